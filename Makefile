@@ -1,0 +1,37 @@
+# Python >= 3.12 is required (ArviZ 1.x, current jax). Pick the first interpreter that qualifies.
+PY_CANDIDATES := python3.13 python3.12 python3 $(wildcard /root/.pyenv/versions/3.1[2-9]*/bin/python3) $(wildcard /usr/local/bin/python3.1[2-9]) $(wildcard /usr/bin/python3.1[2-9])
+PYTHON ?= $(shell for p in $(PY_CANDIDATES); do \
+	$$p -c 'import sys; sys.exit(0 if sys.version_info >= (3, 12) else 1)' >/dev/null 2>&1 && { echo $$p; break; }; done)
+VENV := .venv
+BIN := $(VENV)/bin
+JOBS ?= 2
+
+.PHONY: demo test test-slow bench clean check-python
+
+check-python:
+	@test -n "$(PYTHON)" || { echo "error: Python >= 3.12 not found (tried: $(PY_CANDIDATES))"; exit 1; }
+
+$(BIN)/.installed: pyproject.toml | check-python
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install -q --upgrade pip
+	$(BIN)/pip install -q -e .
+	touch $@
+
+$(BIN)/.installed-test: $(BIN)/.installed
+	$(BIN)/pip install -q -e '.[test]'
+	touch $@
+
+demo: $(BIN)/.installed
+	$(BIN)/liesample demo
+
+test: $(BIN)/.installed-test
+	$(BIN)/python -m pytest -n $(JOBS) -q
+
+test-slow: $(BIN)/.installed-test
+	$(BIN)/python -m pytest -n $(JOBS) -q -m slow
+
+bench: $(BIN)/.installed
+	$(BIN)/python benchmarks/run.py
+
+clean:
+	rm -rf $(VENV) liesample-demo-output .pytest_cache

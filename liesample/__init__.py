@@ -1,0 +1,1 @@
+"""liesample: Gibbs-exact samplers from stochastic-dissipative geometric mechanics."""
