@@ -1,1 +1,18 @@
-"""liesample: Gibbs-exact samplers from stochastic-dissipative geometric mechanics."""
+"""liesample: Gibbs-exact samplers from stochastic-dissipative geometric mechanics.
+
+The one equation is the Poisson–Langevin SDE (paper, ``eq:poisson-langevin-eq``); systems
+declare a Poisson structure, a Hamiltonian and noise, and the dissipation is derived.
+"""
+
+from liesample import algebras, integrators, systems
+from liesample.dynamics import PoissonLangevin, Scene
+from liesample.samplers.lie_poisson_langevin import lie_poisson_langevin
+
+__all__ = [
+    "PoissonLangevin",
+    "Scene",
+    "algebras",
+    "integrators",
+    "lie_poisson_langevin",
+    "systems",
+]

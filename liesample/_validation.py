@@ -1,0 +1,32 @@
+"""Parameter checks shared by constructors: each error names the parameter and what is allowed."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def finite_float(name: str, value, *, positive: bool = False, nonnegative: bool = False) -> float:
+    """``value`` as a Python float, or a ``ValueError``/``TypeError`` that says what is allowed."""
+    if isinstance(value, bool) or np.ndim(value) != 0:
+        raise TypeError(f"{name} must be a real scalar, got {value!r}")
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be a real scalar, got {value!r}") from None
+    if not math.isfinite(x):
+        raise ValueError(f"{name} must be finite, got {x}")
+    if positive and not x > 0:
+        raise ValueError(f"{name} must be > 0, got {x}")
+    if nonnegative and not x >= 0:
+        raise ValueError(f"{name} must be >= 0, got {x}")
+    return x
+
+
+def concrete_array(value):
+    """``np.asarray(value)``, or ``None`` when ``value`` is a tracer (checks then happen outside jit)."""
+    try:
+        return np.asarray(value)
+    except Exception:  # jax tracers refuse conversion; value checks are skipped under tracing
+        return None

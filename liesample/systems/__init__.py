@@ -1,0 +1,6 @@
+"""Thin systems: each declares its structure, Hamiltonian, noise and exact reference."""
+
+from liesample.systems.base import LiePoissonSystem
+from liesample.systems.rigid_body import rigid_body
+
+__all__ = ["LiePoissonSystem", "rigid_body"]

@@ -1,0 +1,371 @@
+"""Exact references: the restricted Gaussian (Bingham law) on the sphere (MATH.md §2, §4).
+
+The rigid-body Gibbs law on ``|μ| = r`` is ``∝ exp(−(β/2) μ·I⁻¹μ)`` w.r.t. area. With
+``μ = r x``, ``|x| = 1`` it is the Bingham law ``∝ exp(−Σ_i λ_i x_i²)`` on the unit sphere,
+``λ_i = β r² / (2 I_i)``. Its normaliser reduces to a 1-D integral over ``t = x_k``
+(``s = 1 − t²``, area element ``dt dφ``)::
+
+    Z(λ) = 2π ∫_{−1}^{1} exp(−λ_k t² − s(λ_a+λ_b)/2) I₀(s(λ_a−λ_b)/2) dt,
+
+evaluated in logs by fixed-order Gauss–Legendre quadrature, hence differentiable by ``jax.grad``;
+``E[x_i²] = −∂ log Z/∂λ_i``. Exact i.i.d. draws use rejection from an angular central Gaussian
+envelope (Kent, Ganeiber & Mardia 2018).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import partial
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.scipy.special import i0e, i1e, logsumexp
+
+__all__ = [
+    "RestrictedGaussian",
+    "bingham_log_normalizer",
+    "bingham_marginal_density",
+    "bingham_second_moments",
+    "isotropic_autocorrelation",
+    "sample_bingham",
+]
+
+_LOG_2PI = math.log(2.0 * math.pi)
+
+# Gauss–Legendre rule on [0, 1] for the (even) integrand over t ∈ [0, a]; see `_log_integral`.
+_NUM_NODES = 96
+_GL_NODES, _GL_WEIGHTS = np.polynomial.legendre.leggauss(_NUM_NODES)
+_GL_NODES = 0.5 * (_GL_NODES + 1.0)
+_GL_WEIGHTS = 0.5 * _GL_WEIGHTS
+# The integrand carries exp(−λ_max t²); beyond t = _CUTOFF/√λ_max it is below e^{−64} of its peak.
+_CUTOFF = 8.0
+
+
+def _as_lam(lam):
+    lam = jnp.asarray(lam, dtype=float)
+    if lam.shape != (3,):
+        raise ValueError(f"lam must have shape (3,), got shape {lam.shape}")
+    return lam
+
+
+@jax.custom_jvp
+def _log_i0(y):
+    """``log I₀(y)`` for ``y ≥ 0``, stably; its derivative ``I₁/I₀`` vanishes at 0 as it should
+    (differentiating ``y + log i0e(y)`` directly gives 1 there)."""
+    return y + jnp.log(i0e(y))
+
+
+@_log_i0.defjvp
+def _log_i0_jvp(primals, tangents):
+    (y,), (dy,) = primals, tangents
+    return _log_i0(y), i1e(y) / i0e(y) * dy
+
+
+def _log_kernel(t, lk, la, lb):
+    """``log[exp(−λ_k t² − s(λ_a+λ_b)/2) I₀(s(λ_a−λ_b)/2)]`` with ``s = 1 − t²``."""
+    s = 1.0 - t * t
+    return -lk * t * t - 0.5 * s * (la + lb) + _log_i0(0.5 * s * jnp.abs(la - lb))
+
+
+def _shift_and_order(lam):
+    """``λ − min λ`` (shift without gradient: the identity ``log Z(λ) = log Z(λ−c) − c`` is exact)
+    and the permutation putting the largest shifted value first."""
+    c = jax.lax.stop_gradient(jnp.min(lam))
+    shifted = lam - c
+    order = jnp.argsort(-jax.lax.stop_gradient(shifted))
+    return shifted, c, order
+
+
+def _log_integral(lk, la, lb):
+    """``log ∫_{−1}^{1} kernel(t) dt`` for ``λ_k = max`` of the shifted (non-negative) λ.
+
+    With ``λ_k`` the largest and ``min λ = 0`` the kernel is ``exp(−λ_k t²) i0e(λ_mid s/2)``:
+    smooth and peaked at ``t = 0`` with width ``λ_k^{−1/2}``, so the rule is mapped onto
+    ``[0, a]``, ``a = min(1, 8/√λ_k)``; the omitted tail is below ``e^{−64}`` relative.
+    """
+    a = jax.lax.stop_gradient(_CUTOFF / jnp.sqrt(jnp.maximum(lk, _CUTOFF**2)))
+    nodes = jnp.asarray(_GL_NODES, dtype=lk.dtype) * a
+    log_w = jnp.log(jnp.asarray(_GL_WEIGHTS, dtype=lk.dtype) * a)
+    return jnp.log(2.0) + logsumexp(log_w + _log_kernel(nodes, lk, la, lb))
+
+
+def bingham_log_normalizer(lam):
+    """Log normaliser of the Bingham law ``∝ exp(−Σ_i λ_i x_i²)`` on the unit sphere S².
+
+    Parameters
+    ----------
+    lam : array_like, shape (3,)
+        Concentrations ``λ``, any finite reals.
+
+    Returns
+    -------
+    jax scalar
+        ``log ∫_{S²} exp(−Σ_i λ_i x_i²) dA(x)``; ``log 4π`` for ``λ = 0``. Differentiable in
+        ``λ`` (``jax.grad``, ``jit``, ``vmap``).
+
+    Notes
+    -----
+    96-node Gauss–Legendre rule on an interval adapted to ``max λ − min λ``. In float64 the
+    error in ``log Z`` is ~1e-13 for spreads ``max λ − min λ`` up to at least 1e5, plus the
+    rounding ``~1e-16 |min λ|`` of the shift.
+    """
+    return _log_normalizer(_as_lam(lam))
+
+
+@jax.jit
+def _log_normalizer(lam):
+    shifted, c, order = _shift_and_order(lam)
+    lk, la, lb = shifted[order[0]], shifted[order[1]], shifted[order[2]]
+    return _LOG_2PI + _log_integral(lk, la, lb) - c
+
+
+_second_moments = jax.jit(lambda lam: -jax.grad(_log_normalizer)(lam))
+
+
+def bingham_second_moments(lam):
+    """Exact ``E[x_i²] = −∂ log Z/∂λ_i`` of the Bingham law (``E[x_i x_j] = 0`` for ``i ≠ j``).
+
+    Parameters
+    ----------
+    lam : array_like, shape (3,)
+        Concentrations ``λ``.
+
+    Returns
+    -------
+    jax array, shape (3,)
+        ``E[x_i²]``, summing to 1.
+    """
+    return _second_moments(_as_lam(lam))
+
+
+def bingham_marginal_density(t, lam, axis: int):
+    """Density of the coordinate ``x_axis`` of the Bingham law, at ``t ∈ [−1, 1]``.
+
+    Parameters
+    ----------
+    t : array_like
+        Points in ``[−1, 1]`` (any shape).
+    lam : array_like, shape (3,)
+        Concentrations ``λ``.
+    axis : int
+        Coordinate ``k ∈ {0, 1, 2}``.
+
+    Returns
+    -------
+    jax array, shape of ``t``
+        ``f_k(t) = 2π exp(−λ_k t² − s(λ_a+λ_b)/2) I₀(s(λ_a−λ_b)/2) / Z``, ``s = 1 − t²``;
+        zero outside ``[−1, 1]``.
+    """
+    if axis not in (0, 1, 2):
+        raise ValueError(f"axis must be 0, 1 or 2, got {axis!r}")
+    lam = _as_lam(lam)
+    return _marginal_density(jnp.asarray(t, dtype=lam.dtype), lam, axis)
+
+
+@partial(jax.jit, static_argnames=("axis",))
+def _marginal_density(t, lam, axis):
+    shifted = lam - jnp.min(lam)  # f is invariant under λ → λ − c
+    a, b = [i for i in range(3) if i != axis]
+    inside = jnp.abs(t) <= 1.0
+    tc = jnp.clip(t, -1.0, 1.0)
+    log_f = (
+        _LOG_2PI + _log_kernel(tc, shifted[axis], shifted[a], shifted[b]) - _log_normalizer(shifted)
+    )
+    return jnp.where(inside, jnp.exp(log_f), 0.0)
+
+
+def _acg_envelope(lam):
+    """Angular-central-Gaussian envelope for Bingham ``λ`` (Kent, Ganeiber & Mardia 2018).
+
+    Returns ``(A, b, omega, log_M)`` with ``A = λ − min λ``, ``b`` solving
+    ``Σ_i 1/(b + 2A_i) = 1`` on ``(0, 3]``, ``Ω = 1 + 2A/b`` (diagonal) and
+    ``log M = −(3−b)/2 + (3/2) log(3/b)``, so that ``exp(−xᵀAx) ≤ M (xᵀΩx)^{−3/2}`` on S².
+    """
+    q = 3.0
+    A = lam - jnp.min(lam)
+
+    def bisect(_, bracket):
+        lo, hi = bracket
+        mid = 0.5 * (lo + hi)
+        too_small = jnp.sum(1.0 / (mid + 2.0 * A)) > 1.0  # the sum decreases in b
+        return jnp.where(too_small, mid, lo), jnp.where(too_small, hi, mid)
+
+    # Σ 1/(b+2A) → ∞ as b → 0 (min A = 0) and is ≤ 1 at b = q: the root lies in (0, q].
+    lo, hi = jax.lax.fori_loop(0, 200, bisect, (jnp.zeros_like(q * A[0]), q + 0.0 * A[0]))
+    b = 0.5 * (lo + hi)
+    omega = 1.0 + 2.0 * A / b
+    log_M = -(q - b) / 2.0 + (q / 2.0) * jnp.log(q / b)
+    return A, b, omega, log_M
+
+
+def _log_acceptance_ratio(x, A, omega, log_M):
+    """``log[f*(x) / (M g*(x))]`` with ``f* = exp(−xᵀAx)``, ``g* = (xᵀΩx)^{−3/2}``; ≤ 0."""
+    return -jnp.sum(A * x * x, axis=-1) + 1.5 * jnp.log(jnp.sum(omega * x * x, axis=-1)) - log_M
+
+
+@partial(jax.jit, static_argnames=("num_samples",))
+def _sample_bingham(rng_key, lam, num_samples: int):
+    A, _, omega, log_M = _acg_envelope(lam)
+    # Acceptance is ≥ 52% on S²: 2.2× oversampling usually finishes in one round.
+    batch = max(64, math.ceil(2.2 * num_samples) + 64)
+    scale = 1.0 / jnp.sqrt(omega)
+
+    def cond(state):
+        return state[2] < num_samples
+
+    def body(state):
+        key, out, count, proposed, accepted = state
+        key, k_norm, k_unif = jax.random.split(key, 3)
+        y = jax.random.normal(k_norm, (batch, 3), dtype=lam.dtype) * scale
+        x = y / jnp.linalg.norm(y, axis=-1, keepdims=True)
+        log_u = jnp.log(jax.random.uniform(k_unif, (batch,), dtype=lam.dtype))
+        keep = log_u < _log_acceptance_ratio(x, A, omega, log_M)
+        slot = count + jnp.cumsum(keep) - 1
+        slot = jnp.where(keep & (slot < num_samples), slot, num_samples)  # → dropped
+        out = out.at[slot].set(x, mode="drop")
+        n_keep = jnp.sum(keep)
+        return (
+            key,
+            out,
+            jnp.minimum(count + n_keep, num_samples),
+            proposed + batch,
+            accepted + n_keep,
+        )
+
+    zero = jnp.zeros((), dtype=jnp.int64 if jax.config.jax_enable_x64 else jnp.int32)
+    init = (rng_key, jnp.zeros((num_samples, 3), dtype=lam.dtype), zero, zero, zero)
+    _, out, _, proposed, accepted = jax.lax.while_loop(cond, body, init)
+    return out, accepted / proposed
+
+
+def sample_bingham(rng_key, lam, num_samples: int):
+    """Exact i.i.d. draws from the Bingham law ``∝ exp(−Σ_i λ_i x_i²)`` on S².
+
+    Rejection sampling from an angular central Gaussian envelope (Kent, Ganeiber & Mardia 2018),
+    vectorised in batches until ``num_samples`` proposals are accepted; deterministic given
+    ``rng_key``.
+
+    Parameters
+    ----------
+    rng_key : jax.random key
+    lam : array_like, shape (3,)
+        Concentrations ``λ``, any finite reals.
+    num_samples : int
+        Number of draws (static).
+
+    Returns
+    -------
+    samples : jax array, shape (num_samples, 3)
+        Unit vectors.
+    acceptance_rate : jax scalar
+        Accepted / proposed over all proposals drawn (≥ ~0.52 in expectation).
+    """
+    num_samples = int(num_samples)
+    if num_samples < 1:
+        raise ValueError(f"num_samples must be a positive integer, got {num_samples}")
+    return _sample_bingham(rng_key, _as_lam(lam), num_samples)
+
+
+def isotropic_autocorrelation(t, radius, sigma):
+    """Exact ``E[μ(t)·μ(0)] = r² exp(−σ²|t|)`` of Brownian motion on the sphere ``|μ| = r``.
+
+    This is the stationary process for isotropic inertia ``I = c(1, 1, 1)`` (uniform law).
+
+    Parameters
+    ----------
+    t : array_like
+        Time lags.
+    radius : float
+        ``r``.
+    sigma : float
+        Noise strength ``σ``.
+
+    Returns
+    -------
+    jax array, shape of ``t``
+    """
+    t = jnp.asarray(t, dtype=float)
+    return radius**2 * jnp.exp(-(sigma**2) * jnp.abs(t))
+
+
+def _checked_float(name, value, *, positive=False):
+    try:
+        if np.ndim(value) != 0 or isinstance(value, (bool, np.bool_)):
+            raise TypeError
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a real scalar, got {value!r}") from None
+    if not math.isfinite(x):
+        raise ValueError(f"{name} must be finite, got {x}")
+    if positive and not x > 0:
+        raise ValueError(f"{name} must be > 0, got {x}")
+    return x
+
+
+@dataclass(frozen=True)
+class RestrictedGaussian:
+    """Gibbs law ``∝ exp(−(β/2) μ·I⁻¹μ)`` on the sphere ``|μ| = radius`` (rigid body).
+
+    Parameters
+    ----------
+    inertia : tuple of 3 floats
+        Principal moments ``(I₁, I₂, I₃)``, each finite and > 0.
+    beta : float
+        Inverse temperature, finite, any sign (``β = 0`` is uniform).
+    radius : float
+        ``r = |μ|``, finite and > 0.
+    """
+
+    inertia: tuple[float, float, float]
+    beta: float
+    radius: float
+
+    def __post_init__(self):
+        inertia = self.inertia
+        if np.ndim(inertia) != 1 or len(inertia) != 3:
+            raise ValueError(
+                f"inertia must be a sequence of 3 principal moments (each finite and > 0), "
+                f"got {inertia!r}"
+            )
+        moments = tuple(
+            _checked_float(f"inertia[{i}]", v, positive=True) for i, v in enumerate(inertia)
+        )
+        object.__setattr__(self, "inertia", moments)
+        object.__setattr__(self, "beta", _checked_float("beta", self.beta))
+        object.__setattr__(self, "radius", _checked_float("radius", self.radius, positive=True))
+
+    @property
+    def lam(self):
+        """Bingham concentrations ``λ_i = β r² / (2 I_i)``, shape (3,)."""
+        return self.beta * self.radius**2 / (2.0 * jnp.asarray(self.inertia, dtype=float))
+
+    def log_normalizer(self):
+        """``log ∫_{|μ|=r} exp(−(β/2) μ·I⁻¹μ) dA(μ) = log Z(λ) + 2 log r``."""
+        return bingham_log_normalizer(self.lam) + 2.0 * math.log(self.radius)
+
+    def logdensity(self, mu):
+        """Normalised log density w.r.t. area on ``|μ| = r``; ``mu`` has shape ``(..., 3)``."""
+        mu = jnp.asarray(mu, dtype=float)
+        inv_inertia = 1.0 / jnp.asarray(self.inertia, dtype=mu.dtype)
+        return -0.5 * self.beta * jnp.sum(inv_inertia * mu * mu, axis=-1) - self.log_normalizer()
+
+    def second_moments(self):
+        """``E[μ_i μ_j]``, a diagonal (3, 3) array."""
+        return jnp.diag(self.radius**2 * bingham_second_moments(self.lam))
+
+    def mean_energy(self):
+        """``E[h]``, ``h = ½ μ·I⁻¹μ``."""
+        m2 = self.radius**2 * bingham_second_moments(self.lam)
+        return 0.5 * jnp.sum(m2 / jnp.asarray(self.inertia, dtype=m2.dtype))
+
+    def marginal_density(self, m, axis: int):
+        """Density of ``μ_axis`` at ``m ∈ [−r, r]`` (zero outside)."""
+        m = jnp.asarray(m, dtype=float)
+        return bingham_marginal_density(m / self.radius, self.lam, axis) / self.radius
+
+    def sample(self, rng_key, num_samples: int):
+        """Exact i.i.d. draws on ``|μ| = r``, shape ``(num_samples, 3)``."""
+        x, _ = sample_bingham(rng_key, self.lam, num_samples)
+        return self.radius * x
