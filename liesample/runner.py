@@ -163,3 +163,52 @@ def _report_nonfinite(result: ChainsResult, on_nonfinite: str):
     if on_nonfinite == "raise":
         raise NonFiniteStateError(message)
     warnings.warn(message, RuntimeWarning, stacklevel=3)
+
+
+def sample(
+    algorithm,
+    rng_key,
+    initial_positions,
+    num_draws: int,
+    *,
+    num_warmup: int = 0,
+    thinning: int = 1,
+    progress: bool = True,
+    on_nonfinite: str = "warn",
+    var_name: str = "mu",
+    event_dims=("component",),
+    coords=None,
+    attrs=None,
+):
+    """Run chains with :func:`sample_chains` and return an ArviZ ``DataTree``.
+
+    The tree has ``posterior/<var_name>`` with dims ``(chain, draw, *event_dims)`` and
+    ``sample_stats`` (``energy``, ``diverging``, ``casimir_error``); its attributes record the
+    wall time, the number of steps and ``attrs``.
+    """
+    from liesample.diagnostics import to_datatree
+
+    result = sample_chains(
+        algorithm,
+        rng_key,
+        initial_positions,
+        num_draws,
+        num_warmup=num_warmup,
+        thinning=thinning,
+        progress=progress,
+        on_nonfinite=on_nonfinite,
+    )
+    return to_datatree(
+        result.positions,
+        result.info,
+        var_name=var_name,
+        event_dims=event_dims,
+        coords=coords,
+        thinning=thinning,
+        attrs={
+            "wall_time_seconds": result.wall_time,
+            "num_steps": result.num_steps,
+            "num_warmup": num_warmup,
+            **(attrs or {}),
+        },
+    )
