@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import jax
 import numpy as np
 
 
@@ -28,5 +29,5 @@ def concrete_array(value):
     """``np.asarray(value)``, or ``None`` when ``value`` is a tracer (checks then happen outside jit)."""
     try:
         return np.asarray(value)
-    except Exception:  # jax tracers refuse conversion; value checks are skipped under tracing
+    except jax.errors.TracerArrayConversionError:  # value checks are skipped under tracing
         return None

@@ -44,6 +44,29 @@ class LieAlgebra:
         raise NotImplementedError
 
 
+# Below this θ² the Taylor series (to θ⁴) is exact in float64 and smooth for autodiff.
+_SMALL_ANGLE_SQ = 1e-6
+
+
+def _rodrigues_coefficients(theta_sq):
+    """``sin θ / θ`` and ``(1 − cos θ)/θ²`` as smooth functions of ``θ²`` (derivatives included).
+
+    The double ``where`` keeps ``sqrt`` away from 0, so gradients at ``ζ = 0`` are finite.
+    """
+    small = theta_sq < _SMALL_ANGLE_SQ
+    safe_sq = jnp.where(small, 1.0, theta_sq)
+    theta = jnp.sqrt(safe_sq)
+    sin_over_theta = jnp.where(
+        small, 1.0 - theta_sq / 6.0 + theta_sq**2 / 120.0, jnp.sin(theta) / theta
+    )
+    one_minus_cos = jnp.where(
+        small,
+        0.5 - theta_sq / 24.0 + theta_sq**2 / 720.0,
+        2.0 * jnp.sin(0.5 * theta) ** 2 / safe_sq,
+    )
+    return sin_over_theta, one_minus_cos
+
+
 @dataclass(frozen=True)
 class SO3(LieAlgebra):
     """so(3) ≅ (R³, ×), and its dual, in closed form.
@@ -67,14 +90,11 @@ class SO3(LieAlgebra):
         """``Ad*_{exp ζ} μ``: the time-one flow of ``μ̇ = μ × ζ``.
 
         That flow is the rotation by angle ``|ζ|`` about the axis ``−ζ/|ζ|`` (Rodrigues):
-        ``μ + (sin θ/θ) μ×ζ + ((1 − cos θ)/θ²) ζ×(ζ×μ)`` with ``θ = |ζ|``; exactly norm-preserving
-        up to round-off, and smooth at ``ζ = 0``.
+        ``μ + (sin θ/θ) μ×ζ + ((1 − cos θ)/θ²) ζ×(ζ×μ)`` with ``θ = |ζ|``; norm-preserving to
+        round-off, and smooth (derivatives included) at ``ζ = 0``.
         """
         theta_sq = jnp.sum(zeta * zeta, axis=-1, keepdims=True)
-        # sin θ / θ and (1 − cos θ)/θ² through numpy's normalised sinc, which is exact at 0.
-        theta = jnp.sqrt(theta_sq)
-        sin_over_theta = jnp.sinc(theta / jnp.pi)
-        one_minus_cos_over_theta_sq = 0.5 * jnp.sinc(theta / (2 * jnp.pi)) ** 2
+        sin_over_theta, one_minus_cos_over_theta_sq = _rodrigues_coefficients(theta_sq)
         zeta_cross_mu = jnp.cross(zeta, mu)
         return (
             mu

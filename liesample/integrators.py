@@ -9,8 +9,8 @@ size, measured in ``tests/test_sampling.py`` and ``benchmarks/``.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Callable
 
 import jax
 import jax.numpy as jnp

@@ -36,7 +36,9 @@ class ChainsResult:
     num_steps: int
 
 
-def _check_run_arguments(initial_positions, num_draws, num_warmup, thinning, on_nonfinite):
+def _check_run_arguments(
+    initial_positions, num_draws, num_warmup, thinning, on_nonfinite, chunk_draws
+):
     if np.ndim(initial_positions) < 1:
         raise ValueError("initial_positions must have a leading chain axis, shape (chains, ...)")
     for name, value, low in (
@@ -46,6 +48,12 @@ def _check_run_arguments(initial_positions, num_draws, num_warmup, thinning, on_
     ):
         if not isinstance(value, (int, np.integer)) or value < low:
             raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
+    if chunk_draws is not None and (
+        not isinstance(chunk_draws, (int, np.integer))
+        or isinstance(chunk_draws, bool)
+        or chunk_draws < 1
+    ):
+        raise ValueError(f"chunk_draws must be None or an integer >= 1, got {chunk_draws!r}")
     if on_nonfinite not in ("warn", "raise"):
         raise ValueError(f"on_nonfinite must be 'warn' or 'raise', got {on_nonfinite!r}")
 
@@ -80,7 +88,9 @@ def sample_chains(
     on_nonfinite : {"warn", "raise"}
         What to do if any step produced a non-finite state (``info.nonfinite``).
     """
-    _check_run_arguments(initial_positions, num_draws, num_warmup, thinning, on_nonfinite)
+    _check_run_arguments(
+        initial_positions, num_draws, num_warmup, thinning, on_nonfinite, chunk_draws
+    )
     initial_positions = jnp.asarray(initial_positions)
     num_chains = initial_positions.shape[0]
     algorithm.init(initial_positions[0])  # validates one position concretely (shape, values)
@@ -110,7 +120,7 @@ def sample_chains(
 
         return jax.lax.scan(one_draw, state, jnp.arange(count))
 
-    chunk = chunk_draws or max(1, math.ceil(num_draws / 20))
+    chunk = chunk_draws if chunk_draws is not None else max(1, math.ceil(num_draws / 20))
     run_chunk = jax.jit(
         lambda states, first_step, count: jax.vmap(lambda s, k: draws(s, k, first_step, count))(
             states, chain_keys

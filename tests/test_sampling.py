@@ -124,7 +124,9 @@ def test_splitting_bias_is_second_order():
     exact = moments[2] - moments[0]
     estimates = []
     for dt in (0.1, 0.05):
-        m = ergodic_second_moments("splitting", 3.0, dt, num_chains=16384, total_time=1400.0, seed=3)
+        m = ergodic_second_moments(
+            "splitting", 3.0, dt, num_chains=16384, total_time=1400.0, seed=3
+        )
         f = m[:, 2] - m[:, 0]
         estimates.append((f.mean() - exact, f.std(ddof=1) / np.sqrt(len(f))))
     (b1, s1), (b2, s2) = estimates

@@ -20,11 +20,11 @@ from liesample.integrators import DEFAULT_INTEGRATOR, get_integrator
 from liesample.systems.base import LiePoissonSystem
 
 __all__ = [
-    "LiePoissonState",
     "LiePoissonInfo",
-    "init",
-    "build_kernel",
+    "LiePoissonState",
     "as_top_level_api",
+    "build_kernel",
+    "init",
     "make_dynamics",
 ]
 
@@ -66,13 +66,16 @@ def _info(system, position, reference_casimirs, nonfinite):
     return LiePoissonInfo(system.hamiltonian(position), jnp.max(drift), nonfinite)
 
 
-def build_kernel(system: LiePoissonSystem, integrator=DEFAULT_INTEGRATOR, scene: Scene = Scene()):
+def build_kernel(
+    system: LiePoissonSystem, integrator=DEFAULT_INTEGRATOR, scene: Scene | None = None
+):
     """Build ``kernel(rng_key, state, step_size, sigma, theta) -> (state, info)``.
 
     The scene and integrator are structural (they decide what is traced); ``step_size``,
     ``sigma`` and ``theta`` may be traced values.
     """
     integrator = get_integrator(integrator)
+    scene = Scene() if scene is None else scene
 
     def kernel(rng_key, state: LiePoissonState, step_size, sigma, theta):
         dynamics = PoissonLangevin(system, sigma=sigma, theta=theta, scene=scene)
