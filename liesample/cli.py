@@ -147,7 +147,7 @@ def demo(args) -> int:
 
     flat = mu.reshape(-1, 3)
     paths = [
-        plot_traces(mu, out / "trace.png", names=system.component_names, max_draws=400),
+        plot_traces(mu[:4], out / "trace.png", names=system.component_names, max_draws=200),
         plot_autocorrelation(
             lag_times,
             (per_chain.mean(0), per_chain.std(0, ddof=1) / np.sqrt(len(per_chain))),

@@ -1,0 +1,229 @@
+"""Shared set-up for the benchmarks: the rigid-body problem, configurations, timing, machine.
+
+Float64 is switched on here, before anything builds an array; every benchmark module imports
+this one first.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import math
+import os
+import platform
+import subprocess
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import numpy as np
+
+import liesample
+from liesample.samplers.lie_poisson_langevin import make_dynamics
+from liesample.systems import rigid_body
+from liesample.targets import RestrictedGaussian
+
+BENCH_DIR = Path(__file__).resolve().parent
+REPO_DIR = BENCH_DIR.parent
+
+# The problem every benchmark samples: rigid body I = (1, 2, 4), β = 3, σ = 1, |μ| = 1.5.
+INERTIA = (1.0, 2.0, 4.0)
+BETA = 3.0
+SIGMA = 1.0
+RADIUS = 1.5
+
+INTEGRATOR_NAMES = ("splitting", "rkmk_heun", "lie_euler", "euler_heun")
+
+# Scenes of the throughput benchmark: label -> keyword arguments of the sampler.
+SCENES = {
+    "all effects": {"beta": BETA, "sigma": SIGMA},
+    "Hamiltonian only": {"sigma": 0.0, "theta": 0.0},
+    "noise+dissipation, no Hamiltonian": {"beta": BETA, "sigma": SIGMA, "hamiltonian": False},
+}
+
+
+@dataclass(frozen=True)
+class Config:
+    """What one invocation of ``benchmarks/run.py`` measures."""
+
+    mode: str
+    # 1. throughput
+    throughput_chains: tuple[int, ...] = (1, 1_000, 100_000)
+    throughput_step_size: float = 0.1
+    throughput_target_seconds: float = 0.6  # length of each timed call
+    throughput_repeats: int = 3  # best of
+    # (integrator, scene) pairs; None = every integrator in every scene
+    throughput_pairs: tuple[tuple[str, str], ...] | None = None
+    # 2. accuracy–cost
+    accuracy_chains: int = 4096
+    accuracy_time: float = 200.0  # physical time T per chain, burn-in included
+    accuracy_burn_in: float = 10.0  # discarded
+    accuracy_step_sizes: tuple[float, ...] = (0.8, 0.4, 0.2, 0.1, 0.05)
+    accuracy_integrators: tuple[str, ...] = INTEGRATOR_NAMES
+    ess_check_chains: int = 32  # stored run per setting for the ArviZ ESS cross-check
+    casimir_tolerance: float = 0.1  # relative |C − C₀|/C₀ that counts as "left the orbit"
+    target_errors: tuple[float, ...] = (0.03, 0.01, 0.005, 0.003)
+    # High-precision order check (more chains, longer T) for the integrators whose small-h
+    # biases the sweep above cannot resolve; empty to skip.
+    order_check_integrators: tuple[str, ...] = ("splitting",)
+    order_check_chains: int = 16384
+    order_check_time: float = 400.0
+    order_check_step_sizes: tuple[float, ...] = (0.4, 0.2, 0.1)
+    # 3. exact i.i.d. sampler
+    iid_sizes: tuple[int, ...] = (10_000, 1_000_000)
+    seed: int = 20240611
+    extra: dict = field(default_factory=dict)
+
+    def to_json(self):
+        return asdict(self)
+
+
+FULL = Config(mode="full")
+QUICK = Config(
+    mode="quick",
+    throughput_target_seconds=0.1,
+    throughput_pairs=tuple((name, "all effects") for name in INTEGRATOR_NAMES)
+    + (("splitting", "Hamiltonian only"), ("splitting", "noise+dissipation, no Hamiltonian")),
+    accuracy_chains=512,
+    accuracy_time=50.0,
+    accuracy_burn_in=5.0,
+    accuracy_step_sizes=(0.4, 0.2, 0.1),
+    ess_check_chains=16,
+    target_errors=(0.03, 0.01),
+    order_check_integrators=(),
+    iid_sizes=(10_000, 100_000),
+)
+
+
+def system():
+    return rigid_body(INERTIA)
+
+
+def target() -> RestrictedGaussian:
+    return RestrictedGaussian(inertia=INERTIA, beta=BETA, radius=RADIUS)
+
+
+def exact_second_moments() -> np.ndarray:
+    """Exact ``E[μ_i²]``, i = 1..3."""
+    return np.diag(np.asarray(target().second_moments()))
+
+
+def sampler(integrator: str, scene: str, step_size: float):
+    """The public sampler, ``liesample.lie_poisson_langevin``, for one scene."""
+    return liesample.lie_poisson_langevin(
+        system(), step_size=step_size, integrator=integrator, **SCENES[scene]
+    )
+
+
+def dynamics_parameters(scene: str):
+    """``(sigma, theta, Scene)`` exactly as the sampler derives them."""
+    return make_dynamics(system(), **SCENES[scene])
+
+
+def block(x):
+    return jax.block_until_ready(x)
+
+
+def timed(fn, *args):
+    """``(result, seconds)`` of one call, waited for."""
+    start = time.perf_counter()
+    out = block(fn(*args))
+    return out, time.perf_counter() - start
+
+
+# --------------------------------------------------------------------------- machine
+
+
+def _cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.lower().startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
+
+
+def _git(*args) -> str | None:
+    try:
+        out = subprocess.run(
+            ["git", *args], cwd=REPO_DIR, capture_output=True, text=True, timeout=10, check=True
+        )
+        return out.stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return None
+
+
+def machine_info() -> dict:
+    import jaxlib
+
+    try:
+        usable = len(os.sched_getaffinity(0))
+    except AttributeError:
+        usable = os.cpu_count()
+    status = _git("status", "--porcelain", "--untracked-files=no")
+    return {
+        "cpu_model": _cpu_model(),
+        "logical_cpus": os.cpu_count(),
+        "usable_cpus": usable,
+        "jax": jax.__version__,
+        "jaxlib": jaxlib.__version__,
+        "numpy": np.__version__,
+        "python": platform.python_version(),
+        "backend": jax.default_backend(),
+        "devices": [str(d) for d in jax.devices()],
+        "x64": bool(jax.config.jax_enable_x64),
+        "platform": platform.platform(),
+        "date_utc": _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC"),
+        "git_commit": _git("rev-parse", "--short", "HEAD"),
+        "git_dirty": None if status is None else bool(status),
+    }
+
+
+# --------------------------------------------------------------------------- JSON
+
+
+def _jsonable(value):
+    """Numbers and containers as JSON; non-finite floats as the strings "nan"/"inf"/"-inf"."""
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _jsonable(value.tolist())
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        v = float(value)
+        if math.isnan(v):
+            return "nan"
+        if math.isinf(v):
+            return "inf" if v > 0 else "-inf"
+        return v
+    return value
+
+
+def _from_json(value):
+    if isinstance(value, dict):
+        return {k: _from_json(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_from_json(v) for v in value]
+    if value in ("nan", "inf", "-inf"):
+        return float(value)
+    return value
+
+
+def write_json(path: Path, data) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(_jsonable(data), indent=1, allow_nan=False) + "\n")
+    return path
+
+
+def read_json(path: Path):
+    return _from_json(json.loads(path.read_text()))
