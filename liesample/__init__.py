@@ -6,6 +6,7 @@ declare a Poisson structure, a Hamiltonian and noise, and the dissipation is der
 
 from liesample import algebras, integrators, systems
 from liesample.dynamics import PoissonLangevin, Scene
+from liesample.runner import sample, sample_chains
 from liesample.samplers.lie_poisson_langevin import lie_poisson_langevin
 
 __all__ = [
@@ -14,5 +15,7 @@ __all__ = [
     "algebras",
     "integrators",
     "lie_poisson_langevin",
+    "sample",
+    "sample_chains",
     "systems",
 ]

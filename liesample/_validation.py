@@ -25,6 +25,16 @@ def finite_float(name: str, value, *, positive: bool = False, nonnegative: bool 
     return x
 
 
+def principal_moments(inertia) -> tuple[float, float, float]:
+    """Three finite, positive principal moments of inertia, or a ``ValueError`` naming the bad one."""
+    if np.ndim(inertia) != 1 or len(inertia) != 3:
+        raise ValueError(
+            f"inertia must be a sequence of 3 principal moments (each finite and > 0), "
+            f"got {inertia!r}"
+        )
+    return tuple(finite_float(f"inertia[{i}]", v, positive=True) for i, v in enumerate(inertia))
+
+
 def concrete_array(value):
     """``np.asarray(value)``, or ``None`` when ``value`` is a tracer (checks then happen outside jit)."""
     try:

@@ -23,6 +23,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import i0e, i1e, logsumexp
 
+from liesample._validation import finite_float, principal_moments
+
 __all__ = [
     "RestrictedGaussian",
     "bingham_log_normalizer",
@@ -290,20 +292,6 @@ def isotropic_autocorrelation(t, radius, sigma):
     return radius**2 * jnp.exp(-(sigma**2) * jnp.abs(t))
 
 
-def _checked_float(name, value, *, positive=False):
-    try:
-        if np.ndim(value) != 0 or isinstance(value, (bool, np.bool_)):
-            raise TypeError
-        x = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a real scalar, got {value!r}") from None
-    if not math.isfinite(x):
-        raise ValueError(f"{name} must be finite, got {x}")
-    if positive and not x > 0:
-        raise ValueError(f"{name} must be > 0, got {x}")
-    return x
-
-
 @dataclass(frozen=True)
 class RestrictedGaussian:
     """Gibbs law ``∝ exp(−(β/2) μ·I⁻¹μ)`` on the sphere ``|μ| = radius`` (rigid body).
@@ -323,18 +311,9 @@ class RestrictedGaussian:
     radius: float
 
     def __post_init__(self):
-        inertia = self.inertia
-        if np.ndim(inertia) != 1 or len(inertia) != 3:
-            raise ValueError(
-                f"inertia must be a sequence of 3 principal moments (each finite and > 0), "
-                f"got {inertia!r}"
-            )
-        moments = tuple(
-            _checked_float(f"inertia[{i}]", v, positive=True) for i, v in enumerate(inertia)
-        )
-        object.__setattr__(self, "inertia", moments)
-        object.__setattr__(self, "beta", _checked_float("beta", self.beta))
-        object.__setattr__(self, "radius", _checked_float("radius", self.radius, positive=True))
+        object.__setattr__(self, "inertia", principal_moments(self.inertia))
+        object.__setattr__(self, "beta", finite_float("beta", self.beta))
+        object.__setattr__(self, "radius", finite_float("radius", self.radius, positive=True))
 
     @property
     def lam(self):

@@ -13,7 +13,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from liesample._validation import finite_float
+from liesample._validation import principal_moments
 from liesample.algebras import so3
 from liesample.systems.base import LiePoissonSystem
 
@@ -31,9 +31,7 @@ def rigid_body(inertia=(1.0, 2.0, 4.0)) -> LiePoissonSystem:
     LiePoissonSystem
         State ``μ`` of shape ``(3,)`` (body angular momentum); Casimir ``|μ|²``.
     """
-    if np.ndim(inertia) != 1 or len(inertia) != 3:
-        raise ValueError(f"inertia must be a sequence of 3 principal moments, got {inertia!r}")
-    moments = tuple(finite_float(f"inertia[{i}]", v, positive=True) for i, v in enumerate(inertia))
+    moments = principal_moments(inertia)
     inverse_inertia = 1.0 / np.asarray(moments)
 
     def hamiltonian(mu):
