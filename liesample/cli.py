@@ -61,6 +61,10 @@ def demo(args) -> int:
     from liesample.runner import sample
     from liesample.targets import isotropic_autocorrelation
 
+    if args.chains < 1:
+        raise ValueError(f"--chains must be >= 1, got {args.chains}")
+    if not args.time > 0:
+        raise ValueError(f"--time must be > 0, got {args.time}")
     out = args.output
     out.mkdir(parents=True, exist_ok=True)
     system = systems.rigid_body(args.inertia)
@@ -185,7 +189,11 @@ def main(argv=None) -> int:
     args = _parse(sys.argv[1:] if argv is None else argv)
     if args.command == "demo":
         start = time.perf_counter()
-        status = demo(args)
+        try:
+            status = demo(args)
+        except (ValueError, TypeError) as error:  # invalid parameters: say which, no traceback
+            print(f"liesample demo: error: {error}", file=sys.stderr)
+            return 2
         print(f"Done in {time.perf_counter() - start:.1f} s.")
         return status
     return 2

@@ -39,8 +39,11 @@ class ChainsResult:
 def _check_run_arguments(
     initial_positions, num_draws, num_warmup, thinning, on_nonfinite, chunk_draws
 ):
-    if np.ndim(initial_positions) < 1:
-        raise ValueError("initial_positions must have a leading chain axis, shape (chains, ...)")
+    if np.ndim(initial_positions) < 1 or np.shape(initial_positions)[0] < 1:
+        raise ValueError(
+            "initial_positions must have a leading chain axis with at least one chain, "
+            f"shape (chains, ...); got shape {np.shape(initial_positions)}"
+        )
     for name, value, low in (
         ("num_draws", num_draws, 1),
         ("num_warmup", num_warmup, 0),
