@@ -35,6 +35,22 @@ def principal_moments(inertia) -> tuple[float, float, float]:
     return tuple(finite_float(f"inertia[{i}]", v, positive=True) for i, v in enumerate(inertia))
 
 
+def nonzero_vector3(name: str, value) -> np.ndarray:
+    """A finite, nonzero, read-only float array of shape (3,), or a ``ValueError`` naming it."""
+    try:
+        vector = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a 3-vector of finite reals, got {value!r}") from None
+    if vector.shape != (3,):
+        raise ValueError(f"{name} must be a 3-vector, got shape {vector.shape}")
+    if not np.all(np.isfinite(vector)):
+        raise ValueError(f"{name} must be finite, got {vector}")
+    if not np.any(vector != 0.0):
+        raise ValueError(f"{name} must be nonzero, got {vector}")
+    vector.setflags(write=False)
+    return vector
+
+
 def concrete_array(value):
     """``np.asarray(value)``, or ``None`` when ``value`` is a tracer (checks then happen outside jit)."""
     try:

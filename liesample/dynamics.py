@@ -89,14 +89,34 @@ class PoissonLangevin:
     def num_noises(self) -> int:
         return self.system.num_noises
 
-    def noise_gradients(self, mu):
-        """``∇ĥ_i(μ)`` for every unit-strength noise Hamiltonian, shape ``(m, *μ.shape)``."""
-        return jax.jacrev(self.system.noise_hamiltonians)(mu)
+    def brackets_with_noise(self, mu, grad_h):
+        """``{h, ĥ_i}(μ)`` for every ``i``, shape ``(m,)``, without forming any Jacobian.
 
-    def brackets_with_noise(self, mu, grad_h, noise_grads):
-        """``{h, ĥ_i}(μ) = ⟨∇h, ad*_{∇ĥ_i} μ⟩`` for every ``i``, shape ``(m,)``."""
-        ad_star = self.algebra.ad_star
-        return jax.vmap(lambda g: self.algebra.pairing(grad_h, ad_star(g, mu)))(noise_grads)
+        ``{h, ĥ_i} = ⟨∇h, ad*_{∇ĥ_i} μ⟩ = ⟨∇ĥ_i, w⟩`` with ``w = A(μ)ᵀ∇h`` and ``A(μ)ξ = ad*_ξ μ``:
+        one VJP of ``ad*`` and one JVP of the noise Hamiltonians.
+        """
+        _, transpose_ad_star = jax.vjp(lambda xi: self.algebra.ad_star(xi, mu), mu)
+        (w,) = transpose_ad_star(grad_h)
+        return jax.jvp(self.system.noise_hamiltonians, (mu,), (w,))[1]
+
+    def noise_coefficients(self, mu, dt, dW=None, grad_h=None):
+        """``c_i = −θ {h, ĥ_i} dt + σ dW_i`` (only the scene's terms), shape ``(m,)``."""
+        scene = self.scene
+        if scene.noise != (dW is not None):
+            raise ValueError("dW must be given exactly when the scene has noise")
+        coefficients = jnp.zeros((self.num_noises,), mu.dtype)
+        if scene.dissipation:
+            if grad_h is None:
+                grad_h = jax.grad(self.system.hamiltonian)(mu)
+            coefficients = coefficients - (self.theta * dt) * self.brackets_with_noise(mu, grad_h)
+        if scene.noise:
+            coefficients = coefficients + self.sigma * dW
+        return coefficients
+
+    def noise_generator(self, mu, coefficients):
+        """``Σ_i c_i ∇ĥ_i(μ)``: one VJP of the noise Hamiltonians (no Jacobian is formed)."""
+        _, pullback = jax.vjp(self.system.noise_hamiltonians, mu)
+        return pullback(coefficients)[0]
 
     def generator(self, mu, dt, dW=None):
         """The generator ``ζ ∈ g`` of one step of length ``dt`` with Brownian increments ``dW``.
@@ -105,40 +125,28 @@ class PoissonLangevin:
         the scene has noise.
         """
         scene = self.scene
-        if scene.noise != (dW is not None):
-            raise ValueError("dW must be given exactly when the scene has noise")
         need_h = scene.hamiltonian or scene.dissipation
         grad_h = jax.grad(self.system.hamiltonian)(mu) if need_h else None
-        noise_grads = self.noise_gradients(mu) if (scene.noise or scene.dissipation) else None
-        zeta = jnp.zeros_like(mu)
-        if scene.hamiltonian:
-            zeta = zeta + grad_h * dt
-        if scene.dissipation:
-            rates = self.brackets_with_noise(mu, grad_h, noise_grads)
-            zeta = zeta - (self.theta * dt) * jnp.tensordot(rates, noise_grads, axes=1)
-        if scene.noise:
-            zeta = zeta + self.sigma * jnp.tensordot(dW, noise_grads, axes=1)
+        zeta = grad_h * dt if scene.hamiltonian else jnp.zeros_like(mu)
+        if scene.noise or scene.dissipation:
+            coefficients = self.noise_coefficients(mu, dt, dW, grad_h)
+            zeta = zeta + self.noise_generator(mu, coefficients)
+        elif dW is not None:
+            raise ValueError("dW must be given exactly when the scene has noise")
         return zeta
 
-    def direction_generator(self, mu, index, dt, dW_index=None):
-        """The generator of noise direction ``index`` alone: ``(−θ {h, ĥ_i} dt + σ dW_i) ∇ĥ_i``.
+    def group_generator(self, mu, group, dt, dW=None):
+        """The generator of one group of noise directions alone: ``Σ_{i∈group} c_i ∇ĥ_i``.
 
         Along one direction the SDE is a one-dimensional Langevin equation with additive noise
         in the group coordinate ``φ`` of ``exp(φ ∇ĥ_i)`` (MATH.md §1: each direction leaves
         ``exp(−βh)`` invariant on its own), which is what the splitting integrator exploits.
+        A system may group directions that commute and do not affect each other's
+        coefficients (``LiePoissonSystem.noise_groups``); a group then moves as one piece.
         """
-        scene = self.scene
-        if scene.noise != (dW_index is not None):
-            raise ValueError("dW_index must be given exactly when the scene has noise")
-        grad_i = jax.grad(lambda m: self.system.noise_hamiltonians(m)[index])(mu)
-        coefficient = jnp.zeros((), mu.dtype)
-        if scene.dissipation:
-            grad_h = jax.grad(self.system.hamiltonian)(mu)
-            rate = self.algebra.pairing(grad_h, self.algebra.ad_star(grad_i, mu))
-            coefficient = coefficient - self.theta * rate * dt
-        if scene.noise:
-            coefficient = coefficient + self.sigma * dW_index
-        return coefficient * grad_i
+        coefficients = self.noise_coefficients(mu, dt, dW)
+        in_group = self.system.noise_group_labels == group
+        return self.noise_generator(mu, jnp.where(in_group, coefficients, 0.0))
 
     def vector_field(self, mu, dt, dW=None):
         """The ambient increment ``ad*_ζ μ`` (what a non-geometric integrator adds to ``μ``)."""

@@ -72,8 +72,9 @@ def _heun_on_group(move, generator, mu):
 def _splitting(dynamics, mu, dt, dW):
     """Lie–Trotter splitting into pieces that each leave ``exp(−βh)`` invariant.
 
-    The pieces are the Hamiltonian flow and, one after another, each noise direction with its
-    own share of the derived dissipation (MATH.md §1: the generator is a sum over ``i`` of
+    The pieces are the Hamiltonian flow and, one after another, each group of noise directions
+    (by default each direction; ``LiePoissonSystem.noise_groups``) with its own share of the
+    derived dissipation (MATH.md §1: the generator is a sum over ``i`` of
     operators self-adjoint in ``L²(exp(−βh))``). Each piece is advanced by Heun on the group,
     which has one-step weak error ``O(dt³)`` against its exact, ``π``-preserving flow: along a
     single noise direction the noise is additive in the group coordinate. So every piece
@@ -91,13 +92,10 @@ def _splitting(dynamics, mu, dt, dW):
     if not (scene.noise or scene.dissipation):
         return mu
 
-    def one_direction(mu, index):
-        dW_index = None if dW is None else dW[index]
-        return _heun_on_group(
-            move, lambda m: dynamics.direction_generator(m, index, dt, dW_index), mu
-        ), None
+    def one_group(mu, group):
+        return _heun_on_group(move, lambda m: dynamics.group_generator(m, group, dt, dW), mu), None
 
-    mu, _ = jax.lax.scan(one_direction, mu, jnp.arange(dynamics.num_noises))
+    mu, _ = jax.lax.scan(one_group, mu, jnp.arange(dynamics.system.num_noise_groups))
     return mu
 
 

@@ -44,7 +44,9 @@ class LiePoissonInfo(NamedTuple):
     """What one step did.
 
     energy : ``h`` at the new state.
-    casimir_error : largest relative drift ``|C − C₀|/|C₀|`` of the Casimirs.
+    casimir_error : largest relative drift ``|C − C₀|/|C₀|`` of the Casimirs; for systems that
+        declare a ``casimir_scale`` (a Casimir may be zero, e.g. the heavy top's ``Π·Γ``) the
+        denominator is ``max(|C₀|, scale(μ))`` (``LiePoissonSystem.casimir_error``).
     nonfinite : the step produced NaN/inf; the chain then kept its previous state.
     """
 
@@ -62,8 +64,8 @@ def init(position, system: LiePoissonSystem, rng_key=None) -> LiePoissonState:
 
 
 def _info(system, position, reference_casimirs, nonfinite):
-    drift = jnp.abs(system.casimirs(position) - reference_casimirs) / jnp.abs(reference_casimirs)
-    return LiePoissonInfo(system.hamiltonian(position), jnp.max(drift), nonfinite)
+    drift = system.casimir_error(position, reference_casimirs)
+    return LiePoissonInfo(system.hamiltonian(position), drift, nonfinite)
 
 
 def build_kernel(

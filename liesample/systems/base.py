@@ -41,6 +41,24 @@ class LiePoissonSystem:
         Labels of the state's last axis, for tables and plots.
     params : dict
         The physical parameters, recorded in outputs.
+    noise_groups : array of int, optional
+        A group label in ``0 … G−1`` for each noise direction (shape ``(m,)``). The splitting
+        integrator moves one group at a time; directions may share a group only if they
+        commute and do not change each other's coefficients (e.g. the same axis on the
+        non-neighbouring spins of one sublattice). Default: each direction its own group.
+    positive_casimirs : tuple of int or None
+        Which Casimirs (indices into the last axis of ``algebra.casimirs(μ)``) must be > 0 for
+        the orbit to be non-degenerate; ``check_position`` rejects a state where one of them is
+        ``≤ 0``. ``None`` (default): all of them (rigid body and spins: ``|μ_k|² > 0``). A
+        Casimir that may legitimately be zero or negative (the heavy top's ``Π·Γ``) is left out:
+        the heavy top declares ``(0,)``, i.e. only ``|Γ|² > 0``.
+    casimir_scale : callable or None
+        ``μ ↦`` a non-negative size for each Casimir (same shape as ``casimirs(μ)``), the scale
+        of its round-off: :meth:`casimir_error` measures drift relative to
+        ``max(|C₀|, casimir_scale(μ))`` at the current state ``μ`` (no extra state to carry).
+        Needed when a Casimir may vanish (``Π·Γ = 0``), where
+        ``|C − C₀|/|C₀|`` is undefined; for the quadratic Casimirs here ``|μ|²`` is the natural
+        size. ``None`` (default): ``|C₀|`` alone, which must then be nonzero.
     """
 
     name: str
@@ -53,12 +71,51 @@ class LiePoissonSystem:
     reference: Callable | None = None
     component_names: tuple[str, ...] = ()
     params: dict = field(default_factory=dict)
+    noise_groups: Any = None
+    positive_casimirs: tuple[int, ...] | None = None
+    casimir_scale: Callable | None = None
+
+    def __post_init__(self):
+        if self.noise_groups is not None:
+            labels = np.asarray(self.noise_groups)
+            if labels.shape != (self.num_noises,) or not np.issubdtype(labels.dtype, np.integer):
+                raise ValueError(
+                    f"noise_groups must be an integer array of shape ({self.num_noises},), "
+                    f"one label per noise direction; got {labels.dtype} of shape {labels.shape}"
+                )
+            if set(np.unique(labels)) != set(range(int(labels.max()) + 1)):
+                raise ValueError("noise_groups labels must be 0, 1, …, G−1 with none missing")
+
+    @property
+    def noise_group_labels(self):
+        """Group label of each noise direction, shape ``(m,)``."""
+        if self.noise_groups is None:
+            return np.arange(self.num_noises)
+        return np.asarray(self.noise_groups)
+
+    @property
+    def num_noise_groups(self) -> int:
+        return int(np.max(self.noise_group_labels)) + 1
 
     def casimirs(self, mu):
         return self.algebra.casimirs(mu)
 
+    def casimir_error(self, mu, reference_casimirs):
+        """Largest relative drift ``max_k |C_k(μ) − C₀_k| / scale_k`` of the Casimirs (a scalar).
+
+        ``scale = |C₀|``, or ``max(|C₀|, casimir_scale(μ))`` when the system declares a scale,
+        which keeps the error finite on orbits where a Casimir is zero. 0 for an algebra
+        without Casimirs.
+        """
+        scale = jnp.abs(reference_casimirs)
+        if self.casimir_scale is not None:
+            scale = jnp.maximum(scale, self.casimir_scale(mu))
+        drift = jnp.abs(self.casimirs(mu) - reference_casimirs) / scale
+        return jnp.max(drift, initial=0.0)
+
     def check_position(self, position, name: str = "position"):
-        """Reject a state of the wrong shape, non-finite, or on a degenerate (zero) orbit."""
+        """Reject a state of the wrong shape, non-finite, or on a degenerate orbit (one of the
+        ``positive_casimirs`` is ``≤ 0``)."""
         shape = tuple(jnp.shape(position))
         if shape != self.event_shape:
             raise ValueError(
@@ -71,8 +128,10 @@ class LiePoissonSystem:
             raise ValueError(f"{name} must be finite, got {value}")
         with jax.ensure_compile_time_eval():
             casimirs = np.asarray(self.casimirs(value))
+        if self.positive_casimirs is not None:
+            casimirs = casimirs[..., list(self.positive_casimirs)]
         if np.any(casimirs <= 0):
             raise ValueError(
-                f"{name} lies on a degenerate orbit (a Casimir |μ|² is zero): {value}; "
-                "choose a nonzero state"
+                f"{name} lies on a degenerate orbit (a Casimir that must be > 0, e.g. |μ|², "
+                f"is {np.min(casimirs):.3g}): {value}; choose a nonzero state"
             )
