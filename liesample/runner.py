@@ -96,9 +96,16 @@ def sample_chains(
     )
     initial_positions = jnp.asarray(initial_positions)
     num_chains = initial_positions.shape[0]
-    algorithm.init(initial_positions[0])  # validates one position concretely (shape, values)
     if not np.all(np.isfinite(np.asarray(initial_positions))):
         raise ValueError("initial_positions must be finite")
+    # Concrete checks (shape, orbit, constraints) of every distinct start; chains often share one.
+    flat = np.asarray(initial_positions).reshape(num_chains, -1)
+    _, first_chains = np.unique(flat, axis=0, return_index=True)
+    for chain in np.sort(first_chains):
+        try:
+            algorithm.init(initial_positions[chain])
+        except (ValueError, TypeError) as error:
+            raise type(error)(f"initial_positions[{chain}]: {error}") from None
     states = jax.vmap(algorithm.init)(initial_positions)
     chain_keys = jax.random.split(rng_key, num_chains)
 

@@ -174,3 +174,10 @@ def test_bad_chunk_draws(monkeypatch, chunk_draws):
     monkeypatch.setattr(runner, "tqdm", _GuardBar)
     with pytest.raises(ValueError, match="chunk_draws"):
         sample_chains(ALGORITHM, KEY, POSITIONS, 6, progress=False, chunk_draws=chunk_draws)
+
+
+def test_every_distinct_start_is_checked_concretely():
+    """A degenerate start in any chain (not just the first) is refused, naming the chain."""
+    starts = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    with pytest.raises(ValueError, match=r"initial_positions\[1\].*degenerate"):
+        sample_chains(ALGORITHM, KEY, starts, 4, progress=False)

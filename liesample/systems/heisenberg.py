@@ -1,0 +1,329 @@
+"""Classical Heisenberg spin lattices: the stochastic Landau–Lifshitz–Gilbert equation.
+
+The state is a stack of unit spins ``s`` of shape ``(*shape, 3)`` on the product
+``(so(3)*)^N`` (``so3`` acts copy by copy), ``N = prod(shape)``: ``shape = (N,)`` is a chain and
+``shape = (L₁, L₂)`` a square lattice. The Hamiltonian (MATH.md §2, "Classical spins") is
+
+    h(s) = −J Σ_⟨jk⟩ s_j·s_k  −  B·Σ_k s_k  −  D Σ_k (s_k·e_z)²
+
+over nearest-neighbour bonds, with open or periodic boundaries (easy axis ``e_z`` for
+``D > 0``), and the unit-strength noise Hamiltonians are the ``3N`` spin components
+``ĥ_{k,i} = e_i·s_k`` (returned flat, index ``3k + i`` with ``k`` the C-order site index). With
+``θ = βσ²/2`` the engine then produces, per spin,
+
+    ds_k = s_k×∇_k h dt + θ s_k×(s_k×∇_k h) dt + σ Σ_i s_k×e_i ∘ dW_{k,i},
+
+the stochastic Landau–Lifshitz–Gilbert equation, whose invariant law on the orbit
+``|s_k| = 1`` is the classical Heisenberg Gibbs law ``∝ exp(−βh)``.
+
+The splitting integrator moves commuting groups of noise directions at once
+(``LiePoissonSystem.noise_groups``): one spin axis on one colour class of a proper
+colouring of the lattice (:func:`noise_groups`), 6 groups per step on a bipartite lattice
+instead of ``3N`` single directions.
+
+Each spin must be a unit vector: the system's ``check_position`` (which the sampler's
+``init`` calls) adds that check to the base class's shape/finiteness checks; the default
+position has every spin along ``e_z``.
+"""
+
+from __future__ import annotations
+
+import math
+import operator
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from liesample._validation import concrete_array, finite_float
+from liesample.algebras import so3
+from liesample.systems.base import LiePoissonSystem
+
+__all__ = [
+    "HeisenbergChainReference",
+    "SpinLatticeSystem",
+    "colouring",
+    "heisenberg",
+    "heisenberg_chain_correlation",
+    "lattice_shape",
+    "neighbour_sum",
+    "noise_groups",
+]
+
+UNIT_NORM_TOLERANCE = 1e-9
+"""How far ``|s_k|`` may be from 1 in an initial state."""
+
+
+class SpinLatticeSystem(LiePoissonSystem):
+    """A :class:`LiePoissonSystem` whose states are stacks of *unit* spins.
+
+    Only ``check_position`` differs from the base class: after its checks (shape, finite,
+    non-degenerate orbit) every spin must satisfy ``| |s_k| − 1 | ≤ 1e-9``; a ``ValueError``
+    names the first offending site.
+    """
+
+    def check_position(self, position, name: str = "position"):
+        super().check_position(position, name)
+        value = concrete_array(position)
+        if value is None:  # traced: value checks happen outside jit
+            return
+        norms = np.linalg.norm(np.asarray(value, dtype=float), axis=-1)
+        bad = np.abs(norms - 1.0) > UNIT_NORM_TOLERANCE
+        if np.any(bad):
+            site = tuple(int(i) for i in np.argwhere(bad)[0])
+            raise ValueError(
+                f"{name} must hold unit spins (|s_k| = 1 to {UNIT_NORM_TOLERANCE:g}); the spin at "
+                f"site {site} has norm {float(norms[site]):.12g} "
+                f"({int(np.sum(bad))} bad spin(s) in all)"
+            )
+
+
+def lattice_shape(shape) -> tuple[int, ...]:
+    """``shape`` as a tuple of 1 or 2 positive ints, or a ``TypeError``/``ValueError``."""
+    if not isinstance(shape, (tuple, list)):
+        raise TypeError(
+            f"shape must be a tuple of 1 or 2 positive ints, (N,) for a chain or (L1, L2) for a "
+            f"square lattice; got {shape!r}"
+        )
+    if not 1 <= len(shape) <= 2:
+        raise ValueError(f"shape must have 1 or 2 entries (chain or square lattice), got {shape!r}")
+    out = []
+    for extent in shape:
+        if isinstance(extent, (bool, np.bool_)):
+            raise TypeError(f"shape entries must be positive ints, got {shape!r}")
+        try:
+            value = operator.index(extent)
+        except TypeError:
+            raise TypeError(f"shape entries must be positive ints, got {shape!r}") from None
+        if value < 1:
+            raise ValueError(f"shape entries must be positive ints, got {shape!r}")
+        out.append(value)
+    return tuple(out)
+
+
+def _field(field) -> np.ndarray:
+    if np.ndim(field) != 1 or len(field) != 3:
+        raise ValueError(
+            f"field must be a sequence of 3 finite floats (B_x, B_y, B_z), got {field!r}"
+        )
+    return np.array([finite_float(f"field[{i}]", b) for i, b in enumerate(field)])
+
+
+def _bond_sum(s, periodic: bool):
+    """``Σ_⟨jk⟩ s_j·s_k`` over nearest-neighbour bonds along every lattice axis (no loops)."""
+    total = jnp.zeros((), s.dtype)
+    for axis in range(s.ndim - 1):  # lattice axes only (at most 2)
+        if periodic:
+            total = total + jnp.sum(s * jnp.roll(s, -1, axis=axis))
+        else:
+            n = s.shape[axis]
+            head = jax.lax.slice_in_dim(s, 0, n - 1, axis=axis)
+            tail = jax.lax.slice_in_dim(s, 1, n, axis=axis)
+            total = total + jnp.sum(head * tail)
+    return total
+
+
+def neighbour_sum(s, periodic: bool):
+    """``Σ_{j ~ k} s_j`` for every site ``k`` (shape of ``s``): the exchange field over ``J``."""
+    total = jnp.zeros_like(s)
+    for axis in range(s.ndim - 1):
+        if periodic:
+            total = total + jnp.roll(s, 1, axis=axis) + jnp.roll(s, -1, axis=axis)
+        else:
+            pad = [(0, 0)] * s.ndim
+            pad[axis] = (1, 1)
+            padded = jnp.pad(s, pad)
+            n = s.shape[axis]
+            total = (
+                total
+                + jax.lax.slice_in_dim(padded, 0, n, axis=axis)
+                + jax.lax.slice_in_dim(padded, 2, n + 2, axis=axis)
+            )
+    return total
+
+
+def colouring(shape, periodic: bool) -> tuple[np.ndarray, int]:
+    """A proper colouring of the lattice: ``(colours of shape `shape`, number of colours)``.
+
+    Axis colourings ``c_a(i) = i mod 2`` (path or even cycle) or, on an odd cycle, the same with
+    the last site coloured 2; their sum modulo ``k = max χ_a`` colours the Cartesian product
+    properly, because neighbours differ in exactly one coordinate.
+    """
+    odd_cycle = periodic and any(n % 2 for n in shape)
+    k = 3 if odd_cycle else 2
+    total = np.zeros(shape, dtype=np.int64)
+    for axis, n in enumerate(shape):
+        c = np.arange(n) % 2
+        if periodic and n % 2:
+            c[-1] = 2
+        index = [None] * len(shape)
+        index[axis] = slice(None)
+        total = total + c[tuple(index)]
+    return total % k, k
+
+
+def noise_groups(shape, periodic: bool) -> np.ndarray:
+    """Commuting groups of the ``3N`` noise directions, for the splitting integrator.
+
+    Direction ``(k, i)`` (flat index ``3k + i``) gets label ``3·colour(k) + i``: one group is
+    one spin axis on one colour class of :func:`colouring`. Its directions act on different,
+    non-neighbouring spins, so their vector fields commute and none changes another's
+    coefficient ``{h, ĥ_{k,i}}`` (which depends on ``s_k`` and its neighbours only): the group
+    moves as one piece, ``3 × colours`` (6 or 9) pieces per step instead of ``3N``.
+    """
+    colours, _ = colouring(shape, periodic)
+    return (3 * colours.reshape(-1, 1) + np.arange(3)).reshape(-1)
+
+
+def heisenberg(
+    shape,
+    coupling=1.0,
+    periodic: bool = False,
+    field=(0.0, 0.0, 0.0),
+    anisotropy=0.0,
+) -> SpinLatticeSystem:
+    """The classical Heisenberg model on a chain or a square lattice.
+
+    Parameters
+    ----------
+    shape : tuple of 1 or 2 positive ints
+        ``(N,)`` for a chain of ``N`` spins, ``(L1, L2)`` for a square lattice.
+    coupling : float
+        Exchange ``J`` (finite): ``J > 0`` ferromagnetic, ``J < 0`` antiferromagnetic.
+    periodic : bool
+        Periodic boundaries along every axis (each extent must then be ≥ 3, so that every bond
+        joins two distinct sites once); ``False``: open boundaries.
+    field : sequence of 3 floats
+        Uniform external field ``B`` (Zeeman term ``−B·Σ s_k``).
+    anisotropy : float
+        ``D`` in ``−D Σ (s_k·e_z)²``: easy axis ``e_z`` for ``D > 0``, easy plane for ``D < 0``.
+
+    Returns
+    -------
+    SpinLatticeSystem
+        A :class:`LiePoissonSystem` on ``(so(3)*)^N`` with state shape ``(*shape, 3)``, ``3N``
+        noise Hamiltonians ``e_i·s_k`` (grouped by :func:`noise_groups`), unit spins checked at
+        ``init`` and default position all spins along ``e_z``. ``reference(beta)`` is the exact
+        :class:`HeisenbergChainReference` for an open chain with ``B = 0``, ``D = 0``, else
+        ``None``.
+    """
+    shape = lattice_shape(shape)
+    coupling = finite_float("coupling", coupling)
+    if not isinstance(periodic, (bool, np.bool_)):
+        raise TypeError(f"periodic must be a bool, got {periodic!r}")
+    periodic = bool(periodic)
+    if periodic and min(shape) < 3:
+        raise ValueError(
+            f"periodic boundaries need every extent of shape to be >= 3 (a bond would join a site "
+            f"to itself or be counted twice); got shape {shape}"
+        )
+    field = _field(field)
+    anisotropy = finite_float("anisotropy", anisotropy)
+    num_sites = math.prod(shape)
+    has_field = bool(np.any(field != 0.0))
+
+    def hamiltonian(s):
+        h = -coupling * _bond_sum(s, periodic)
+        if has_field:
+            h = h - jnp.sum(s * field)
+        if anisotropy != 0.0:
+            h = h - anisotropy * jnp.sum(s[..., 2] ** 2)
+        return h
+
+    def noise_hamiltonians(s):
+        return jnp.reshape(s, (-1,))  # ĥ_{k,i} = e_i·s_k, index 3k + i
+
+    exact_chain = len(shape) == 1 and not periodic and not has_field and anisotropy == 0.0
+
+    def reference(beta, position=None):
+        del position  # the law does not depend on the (unit-spin) orbit
+        if not exact_chain:
+            return None
+        return HeisenbergChainReference(length=shape[0], beta=float(beta), coupling=coupling)
+
+    default_position = np.zeros((*shape, 3))
+    default_position[..., 2] = 1.0
+    geometry = "chain" if len(shape) == 1 else "square lattice"
+    return SpinLatticeSystem(
+        name=f"Heisenberg {geometry} {'x'.join(map(str, shape))}",
+        algebra=so3,
+        hamiltonian=hamiltonian,
+        noise_hamiltonians=noise_hamiltonians,
+        num_noises=3 * num_sites,
+        event_shape=(*shape, 3),
+        default_position=default_position,
+        reference=reference,
+        component_names=("s_x", "s_y", "s_z"),
+        params={
+            "shape": shape,
+            "coupling": coupling,
+            "periodic": periodic,
+            "field": tuple(float(b) for b in field),
+            "anisotropy": anisotropy,
+        },
+        noise_groups=noise_groups(shape, periodic),
+    )
+
+
+# --------------------------------------------------------------------------- exact reference
+
+
+def langevin_function(x):
+    """``L(x) = coth x − 1/x`` (``x/3`` near 0, odd), stable for every finite ``x``."""
+    x = np.asarray(x, dtype=float)
+    small = np.abs(x) < 1e-3
+    safe = np.where(small, 1.0, x)
+    series = x / 3.0 - x**3 / 45.0 + 2.0 * x**5 / 945.0
+    return np.where(small, series, 1.0 / np.tanh(safe) - 1.0 / safe)
+
+
+def heisenberg_chain_correlation(n, beta, coupling=1.0):
+    """Exact ``E[s_k·s_{k+n}] = u^n``, ``u = coth(βJ) − 1/(βJ)`` (Fisher 1964).
+
+    For the open classical Heisenberg chain without field or anisotropy, at any length and for
+    any ``k``: the bond angles are independent under the Gibbs law. ``n ≥ 0`` (array or int).
+    """
+    n = np.asarray(n)
+    if not np.issubdtype(n.dtype, np.integer) or np.any(n < 0):
+        raise ValueError(f"n must be a non-negative integer (or array of them), got {n!r}")
+    beta = finite_float("beta", beta)
+    coupling = finite_float("coupling", coupling)
+    return langevin_function(beta * coupling) ** n
+
+
+@dataclass(frozen=True)
+class HeisenbergChainReference:
+    """Exact Gibbs law of an open chain of ``length`` spins, ``B = 0``, ``D = 0`` (Fisher 1964).
+
+    With ``K = βJ``, the ``length − 1`` bond cosines ``c_k = s_k·s_{k+1}`` are i.i.d. with
+    density ``∝ exp(K c)`` on ``[−1, 1]``: mean ``L(K)`` (Langevin function) and variance
+    ``L′(K) = 1/K² − 1/sinh²K``.
+    """
+
+    length: int
+    beta: float
+    coupling: float
+
+    @property
+    def u(self) -> float:
+        return float(langevin_function(self.beta * self.coupling))
+
+    def correlation(self, n):
+        """``E[s_k·s_{k+n}] = u^n``."""
+        return heisenberg_chain_correlation(n, self.beta, self.coupling)
+
+    def bond_variance(self) -> float:
+        """``Var(s_k·s_{k+1}) = 1/K² − 1/sinh²K``."""
+        k = self.beta * self.coupling
+        if abs(k) < 1e-3:
+            return 1.0 / 3.0 - 2.0 * k**2 / 15.0
+        return 1.0 / k**2 - 1.0 / math.sinh(k) ** 2
+
+    def energy_mean(self) -> float:
+        """``E[h] = −J (length − 1) u``."""
+        return -self.coupling * (self.length - 1) * self.u
+
+    def energy_variance(self) -> float:
+        """``Var(h) = J² (length − 1) Var(c)``."""
+        return self.coupling**2 * (self.length - 1) * self.bond_variance()
