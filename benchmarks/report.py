@@ -765,10 +765,12 @@ def _spins_section(out_dir: Path) -> str:
         "",
         "## Classical spins: Langevin vs single-spin Metropolis",
         "",
-        f"From `benchmarks/spins.py` ({data['machine']['date_utc']}, "
-        f"{data['total_seconds']:.0f} s; the machine was shared, so wall times are rough — "
-        "ESS per 1000 chain-steps does not depend on the machine). Periodic 32×32 Heisenberg "
-        "lattice, J = 1, σ = 1, 8 chains; a Metropolis step is one checkerboard sweep.",
+        (
+            f"From `benchmarks/spins.py` ({data['machine']['date_utc']}, "
+            f"{data['total_seconds']:.0f} s; the machine was shared, so wall times are rough — "
+            "ESS per 1000 chain-steps does not depend on the machine). Periodic 32×32 Heisenberg "
+            "lattice, J = 1, σ = 1, 8 chains; a Metropolis step is one checkerboard sweep."
+        ),
         "",
         "| β | sampler | quantity | estimate ± MCSE | ESS/s | ESS per 1000 steps | R-hat |",
         "|---|---|---|---|---|---|---|",
@@ -781,9 +783,11 @@ def _spins_section(out_dir: Path) -> str:
         )
     lines += [
         "",
-        "Metropolis wins here: it can decorrelate a spin in one move, while the Langevin "
-        "dynamics rotates each spin diffusively by a small angle per step. R-hat > 1.01 at "
-        "β = 1.4 marks runs that have not converged (critical slowing down).",
+        (
+            "Metropolis wins here: it can decorrelate a spin in one move, while the Langevin "
+            "dynamics rotates each spin diffusively by a small angle per step. R-hat > 1.01 at "
+            "β = 1.4 marks runs that have not converged (critical slowing down)."
+        ),
         "",
     ]
     return "\n".join(lines)
