@@ -141,6 +141,20 @@ def _max_component(r):
     return abs(r["bias"][i]), r["se"][i]
 
 
+def _line_with_2se_bars(ax, x, y, se, color):
+    """A line through ``(x, y)`` with ±2 SE bars, kept above zero on log axes."""
+    ax.plot(x, y, "-", color=color, lw=1.2)
+    ax.errorbar(
+        x,
+        y,
+        yerr=[np.minimum(2 * se, 0.9 * y), 2 * se],
+        fmt="none",
+        ecolor=color,
+        elinewidth=0.8,
+        capsize=2,
+    )
+
+
 def plot_accuracy_cost(rows, iid_rows, iid_check, target_errors, path: Path) -> Path:
     fig = Figure(figsize=(13.0, 5.6), layout="constrained")
     ax, ax2 = fig.subplots(1, 2)
@@ -156,16 +170,7 @@ def plot_accuracy_cost(rows, iid_rows, iid_check, target_errors, path: Path) -> 
         se = np.array([_max_component(r)[1] for r in pts])
         ok = np.array([r["max_abs_bias_resolved"] for r in pts])
         c, m = _COLORS[name], _MARKERS[name]
-        ax.plot(x, y, "-", color=c, lw=1.2)
-        ax.errorbar(
-            x,
-            y,
-            yerr=[np.minimum(2 * se, 0.9 * y), 2 * se],
-            fmt="none",
-            ecolor=c,
-            elinewidth=0.8,
-            capsize=2,
-        )
+        _line_with_2se_bars(ax, x, y, se, c)
         ax.plot(x[ok], y[ok], m, color=c, ms=7, label=name)
         lowest.append(y.min())
         ax.plot(x[~ok], y[~ok], m, mfc="white", mec=c, ms=7)
@@ -243,16 +248,7 @@ def plot_bias_vs_step(rows, path: Path, order_rows=()) -> Path:
         se = np.array([_max_component(r)[1] for r in pts])
         ok = np.array([r["max_abs_bias_resolved"] for r in pts])
         c, m = _COLORS[name], _MARKERS[name]
-        ax.plot(h, y, "-", color=c, lw=1.2)
-        ax.errorbar(
-            h,
-            y,
-            yerr=[np.minimum(2 * se, 0.9 * y), 2 * se],
-            fmt="none",
-            ecolor=c,
-            elinewidth=0.8,
-            capsize=2,
-        )
+        _line_with_2se_bars(ax, h, y, se, c)
         order = pts[0]["declared_weak_order"]
         ax.plot(h[ok], y[ok], m, color=c, ms=7, label=f"{name} (declared order {order})")
         ax.plot(h[~ok], y[~ok], m, mfc="white", mec=c, ms=7)

@@ -67,14 +67,18 @@ def demo(args) -> int:
         raise ValueError(f"--time must be > 0, got {args.time}")
     out = args.output
     out.mkdir(parents=True, exist_ok=True)
+
+    def sampler_for(system):
+        return lie_poisson_langevin(
+            system,
+            beta=args.beta,
+            sigma=args.sigma,
+            step_size=args.step_size,
+            integrator=args.integrator,
+        )
+
     system = systems.rigid_body(args.inertia)
-    algorithm = lie_poisson_langevin(
-        system,
-        beta=args.beta,
-        sigma=args.sigma,
-        step_size=args.step_size,
-        integrator=args.integrator,
-    )
+    algorithm = sampler_for(system)
     target = system.reference(args.beta, [args.radius, 0.0, 0.0])
     key_start, key_run, key_iso = jax.random.split(jax.random.key(args.seed), 3)
     thinning = max(1, round(0.5 / args.step_size))  # a draw every ~half time unit
@@ -123,13 +127,7 @@ def demo(args) -> int:
     )
 
     # Isotropic body: uniform law, exact autocorrelation r² exp(−σ² t) (MATH.md §2).
-    iso_algorithm = lie_poisson_langevin(
-        systems.rigid_body((2.0, 2.0, 2.0)),
-        beta=args.beta,
-        sigma=args.sigma,
-        step_size=args.step_size,
-        integrator=args.integrator,
-    )
+    iso_algorithm = sampler_for(systems.rigid_body((2.0, 2.0, 2.0)))
     iso_draws = round(200.0 / args.step_size)
     iso = sample(
         iso_algorithm,
