@@ -30,7 +30,11 @@ test: $(BIN)/.installed-test
 test-slow: $(BIN)/.installed-test
 	$(BIN)/python -m pytest -n $(JOBS) -q -m slow
 
-bench: $(BIN)/.installed
+$(BIN)/.installed-bench: $(BIN)/.installed
+	$(BIN)/pip install -q -e '.[bench]'
+	touch $@
+
+bench: $(BIN)/.installed-bench
 	$(BIN)/python benchmarks/run.py
 
 clean:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import itertools
-import json
 import math
 import os
 from pathlib import Path
@@ -11,7 +10,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from benchmarks import accuracy, common
+from benchmarks import accuracy, common, suites
 from benchmarks.throughput import RNG_ONLY
 
 _DPI = 130
@@ -751,44 +750,6 @@ above come from a large third-order term of opposite sign at h ≥ 0.1.
 """
 
 
-def _spins_section(out_dir: Path) -> str:
-    """Table from ``spins.json`` (written by ``benchmarks/spins.py``), if it exists."""
-    path = out_dir / "spins.json"
-    if not path.exists():
-        return ""
-    data = json.loads(path.read_text())
-    lines = [
-        "",
-        "## Classical spins: Langevin vs single-spin Metropolis",
-        "",
-        (
-            f"From `benchmarks/spins.py` ({data['machine']['date_utc']}, "
-            f"{data['total_seconds']:.0f} s; the machine was shared, so wall times are rough — "
-            "ESS per 1000 chain-steps does not depend on the machine). Periodic 32×32 Heisenberg "
-            "lattice, J = 1, σ = 1, 8 chains; a Metropolis step is one checkerboard sweep."
-        ),
-        "",
-        "| β | sampler | quantity | estimate ± MCSE | ESS/s | ESS per 1000 steps | R-hat |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    for row in data["ess"]:
-        lines.append(
-            f"| {row['beta']} | {row['sampler']} | {row['quantity']} | "
-            f"{row['estimate']:.4f} ± {row['mcse']:.4f} | {row['ess_per_second']:.3g} | "
-            f"{row['ess_per_1000_steps']:.3g} | {row['r_hat']:.2f} |"
-        )
-    lines += [
-        "",
-        (
-            "Metropolis wins here: it can decorrelate a spin in one move, while the Langevin "
-            "dynamics rotates each spin diffusively by a small angle per step. R-hat > 1.01 at "
-            "β = 1.4 marks runs that have not converged (critical slowing down)."
-        ),
-        "",
-    ]
-    return "\n".join(lines)
-
-
 def write_report(out_dir: Path, md_path: Path) -> list[Path]:
     meta = common.read_json(out_dir / "meta.json")
     tp_rows = common.read_json(out_dir / "throughput.json")["rows"]
@@ -850,6 +811,9 @@ def write_report(out_dir: Path, md_path: Path) -> list[Path]:
         f"This run took **{meta['runtime_seconds']:.0f} s** ("
         + ", ".join(f"{labels.get(k, k)} {v:.0f} s" for k, v in sections.items())
         + ", plus start-up; compilation included)."
+    )
+    suite_sections = "".join(
+        "\n" + section for section in suites.report_sections(out_dir, md_path.parent)
     )
     md = f"""# liesample benchmarks
 
@@ -980,6 +944,6 @@ warmed up, best of {cfg["throughput_repeats"]}:
             order_slopes,
         )
     }
-{SLOW_ORDER_SECTION}{_spins_section(out_dir)}"""
+{SLOW_ORDER_SECTION}{suite_sections}"""
     md_path.write_text(md)
     return [md_path, *plots.values(), out_dir / "summary.json"]

@@ -1,4 +1,5 @@
-"""Benchmarks of liesample's rigid-body sampler: throughput, accuracy against cost, exact limit.
+"""Benchmarks of liesample: the rigid-body core (throughput, accuracy against cost, exact limit)
+and every suite of ``benchmarks/suites.py`` (one per system or comparison).
 
 Usage (from the repository root)::
 
@@ -27,7 +28,7 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-from benchmarks import accuracy, common, report, throughput
+from benchmarks import accuracy, common, report, suites, throughput
 
 
 def _paths(args):
@@ -47,6 +48,11 @@ def main(argv=None) -> int:
         "--report-only", action="store_true", help="rebuild the plots and RESULTS.md from JSON"
     )
     parser.add_argument("--out", default=None, help="results folder (RESULTS.md goes inside)")
+    parser.add_argument(
+        "--suites",
+        default=None,
+        help="comma-separated suites to run (default: all in benchmarks/suites.py); 'none' skips",
+    )
     args = parser.parse_args(argv)
     out_dir, md_path = _paths(args)
     cfg = common.QUICK if args.quick else common.FULL
@@ -92,6 +98,9 @@ def main(argv=None) -> int:
             common.write_json(order_path, {"rows": rows})
         elif order_path.exists():
             order_path.unlink()  # a stale check from another run must not be reported
+
+        only = None if args.suites is None else set(args.suites.split(",")) - {"none"}
+        sections.update(suites.run_all(out_dir, args.quick, _log, only))
 
         meta["section_seconds"] = sections
         meta["runtime_seconds"] = time.perf_counter() - _START  # before the report

@@ -7,7 +7,7 @@ import pytest
 from scipy import stats
 from scipy.special import dawsn, roots_legendre
 
-from liesample.targets import (
+from liesample.targets.orbits import (
     RestrictedGaussian,
     _acg_envelope,
     _log_acceptance_ratio,
