@@ -103,6 +103,8 @@ def make_dynamics(system, *, beta=None, sigma=1.0, theta=None, hamiltonian=True)
         if beta is None:
             raise ValueError("beta is required when sigma > 0 (the target is exp(-beta*h))")
         beta = finite_float("beta", beta)
+        if system.check_beta is not None:
+            system.check_beta(beta)
         if theta is not None:
             raise ValueError(
                 "theta is derived from beta and sigma (theta = beta*sigma**2/2); pass beta, not theta"

@@ -59,6 +59,10 @@ class LiePoissonSystem:
         Needed when a Casimir may vanish (``Π·Γ = 0``), where
         ``|C − C₀|/|C₀|`` is undefined; for the quadratic Casimirs here ``|μ|²`` is the natural
         size. ``None`` (default): ``|C₀|`` alone, which must then be nonzero.
+    check_beta : callable or None
+        ``β ↦ None``, raising ``ValueError`` (naming the bound) where ``exp(−βh)`` is not
+        normalisable on the orbit (e.g. point vortices at strongly negative ``β``). ``None``
+        (default): every finite ``β`` is admissible (compact orbit, continuous ``h``).
     """
 
     name: str
@@ -74,6 +78,7 @@ class LiePoissonSystem:
     noise_groups: Any = None
     positive_casimirs: tuple[int, ...] | None = None
     casimir_scale: Callable | None = None
+    check_beta: Callable | None = None
 
     def __post_init__(self):
         if self.noise_groups is not None:
