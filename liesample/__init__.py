@@ -8,6 +8,8 @@ from liesample import algebras, integrators, systems
 from liesample.dynamics import PoissonLangevin, Scene
 from liesample.runner import sample, sample_chains
 from liesample.samplers.lie_poisson_langevin import lie_poisson_langevin
+from liesample.samplers.magnetic_hmc import magnetic_hmc
+from liesample.samplers.magnetic_langevin import magnetic_langevin
 
 __all__ = [
     "PoissonLangevin",
@@ -15,6 +17,8 @@ __all__ = [
     "algebras",
     "integrators",
     "lie_poisson_langevin",
+    "magnetic_hmc",
+    "magnetic_langevin",
     "sample",
     "sample_chains",
     "systems",

@@ -3,6 +3,14 @@
 One module per family of laws; everything public is re-exported here.
 """
 
+from liesample.targets.gaussian import (
+    Gaussian,
+    correlated_gaussian,
+    linear_step_moments,
+    ou_cross_covariance,
+    ou_drift,
+    ou_stationary_covariance,
+)
 from liesample.targets.orbits import (
     HeavyTopGibbs,
     RestrictedGaussian,
@@ -14,6 +22,12 @@ from liesample.targets.orbits import (
 )
 
 __all__ = [
+    "Gaussian",
+    "correlated_gaussian",
+    "linear_step_moments",
+    "ou_cross_covariance",
+    "ou_drift",
+    "ou_stationary_covariance",
     "HeavyTopGibbs",
     "RestrictedGaussian",
     "bingham_log_normalizer",
