@@ -23,16 +23,16 @@ from liesample.targets.orbits import (
 
 __all__ = [
     "Gaussian",
-    "correlated_gaussian",
-    "linear_step_moments",
-    "ou_cross_covariance",
-    "ou_drift",
-    "ou_stationary_covariance",
     "HeavyTopGibbs",
     "RestrictedGaussian",
     "bingham_log_normalizer",
     "bingham_marginal_density",
     "bingham_second_moments",
+    "correlated_gaussian",
     "isotropic_autocorrelation",
+    "linear_step_moments",
+    "ou_cross_covariance",
+    "ou_drift",
+    "ou_stationary_covariance",
     "sample_bingham",
 ]
