@@ -152,6 +152,24 @@ class PoissonLangevin:
         """The ambient increment ``ad*_ζ μ`` (what a non-geometric integrator adds to ``μ``)."""
         return self.algebra.ad_star(self.generator(mu, dt, dW), mu)
 
+    def ito_correction(self, mu, quadratic_variation):
+        """``½ σ² Σ_i d[S^i] (DX_i · X_i)(μ)``, ``X_i = X_{ĥ_i}``: the drift that turns the
+        Stratonovich noise into Itô form (paper, the Itô-form proposition of ``sec:stoch-ham``;
+        MATH.md §1). ``quadratic_variation`` holds ``d[S^i]`` over the step, shape ``(m,)`` or a
+        scalar. Only Itô-reading integrators add it; none does silently.
+        """
+
+        def field(coefficients, m):
+            return self.algebra.ad_star(self.noise_generator(m, coefficients), m)
+
+        def along_itself(coefficients):
+            return jax.jvp(lambda m: field(coefficients, m), (mu,), (field(coefficients, mu),))[1]
+
+        directions = jnp.eye(self.num_noises, dtype=mu.dtype)
+        weights = jnp.broadcast_to(quadratic_variation, (self.num_noises,))
+        second_order = jax.vmap(along_itself)(directions)
+        return 0.5 * self.sigma**2 * jnp.tensordot(weights, second_order, axes=1)
+
     def brownian_increments(self, rng_key, dt, dtype):
         """``dW ~ N(0, dt I_m)`` when the scene has noise, else ``None`` (no draw at all)."""
         if not self.scene.noise:

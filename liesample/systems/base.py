@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import jax
@@ -63,6 +63,14 @@ class LiePoissonSystem:
         ``β ↦ None``, raising ``ValueError`` (naming the bound) where ``exp(−βh)`` is not
         normalisable on the orbit (e.g. point vortices at strongly negative ``β``). ``None``
         (default): every finite ``β`` is admissible (compact orbit, continuous ``h``).
+    hamiltonian_pieces : tuple of callables or None
+        Functions summing to ``h``, each exactly solved by one coadjoint move: its gradient is
+        constant along its own flow, so ``Ad*_{exp(t ∇f(μ))} μ`` *is* that flow. The
+        ``splitting`` integrator then advances ``X_h`` as the symmetric (Strang) composition of
+        these exact flows instead of one Heun step on ``∇h``. Pieces that are each invariant
+        under a symmetry keep its momentum map exactly (stochastic Noether, paper
+        ``prop:stoch-noether``); see :func:`liesample.systems.heavy_top`. ``None`` (default):
+        one piece, ``h``.
     """
 
     name: str
@@ -79,6 +87,7 @@ class LiePoissonSystem:
     positive_casimirs: tuple[int, ...] | None = None
     casimir_scale: Callable | None = None
     check_beta: Callable | None = None
+    hamiltonian_pieces: tuple[Callable, ...] | None = None
 
     def __post_init__(self):
         if self.noise_groups is not None:
@@ -90,6 +99,21 @@ class LiePoissonSystem:
                 )
             if set(np.unique(labels)) != set(range(int(labels.max()) + 1)):
                 raise ValueError("noise_groups labels must be 0, 1, …, G−1 with none missing")
+
+    def with_noise(self, noise_hamiltonians: Callable, noise_groups=None) -> LiePoissonSystem:
+        """The same system driven by other unit-strength noise Hamiltonians ``μ ↦ (ĥ_1, …, ĥ_m)``.
+
+        The dissipation follows (it is always derived from the noise); ``m`` is read off the
+        function at ``default_position``. ``noise_groups`` applies to the new directions
+        (default: each direction its own group).
+        """
+        num_noises = _count_noises(noise_hamiltonians, self.default_position, "noise_hamiltonians")
+        return replace(
+            self,
+            noise_hamiltonians=noise_hamiltonians,
+            num_noises=num_noises,
+            noise_groups=noise_groups,
+        )
 
     @property
     def noise_group_labels(self):
@@ -140,3 +164,69 @@ class LiePoissonSystem:
                 f"{name} lies on a degenerate orbit (a Casimir that must be > 0, e.g. |μ|², "
                 f"is {np.min(casimirs):.3g}): {value}; choose a nonzero state"
             )
+
+
+def _count_noises(noise_hamiltonians, position, name: str) -> int:
+    if not callable(noise_hamiltonians):
+        raise TypeError(
+            f"{name} must be a callable μ ↦ (ĥ_1(μ), …, ĥ_m(μ)), got {noise_hamiltonians!r}"
+        )
+    values = jax.eval_shape(noise_hamiltonians, jnp.asarray(position, dtype=float))
+    if len(values.shape) != 1 or values.shape[0] < 1:
+        raise ValueError(
+            f"{name} must return a 1-D array (ĥ_1, …, ĥ_m) with m >= 1, got shape {values.shape}"
+        )
+    return int(values.shape[0])
+
+
+def lie_poisson_system(
+    algebra: LieAlgebra,
+    hamiltonian: Callable,
+    noise_hamiltonians: Callable,
+    position,
+    *,
+    name: str = "Lie–Poisson system",
+    **options,
+) -> LiePoissonSystem:
+    """A user-defined system from the three things the equation needs (ARCHITECTURE: *systems*).
+
+    Parameters
+    ----------
+    algebra : LieAlgebra
+        E.g. ``liesample.algebras.so3``, ``se3`` or any ``StructureConstants``.
+    hamiltonian : callable
+        ``μ ↦ h(μ)``, a scalar.
+    noise_hamiltonians : callable
+        ``μ ↦ (ĥ_1(μ), …, ĥ_m(μ))``, unit strength; the dissipation is derived from them.
+    position : array
+        A valid state; fixes the state's shape and the default start.
+    name : str
+    **options
+        Any other :class:`LiePoissonSystem` field (``reference``, ``component_names``,
+        ``noise_groups``, ``positive_casimirs``, …).
+
+    Everything else (the dissipation, Casimir checks, every integrator and sampler) comes from
+    the engine; ``examples/custom_system.py`` builds a planar pendulum on ``se(2)*`` this way.
+    """
+    if not isinstance(algebra, LieAlgebra):
+        raise TypeError(f"algebra must be a liesample.algebras.LieAlgebra, got {algebra!r}")
+    if not callable(hamiltonian):
+        raise TypeError(f"hamiltonian must be a callable μ ↦ h(μ), got {hamiltonian!r}")
+    position = np.array(position, dtype=float)
+    if position.ndim < 1:
+        raise ValueError(f"position must be an array with at least one axis, got {position!r}")
+    energy = jax.eval_shape(hamiltonian, jnp.asarray(position))
+    if energy.shape != ():
+        raise ValueError(f"hamiltonian must return a scalar, got shape {energy.shape}")
+    system = LiePoissonSystem(
+        name=name,
+        algebra=algebra,
+        hamiltonian=hamiltonian,
+        noise_hamiltonians=noise_hamiltonians,
+        num_noises=_count_noises(noise_hamiltonians, position, "noise_hamiltonians"),
+        event_shape=position.shape,
+        default_position=position,
+        **options,
+    )
+    system.check_position(position)
+    return system

@@ -18,13 +18,34 @@ from liesample.algebras import so3
 from liesample.systems.base import LiePoissonSystem
 
 
-def rigid_body(inertia=(1.0, 2.0, 4.0)) -> LiePoissonSystem:
+def kinetic_pieces(inverse_inertia, momentum):
+    """``½ Π·I⁻¹Π = ½|Π|²/I₁ + Σ_{i=2,3} ½ (1/I_i − 1/I₁) Π_i²`` as exactly solvable pieces.
+
+    Each piece's gradient is constant along its own flow (``Π`` rotates about itself or about
+    ``e_i``), so one coadjoint move solves it (``LiePoissonSystem.hamiltonian_pieces``); terms
+    with a zero coefficient are left out. With ``I₁ = I₂`` every piece is invariant under
+    rotations about ``e₃`` (the Lagrange top's symmetry). ``momentum(μ)`` selects ``Π``.
+    """
+    inverse_inertia = np.asarray(inverse_inertia, dtype=float)
+    pieces = [lambda mu: 0.5 * inverse_inertia[0] * jnp.sum(momentum(mu) ** 2)]
+    for axis in (1, 2):
+        coefficient = float(inverse_inertia[axis] - inverse_inertia[0])
+        if coefficient != 0.0:
+            pieces.append(lambda mu, c=coefficient, a=axis: 0.5 * c * momentum(mu)[..., a] ** 2)
+    return tuple(pieces)
+
+
+def rigid_body(inertia=(1.0, 2.0, 4.0), split_hamiltonian: bool = False) -> LiePoissonSystem:
     """The free rigid body with principal moments of inertia ``inertia``.
 
     Parameters
     ----------
     inertia : sequence of 3 floats
         Principal moments ``(I₁, I₂, I₃)``, each finite and > 0.
+    split_hamiltonian : bool
+        Declare ``h`` as exactly solvable pieces (:func:`kinetic_pieces`), so that the
+        ``splitting`` integrator's Hamiltonian flow is a composition of exact rotations (a
+        Poisson map). Default ``False``: one Heun step on ``∇h``.
 
     Returns
     -------
@@ -32,6 +53,8 @@ def rigid_body(inertia=(1.0, 2.0, 4.0)) -> LiePoissonSystem:
         State ``μ`` of shape ``(3,)`` (body angular momentum); Casimir ``|μ|²``.
     """
     moments = principal_moments(inertia)
+    if not isinstance(split_hamiltonian, bool):
+        raise TypeError(f"split_hamiltonian must be a bool, got {split_hamiltonian!r}")
     inverse_inertia = 1.0 / np.asarray(moments)
 
     def hamiltonian(mu):
@@ -57,4 +80,7 @@ def rigid_body(inertia=(1.0, 2.0, 4.0)) -> LiePoissonSystem:
         reference=reference,
         component_names=("μ₁", "μ₂", "μ₃"),
         params={"inertia": moments},
+        hamiltonian_pieces=kinetic_pieces(inverse_inertia, lambda mu: mu)
+        if split_hamiltonian
+        else None,
     )
