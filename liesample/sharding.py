@@ -1,0 +1,128 @@
+"""Chains across devices: JAX's own sharding of the chain axis (``jax.sharding.NamedSharding``).
+
+Chains are independent, so the runner splits the leading (chain) axis of the states and of the
+per-chain keys over a one-dimensional device mesh and lets ``jax.jit`` partition the vmapped
+step (GSPMD): no chain ever talks to another, so there is no communication until the draws are
+copied back to the host. Each chain runs the same operations on the same key
+``fold_in(key_c, step)`` as in the unsharded run, so the draws agree (bitwise on CPU, see
+``tests/test_sharding.py``).
+
+Several hosts (``jax.distributed``)
+-----------------------------------
+Start every process with the same script and call :func:`initialize_distributed` (a guarded
+``jax.distributed.initialize``) before anything else touches JAX; then ``jax.devices()`` lists
+the devices of all hosts and ``devices="all"`` spreads the chains over all of them. Every
+process passes the same ``rng_key`` and the same ``initial_positions`` (the global array; each
+process only computes its own chains' shards); the draws are gathered to every host
+(``multihost_utils.process_allgather``). Write the draws (``output=``) from one process only,
+e.g. ``output=path if jax.process_index() == 0 else None``. Multi-host runs are not tested here
+(one machine); the single-host path is.
+"""
+
+from __future__ import annotations
+
+import operator
+
+import jax
+import numpy as np
+from jax.sharding import NamedSharding, PartitionSpec
+
+__all__ = ["CHAIN_AXIS", "chain_sharding", "initialize_distributed", "shard_chains", "to_host"]
+
+CHAIN_AXIS = "chain"
+"""Name of the mesh axis over which chains are split."""
+
+
+def chain_sharding(devices, num_chains: int) -> NamedSharding | None:
+    """The sharding of the chain axis, or ``None`` for an unsharded run.
+
+    Parameters
+    ----------
+    devices : None, "all", int, sequence of ``jax.Device`` or ``NamedSharding``
+        ``None``: run on the default device, unsharded. ``"all"``: every device JAX sees
+        (every host's, after :func:`initialize_distributed`). An int ``n``: the first ``n``.
+        A ``NamedSharding`` is used as given (its spec must split axis 0 only).
+    num_chains : int
+        Must be a multiple of the number of devices (each device runs the same number of chains).
+    """
+    if devices is None:
+        return None
+    if isinstance(devices, NamedSharding):
+        sharding = devices
+    else:
+        if isinstance(devices, str):
+            if devices != "all":
+                raise ValueError(
+                    f"devices must be None, 'all', a positive int, a sequence of jax devices or "
+                    f"a NamedSharding; got {devices!r}"
+                )
+            chosen = jax.devices()
+        elif isinstance(devices, (int, np.integer)) and not isinstance(devices, bool):
+            count = operator.index(devices)
+            available = jax.devices()
+            if not 1 <= count <= len(available):
+                raise ValueError(
+                    f"devices must be between 1 and the {len(available)} available device(s), "
+                    f"got {count}"
+                )
+            chosen = available[:count]
+        else:
+            try:
+                chosen = list(devices)
+            except TypeError:
+                raise TypeError(
+                    f"devices must be None, 'all', a positive int, a sequence of jax devices or "
+                    f"a NamedSharding; got {devices!r}"
+                ) from None
+            if not chosen or not all(isinstance(d, jax.Device) for d in chosen):
+                raise TypeError(
+                    f"devices must be a non-empty sequence of jax.Device, got {devices!r}"
+                )
+        mesh = jax.sharding.Mesh(np.asarray(chosen), (CHAIN_AXIS,))
+        sharding = NamedSharding(mesh, PartitionSpec(CHAIN_AXIS))
+    spec = tuple(sharding.spec)
+    if len(spec) > 1 and any(s is not None for s in spec[1:]):
+        raise ValueError(f"devices: the sharding must split the chain axis only, got {spec}")
+    count = int(np.prod([sharding.mesh.shape[a] for a in _axis_names(spec[0] if spec else None)]))
+    if num_chains % count:
+        raise ValueError(
+            f"the number of chains ({num_chains}) must be a multiple of the number of devices "
+            f"({count}) it is split over"
+        )
+    return sharding
+
+
+def _axis_names(entry):
+    if entry is None:
+        return ()
+    return (entry,) if isinstance(entry, str) else tuple(entry)
+
+
+def shard_chains(tree, sharding: NamedSharding | None):
+    """Place every leaf of ``tree`` (leading axis = chains) with ``sharding`` (or leave it)."""
+    if sharding is None:
+        return tree
+    return jax.device_put(tree, sharding)
+
+
+def to_host(tree):
+    """The leaves of ``tree`` as NumPy arrays on this host (gathered from every process)."""
+    if jax.process_count() > 1:
+        from jax.experimental import multihost_utils
+
+        return jax.tree.map(np.asarray, multihost_utils.process_allgather(tree, tiled=True))
+    return jax.tree.map(np.asarray, tree)
+
+
+def initialize_distributed(**kwargs) -> bool:
+    """``jax.distributed.initialize(**kwargs)`` once; ``False`` if it was already initialised.
+
+    Call it at the top of every process of a multi-host run, before any other JAX call. Without
+    arguments JAX reads the cluster from the environment (SLURM, Open MPI, Kubernetes, or
+    ``JAX_COORDINATOR_ADDRESS``, ``JAX_NUM_PROCESSES``, ``JAX_PROCESS_ID``); pass
+    ``coordinator_address=``, ``num_processes=``, ``process_id=`` otherwise.
+    """
+    if jax.distributed.is_initialized():
+        return False
+    jax.distributed.initialize(**kwargs)
+    return True
