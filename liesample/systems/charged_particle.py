@@ -388,12 +388,14 @@ def _derived_friction_rate(system: ChargedParticleSystem, sde: PoissonLangevinSD
     n = system.dimension
     rng = np.random.default_rng(0)
     probes = rng.normal(size=(2, 2 * n))
+    unit = PoissonLangevinSDE(
+        sde.structure, sde.hamiltonian, sde.noise_hamiltonians, 1.0, 0.0, sde.scene
+    )
     with jax.ensure_compile_time_eval():
-        dissipation = np.stack([np.asarray(sde.dissipation(jnp.asarray(z))) for z in probes])
-        unit = PoissonLangevinSDE(
-            sde.structure, sde.hamiltonian, sde.noise_hamiltonians, 1.0, 0.0, sde.scene
-        )
-        fields = np.asarray(unit.noise_fields(jnp.asarray(probes[0])))
+        dissipation, fields = jax.jit(
+            jax.vmap(lambda z: (sde.dissipation(z), unit.noise_fields(z)))
+        )(jnp.asarray(probes))
+    dissipation, fields = np.asarray(dissipation), np.asarray(fields[0])
     momenta = probes[:, n:]
     gamma = -float(np.sum(dissipation[:, n:] * momenta) / np.sum(momenta * momenta))
     expected_fields = np.concatenate([np.zeros((n, n)), np.eye(n)])
