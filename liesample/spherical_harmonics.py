@@ -1,0 +1,145 @@
+"""Real orthonormal spherical harmonics in JAX, as polynomials in Cartesian coordinates.
+
+The transport noise of point vortices (MATH.md §2, "Point vortices on the sphere"; paper,
+``eq:stoch-diss-point-vortex``) needs ``Y_ℓ^m`` and its gradient at every vortex. Here
+
+    Y_ℓ^0 = q_ℓ0(z),   Y_ℓ^m = √2 q_ℓm(z) Re (x + iy)^m,   Y_ℓ^{−m} = √2 q_ℓm(z) Im (x + iy)^m
+
+for ``1 ≤ m ≤ ℓ``, evaluated at the unit vector ``u = x/|x|``. ``q_ℓm`` is the fully normalised
+associated Legendre function divided by ``sin^m θ`` (a polynomial in ``z = cos θ``), computed by
+the standard stable three-term recurrences; ``(x + iy)^m = sin^m θ e^{imφ}`` is a polynomial
+too. So there is no ``1/sin θ`` anywhere: values and autodiff gradients are smooth at the
+poles. No Condon–Shortley phase: ``Y_ℓ^m = √2 (−1)^m Re Y_ℓ^{m, complex}`` in the physics
+convention (``scipy.special.sph_harm_y``), ``Y_ℓ^{−m} = √2 (−1)^m Im Y_ℓ^{m, complex}``.
+
+Evaluating at ``x/|x|`` extends each function to ``R³ \\ {0}`` as a 0-homogeneous function, so
+its gradient is tangent to the sphere: a generator built from it rotates a point along the
+sphere only (no spin about the point itself).
+
+Ordering: degree ``ℓ = ℓ_min … L``, then ``m = −ℓ … ℓ``; the index of ``(ℓ, m)`` is
+``ℓ² + ℓ + m − ℓ_min²``. :func:`degrees_and_orders` lists them.
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax.numpy as jnp
+import numpy as np
+
+__all__ = [
+    "degrees_and_orders",
+    "num_harmonics",
+    "real_spherical_harmonics",
+    "transport_modes",
+]
+
+
+def _check_degrees(max_degree, min_degree):
+    for name, value in (("max_degree", max_degree), ("min_degree", min_degree)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            raise TypeError(f"{name} must be an int, got {value!r}")
+    if min_degree < 0:
+        raise ValueError(f"min_degree must be >= 0, got {min_degree}")
+    if max_degree < min_degree:
+        raise ValueError(f"max_degree must be >= min_degree = {min_degree}, got {max_degree}")
+    return int(max_degree), int(min_degree)
+
+
+def num_harmonics(max_degree: int, min_degree: int = 0) -> int:
+    """``Σ_{ℓ=min}^{max} (2ℓ+1) = (L+1)² − ℓ_min²``."""
+    max_degree, min_degree = _check_degrees(max_degree, min_degree)
+    return (max_degree + 1) ** 2 - min_degree**2
+
+
+def degrees_and_orders(max_degree: int, min_degree: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """``(ℓ, m)`` of every output column, in order (two int arrays)."""
+    max_degree, min_degree = _check_degrees(max_degree, min_degree)
+    pairs = [(ell, m) for ell in range(min_degree, max_degree + 1) for m in range(-ell, ell + 1)]
+    ell, m = np.array(pairs, dtype=np.int64).T
+    return ell, m
+
+
+def _recurrence_coefficients(max_degree):
+    """Coefficient vectors (over ``m = 0 … L``) of the degree recurrence, one row per ``ℓ``.
+
+    ``q_ℓ = A_ℓ z q_{ℓ−1} − B_ℓ q_{ℓ−2} + C_ℓ (q_{ℓ−1} shifted by one order)``, which packs
+    ``q_ℓm = a_ℓm (z q_{ℓ−1,m} − b_ℓm q_{ℓ−2,m})`` (``m ≤ ℓ−2``), ``q_{ℓ,ℓ−1} = √(2ℓ+1) z q_{ℓ−1,ℓ−1}``
+    and ``q_ℓℓ = √((2ℓ+1)/(2ℓ)) q_{ℓ−1,ℓ−1}``.
+    """
+    size = max_degree + 1
+    a = np.zeros((size, size))
+    b = np.zeros((size, size))
+    c = np.zeros((size, size))
+    for ell in range(1, size):
+        for m in range(ell - 1):
+            a[ell, m] = math.sqrt((4 * ell * ell - 1) / (ell * ell - m * m))
+            b[ell, m] = a[ell, m] * math.sqrt(((ell - 1) ** 2 - m * m) / (4 * (ell - 1) ** 2 - 1))
+        a[ell, ell - 1] = math.sqrt(2 * ell + 1)
+        c[ell, ell] = math.sqrt((2 * ell + 1) / (2 * ell))
+    return a, b, c
+
+
+def _legendre_over_sin_power(z, max_degree):
+    """``q[..., ℓ, m]`` for ``0 ≤ m ≤ ℓ ≤ L`` (zero for ``m > ℓ``): ``P̄_ℓ^m(z) / sin^m θ``, with
+    ``∫|P̄_ℓ^m e^{imφ}|² dΩ = 1``.
+
+    The standard recurrences of the fully normalised functions (``q_00 = 1/√(4π)``, then
+    :func:`_recurrence_coefficients`), vectorised over ``m``: values stay O(1) (no factorials)
+    for every degree, and the graph has a few operations per degree.
+    """
+    a, b, c = (jnp.asarray(v, dtype=z.dtype) for v in _recurrence_coefficients(max_degree))
+    size = max_degree + 1
+    first = jnp.zeros((*z.shape, size), z.dtype).at[..., 0].set(1.0 / math.sqrt(4.0 * math.pi))
+    rows = [first]
+    previous = jnp.zeros_like(first)
+    for ell in range(1, size):
+        current = rows[-1]
+        shifted = jnp.concatenate([jnp.zeros_like(current[..., :1]), current[..., :-1]], axis=-1)
+        rows.append(a[ell] * z[..., None] * current - b[ell] * previous + c[ell] * shifted)
+        previous = current
+    return jnp.stack(rows, axis=-2)
+
+
+def real_spherical_harmonics(x, max_degree: int, min_degree: int = 0):
+    """Real orthonormal ``Y_ℓ^m(x/|x|)`` for ``ℓ_min ≤ ℓ ≤ L``, shape ``(..., (L+1)² − ℓ_min²)``.
+
+    ``x`` has shape ``(..., 3)`` and must be nonzero. Orthonormal on the unit sphere:
+    ``∫ Y_ℓ^m Y_ℓ'^m' dΩ = δ δ``.
+    """
+    max_degree, min_degree = _check_degrees(max_degree, min_degree)
+    x = jnp.asarray(x)
+    if x.shape[-1:] != (3,):
+        raise ValueError(f"x must have shape (..., 3), got {x.shape}")
+    u = x / jnp.linalg.norm(x, axis=-1, keepdims=True)
+    ux, uy, uz = u[..., 0], u[..., 1], u[..., 2]
+    q = _legendre_over_sin_power(uz, max_degree)
+    # (x + iy)^m = c_m + i s_m by the recurrence (c, s) <- (c x - s y, c y + s x).
+    cos_part, sin_part = [jnp.ones_like(ux)], [jnp.zeros_like(ux)]
+    for _ in range(max_degree):
+        c, s = cos_part[-1], sin_part[-1]
+        cos_part.append(c * ux - s * uy)
+        sin_part.append(c * uy + s * ux)
+    # angular[..., L + m]: s_{|m|} for m < 0, 1 for m = 0, c_m for m > 0
+    angular = jnp.stack(sin_part[:0:-1] + cos_part, axis=-1)
+    ell, m = degrees_and_orders(max_degree, min_degree)
+    factor = np.where(m == 0, 1.0, math.sqrt(2.0))
+    legendre = q[..., ell, np.abs(m)]
+    return jnp.asarray(factor, dtype=x.dtype) * legendre * angular[..., max_degree + m]
+
+
+def transport_modes(x, max_degree: int):
+    """``ψ_ℓm = Y_ℓ^m / √(ℓ(ℓ+1))`` for ``1 ≤ ℓ ≤ L``, shape ``(..., L(L+2))``.
+
+    The noise potentials of the paper's ``eq:stoch-diss-point-vortex``: their velocity fields
+    ``x × ∇ψ_ℓm`` are orthonormal in ``L²(S²)`` (``∫|∇ψ_ℓm|² = 1``).
+    """
+    if isinstance(max_degree, bool) or not isinstance(max_degree, (int, np.integer)):
+        raise TypeError(f"max_degree must be an int >= 1, got {max_degree!r}")
+    if max_degree < 1:
+        raise ValueError(
+            f"max_degree must be >= 1 (transport modes start at ℓ = 1), got {max_degree}"
+        )
+    ell, _ = degrees_and_orders(int(max_degree), 1)
+    scale = 1.0 / np.sqrt(ell * (ell + 1.0))
+    return real_spherical_harmonics(x, int(max_degree), 1) * scale
