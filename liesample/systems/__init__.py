@@ -4,6 +4,7 @@ from liesample.systems.base import LiePoissonSystem, lie_poisson_system
 from liesample.systems.heavy_top import heavy_top
 from liesample.systems.heisenberg import heisenberg
 from liesample.systems.heisenberg_metropolis import heisenberg_metropolis
+from liesample.systems.point_vortices import point_vortex_integrator, point_vortices
 from liesample.systems.rigid_body import rigid_body
 
 __all__ = [
@@ -12,5 +13,7 @@ __all__ = [
     "heisenberg",
     "heisenberg_metropolis",
     "lie_poisson_system",
+    "point_vortex_integrator",
+    "point_vortices",
     "rigid_body",
 ]

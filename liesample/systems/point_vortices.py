@@ -47,18 +47,19 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import jax.numpy as jnp
 import numpy as np
 
 from liesample._validation import concrete_array, finite_float
 from liesample.algebras import LieAlgebra, so3
-from liesample.dynamics import Scene
-from liesample.integrators import Integrator, get_integrator
 from liesample.spherical_harmonics import num_harmonics, transport_modes
-from liesample.substepping import adaptive_substepping
 from liesample.systems.base import LiePoissonSystem
 from liesample.targets.vortices import VortexPairLaw, check_vortex_beta
+
+if TYPE_CHECKING:  # the engine imports liesample.systems: import it lazily (no cycle)
+    from liesample.integrators import Integrator
 
 __all__ = [
     "PointVortexSystem",
@@ -343,9 +344,12 @@ def _closed_form_generator(system: PointVortexSystem, x):
     return -gamma * jnp.cross(d, x) / system.radius
 
 
-def _with_all_modes_dissipation(system: PointVortexSystem, base: Integrator) -> Integrator:
+def _with_all_modes_dissipation(system: PointVortexSystem, base):
     """Strang composition ``D(dt/2) ∘ base(Hamiltonian + noise)(dt) ∘ D(dt/2)`` where ``D`` is the
     closed-form dissipation, each half advanced by Heun on the group."""
+    from liesample.dynamics import Scene
+    from liesample.integrators import Integrator
+
     move = system.algebra.coadjoint_exp
 
     def dissipate(x, tau):
@@ -405,6 +409,10 @@ def point_vortex_integrator(
     max_substeps : int
         Cap per step (beyond it the rest of the step is dropped; :mod:`liesample.substepping`).
     """
+    # Imported here: the engine imports liesample.systems, which imports this module.
+    from liesample.integrators import get_integrator
+    from liesample.substepping import adaptive_substepping
+
     if not isinstance(system, PointVortexSystem):
         raise TypeError(f"system must be a PointVortexSystem, got {type(system).__name__}")
     if dissipation not in ("truncated", "all_modes"):

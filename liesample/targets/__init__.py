@@ -20,15 +20,25 @@ from liesample.targets.orbits import (
     isotropic_autocorrelation,
     sample_bingham,
 )
+from liesample.targets.vortices import (
+    VortexPairLaw,
+    beta_bounds,
+    check_vortex_beta,
+    gibbs_expectation,
+)
 
 __all__ = [
     "Gaussian",
     "HeavyTopGibbs",
     "RestrictedGaussian",
+    "VortexPairLaw",
+    "beta_bounds",
     "bingham_log_normalizer",
     "bingham_marginal_density",
     "bingham_second_moments",
+    "check_vortex_beta",
     "correlated_gaussian",
+    "gibbs_expectation",
     "isotropic_autocorrelation",
     "linear_step_moments",
     "ou_cross_covariance",
