@@ -4,9 +4,10 @@ The one equation is the Poisson–Langevin SDE (paper, ``eq:poisson-langevin-eq`
 declare a Poisson structure, a Hamiltonian and noise, and the dissipation is derived.
 """
 
-from liesample import algebras, integrators, systems
+from liesample import accuracy, algebras, integrators, systems
 from liesample.dynamics import PoissonLangevin, Scene
 from liesample.runner import sample, sample_chains
+from liesample.samplers.adjusted_lie_poisson import adjusted_lie_poisson
 from liesample.samplers.lie_poisson_langevin import lie_poisson_langevin
 from liesample.samplers.magnetic_hmc import magnetic_hmc
 from liesample.samplers.magnetic_langevin import magnetic_langevin
@@ -14,6 +15,8 @@ from liesample.samplers.magnetic_langevin import magnetic_langevin
 __all__ = [
     "PoissonLangevin",
     "Scene",
+    "accuracy",
+    "adjusted_lie_poisson",
     "algebras",
     "integrators",
     "lie_poisson_langevin",
