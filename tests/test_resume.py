@@ -1,0 +1,171 @@
+"""Long runs lose nothing: ``output=`` saves every chunk, ``resume=True`` continues after a kill.
+
+The interrupted run is a subprocess that kills itself with SIGKILL right after chunk ``k`` has
+been saved (the runner's test hook ``_after_chunk_hook``), which is deterministic and as abrupt
+as a crash or a pre-empted job: no ``finally`` runs, nothing is flushed. Resuming from the file
+must then give the draws of one uninterrupted run *exactly*, because draw ``d`` of chain ``c``
+uses the key ``fold_in(key_c, step)`` and the saved state is the exact state after the last
+saved chunk.
+"""
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+
+import jax
+import numpy as np
+import pytest
+import xarray as xr
+
+import liesample
+from liesample import runner
+from liesample.runner import load_chains, sample_chains
+
+SYSTEM = liesample.systems.rigid_body((1.0, 2.0, 4.0))
+STARTS = np.array([[0.6, 1.0, 0.8], [1.0, 0.0, 0.0], [0.0, -2.0, 0.5]])
+KEY_SEED = 11
+RUN = {"num_warmup": 4, "thinning": 3, "chunk_draws": 4}
+# Whole chunks only (each call compiles one chunk shape: keeps the test fast).
+NUM_DRAWS = 20
+KILL_AFTER = 2  # chunks saved before the kill
+
+SCRIPT = textwrap.dedent(
+    f"""
+    import os, signal, sys
+    import jax
+    jax.config.update("jax_enable_x64", True)
+    import numpy as np
+    import liesample
+    from liesample import runner
+
+    def kill(draws_done):
+        if draws_done >= {KILL_AFTER} * {RUN["chunk_draws"]}:
+            os.kill(os.getpid(), signal.SIGKILL)
+
+    runner._after_chunk_hook = kill
+    algorithm = liesample.lie_poisson_langevin(
+        liesample.systems.rigid_body((1.0, 2.0, 4.0)), beta=3.0, step_size=0.05,
+        integrator="lie_euler",
+    )
+    liesample.sample_chains(
+        algorithm, jax.random.key({KEY_SEED}), np.array({STARTS.tolist()}), {NUM_DRAWS},
+        output=sys.argv[1], progress=False, **{RUN!r},
+    )
+    print("NOT KILLED")
+    """
+)
+
+ALGORITHM = liesample.lie_poisson_langevin(SYSTEM, beta=3.0, step_size=0.05, integrator="lie_euler")
+
+
+def run(num_draws=NUM_DRAWS, **kwargs):
+    kwargs = {**RUN, "progress": False, **kwargs}
+    return sample_chains(ALGORITHM, jax.random.key(KEY_SEED), STARTS, num_draws, **kwargs)
+
+
+@pytest.fixture(scope="module")
+def uninterrupted():
+    return run()
+
+
+def test_killed_run_resumes_to_the_same_draws(tmp_path, uninterrupted):
+    path = tmp_path / "run.nc"
+    completed = subprocess.run(
+        [sys.executable, "-c", SCRIPT, str(path)],
+        check=False,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert completed.returncode == -signal.SIGKILL, completed.stdout + completed.stderr
+    assert "NOT KILLED" not in completed.stdout
+    # What survived the kill: exactly the first KILL_AFTER chunks, readable as they are.
+    saved = load_chains(path)
+    saved_draws = KILL_AFTER * RUN["chunk_draws"]
+    assert saved.positions.shape == (3, saved_draws, 3)
+    np.testing.assert_array_equal(saved.positions, uninterrupted.positions[:, :saved_draws])
+    assert saved.num_steps == RUN["num_warmup"] + saved_draws * RUN["thinning"]
+    with xr.open_dataset(path, engine="h5netcdf") as dataset:
+        assert dataset.sizes["draw"] == saved_draws
+
+    resumed = run(output=path, resume=True)
+    np.testing.assert_array_equal(resumed.positions, uninterrupted.positions)
+    np.testing.assert_array_equal(resumed.info["nonfinite"], uninterrupted.info["nonfinite"])
+    np.testing.assert_allclose(resumed.info["energy"], uninterrupted.info["energy"], rtol=4e-16)
+    assert resumed.num_steps == uninterrupted.num_steps
+    # …and the file now holds the whole run.
+    np.testing.assert_array_equal(load_chains(path).positions, uninterrupted.positions)
+
+
+def test_saved_run_equals_returned_run_and_can_be_extended(tmp_path, uninterrupted, monkeypatch):
+    path = tmp_path / "run.nc"
+    first = run(num_draws=12, output=path)
+    np.testing.assert_array_equal(first.positions, uninterrupted.positions[:, :12])
+    saved = load_chains(path)
+    np.testing.assert_array_equal(saved.positions, first.positions)
+    np.testing.assert_array_equal(saved.info["nonfinite"], first.info["nonfinite"])
+    assert saved.info["nonfinite"].dtype == bool
+    # Extend the same run to more draws; the progress bar starts at the saved draws.
+    bars = []
+
+    class RecordingBar:
+        def __init__(self, *args, total, initial=0, **kwargs):
+            self.total, self.n, self.start = total, initial, initial
+            bars.append(self)
+
+        def update(self, count):
+            self.n += count
+
+        def close(self):
+            pass
+
+    monkeypatch.setattr(runner, "tqdm", RecordingBar)
+    extended = run(output=path, resume=True, progress=True)
+    np.testing.assert_array_equal(extended.positions, uninterrupted.positions)
+    assert (bars[0].start, bars[0].n, bars[0].total) == (12, NUM_DRAWS, NUM_DRAWS)
+    again = run(output=path, resume=True)  # nothing left to do: the saved run comes back
+    np.testing.assert_array_equal(again.positions, uninterrupted.positions)
+
+
+def test_resume_checks_the_run_is_the_same(tmp_path):
+    path = tmp_path / "run.nc"
+    run(num_draws=4, output=path)
+    with pytest.raises(FileExistsError, match="resume=True"):
+        run(num_draws=4, output=path)
+    with pytest.raises(ValueError, match="different rng_key"):
+        sample_chains(
+            ALGORITHM, jax.random.key(KEY_SEED + 1), STARTS, 9, output=path, resume=True, **RUN
+        )
+    with pytest.raises(ValueError, match="different initial_positions"):
+        sample_chains(
+            ALGORITHM,
+            jax.random.key(KEY_SEED),
+            STARTS[::-1],
+            9,
+            output=path,
+            resume=True,
+            **RUN,
+        )
+    with pytest.raises(ValueError, match="different thinning"):
+        run(num_draws=9, output=path, resume=True, thinning=2)
+    with pytest.raises(ValueError, match="different num_warmup"):
+        run(num_draws=9, output=path, resume=True, num_warmup=0)
+    with pytest.raises(ValueError, match="already holds 4 draws"):
+        run(num_draws=3, output=path, resume=True)
+    with pytest.raises(ValueError, match="resume=True needs output"):
+        run(num_draws=3, resume=True)
+    with pytest.raises(TypeError, match="resume must be a bool"):
+        run(num_draws=3, output=tmp_path / "other.nc", resume="yes")
+
+
+def test_sample_writes_and_resumes(tmp_path, uninterrupted):
+    """``liesample.sample`` passes ``output``/``resume`` through; resuming a file that does not
+    exist yet starts afresh."""
+    path = tmp_path / "tree.nc"
+    assert not os.path.exists(path)
+    kwargs = {"output": path, "resume": True, "progress": False, **RUN}
+    liesample.sample(ALGORITHM, jax.random.key(KEY_SEED), STARTS, 8, **kwargs)
+    tree = liesample.sample(ALGORITHM, jax.random.key(KEY_SEED), STARTS, NUM_DRAWS, **kwargs)
+    np.testing.assert_array_equal(np.asarray(tree.posterior["mu"]), uninterrupted.positions)
