@@ -17,11 +17,11 @@ from liesample.systems import rigid_body
 from liesample.systems.heisenberg import (
     colouring,
     heisenberg,
-    heisenberg_chain_correlation,
     neighbour_sum,
     noise_groups,
 )
 from liesample.systems.heisenberg_metropolis import heisenberg_metropolis, local_energy_change
+from liesample.targets import heisenberg_chain_correlation
 
 BETA = 2.0  # βJ = 2: u = 0.537, u³ = 0.155
 CHAIN = (16,)

@@ -20,6 +20,11 @@ from liesample.targets.orbits import (
     isotropic_autocorrelation,
     sample_bingham,
 )
+from liesample.targets.spins import (
+    HeisenbergChainReference,
+    heisenberg_chain_correlation,
+    langevin_function,
+)
 from liesample.targets.vortices import (
     VortexPairLaw,
     beta_bounds,
@@ -30,6 +35,7 @@ from liesample.targets.vortices import (
 __all__ = [
     "Gaussian",
     "HeavyTopGibbs",
+    "HeisenbergChainReference",
     "RestrictedGaussian",
     "VortexPairLaw",
     "beta_bounds",
@@ -39,7 +45,9 @@ __all__ = [
     "check_vortex_beta",
     "correlated_gaussian",
     "gibbs_expectation",
+    "heisenberg_chain_correlation",
     "isotropic_autocorrelation",
+    "langevin_function",
     "linear_step_moments",
     "ou_cross_covariance",
     "ou_drift",
