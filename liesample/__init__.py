@@ -4,7 +4,7 @@ The one equation is the Poisson–Langevin SDE (paper, ``eq:poisson-langevin-eq`
 declare a Poisson structure, a Hamiltonian and noise, and the dissipation is derived.
 """
 
-from liesample import accuracy, algebras, integrators, systems
+from liesample import accuracy, algebras, integrators, structures, symplectic, systems
 from liesample.dynamics import PoissonLangevin, Scene
 from liesample.runner import sample, sample_chains
 from liesample.samplers.adjusted_lie_poisson import adjusted_lie_poisson
@@ -24,5 +24,7 @@ __all__ = [
     "magnetic_langevin",
     "sample",
     "sample_chains",
+    "structures",
+    "symplectic",
     "systems",
 ]

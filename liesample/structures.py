@@ -33,7 +33,7 @@ and the invariant law does not depend on ``G``.)
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import jax
 import jax.numpy as jnp
@@ -42,7 +42,6 @@ import numpy as np
 
 from liesample._validation import finite_float
 from liesample.algebras import LieAlgebra
-from liesample.dynamics import Scene
 
 # A constant magnetic term must be antisymmetric to this relative accuracy (round-off of a
 # matrix typed in or computed in float64, far below any real asymmetry).
@@ -282,8 +281,9 @@ class PoissonLangevinSDE:
         ``z ↦ (ĥ_1(z), …, ĥ_m(z))``, unit strength; the dissipation is derived from them.
     sigma, theta : float
         Noise and dissipation strengths (``θ = βσ²/2`` leaves ``exp(−βh)`` invariant).
-    scene : Scene
-        Which effects exist; a disabled one is never traced.
+    scene : liesample.dynamics.Scene
+        Which effects exist (any object with boolean ``hamiltonian``, ``dissipation`` and
+        ``noise``); a disabled one is never traced.
 
     The Lie–Poisson case ``structure = LiePoissonStructure(algebra)`` reproduces
     :class:`liesample.dynamics.PoissonLangevin`: :meth:`covector` is its ``generator``.
@@ -294,7 +294,7 @@ class PoissonLangevinSDE:
     noise_hamiltonians: Callable
     sigma: float
     theta: float
-    scene: Scene
+    scene: object
 
     def brackets_with_noise(self, z, hamiltonian_field=None):
         """``{h, ĥ_i}(z) = −dĥ_i(X_h)`` for every ``i`` (one JVP; ``J`` is antisymmetric)."""
@@ -358,8 +358,8 @@ class PoissonLangevinSDE:
         return self.sigma * fields.T
 
 
-def _deterministic_scene(scene: Scene) -> Scene:
-    return Scene(hamiltonian=scene.hamiltonian, dissipation=scene.dissipation, noise=False)
+def _deterministic_scene(scene):
+    return replace(scene, noise=False)
 
 
 def stratonovich_heun_step(sde: PoissonLangevinSDE, z, dt, dW=None):

@@ -1,6 +1,7 @@
 """Thin systems: each declares its structure, Hamiltonian, noise and exact reference."""
 
 from liesample.systems.base import LiePoissonSystem, lie_poisson_system
+from liesample.systems.charged_particle import charged_particle, charged_particle_path
 from liesample.systems.heavy_top import heavy_top
 from liesample.systems.heisenberg import heisenberg
 from liesample.systems.heisenberg_metropolis import heisenberg_metropolis
@@ -9,6 +10,8 @@ from liesample.systems.rigid_body import rigid_body
 
 __all__ = [
     "LiePoissonSystem",
+    "charged_particle",
+    "charged_particle_path",
     "heavy_top",
     "heisenberg",
     "heisenberg_metropolis",

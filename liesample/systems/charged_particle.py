@@ -20,7 +20,7 @@ The system runs as a simulation (:func:`charged_particle_path`, or
   derived dissipation plus noise. Weak order 2.
 - ``"heun"``: stochastic Heun on the structure-agnostic SDE (baseline; weak order 1).
 
-Which effects exist is a :class:`MagneticScene` (a :class:`liesample.dynamics.Scene` with a
+Which effects exist is a :class:`MagneticScene` (the flags of :class:`liesample.dynamics.Scene` plus a
 ``magnetic`` flag); a disabled effect is never traced and draws no random numbers.
 """
 
@@ -36,7 +36,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from liesample._validation import concrete_array, finite_float
-from liesample.dynamics import Scene
 from liesample.structures import (
     CanonicalStructure,
     PoissonLangevinSDE,
@@ -55,23 +54,34 @@ _MIDPOINT_MAX_ITERATIONS = 100
 
 
 @dataclass(frozen=True)
-class MagneticScene(Scene):
-    """A :class:`~liesample.dynamics.Scene` with a ``magnetic`` flag.
+class MagneticScene:
+    """The effects of :class:`liesample.dynamics.Scene` plus a ``magnetic`` flag.
 
     ``magnetic=False`` drops ``G`` from the Poisson tensor (the canonical structure): the field
     is never evaluated. ``G`` enters only through ``X_h``, so it acts only with ``hamiltonian``.
+    (A separate class rather than a subclass: ``liesample.dynamics`` imports the systems
+    package, so this module does not import it.)
     """
 
+    hamiltonian: bool = True
+    dissipation: bool = True
+    noise: bool = True
     magnetic: bool = True
 
     def __post_init__(self):
-        super().__post_init__()
-        if not isinstance(self.magnetic, bool):
-            raise TypeError(f"MagneticScene.magnetic must be a bool, got {self.magnetic!r}")
+        for name in ("hamiltonian", "dissipation", "noise", "magnetic"):
+            if not isinstance(getattr(self, name), bool):
+                raise TypeError(f"MagneticScene.{name} must be a bool, got {getattr(self, name)!r}")
+        if not (self.hamiltonian or self.dissipation or self.noise):
+            raise ValueError(
+                "MagneticScene has no effect enabled: enable hamiltonian, dissipation or noise"
+            )
 
     @property
     def effects(self) -> tuple[str, ...]:
-        return super().effects + (("magnetic",) if self.magnetic else ())
+        """Names of the enabled effects, in a fixed order."""
+        names = ("hamiltonian", "dissipation", "noise", "magnetic")
+        return tuple(name for name in names if getattr(self, name))
 
 
 @dataclass(frozen=True, eq=False)
@@ -450,7 +460,7 @@ def charged_particle_dynamics(
         system.noise_hamiltonians,
         sigma,
         theta,
-        Scene(scene.hamiltonian, scene.dissipation, scene.noise),
+        scene,
     )
     friction_rate = _derived_friction_rate(system, sde) if scene.dissipation else 0.0
     return ChargedParticleDynamics(system, sde, scene, beta, integrator, friction_rate)
