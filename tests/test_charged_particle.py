@@ -213,21 +213,28 @@ def test_jacobi_identity_holds_for_a_field_from_a_vector_potential():
 
 
 def test_exact_magnetic_flow_is_orthogonal_including_singular_g():
+    """``e^{εG/m}`` is orthogonal to round-off for ``G = 0``, a singular ``G`` (rank 2, a strong
+    field in R³ embedded in R⁴) and a generic one (one compiled shape, three matrices)."""
+    singular = np.zeros((4, 4))
+    singular[:3, :3] = magnetic_structure(magnetic_field=[0.0, 0.0, 40.0]).magnetic_term
+    generic = [[0, 3.0, 1, 0], [-3, 0, 2, 5], [-1, -2, 0, 1], [0, -5, -1, 0]]
+    flow = jax.jit(magnetic_flow)
     for matrix in (
-        np.zeros((3, 3)),
-        magnetic_structure(magnetic_field=[0.0, 0.0, 40.0]).magnetic_term,  # singular (rank 2)
-        magnetic_structure(
-            magnetic_field=[[0, 3.0, 1, 0], [-3, 0, 2, 5], [-1, -2, 0, 1], [0, -5, -1, 0]]
-        ).magnetic_term,
+        np.zeros((4, 4)),
+        singular,
+        magnetic_structure(magnetic_field=generic).magnetic_term,
     ):
-        rotation, displacement = jax.jit(magnetic_flow)(matrix, 1.3, 0.7)
-        np.testing.assert_allclose(rotation.T @ rotation, np.eye(len(matrix)), atol=ATOL)
+        rotation, displacement = flow(matrix, 1.3, 0.7)
+        np.testing.assert_allclose(rotation.T @ rotation, np.eye(4), atol=ATOL)
         # displacement = (1/m) ∫₀^ε e^{sG/m} ds: G·displacement = rotation − I, and it commutes
-        # with G; on ker G it is ε/m (checked for G = 0).
-        np.testing.assert_allclose(matrix @ displacement, rotation - np.eye(len(matrix)), atol=ATOL)
+        # with G; on ker G it is ε/m.
+        np.testing.assert_allclose(matrix @ displacement, rotation - np.eye(4), atol=ATOL)
         np.testing.assert_allclose(matrix @ displacement, displacement @ matrix, atol=ATOL)
-    _, displacement = jax.jit(magnetic_flow)(np.zeros((3, 3)), 1.3, 0.7)
-    np.testing.assert_allclose(displacement, 0.7 / 1.3 * np.eye(3), atol=ATOL)
+    _, displacement = flow(np.zeros((4, 4)), 1.3, 0.7)
+    np.testing.assert_allclose(displacement, 0.7 / 1.3 * np.eye(4), atol=ATOL)
+    _, displacement = flow(singular, 1.3, 0.7)
+    assert displacement[3, 3] == pytest.approx(0.7 / 1.3, rel=1e-14)
+    np.testing.assert_allclose(displacement[2, 2], 0.7 / 1.3, rtol=1e-14)  # B ∥ e₃: free along B
 
 
 # ---------------------------------------------------------------------------------------------

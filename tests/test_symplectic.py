@@ -193,6 +193,6 @@ def test_stochastic_pendulum_example_writes_a_phase_portrait(tmp_path):
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     output = tmp_path / "pendulum.png"
-    summary = module.main(output, num_paths=4, num_steps=200)
+    summary = module.main(output, num_paths=2, num_steps=100)
     assert output.stat().st_size > 10_000
     assert summary["converged"] and summary["max_symplecticity_defect"] < SYMPLECTIC_ATOL
