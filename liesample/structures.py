@@ -302,14 +302,17 @@ class PoissonLangevinSDE:
             hamiltonian_field = self.structure.hamiltonian_vector_field(self.hamiltonian, z)
         return -jax.jvp(self.noise_hamiltonians, (z,), (hamiltonian_field,))[1]
 
-    def noise_coefficients(self, z, dt, dW=None):
-        """``c_i = −θ {h, ĥ_i} dt + σ dW_i`` (only the scene's terms)."""
+    def noise_coefficients(self, z, dt, dW=None, grad_h=None):
+        """``c_i = −θ {h, ĥ_i} dt + σ dW_i`` (only the scene's terms); ``grad_h`` may be reused."""
         scene = self.scene
         if scene.noise != (dW is not None):
             raise ValueError("dW must be given exactly when the scene has noise")
         coefficients = 0.0
         if scene.dissipation:
-            coefficients = -(self.theta * dt) * self.brackets_with_noise(z)
+            if grad_h is None:
+                grad_h = jax.grad(self.hamiltonian)(z)
+            brackets = self.brackets_with_noise(z, self.structure.apply(z, grad_h))
+            coefficients = -(self.theta * dt) * brackets
         if scene.noise:
             coefficients = coefficients + self.sigma * dW
         return coefficients
@@ -317,9 +320,11 @@ class PoissonLangevinSDE:
     def covector(self, z, dt, dW=None):
         """``ζ = ∇h dt + Σ_i c_i ∇ĥ_i`` (scene's terms only); the increment is ``J(z) ζ``."""
         scene = self.scene
-        zeta = jax.grad(self.hamiltonian)(z) * dt if scene.hamiltonian else jnp.zeros_like(z)
+        need_h = scene.hamiltonian or scene.dissipation
+        grad_h = jax.grad(self.hamiltonian)(z) if need_h else None  # computed once, used twice
+        zeta = grad_h * dt if scene.hamiltonian else jnp.zeros_like(z)
         if scene.noise or scene.dissipation:
-            coefficients = self.noise_coefficients(z, dt, dW)
+            coefficients = self.noise_coefficients(z, dt, dW, grad_h)
             _, pullback = jax.vjp(self.noise_hamiltonians, z)
             zeta = zeta + pullback(coefficients)[0]
         elif dW is not None:
