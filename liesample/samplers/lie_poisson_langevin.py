@@ -14,9 +14,10 @@ import blackjax
 import jax
 import jax.numpy as jnp
 
-from liesample._validation import finite_float
+from liesample._validation import concrete_array, finite_float
 from liesample.dynamics import PoissonLangevin, Scene
 from liesample.integrators import DEFAULT_INTEGRATOR, get_integrator
+from liesample.stability import STABILITY_MODES, check_step_size
 from liesample.systems.base import LiePoissonSystem
 
 __all__ = [
@@ -132,6 +133,7 @@ def as_top_level_api(
     integrator=DEFAULT_INTEGRATOR,
     theta=None,
     hamiltonian: bool = True,
+    stability: str = "warn",
 ) -> blackjax.base.SamplingAlgorithm:
     """Lie–Poisson–Langevin sampler of ``exp(−βh)`` on the orbit of the initial state.
 
@@ -152,6 +154,11 @@ def as_top_level_api(
         Dissipation strength for a noise-free flow (``sigma = 0``) only.
     hamiltonian : bool
         Whether the scene has the Hamiltonian drift (it does not change the invariant law).
+    stability : {"warn", "raise", "off"}
+        What ``init`` does when ``step_size`` is beyond the integrator's stable bound on the
+        orbit of the initial position, ``κ = step_size·θ·max_i |h''_i| > 2``
+        (:mod:`liesample.stability`; rigid body: ``θ·step_size·r²(1/I_min − 1/I_max) ≤ 2``): a
+        ``UserWarning`` naming the bound, a ``ValueError``, or nothing.
 
     Returns
     -------
@@ -164,10 +171,16 @@ def as_top_level_api(
     sigma, theta, scene = make_dynamics(
         system, beta=beta, sigma=sigma, theta=theta, hamiltonian=hamiltonian
     )
+    if stability not in STABILITY_MODES:
+        raise ValueError(f"stability must be one of {STABILITY_MODES}, got {stability!r}")
+    integrator_name = get_integrator(integrator).name
     kernel = build_kernel(system, integrator, scene)
 
     def init_fn(position, rng_key=None):
-        return init(position, system, rng_key)
+        state = init(position, system, rng_key)
+        if stability != "off" and concrete_array(position) is not None:
+            check_step_size(system, integrator_name, step_size, theta, position, stability)
+        return state
 
     def step_fn(rng_key, state):
         return kernel(rng_key, state, step_size, sigma, theta)
