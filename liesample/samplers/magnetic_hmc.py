@@ -16,7 +16,9 @@ A BlackJAX-shaped module (``MagneticHMCState``/``MagneticHMCInfo``, ``init``, ``
 4. with ``persistent=True`` (default) the chain then applies the measure-preserving flip
    ``(p, s) ↦ (−p, −s)`` (Horowitz 1991): an accepted move keeps the field's sign and the
    direction of motion, a rejection reverses both. With ``persistent=False`` the sign flips on
-   acceptance, literally as in Tripuraneni et al. (2017, Alg. 1).
+   acceptance, literally as in Tripuraneni et al. (2017, Alg. 1); combined with partial
+   refreshment that reverses the momentum on every acceptance, so the chain backtracks
+   (valid, but slow: use ``persistent=True`` with ``momentum_persistence > 0``).
 
 Non-finite energies are rejected and flagged ``is_divergent``; the state is then kept.
 """
@@ -170,9 +172,9 @@ def _transition(
     is_accepted = jax.random.uniform(key_accept, (), dtype) < acceptance_rate
 
     # Involution (q, p, s) -> (q', -p', -s); then, if persistent, the flip (p, s) -> (-p, -s).
-    flip = 1.0 if persistent else -1.0
-    new_momentum = jnp.where(is_accepted, -flip * p, flip * momentum)
-    new_sign = jnp.where(is_accepted, -flip * sign, flip * sign)
+    after = -1.0 if persistent else 1.0
+    new_momentum = after * jnp.where(is_accepted, -p, momentum)
+    new_sign = after * jnp.where(is_accepted, -sign, sign)
     new_state = MagneticHMCState(
         jax.tree.map(lambda new, old: jnp.where(is_accepted, new, old), unravel(q), state.position),
         jnp.where(is_accepted, logdensity, state.logdensity),
