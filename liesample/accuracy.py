@@ -324,14 +324,22 @@ class ChainAverages:
 
 
 def ergodic_averages(
-    algorithm, rng_key, initial_positions, observables: Callable, *, num_steps, num_warmup=0
+    algorithm,
+    rng_key,
+    initial_positions,
+    observables: Callable,
+    *,
+    num_steps,
+    num_warmup=0,
+    info_fields=None,
 ) -> ChainAverages:
     """Run independent vmapped chains of ``algorithm`` and keep only running sums.
 
     ``algorithm`` has ``init(position)`` and ``step(rng_key, state) -> (state, info)``
     (:func:`liesample.lie_poisson_langevin`, :func:`liesample.adjusted_lie_poisson`); step ``i``
     of chain ``c`` uses ``fold_in(key_c, i)``. Nothing per step is stored, so long runs of many
-    chains fit in memory. Numeric ``info`` fields are averaged over the kept steps.
+    chains fit in memory. The scalar ``info`` fields named in ``info_fields`` (default: all) are
+    averaged over the kept steps; fields not asked for are not computed (XLA drops them).
     """
     num_steps = _positive_int("num_steps", num_steps)
     num_warmup = _positive_int("num_warmup", num_warmup, low=0)
@@ -344,11 +352,11 @@ def ergodic_averages(
     example_state = algorithm.init(starts[0])
     num_obs = int(np.size(jax.eval_shape(observables, starts[0])))
     _, example_info = jax.eval_shape(algorithm.step, jax.random.key(0), example_state)
-    info_names = [
-        name
-        for name, value in example_info._asdict().items()
-        if value.shape == () and value.dtype != jnp.bool_
-    ] + [name for name, value in example_info._asdict().items() if value.dtype == jnp.bool_]
+    scalars = [name for name, value in example_info._asdict().items() if value.shape == ()]
+    info_names = scalars if info_fields is None else list(info_fields)
+    unknown = sorted(set(info_names) - set(scalars))
+    if unknown:
+        raise ValueError(f"info_fields {unknown} are not scalar info fields; have {scalars}")
 
     def chain(key, start):
         state = algorithm.init(start)
@@ -358,7 +366,9 @@ def ergodic_averages(
             state, info = algorithm.step(jax.random.fold_in(key, i), state)
             value = jnp.ravel(observables(state.position))
             kept = i >= num_warmup
-            info_values = jnp.stack([getattr(info, n).astype(total.dtype) for n in info_names])
+            info_values = jnp.asarray(
+                [getattr(info, n).astype(total.dtype) for n in info_names], total.dtype
+            )
             return (
                 state,
                 jnp.where(kept, total + value, total),
