@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import jax
 import jax.numpy as jnp
 
+from liesample.structures import LiePoissonStructure, PoissonLangevinSDE
 from liesample.systems.base import LiePoissonSystem
 
 
@@ -89,29 +90,30 @@ class PoissonLangevin:
     def num_noises(self) -> int:
         return self.system.num_noises
 
-    def brackets_with_noise(self, mu, grad_h):
-        """``{h, ĥ_i}(μ)`` for every ``i``, shape ``(m,)``, without forming any Jacobian.
+    @property
+    def sde(self) -> PoissonLangevinSDE:
+        """The structure-agnostic SDE (``liesample.structures``) on ``g*``, ``J(μ)ζ = ad*_ζ μ``."""
+        system = self.system
+        return PoissonLangevinSDE(
+            LiePoissonStructure(system.algebra),
+            system.hamiltonian,
+            system.noise_hamiltonians,
+            self.sigma,
+            self.theta,
+            self.scene,
+        )
 
-        ``{h, ĥ_i} = ⟨∇h, ad*_{∇ĥ_i} μ⟩ = ⟨∇ĥ_i, w⟩`` with ``w = A(μ)ᵀ∇h`` and ``A(μ)ξ = ad*_ξ μ``:
-        one VJP of ``ad*`` and one JVP of the noise Hamiltonians.
-        """
-        _, transpose_ad_star = jax.vjp(lambda xi: self.algebra.ad_star(xi, mu), mu)
-        (w,) = transpose_ad_star(grad_h)
-        return jax.jvp(self.system.noise_hamiltonians, (mu,), (w,))[1]
+    def brackets_with_noise(self, mu, grad_h):
+        """``{h, ĥ_i}(μ) = −dĥ_i(ad*_{∇h} μ)`` for every ``i``, shape ``(m,)`` (one JVP)."""
+        return self.sde.brackets_with_noise(mu, self.algebra.ad_star(grad_h, mu))
 
     def noise_coefficients(self, mu, dt, dW=None, grad_h=None):
-        """``c_i = −θ {h, ĥ_i} dt + σ dW_i`` (only the scene's terms), shape ``(m,)``."""
-        scene = self.scene
-        if scene.noise != (dW is not None):
-            raise ValueError("dW must be given exactly when the scene has noise")
-        coefficients = jnp.zeros((self.num_noises,), mu.dtype)
-        if scene.dissipation:
-            if grad_h is None:
-                grad_h = jax.grad(self.system.hamiltonian)(mu)
-            coefficients = coefficients - (self.theta * dt) * self.brackets_with_noise(mu, grad_h)
-        if scene.noise:
-            coefficients = coefficients + self.sigma * dW
-        return coefficients
+        """``c_i = −θ {h, ĥ_i} dt + σ dW_i`` (only the scene's terms), shape ``(m,)``.
+
+        ``{h, ĥ_i} = −dĥ_i(X_h)``: one JVP of the noise Hamiltonians, no Jacobian formed.
+        """
+        coefficients = self.sde.noise_coefficients(mu, dt, dW, grad_h)
+        return jnp.broadcast_to(coefficients, (self.num_noises,))
 
     def noise_generator(self, mu, coefficients):
         """``Σ_i c_i ∇ĥ_i(μ)``: one VJP of the noise Hamiltonians (no Jacobian is formed)."""
@@ -119,21 +121,13 @@ class PoissonLangevin:
         return pullback(coefficients)[0]
 
     def generator(self, mu, dt, dW=None):
-        """The generator ``ζ ∈ g`` of one step of length ``dt`` with Brownian increments ``dW``.
+        """The generator ``ζ ∈ g`` of one step of length ``dt`` with Brownian increments ``dW``:
+        ``∇h dt + Σ_i c_i ∇ĥ_i`` (the SDE's covector; the increment is ``ad*_ζ μ``).
 
         Only the scene's effects are traced. ``dW`` (shape ``(m,)``) is required exactly when
         the scene has noise.
         """
-        scene = self.scene
-        need_h = scene.hamiltonian or scene.dissipation
-        grad_h = jax.grad(self.system.hamiltonian)(mu) if need_h else None
-        zeta = grad_h * dt if scene.hamiltonian else jnp.zeros_like(mu)
-        if scene.noise or scene.dissipation:
-            coefficients = self.noise_coefficients(mu, dt, dW, grad_h)
-            zeta = zeta + self.noise_generator(mu, coefficients)
-        elif dW is not None:
-            raise ValueError("dW must be given exactly when the scene has noise")
-        return zeta
+        return self.sde.covector(mu, dt, dW)
 
     def group_generator(self, mu, group, dt, dW=None):
         """The generator of one group of noise directions alone: ``Σ_{i∈group} c_i ∇ĥ_i``.
