@@ -472,3 +472,30 @@ def test_nonfinite_logdensity_is_flagged_never_a_nan_chain(which):
     previous = np.vstack([np.zeros((1, 2)), positions[:-1]])
     np.testing.assert_array_equal(positions[divergent], previous[divergent])
     assert np.all(np.isfinite(np.asarray(info.energy)[~divergent]))
+
+
+@pytest.mark.parametrize("dense", [False, True])
+def test_default_magnetic_field_is_a_unit_rotation_in_the_whitened_frame(dense):
+    rng = np.random.default_rng(8)
+    d = 5
+    if dense:
+        a = rng.normal(size=(d, d))
+        imm = a @ a.T + np.eye(d)
+    else:
+        imm = rng.uniform(0.5, 2.0, size=d)
+    minv = np.diag(imm) if imm.ndim == 1 else imm
+    lam, u = np.linalg.eigh(minv)
+    inv_sqrt_m = (u * np.sqrt(lam)) @ u.T  # M^{-1/2}
+    field = default_magnetic_field(imm, 2.5)
+    np.testing.assert_array_equal(field, -field.T)
+    whitened = inv_sqrt_m @ field @ inv_sqrt_m
+    # Two planes turned at rate 2.5, one direction (odd d) left alone.
+    moduli = np.sort(np.abs(np.linalg.eigvals(whitened)))
+    np.testing.assert_allclose(moduli, [0.0, 2.5, 2.5, 2.5, 2.5], atol=1e-12)
+    # With a covariance estimate, the largest whitened principal direction is paired with the
+    # smallest: the field maps one onto the other.
+    covariance = np.diag([4.0, 1.0, 0.5, 0.25, 0.1])
+    field = default_magnetic_field(np.ones(d), 1.0, covariance=covariance)
+    np.testing.assert_allclose(np.abs(field @ np.eye(d)[0]), np.eye(d)[4], atol=1e-12)
+    np.testing.assert_allclose(np.abs(field @ np.eye(d)[1]), np.eye(d)[3], atol=1e-12)
+    np.testing.assert_allclose(field @ np.eye(d)[2], 0.0, atol=1e-12)

@@ -265,11 +265,15 @@ def default_magnetic_field(inverse_mass_matrix, strength=1.0, covariance=None):
       (what the mass matrix missed) with a fast one. With odd ``d`` the median direction is
       left out.
 
-    **Strength.** ``strength`` is the rotation rate of the whitened velocity, in units of the
-    whitened target's own angular frequency (1). ``strength = 0`` gives plain HMC / underdamped
-    Langevin. ``benchmarks/euclidean.py`` measures ESS per gradient against ``strength``; the
-    rule it supports is ``strength ≈ 1`` (the field turns the velocity by about one radian per
-    unit of whitened time), see ``benchmarks/RESULTS.md``.
+    **Strength (the tuning rule).** ``strength`` is the rotation rate of the whitened velocity
+    (rad per unit time); ``strength = 0`` gives plain HMC / underdamped Langevin. What matters
+    for a leapfrog trajectory is the angle turned per step, ``strength · step_size``: after
+    window adaptation the step size is set by the fastest direction, so a field with a fixed
+    angle per step scales with the target's stiffest frequency. Rule: take
+    ``strength = angle / step_size`` with ``angle ≈ 0.5`` rad (``benchmarks/euclidean.py``
+    sweeps the angle; see ``benchmarks/RESULTS.md``). Measured there: moderate angles (0.25–0.5)
+    help on curved targets (banana), do little on Gaussians whose mass matrix already whitens
+    them, and angles ≥ 1.5 hurt everywhere; ``angle = 0`` is always a safe fallback.
 
     Parameters
     ----------
