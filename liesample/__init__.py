@@ -4,7 +4,8 @@ The one equation is the Poisson–Langevin SDE (paper, ``eq:poisson-langevin-eq`
 declare a Poisson structure, a Hamiltonian and noise, and the dissipation is derived.
 """
 
-from liesample import accuracy, algebras, integrators, structures, symplectic, systems
+from liesample import accuracy, algebras, drivers, integrators, structures, symplectic, systems
+from liesample.drivers import simulate
 from liesample.dynamics import PoissonLangevin, Scene
 from liesample.runner import sample, sample_chains
 from liesample.samplers.adjusted_lie_poisson import adjusted_lie_poisson
@@ -18,12 +19,14 @@ __all__ = [
     "accuracy",
     "adjusted_lie_poisson",
     "algebras",
+    "drivers",
     "integrators",
     "lie_poisson_langevin",
     "magnetic_hmc",
     "magnetic_langevin",
     "sample",
     "sample_chains",
+    "simulate",
     "structures",
     "symplectic",
     "systems",
