@@ -115,11 +115,12 @@ def test_proposal_is_an_involution(dense):
     metric = make_metric(imm)
     g = 2.0 * random_antisymmetric(d, seed=3)
 
+    @jax.jit
     def trajectory(q, p, field):
         step = magnetic_leapfrog(banana, metric, magnetic_flow(field, metric, eps), eps)
-        grad = jax.grad(banana)(q)
-        for _ in range(steps):
-            q, p, _, grad = step(q, p, grad)
+        q, p, _, _ = jax.lax.fori_loop(
+            0, steps, lambda _, c: step(c[0], c[1], c[3]), (q, p, 0.0, jax.grad(banana)(q))
+        )
         return q, p
 
     q0 = jnp.array([0.3, -0.2, 0.5])
