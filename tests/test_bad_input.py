@@ -1,0 +1,740 @@
+"""Every public constructor and sampler refuses bad input with an error naming the parameter.
+
+One table: each row is a call with one bad argument (wrong shape, wrong type, NaN/inf, zero or
+negative where a positive value is required, an off-orbit or degenerate initial point, a
+non-antisymmetric field) and the error it must raise, whose message must name the parameter
+(``pytest.raises(..., match=...)``). Rows marked ``xfail(strict=True)`` are known gaps in files
+owned elsewhere, each with its proposed fix in the reason.
+"""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import liesample
+from liesample import algebras, systems, targets
+from liesample.algebras import StructureConstants
+
+NAN, INF = math.nan, math.inf
+RIGID = systems.rigid_body()
+TOP = systems.heavy_top()
+CHAIN = systems.heisenberg((4,))
+ALGORITHM = liesample.lie_poisson_langevin(RIGID, beta=1.0, step_size=0.1, integrator="lie_euler")
+KEY = jax.random.key(0)
+STARTS = np.tile(RIGID.default_position, (2, 1))
+
+
+def _gap(reason):
+    return pytest.mark.xfail(strict=True, reason=reason)
+
+
+_FIELD = np.array([[0.0, 1.0], [-1.0, 0.0]])
+
+
+def _potential(q):
+    return 0.5 * jnp.sum(q * q)
+
+
+def _logdensity(q):
+    return -0.5 * jnp.sum(q * q)
+
+
+def _norm2(mu):
+    return jnp.sum(mu * mu)
+
+
+def _identity(mu):
+    return mu
+
+
+def _so3_constants():
+    c = np.zeros((3, 3, 3))
+    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+        c[i, j, k], c[j, i, k] = 1.0, -1.0
+    return c
+
+
+def _jacobi_violating():
+    c = _so3_constants()
+    c[0, 1, 0], c[1, 0, 0] = 1.0, -1.0  # antisymmetric, but [e0,[e1,e2]] + … ≠ 0
+    return c
+
+
+def _sample(**kwargs):
+    arguments = {"progress": False, **kwargs}
+    positions = arguments.pop("initial_positions", STARTS)
+    num_draws = arguments.pop("num_draws", 2)
+    return liesample.sample_chains(ALGORITHM, KEY, positions, num_draws, **arguments)
+
+
+def _langevin(**kwargs):
+    arguments = {"beta": 1.0, "step_size": 0.1, **kwargs}
+    system = arguments.pop("system", RIGID)
+    return liesample.lie_poisson_langevin(system, **arguments)
+
+
+def _init(system, position):
+    return liesample.lie_poisson_langevin(system, beta=1.0, step_size=0.01).init(position)
+
+
+ROWS = [
+    # ---- systems.rigid_body
+    ("rigid_body inertia shape", lambda: systems.rigid_body((1.0, 2.0)), ValueError, "inertia"),
+    (
+        "rigid_body inertia nan",
+        lambda: systems.rigid_body((1.0, NAN, 2.0)),
+        ValueError,
+        r"inertia\[1\].*finite",
+    ),
+    (
+        "rigid_body inertia inf",
+        lambda: systems.rigid_body((INF, 1.0, 2.0)),
+        ValueError,
+        r"inertia\[0\].*finite",
+    ),
+    (
+        "rigid_body inertia zero",
+        lambda: systems.rigid_body((1.0, 0.0, 2.0)),
+        ValueError,
+        r"inertia\[1\].*> 0",
+    ),
+    (
+        "rigid_body inertia negative",
+        lambda: systems.rigid_body((1.0, 2.0, -3.0)),
+        ValueError,
+        r"inertia\[2\].*> 0",
+    ),
+    (
+        "rigid_body inertia dtype",
+        lambda: systems.rigid_body(("a", "b", "c")),
+        TypeError,
+        r"inertia\[0\].*real",
+    ),
+    # ---- systems.heavy_top
+    ("heavy_top mgl nan", lambda: systems.heavy_top(mgl=NAN), ValueError, "mgl.*finite"),
+    ("heavy_top mgl dtype", lambda: systems.heavy_top(mgl="heavy"), TypeError, "mgl"),
+    (
+        "heavy_top chi zero",
+        lambda: systems.heavy_top(chi=(0.0, 0.0, 0.0)),
+        ValueError,
+        "chi.*nonzero",
+    ),
+    ("heavy_top chi shape", lambda: systems.heavy_top(chi=(0.0, 1.0)), ValueError, "chi.*3-vector"),
+    (
+        "heavy_top chi inf",
+        lambda: systems.heavy_top(chi=(0.0, INF, 1.0)),
+        ValueError,
+        "chi.*finite",
+    ),
+    (
+        "heavy_top inertia negative",
+        lambda: systems.heavy_top(inertia=(-1.0, 2.0, 3.0)),
+        ValueError,
+        r"inertia\[0\]",
+    ),
+    ("heavy_top gravity", lambda: systems.heavy_top(gravity=1), TypeError, "gravity.*bool"),
+    # ---- systems.heisenberg
+    ("heisenberg shape zero", lambda: systems.heisenberg((0,)), ValueError, "shape"),
+    ("heisenberg shape type", lambda: systems.heisenberg(5), TypeError, "shape"),
+    ("heisenberg shape 3d", lambda: systems.heisenberg((2, 2, 2)), ValueError, "shape"),
+    (
+        "heisenberg coupling nan",
+        lambda: systems.heisenberg((4,), coupling=NAN),
+        ValueError,
+        "coupling.*finite",
+    ),
+    (
+        "heisenberg periodic small",
+        lambda: systems.heisenberg((2,), periodic=True),
+        ValueError,
+        "periodic.*>= 3",
+    ),
+    (
+        "heisenberg periodic type",
+        lambda: systems.heisenberg((4,), periodic="yes"),
+        TypeError,
+        "periodic.*bool",
+    ),
+    (
+        "heisenberg field shape",
+        lambda: systems.heisenberg((4,), field=(1.0, 0.0)),
+        ValueError,
+        "field",
+    ),
+    (
+        "heisenberg field nan",
+        lambda: systems.heisenberg((4,), field=(0.0, NAN, 0.0)),
+        ValueError,
+        r"field\[1\].*finite",
+    ),
+    (
+        "heisenberg anisotropy inf",
+        lambda: systems.heisenberg((4,), anisotropy=INF),
+        ValueError,
+        "anisotropy.*finite",
+    ),
+    # ---- systems.heisenberg_metropolis
+    (
+        "metropolis system",
+        lambda: systems.heisenberg_metropolis(RIGID, beta=1.0),
+        TypeError,
+        "system",
+    ),
+    (
+        "metropolis beta nan",
+        lambda: systems.heisenberg_metropolis(CHAIN, beta=NAN),
+        ValueError,
+        "beta.*finite",
+    ),
+    (
+        "metropolis proposal",
+        lambda: systems.heisenberg_metropolis(CHAIN, beta=1.0, proposal="gauss"),
+        ValueError,
+        "proposal",
+    ),
+    (
+        "metropolis proposal_scale",
+        lambda: systems.heisenberg_metropolis(CHAIN, beta=1.0, proposal_scale=0.0),
+        ValueError,
+        "proposal_scale.*> 0",
+    ),
+    (
+        "metropolis init off orbit",
+        lambda: systems.heisenberg_metropolis(CHAIN, beta=1.0).init(2.0 * CHAIN.default_position),
+        ValueError,
+        "unit spins",
+    ),
+    # ---- liesample.lie_poisson_langevin
+    (
+        "langevin system",
+        lambda: _langevin(system="rigid body"),
+        TypeError,
+        "system.*LiePoissonSystem",
+    ),
+    ("langevin step_size zero", lambda: _langevin(step_size=0.0), ValueError, "step_size.*> 0"),
+    (
+        "langevin step_size negative",
+        lambda: _langevin(step_size=-0.1),
+        ValueError,
+        "step_size.*> 0",
+    ),
+    ("langevin step_size nan", lambda: _langevin(step_size=NAN), ValueError, "step_size.*finite"),
+    (
+        "langevin step_size array",
+        lambda: _langevin(step_size=np.array([0.1, 0.2])),
+        TypeError,
+        "step_size.*scalar",
+    ),
+    ("langevin beta missing", lambda: _langevin(beta=None), ValueError, "beta is required"),
+    ("langevin beta inf", lambda: _langevin(beta=INF), ValueError, "beta.*finite"),
+    ("langevin beta dtype", lambda: _langevin(beta="hot"), TypeError, "beta.*scalar"),
+    ("langevin sigma negative", lambda: _langevin(sigma=-1.0), ValueError, "sigma.*>= 0"),
+    ("langevin theta with noise", lambda: _langevin(theta=1.0), ValueError, "theta is derived"),
+    ("langevin beta without noise", lambda: _langevin(sigma=0.0), ValueError, "beta needs noise"),
+    (
+        "langevin theta negative",
+        lambda: _langevin(beta=None, sigma=0.0, theta=-1.0),
+        ValueError,
+        "theta.*>= 0",
+    ),
+    (
+        "langevin integrator",
+        lambda: _langevin(integrator="rk4"),
+        ValueError,
+        "integrator must be one of",
+    ),
+    ("langevin hamiltonian", lambda: _langevin(hamiltonian=1), TypeError, "hamiltonian.*bool"),
+    (
+        "langevin stability",
+        lambda: _langevin(stability="ignore"),
+        ValueError,
+        "stability must be one of",
+    ),
+    (
+        "langevin init shape",
+        lambda: _init(RIGID, np.ones(4)),
+        ValueError,
+        r"position.*shape \(3,\)",
+    ),
+    (
+        "langevin init nan",
+        lambda: _init(RIGID, np.array([NAN, 0.0, 1.0])),
+        ValueError,
+        "position.*finite",
+    ),
+    (
+        "langevin init degenerate",
+        lambda: _init(RIGID, np.zeros(3)),
+        ValueError,
+        "position.*degenerate",
+    ),
+    (
+        "langevin init heavy top gamma zero",
+        lambda: _init(TOP, np.array([1.0, 0, 0, 0, 0, 0])),
+        ValueError,
+        "position.*degenerate",
+    ),
+    (
+        "langevin init spins off orbit",
+        lambda: _init(CHAIN, 1.5 * CHAIN.default_position),
+        ValueError,
+        "position.*unit spins",
+    ),
+    (
+        "langevin step beyond bound",
+        lambda: _langevin(beta=1e3, step_size=0.1, stability="raise").init(RIGID.default_position),
+        ValueError,
+        "step_size.*stable bound",
+    ),
+    # ---- liesample.adjusted_lie_poisson
+    (
+        "adjusted step_size zero",
+        lambda: liesample.adjusted_lie_poisson(RIGID, beta=1.0, step_size=0.0),
+        ValueError,
+        "step_size",
+    ),
+    (
+        "adjusted beta nan",
+        lambda: liesample.adjusted_lie_poisson(RIGID, beta=NAN, step_size=0.1),
+        ValueError,
+        "beta",
+    ),
+    (
+        "adjusted system",
+        lambda: liesample.adjusted_lie_poisson("rigid", beta=1.0, step_size=0.1),
+        TypeError,
+        "system",
+    ),
+    # ---- liesample.sample_chains / sample
+    ("sample num_draws zero", lambda: _sample(num_draws=0), ValueError, "num_draws"),
+    ("sample thinning zero", lambda: _sample(thinning=0), ValueError, "thinning"),
+    ("sample num_warmup negative", lambda: _sample(num_warmup=-1), ValueError, "num_warmup"),
+    ("sample chunk_draws zero", lambda: _sample(chunk_draws=0), ValueError, "chunk_draws"),
+    ("sample on_nonfinite", lambda: _sample(on_nonfinite="ignore"), ValueError, "on_nonfinite"),
+    (
+        "sample positions nan",
+        lambda: _sample(initial_positions=np.array([[NAN, 0.0, 1.0]])),
+        ValueError,
+        "initial_positions must be finite",
+    ),
+    (
+        "sample positions scalar",
+        lambda: _sample(initial_positions=np.float64(1.0)),
+        ValueError,
+        "initial_positions",
+    ),
+    (
+        "sample positions shape",
+        lambda: _sample(initial_positions=np.ones((2, 4))),
+        ValueError,
+        r"initial_positions\[0\].*shape",
+    ),
+    (
+        "sample positions degenerate",
+        lambda: _sample(initial_positions=np.zeros((1, 3))),
+        ValueError,
+        r"initial_positions\[0\].*degenerate",
+    ),
+    ("sample devices", lambda: _sample(devices="tpu"), ValueError, "devices"),
+    ("sample devices count", lambda: _sample(devices=0), ValueError, "devices"),
+    (
+        "sample resume without output",
+        lambda: _sample(resume=True),
+        ValueError,
+        "resume=True needs output",
+    ),
+    (
+        "sample resume type",
+        lambda: _sample(resume="yes", output="x.nc"),
+        TypeError,
+        "resume must be a bool",
+    ),
+    (
+        "sample() num_draws",
+        lambda: liesample.sample(ALGORITHM, KEY, STARTS, 0, progress=False),
+        ValueError,
+        "num_draws",
+    ),
+    # ---- systems.point_vortices
+    (
+        "point_vortices empty",
+        lambda: systems.point_vortices([]),
+        ValueError,
+        "circulations.*N >= 1",
+    ),
+    (
+        "point_vortices nan",
+        lambda: systems.point_vortices([1.0, NAN]),
+        ValueError,
+        "circulations must be finite",
+    ),
+    (
+        "point_vortices zero",
+        lambda: systems.point_vortices([1.0, 0.0]),
+        ValueError,
+        "circulations must be nonzero",
+    ),
+    (
+        "point_vortices shape",
+        lambda: systems.point_vortices(np.ones((2, 2))),
+        ValueError,
+        "circulations.*1-D",
+    ),
+    (
+        "point_vortices max_degree",
+        lambda: systems.point_vortices([1.0, 1.0], max_degree=0),
+        ValueError,
+        "max_degree",
+    ),
+    (
+        "point_vortices radius",
+        lambda: systems.point_vortices([1.0, 1.0], radius=-1.0),
+        ValueError,
+        "radius.*> 0",
+    ),
+    (
+        "point_vortices beta",
+        lambda: _langevin(system=systems.point_vortices([1.0, 1.0]), beta=-100.0),
+        ValueError,
+        "beta.*non-normalisable",
+    ),
+    (
+        "point_vortices init collision",
+        lambda: _init(systems.point_vortices([1.0, 1.0]), np.array([[0, 0, 1.0], [0, 0, 1.0]])),
+        ValueError,
+        "position.*coincident",
+    ),
+    (
+        "point_vortices init off sphere",
+        lambda: _init(systems.point_vortices([1.0, 1.0]), np.array([[0, 0, 2.0], [0, 1.0, 0]])),
+        ValueError,
+        "position.*sphere",
+    ),
+    # ---- systems.charged_particle
+    (
+        "charged_particle field not antisymmetric",
+        lambda: systems.charged_particle(_potential, magnetic_field=np.ones((2, 2))),
+        ValueError,
+        "magnetic_field must be antisymmetric",
+    ),
+    (
+        "charged_particle field nan",
+        lambda: systems.charged_particle(
+            _potential, magnetic_field=np.array([[0.0, NAN], [NAN, 0.0]])
+        ),
+        ValueError,
+        "magnetic_field must be finite",
+    ),
+    (
+        "charged_particle mass zero",
+        lambda: systems.charged_particle(_potential, magnetic_field=_FIELD, mass=0.0),
+        ValueError,
+        "mass must be > 0",
+    ),
+    (
+        "charged_particle mass nan",
+        lambda: systems.charged_particle(_potential, magnetic_field=_FIELD, mass=NAN),
+        ValueError,
+        "mass must be finite",
+    ),
+    (
+        "charged_particle charge inf",
+        lambda: systems.charged_particle(_potential, magnetic_field=_FIELD, charge=INF),
+        ValueError,
+        "charge must be finite",
+    ),
+    (
+        "charged_particle no target",
+        lambda: systems.charged_particle(),
+        ValueError,
+        "exactly one of potential_fn",
+    ),
+    # ---- liesample.magnetic_hmc / magnetic_langevin
+    (
+        "magnetic_hmc step_size zero",
+        lambda: liesample.magnetic_hmc(_logdensity, 0.0, np.ones(2), 5, _FIELD),
+        ValueError,
+        "step_size.*> 0",
+    ),
+    (
+        "magnetic_hmc mass negative",
+        lambda: liesample.magnetic_hmc(_logdensity, 0.1, -np.ones(2), 5, _FIELD),
+        ValueError,
+        "inverse_mass_matrix.*> 0",
+    ),
+    (
+        "magnetic_hmc steps zero",
+        lambda: liesample.magnetic_hmc(_logdensity, 0.1, np.ones(2), 0, _FIELD),
+        ValueError,
+        "num_integration_steps",
+    ),
+    (
+        "magnetic_hmc field symmetric",
+        lambda: liesample.magnetic_hmc(_logdensity, 0.1, np.ones(2), 5, np.ones((2, 2))),
+        ValueError,
+        "magnetic_field must be antisymmetric",
+    ),
+    (
+        "magnetic_hmc field shape",
+        lambda: liesample.magnetic_hmc(_logdensity, 0.1, np.ones(2), 5, np.zeros((3, 3))),
+        ValueError,
+        r"magnetic_field must have shape \(2, 2\)",
+    ),
+    (
+        "magnetic_hmc persistence",
+        lambda: liesample.magnetic_hmc(
+            _logdensity, 0.1, np.ones(2), 5, _FIELD, momentum_persistence=1.5
+        ),
+        ValueError,
+        "momentum_persistence",
+    ),
+    (
+        "magnetic_hmc init nan",
+        lambda: liesample.magnetic_hmc(_logdensity, 0.1, np.ones(2), 5, _FIELD).init(
+            np.array([NAN, 0.0])
+        ),
+        ValueError,
+        "initial position",
+    ),
+    (
+        "magnetic_hmc init shape",
+        lambda: liesample.magnetic_hmc(_logdensity, 0.1, np.ones(2), 5, _FIELD).init(np.zeros(3)),
+        ValueError,
+        "position coordinates",
+    ),
+    (
+        "magnetic_langevin friction",
+        lambda: liesample.magnetic_langevin(_logdensity, 0.1, np.ones(2), -1.0, _FIELD),
+        ValueError,
+        "friction must be > 0",
+    ),
+    (
+        "magnetic_langevin step_size nan",
+        lambda: liesample.magnetic_langevin(_logdensity, NAN, np.ones(2), 1.0, _FIELD),
+        ValueError,
+        "step_size",
+    ),
+    (
+        "magnetic_langevin field",
+        lambda: liesample.magnetic_langevin(_logdensity, 0.1, np.ones(2), 1.0, np.eye(2)),
+        ValueError,
+        "magnetic_field must be antisymmetric",
+    ),
+    # ---- systems.lie_poisson_system
+    (
+        "lie_poisson_system algebra",
+        lambda: systems.lie_poisson_system("so3", _norm2, _identity, np.ones(3)),
+        TypeError,
+        "algebra",
+    ),
+    (
+        "lie_poisson_system position nan",
+        lambda: systems.lie_poisson_system(
+            algebras.so3, _norm2, _identity, np.array([NAN, 0, 1.0])
+        ),
+        ValueError,
+        "position must be finite",
+    ),
+    (
+        "lie_poisson_system hamiltonian",
+        lambda: systems.lie_poisson_system(algebras.so3, 3, _identity, np.ones(3)),
+        TypeError,
+        "hamiltonian must be a callable",
+    ),
+    (
+        "lie_poisson_system hamiltonian vector",
+        lambda: systems.lie_poisson_system(algebras.so3, _identity, _identity, np.ones(3)),
+        ValueError,
+        "hamiltonian must return a scalar",
+    ),
+    (
+        "lie_poisson_system noise scalar",
+        lambda: systems.lie_poisson_system(algebras.so3, _norm2, _norm2, np.ones(3)),
+        ValueError,
+        "noise_hamiltonians must return a 1-D",
+    ),
+    # ---- targets
+    (
+        "RestrictedGaussian radius zero",
+        lambda: targets.RestrictedGaussian((1.0, 2.0, 4.0), 1.0, 0.0),
+        ValueError,
+        "radius.*> 0",
+    ),
+    (
+        "RestrictedGaussian beta nan",
+        lambda: targets.RestrictedGaussian((1.0, 2.0, 4.0), NAN, 1.0),
+        ValueError,
+        "beta.*finite",
+    ),
+    (
+        "RestrictedGaussian inertia",
+        lambda: targets.RestrictedGaussian((1.0, -2.0, 4.0), 1.0, 1.0),
+        ValueError,
+        r"inertia\[1\]",
+    ),
+    (
+        "HeavyTopGibbs beta zero",
+        lambda: targets.HeavyTopGibbs((1.0, 2.0, 4.0), 1.0, (0, 0, 1.0), 0.0, 1.0, 0.0),
+        ValueError,
+        "beta must be > 0",
+    ),
+    (
+        "HeavyTopGibbs radius negative",
+        lambda: targets.HeavyTopGibbs((1.0, 2.0, 4.0), 1.0, (0, 0, 1.0), 1.0, -1.0, 0.0),
+        ValueError,
+        "radius",
+    ),
+    (
+        "HeavyTopGibbs chi zero",
+        lambda: targets.HeavyTopGibbs((1.0, 2.0, 4.0), 1.0, (0, 0, 0), 1.0, 1.0, 0.0),
+        ValueError,
+        "chi",
+    ),
+    (
+        "HeavyTopGibbs num_t",
+        lambda: targets.HeavyTopGibbs((1.0, 2.0, 4.0), 1.0, (0, 0, 1.0), 1.0, 1.0, 0.0, num_t=4),
+        ValueError,
+        "num_t",
+    ),
+    (
+        "sample_bingham lam shape",
+        lambda: targets.sample_bingham(KEY, np.ones(2), 3),
+        ValueError,
+        "lam.*shape",
+    ),
+    (
+        "sample_bingham num_samples",
+        lambda: targets.sample_bingham(KEY, np.ones(3), 0),
+        ValueError,
+        "num_samples",
+    ),
+    (
+        "chain correlation n negative",
+        lambda: targets.heisenberg_chain_correlation(-1, 1.0),
+        ValueError,
+        "n must be a non-negative",
+    ),
+    (
+        "chain correlation beta nan",
+        lambda: targets.heisenberg_chain_correlation(1, NAN),
+        ValueError,
+        "beta.*finite",
+    ),
+    (
+        "Gaussian covariance not SPD",
+        lambda: targets.Gaussian(np.zeros(2), np.array([[1.0, 2.0], [2.0, 1.0]])),
+        ValueError,
+        "covariance",
+    ),
+    (
+        "Gaussian shapes",
+        lambda: targets.Gaussian(np.zeros(3), np.eye(2)),
+        ValueError,
+        "covariance|mean",
+    ),
+    ("Gaussian nan", lambda: targets.Gaussian(np.array([NAN, 0.0]), np.eye(2)), ValueError, "mean"),
+    (
+        "correlated_gaussian condition",
+        lambda: targets.correlated_gaussian(3, 0.5),
+        ValueError,
+        "condition_number",
+    ),
+    (
+        "correlated_gaussian dimension",
+        lambda: targets.correlated_gaussian(0, 10.0),
+        ValueError,
+        "dimension",
+    ),
+    ("VortexPairLaw non-integrable", lambda: targets.VortexPairLaw(-1.5), ValueError, "exponent"),
+    ("VortexPairLaw nan", lambda: targets.VortexPairLaw(NAN), ValueError, "exponent"),
+    # ---- algebras.StructureConstants
+    (
+        "StructureConstants shape",
+        lambda: StructureConstants(np.zeros((3, 3))),
+        ValueError,
+        r"shape \(n, n, n\)",
+    ),
+    (
+        "StructureConstants empty",
+        lambda: StructureConstants(np.zeros((0, 0, 0))),
+        ValueError,
+        "n >= 1",
+    ),
+    (
+        "StructureConstants nan",
+        lambda: StructureConstants(np.full((2, 2, 2), NAN)),
+        ValueError,
+        "finite",
+    ),
+    (
+        "StructureConstants symmetric",
+        lambda: StructureConstants(np.abs(_so3_constants())),
+        ValueError,
+        "antisymmetric",
+    ),
+    (
+        "StructureConstants jacobi",
+        lambda: StructureConstants(_jacobi_violating()),
+        ValueError,
+        "Jacobi",
+    ),
+    (
+        "StructureConstants casimirs",
+        lambda: StructureConstants(_so3_constants(), casimirs=3),
+        TypeError,
+        "casimirs",
+    ),
+    (
+        "StructureConstants dtype",
+        lambda: StructureConstants([[["a"]]]),
+        ValueError,
+        "structure constants",
+    ),
+]
+
+
+# Known gaps in files owned elsewhere, with the proposed fix (reported to the lead).
+GAPS = {
+    "Gaussian nan": "targets/gaussian.py: Gaussian accepts a NaN mean; in __post_init__ add "
+    "`if not np.all(np.isfinite(mean)): raise ValueError(f'mean must be finite, got {mean}')`",
+    "correlated_gaussian condition": "targets/gaussian.py: correlated_gaussian accepts "
+    "condition_number < 1; check finite_float('condition_number', …) >= 1",
+    "correlated_gaussian dimension": "targets/gaussian.py: correlated_gaussian(0, …) fails in "
+    "numpy ('zero-size array'); require an integer dimension >= 1, naming it",
+    "StructureConstants dtype": "algebras.py: StructureConstants([[['a']]]) raises numpy's "
+    "'could not convert string to float'; wrap np.array(constants, dtype=float) and raise "
+    "ValueError('structure constants must be a real array of shape (n, n, n) …')",
+}
+
+
+@pytest.mark.parametrize(
+    ("call", "error", "match"),
+    [
+        pytest.param(
+            row[1],
+            row[2],
+            row[3],
+            id=row[0],
+            marks=[_gap(GAPS[row[0]])] if row[0] in GAPS else [],
+        )
+        for row in ROWS
+    ],
+)
+def test_bad_input_is_refused_naming_the_parameter(call, error, match):
+    with pytest.raises(error, match=match):
+        call()
+
+
+def test_the_table_covers_every_public_system_and_sampler():
+    """A new public constructor must get rows here (names as they appear in the row ids)."""
+    covered = " ".join(row[0] for row in ROWS)
+    expected = {
+        "rigid_body", "heavy_top", "heisenberg", "metropolis", "langevin", "adjusted",
+        "sample", "RestrictedGaussian", "HeavyTopGibbs", "StructureConstants", "point_vortices",
+        "charged_particle", "magnetic_hmc", "magnetic_langevin", "lie_poisson_system",
+    }  # fmt: skip
+    assert all(name in covered for name in expected)
+    assert algebras.so3 is not None
