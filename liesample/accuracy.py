@@ -13,7 +13,14 @@ as ``h → 0``; MATH.md §2). This module measures it instead of guessing:
   tolerance, allowing for pre-asymptotic slopes;
 - :func:`richardson_romberg` combines averages at ``h`` and ``h/2``,
   ``(2^p A(h/2) − A(h)) / (2^p − 1)``, with its MCSE; :func:`richardson_romberg_run` does both
-  runs, coupled.
+  runs, coupled;
+- :func:`ergodic_averages` runs any BlackJAX-style sampler (unadjusted or
+  :func:`liesample.adjusted_lie_poisson`) as vmapped chains keeping only running sums.
+
+Without Lévy areas the schemes are strong order 1/2 under non-commuting noise, so coupled levels
+drift apart by ``O(√h)``: the coupling shrinks the variance of the differences (measured in
+``tests/test_accuracy_knob.py``) but does not remove it; every SE here comes from the spread of
+independent chains, coupling included.
 """
 
 from __future__ import annotations
