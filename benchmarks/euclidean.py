@@ -56,7 +56,7 @@ NUM_CHAINS = 4
 NUM_STEPS = 10  # leapfrog steps of HMC and magnetic HMC
 # The field's strength as the angle (rad) it turns the whitened velocity per leapfrog step:
 # strength = ANGLE / step_size (the tuning rule of default_magnetic_field).
-DEFAULT_ANGLE = 0.5
+DEFAULT_ANGLE = 0.25
 ANGLES = (0.0, 0.25, 0.5, 1.0, 1.5, 2.0)
 
 
@@ -354,6 +354,13 @@ def run(out_dir: Path, quick: bool, log=print) -> None:
     log(f"wrote {path} in {time.perf_counter() - start:.0f} s")
 
 
+def short(label):
+    """Legend name: the magnetic rows by role (default or tuned angle), the peers by name."""
+    if label.startswith("magnetic_hmc"):
+        return "magnetic_hmc, tuned angle" if "tuned" in label else "magnetic_hmc, default angle"
+    return label.split(" (")[0]
+
+
 def plot(data, path):
     import matplotlib
 
@@ -361,7 +368,7 @@ def plot(data, path):
     import matplotlib.pyplot as plt
 
     names = list(dict.fromkeys(r["target"] for r in data["results"]))
-    samplers = list(dict.fromkeys(r["sampler"].split(" (")[0] + (" tuned" if "tuned" in r["sampler"] else "") for r in data["results"]))  # fmt: skip
+    samplers = list(dict.fromkeys(short(r["sampler"]) for r in data["results"]))
     fig, axes = plt.subplots(1, 2, figsize=(14, 4.8))
     width = 0.8 / len(samplers)
     for j, row_label in enumerate(samplers):
@@ -370,9 +377,7 @@ def plot(data, path):
             row = next(
                 r
                 for r in data["results"]
-                if r["target"] == name
-                and (r["sampler"].split(" (")[0] + (" tuned" if "tuned" in r["sampler"] else ""))
-                == row_label
+                if r["target"] == name and short(r["sampler"]) == row_label
             )
             values.append(row["ess_bulk_per_gradient"])
         axes[0].bar(np.arange(len(names)) + j * width, values, width, label=row_label)

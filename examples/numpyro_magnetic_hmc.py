@@ -37,7 +37,7 @@ NUM_CHAINS = 4
 NUM_WARMUP = 400
 NUM_DRAWS = 500
 NUM_INTEGRATION_STEPS = 8
-ANGLE_PER_STEP = 0.5  # strength = angle / step_size (default_magnetic_field's rule)
+ANGLE_PER_STEP = 0.25  # strength = angle / step_size (default_magnetic_field's rule)
 
 
 def eight_schools(sigma, y=None):
