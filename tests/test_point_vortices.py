@@ -204,18 +204,20 @@ def test_pair_law_like_signed_full_scene():
 
 
 @pytest.mark.slow
-def test_pair_law_opposite_signed_with_hamiltonian_drift():
-    """``Γ = (1, −1)``, ``β = 2π`` (exponent −1/2: the dipole attracts), drift on, substeps."""
-    _pair_law_check([1.0, -1.0], 2 * math.pi, True, point_vortex_integrator, 2000, 600, 20)
+def test_pair_law_opposite_signed():
+    """``Γ = (1, −1)``, ``β = 2π`` (exponent −1/2: the dipole attracts, exact ``E[x₁·x₂] = 1/3``).
+
+    Without the Hamiltonian drift (same invariant law, no stiffness): with it, vmapped chains
+    each pay the substeps of the closest pair in the batch (the collision tests cover the drift).
+    """
+    _pair_law_check([1.0, -1.0], 2 * math.pi, False, point_vortex_integrator, 2000, 600, 20)
 
 
 @pytest.mark.slow
 def test_pair_law_negative_temperature():
     """``Γ = (1, 1)``, ``β = −2π`` (exponent −1/2: like-signed vortices cluster), sampled without
     the (stiff, law-neutral) Hamiltonian drift."""
-    _pair_law_check(
-        [1.0, 1.0], -2 * math.pi, False, lambda s: point_vortex_integrator(s), 2000, 600, 30
-    )
+    _pair_law_check([1.0, 1.0], -2 * math.pi, False, point_vortex_integrator, 2000, 600, 30)
 
 
 @pytest.mark.slow
@@ -231,7 +233,7 @@ def test_three_vortices_against_importance_sampling():
     )
     system = point_vortices(gamma, max_degree=3)
     algorithm = liesample.lie_poisson_langevin(
-        system, beta=beta, sigma=1.5, step_size=0.01, integrator=point_vortex_integrator(system)
+        system, beta=beta, sigma=1.5, step_size=0.01, hamiltonian=False, integrator="splitting"
     )
     num_chains = 2000
     starts = uniform_sphere_points(jax.random.key(41), (num_chains, 3))

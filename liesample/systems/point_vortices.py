@@ -292,11 +292,11 @@ def point_vortices(circulations, max_degree: int = 2, radius: float = 1.0) -> Po
     max_degree = int(max_degree)
     radius = finite_float("radius", radius, positive=True)
     num_vortices = gamma.size
-    pair_products = np.outer(gamma, gamma)
 
     def hamiltonian(x):
         d2, off = _pair_geometry(x)
-        products = jnp.asarray(pair_products, dtype=x.dtype)
+        g = jnp.asarray(gamma, dtype=x.dtype)
+        products = g[:, None] * g[None, :]  # formed in the graph: an N×N constant is not captured
         # Σ_{j<k} log|x_j − x_k| Γ_jΓ_k/(2π) = Σ_{j≠k} log d²_jk Γ_jΓ_k/(8π)
         return -jnp.sum(jnp.where(off, products * jnp.log(d2), 0.0)) / (8.0 * math.pi)
 
