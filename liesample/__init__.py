@@ -7,7 +7,7 @@ declare a Poisson structure, a Hamiltonian and noise, and the dissipation is der
 from liesample import accuracy, algebras, drivers, integrators, structures, symplectic, systems
 from liesample.drivers import simulate
 from liesample.dynamics import PoissonLangevin, Scene
-from liesample.runner import sample, sample_chains
+from liesample.runner import load_chains, sample, sample_chains
 from liesample.samplers.adjusted_lie_poisson import adjusted_lie_poisson
 from liesample.samplers.lie_poisson_langevin import lie_poisson_langevin
 from liesample.samplers.magnetic_hmc import magnetic_hmc
@@ -22,6 +22,7 @@ __all__ = [
     "drivers",
     "integrators",
     "lie_poisson_langevin",
+    "load_chains",
     "magnetic_hmc",
     "magnetic_langevin",
     "sample",
