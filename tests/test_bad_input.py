@@ -556,6 +556,25 @@ ROWS = [
         ValueError,
         "noise_hamiltonians must return a 1-D",
     ),
+    # ---- liesample.simulate
+    (
+        "simulate step_size zero",
+        lambda: liesample.simulate(RIGID, KEY, step_size=0.0, num_steps=5, beta=1.0),
+        ValueError,
+        "step_size must be > 0",
+    ),
+    (
+        "simulate num_steps zero",
+        lambda: liesample.simulate(RIGID, KEY, step_size=0.1, num_steps=0, beta=1.0),
+        ValueError,
+        "num_steps",
+    ),
+    (
+        "simulate position shape",
+        lambda: liesample.simulate(RIGID, KEY, np.ones(4), step_size=0.1, num_steps=2, beta=1.0),
+        ValueError,
+        r"position must have shape \(3,\)",
+    ),
     # ---- targets
     (
         "RestrictedGaussian radius zero",
@@ -734,7 +753,7 @@ def test_the_table_covers_every_public_system_and_sampler():
     expected = {
         "rigid_body", "heavy_top", "heisenberg", "metropolis", "langevin", "adjusted",
         "sample", "RestrictedGaussian", "HeavyTopGibbs", "StructureConstants", "point_vortices",
-        "charged_particle", "magnetic_hmc", "magnetic_langevin", "lie_poisson_system",
+        "charged_particle", "magnetic_hmc", "magnetic_langevin", "lie_poisson_system", "simulate",
     }  # fmt: skip
     assert all(name in covered for name in expected)
     assert algebras.so3 is not None
