@@ -277,8 +277,9 @@ def default_magnetic_field(inverse_mass_matrix, strength, covariance=None):
     correlated 2-d Gaussian (ρ = 0.99) the best angle, 1, gave 1.5x the ESS per gradient of
     the same kernel without field and 1.8x BlackJAX HMC's; on the rotated 100-d Gaussian
     (κ = 100) and the logistic regression the best angle, 0.25, is within ±20 % of HMC; on the
-    banana a rerun at 0.25 lost to HMC with many divergent transitions (the step size is
-    adapted without the field); on Neal's funnel no angle helped. Angles ≥ 0.5 cost a factor
+    banana two runs at 0.25 on different keys gave 1.24x and 0.20x HMC (divergent transitions
+    in the stiff tails; the step size is adapted without the field); on Neal's funnel no angle
+    helped. Angles ≥ 0.5 cost a factor
     2–100 on the 100-d Gaussian and the logistic regression: a strong field slows the slowest
     modes (the product of the two frequencies of a coupled pair is fixed, their spread grows).
     ``angle = 0`` (plain HMC) is always a safe fallback.
