@@ -379,19 +379,28 @@ def stratonovich_heun_step(sde: PoissonLangevinSDE, z, dt, dW=None):
     return z + 0.5 * (increment_start + increment_end)
 
 
+def kinetic_magnetic_exponential(generator, time):
+    """``(e^{tB}, t φ₁(tB))`` for ``B = G M⁻¹`` from one ``expm([[tB, tI], [0, 0]])``.
+
+    ``φ₁(X) = Σ_k X^k/(k+1)!``, so ``t φ₁(tB) = ∫₀^t e^{sB} ds``: the exact flow of
+    ``q̇ = M⁻¹p, ṗ = G M⁻¹ p`` is ``p ← e^{tB} p``, ``q ← q + M⁻¹ t φ₁(tB) p``. Valid for
+    singular ``G`` (``G = 0`` gives ``(I, tI)``); never from a symmetric eigensolver (MATH.md §3).
+    """
+    generator = jnp.asarray(generator)
+    n = generator.shape[0]
+    eye = jnp.eye(n, dtype=generator.dtype)
+    zeros = jnp.zeros_like(generator)
+    exponential = jax.scipy.linalg.expm(jnp.block([[time * generator, time * eye], [zeros, zeros]]))
+    return exponential[:n, :n], exponential[:n, n:]
+
+
 def magnetic_flow(magnetic_term, mass, step_size):
     """The exact flow of ``q̇ = p/m``, ``ṗ = G p/m`` for a constant antisymmetric ``G``.
 
     Returns ``(rotation, displacement)`` with ``p' = rotation @ p`` and
     ``q' = q + displacement @ p``: ``rotation = e^{εG/m}`` (orthogonal) and
-    ``displacement = (1/m) ∫₀^ε e^{sG/m} ds = (ε/m) φ₁(εG/m)``. Both come from one matrix
-    exponential of ``[[εG/m, εI/m], [0, 0]]``, valid for singular ``G`` (``G = 0`` included);
-    never from a symmetric eigensolver (MATH.md §3).
+    ``displacement = (1/m) ∫₀^ε e^{sG/m} ds = (ε/m) φ₁(εG/m)``
+    (:func:`kinetic_magnetic_exponential` with ``M = m I``).
     """
-    magnetic_term = jnp.asarray(magnetic_term)
-    n = magnetic_term.shape[0]
-    generator = jnp.zeros((2 * n, 2 * n), magnetic_term.dtype)
-    generator = generator.at[:n, :n].set(step_size / mass * magnetic_term)
-    generator = generator.at[:n, n:].set(step_size / mass * jnp.eye(n, dtype=magnetic_term.dtype))
-    exponential = jax.scipy.linalg.expm(generator)
-    return exponential[:n, :n], exponential[:n, n:]
+    rotation, integral = kinetic_magnetic_exponential(jnp.asarray(magnetic_term) / mass, step_size)
+    return rotation, integral / mass

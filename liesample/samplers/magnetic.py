@@ -24,6 +24,7 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 
 from liesample._validation import concrete_array
+from liesample.structures import kinetic_magnetic_exponential
 
 __all__ = [
     "MagneticFlow",
@@ -234,15 +235,11 @@ def magnetic_flow(magnetic_field, metric: Metric, time) -> MagneticFlow:
     ``E = I``, ``Φ = tI``, the drift of velocity Verlet).
     """
     field = jnp.asarray(magnetic_field)
-    d = field.shape[0]
     if metric.eigenvectors is None:
         b = field * metric.inverse_mass_matrix[None, :]  # G diag(m⁻¹)
     else:
         b = field @ metric.inverse_mass_matrix
-    eye = jnp.eye(d, dtype=b.dtype)
-    augmented = jnp.block([[time * b, time * eye], [jnp.zeros_like(b), jnp.zeros_like(b)]])
-    exponential = jax.scipy.linalg.expm(augmented)
-    return MagneticFlow(exponential[:d, :d], exponential[:d, d:])
+    return MagneticFlow(*kinetic_magnetic_exponential(b, time))
 
 
 # --------------------------------------------------------------------------- default field
