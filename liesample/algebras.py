@@ -59,6 +59,19 @@ class LieAlgebra:
         raise NotImplementedError
 
 
+def cross(a, b):
+    """``a × b`` over the last axis (length 3), broadcasting, written out by components.
+
+    Used instead of ``jnp.cross``: on XLA CPU (jax 0.12) ``jit(vmap(loop))`` over Rodrigues
+    moves whose generator mixes ``jnp.cross`` with ``jax.grad`` returned wrong numbers (a
+    miscompile, not round-off), which ``tests/stability/`` detects (batched step = one chain);
+    the component form compiles correctly.
+    """
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return jnp.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
 # Below this θ² the Taylor series (to θ⁴) is exact in float64 and smooth for autodiff.
 _SMALL_ANGLE_SQ = 1e-6
 
@@ -95,11 +108,11 @@ class SO3(LieAlgebra):
 
     def bracket(self, xi, eta):
         """``[ξ, η] = ξ × η``."""
-        return jnp.cross(xi, eta)
+        return cross(xi, eta)
 
     def ad_star(self, xi, mu):
         """``ad*_ξ μ = μ × ξ``, from ``⟨μ, ξ × η⟩ = ⟨μ × ξ, η⟩``."""
-        return jnp.cross(mu, xi)
+        return cross(mu, xi)
 
     def coadjoint_exp(self, zeta, mu):
         """``Ad*_{exp ζ} μ``: the time-one flow of ``μ̇ = μ × ζ``.
@@ -110,11 +123,11 @@ class SO3(LieAlgebra):
         """
         theta_sq = jnp.sum(zeta * zeta, axis=-1, keepdims=True)
         sin_over_theta, one_minus_cos_over_theta_sq = _rodrigues_coefficients(theta_sq)
-        zeta_cross_mu = jnp.cross(zeta, mu)
+        zeta_cross_mu = cross(zeta, mu)
         return (
             mu
             - sin_over_theta * zeta_cross_mu
-            + one_minus_cos_over_theta_sq * jnp.cross(zeta, zeta_cross_mu)
+            + one_minus_cos_over_theta_sq * cross(zeta, zeta_cross_mu)
         )
 
     def casimirs(self, mu):
@@ -172,12 +185,12 @@ class SE3(LieAlgebra):
     def bracket(self, xi, eta):
         """``[(ξ, v), (η, w)] = (ξ×η, ξ×w − η×v)``."""
         (a, v), (b, w) = self._split(xi), self._split(eta)
-        return jnp.concatenate([jnp.cross(a, b), jnp.cross(a, w) - jnp.cross(b, v)], axis=-1)
+        return jnp.concatenate([cross(a, b), cross(a, w) - cross(b, v)], axis=-1)
 
     def ad_star(self, xi, mu):
         """``ad*_{(ξ,v)}(Π, Γ) = (Π×ξ + Γ×v, Γ×ξ)``."""
         (a, v), (pi, gamma) = self._split(xi), self._split(mu)
-        return jnp.concatenate([jnp.cross(pi, a) + jnp.cross(gamma, v), jnp.cross(gamma, a)], -1)
+        return jnp.concatenate([cross(pi, a) + cross(gamma, v), cross(gamma, a)], -1)
 
     def coadjoint_exp(self, zeta, mu):
         """``Ad*_{exp ζ} μ``: the time-one flow of ``μ̇ = ad*_ζ μ`` for constant ``ζ = (ξ, v)``.
@@ -197,14 +210,14 @@ class SE3(LieAlgebra):
         (a, v), (pi, gamma) = self._split(zeta), self._split(mu)
         theta_sq = jnp.sum(a * a, axis=-1, keepdims=True)
         _, one_minus_cos = _rodrigues_coefficients(theta_sq)
-        a_cross_v = jnp.cross(a, v)
+        a_cross_v = cross(a, v)
         w = (
             v
             - one_minus_cos * a_cross_v
-            + _theta_minus_sin_over_cube(theta_sq) * jnp.cross(a, a_cross_v)
+            + _theta_minus_sin_over_cube(theta_sq) * cross(a, a_cross_v)
         )
         gamma_new = so3.coadjoint_exp(a, gamma)
-        pi_new = so3.coadjoint_exp(a, pi) + jnp.cross(gamma_new, w)
+        pi_new = so3.coadjoint_exp(a, pi) + cross(gamma_new, w)
         return jnp.concatenate([pi_new, gamma_new], axis=-1)
 
     def casimirs(self, mu):

@@ -53,7 +53,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from liesample._validation import concrete_array, finite_float
-from liesample.algebras import LieAlgebra, so3
+from liesample.algebras import LieAlgebra, cross, so3
 from liesample.spherical_harmonics import num_harmonics, transport_modes
 from liesample.systems.base import LiePoissonSystem
 from liesample.targets.vortices import VortexPairLaw, check_vortex_beta
@@ -98,11 +98,11 @@ class ScaledSO3Product(LieAlgebra):
         return jnp.asarray(self.weights, dtype=like.dtype)[:, None]
 
     def bracket(self, xi, eta):
-        return self._w(xi) * jnp.cross(xi, eta)
+        return self._w(xi) * cross(xi, eta)
 
     def ad_star(self, xi, mu):
         """``ad*_ξ μ = μ × (w ξ)``, from ``⟨μ, [ξ, η]⟩ = Σ_k w_k μ_k·(ξ_k × η_k)``."""
-        return jnp.cross(mu, self._w(mu) * xi)
+        return cross(mu, self._w(mu) * xi)
 
     def coadjoint_exp(self, zeta, mu):
         """The time-one flow of ``μ̇ = μ × (w ζ)``: so(3)'s Rodrigues rotation by ``w ζ``."""
@@ -131,7 +131,7 @@ def vortex_velocity(x, circulations, radius=1.0):
     gamma = jnp.asarray(circulations, dtype=x.dtype)
     d2, off = _pair_geometry(x)
     weights = jnp.where(off, gamma[None, :] / (2.0 * math.pi * radius * d2), 0.0)
-    return jnp.cross(weights @ x, x)
+    return cross(weights @ x, x)
 
 
 def angular_momentum(x, circulations):
@@ -163,7 +163,7 @@ def all_modes_dissipation(x, circulations, radius=1.0):
     a = jnp.where(off, gamma[None, :] / (4.0 * math.pi * radius * half_d2), 0.0)
     x_dot_u = x @ u.T  # [i, k] = x_i·u_k
     b = jnp.where(off, gamma[None, :] * x_dot_u / (4.0 * math.pi * radius * half_d2**2), 0.0)
-    return -jnp.cross(a @ u + b @ x, x)
+    return -cross(a @ u + b @ x, x)
 
 
 def collision_rate(x, circulations):
@@ -342,7 +342,7 @@ def _closed_form_generator(system: PointVortexSystem, x):
     (for ``D_k ⊥ x_k``, ``x_k × (w_k ζ_k) = x_k × (D_k × x_k)/R² = D_k``)."""
     d = all_modes_dissipation(x, system.circulations, system.radius)
     gamma = jnp.asarray(system.circulations, dtype=x.dtype)[:, None]
-    return -gamma * jnp.cross(d, x) / system.radius
+    return -gamma * cross(d, x) / system.radius
 
 
 def _with_all_modes_dissipation(system: PointVortexSystem, base):
