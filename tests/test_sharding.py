@@ -3,13 +3,11 @@ unsharded run for the same keys, to round-off.
 
 Two CPU devices need ``XLA_FLAGS=--xla_force_host_platform_device_count=2`` before JAX starts,
 so the comparison runs in a subprocess. Each chain executes the same operations on the same key
-``fold_in(key_c, step)`` whether or not the chain axis is split. Up to 22 Nov 2026 (4694826)
-the positions were bitwise equal; since the engine computes ``{h, ĥ_i}`` by a JVP (25cdfe4), XLA
-compiles a batch of 2 chains per device and a batch of 4 differently, and Lie–Euler positions
-differ in the last bit (asserted to 1e-13 over 27 steps), while the splitting and RKMK–Heun
-steps change by ~1e-3 with the batch size, an engine regression pinned in
-``tests/stability/test_stability.py::test_batched_step_equals_one_chain`` — hence Lie–Euler here.
-The non-finite flags are equal; the per-draw diagnostics (``energy``, ``casimir_error``) agree
+``fold_in(key_c, step)`` whether or not the chain axis is split, with the default integrator;
+XLA may compile a batch of 2 chains per device and a batch of 4 differently, so positions are
+compared to 1e-13 (a miscompile, as once caught by
+``tests/stability/test_stability.py::test_batched_step_equals_one_chain``, would differ by far
+more). The non-finite flags are equal; the per-draw diagnostics (``energy``, ``casimir_error``) agree
 to round-off (energies to 1e-13, ~1e-16 absolute on a Casimir drift
 that is itself round-off), as across chunk sizes in ``tests/test_runner.py``.
 """
@@ -46,11 +44,8 @@ SCRIPT = textwrap.dedent(
         ),
     }
     run = dict(num_warmup=3, thinning=2, chunk_draws=4, progress=False)
-    # Lie–Euler: see the module docstring (the default splitting depends on the batch size).
-    for (label, (system, starts)), integrator in zip(cases.items(), ("lie_euler", "lie_euler")):
-        algorithm = liesample.lie_poisson_langevin(
-            system, beta=2.0, sigma=1.0, step_size=0.05, integrator=integrator
-        )
+    for label, (system, starts) in cases.items():
+        algorithm = liesample.lie_poisson_langevin(system, beta=2.0, sigma=1.0, step_size=0.05)
         plain = liesample.sample_chains(algorithm, key, starts, 12, **run)
         choices = ("all", jax.devices()[::-1]) if label == "rigid body" else (2,)
         for devices in choices:

@@ -40,12 +40,12 @@ rotation is a random walk; measured ``~7e-5`` after 10⁵ steps (tolerance 1.9e-
 float32 drift is asserted over 10⁵ steps below. No retraction is needed at that level; a run of
 10⁹ float32 steps would drift ~1e-3.
 
-Engine regression found by this suite (not in these files): since 25cdfe4 the ``splitting``
-step vmapped over >= 4 chains differs from the single-chain step (4e-3 after one step at
-β = 30; the ``lax.scan`` over noise groups with the new ``PoissonLangevinSDE`` coefficients;
-unrolling the scan or restoring ``dynamics.py`` of 4694826 removes it), and stationary chains
-then miss the Gibbs law (E[μ₁²] +22 % at β = 10³, +16 % at β = 30, +4 % at β = 3, *not*
-shrinking with the step). The affected cases are ``xfail(strict=True)`` until it is fixed.
+A miscompile found by this suite: on XLA CPU (jax 0.12) ``jit(vmap(scan))`` of Heun steps on
+the group whose generator combined ``jnp.cross`` with ``jax.grad`` gave each chain a different
+result from the single-chain step (4e-3 after one step at β = 30), and stationary chains missed
+the Gibbs law (E[μ₁²] +22 % at β = 10³, not shrinking with the step).
+``liesample.algebras.cross`` (by components) avoids it; ``test_batched_step_equals_one_chain``
+guards it for every integrator and system.
 
 The 10⁷-step runs (``lax.fori_loop``, nothing stored, moments accumulated on the fly) are
 ``@pytest.mark.slow`` (``make test-slow``).
@@ -260,21 +260,8 @@ def stationary_run(algorithm, starts, num_steps, observables, key, num_batches=1
     return jax.jit(jax.vmap(chain))(states, keys)
 
 
-# Since 25cdfe4 (PoissonLangevin delegates to PoissonLangevinSDE) the splitting's scan over noise
-# groups gives wrong numbers when vmapped over >= 4 chains (test_batched_step_equals_one_chain):
-# the low-temperature cases then miss the Gibbs law by 22 % (17 MCSE; the others by less, large
-# σ by ~5 MCSE). With dynamics.py of 4694826 all eight pass at 128 chains. strict: they XPASS, hence fail, once the engine is fixed; then remove this mark.
-_BATCHING_REGRESSION = pytest.mark.xfail(
-    strict=True, reason="engine regression 25cdfe4: vmapped splitting scan (see module notes)"
-)
 HARD_CASES = [
-    pytest.param(case, dtype, marks=_BATCHING_REGRESSION)
-    if (case, dtype)
-    in {
-        ("low temperature beta=1e3", "float64"),
-        ("low temperature beta=1e3", "float32"),
-    }
-    else pytest.param(case, dtype, marks=pytest.mark.slow)
+    pytest.param(case, dtype, marks=pytest.mark.slow)
     if (case, dtype) in {("large sigma=10", "float32"), ("heavy top mgl=30", "float32")}
     else pytest.param(case, dtype)
     for case in CASES
@@ -310,28 +297,51 @@ def test_hard_case_is_stable_and_gibbs_exact(case, dtype):
     assert np.all(z < 5.0), f"{case} {dtype}: estimate {estimate}, exact {exact}, z {z}"
 
 
-@pytest.mark.parametrize(
-    "integrator",
-    [
-        pytest.param("splitting", marks=_BATCHING_REGRESSION),
-        "rkmk_heun",
-        "lie_euler",
-    ],
-)
-def test_batched_step_equals_one_chain(integrator):
-    """A step vmapped over 8 chains gives each chain exactly the single-chain step (round-off):
-    the runner and every test above rely on it."""
-    system = liesample.systems.rigid_body((1.0, 2.0, 4.0))
+BATCH_SYSTEMS = {
+    "rigid body": (
+        lambda: liesample.systems.rigid_body((1.0, 2.0, 4.0)),
+        np.array([0.3, 0.4, math.sqrt(0.75)]),
+    ),
+    "heavy top": (
+        lambda: liesample.systems.heavy_top(mgl=2.0),
+        np.array([0.2, -0.1, 0.3, 0.0, 0.6, -0.8]),
+    ),
+    "spins": (
+        lambda: liesample.systems.heisenberg((4, 4), periodic=True),
+        np.tile(np.array([0.0, 0.6, 0.8]), (4, 4, 1)),
+    ),
+    "vortices": (
+        lambda: liesample.systems.point_vortices((1.0, 1.0, -0.5, 2.0), max_degree=2),
+        np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.6, 0.0, -0.8]]),
+    ),
+}
+
+
+@pytest.mark.parametrize("system_name", sorted(BATCH_SYSTEMS))
+@pytest.mark.parametrize("integrator", ["splitting", "rkmk_heun", "lie_euler"])
+def test_batched_step_equals_one_chain(integrator, system_name):
+    """Three steps vmapped over 8 chains give each chain exactly the single-chain steps
+    (round-off): the runner and every statistical test rely on it. This once caught an XLA CPU
+    miscompile of ``jnp.cross`` with ``jax.grad`` inside ``jit(vmap(scan))`` (module notes)."""
+    make_system, position = BATCH_SYSTEMS[system_name]
+    system = make_system()
+    beta = 2.0 if system_name == "vortices" else 30.0  # vortices: normalisable for β < 12.6
     algorithm = liesample.lie_poisson_langevin(
-        system, beta=30.0, step_size=1e-3, integrator=integrator
+        system, beta=beta, step_size=1e-3, integrator=integrator, stability="off"
     )
-    position = jnp.array([0.3, 0.4, math.sqrt(0.75)])
+    position = jnp.asarray(position)
     keys = jax.random.split(jax.random.key(0), 8)
-    states = jax.vmap(algorithm.init)(jnp.tile(position, (8, 1)))
-    batched = jax.jit(jax.vmap(algorithm.step))(keys, states)[0].position
+
+    def three_steps(key, state):
+        for k in range(3):
+            state = algorithm.step(jax.random.fold_in(key, k), state)[0]
+        return state.position
+
+    states = jax.vmap(algorithm.init)(jnp.broadcast_to(position, (8, *position.shape)))
+    batched = jax.jit(jax.vmap(three_steps))(keys, states)
     for chain in (0, 5):
-        single = algorithm.step(keys[chain], algorithm.init(position))[0].position
-        np.testing.assert_allclose(batched[chain], single, rtol=0, atol=1e-14)
+        single = three_steps(keys[chain], algorithm.init(position))
+        np.testing.assert_allclose(batched[chain], single, rtol=0, atol=1e-13)
 
 
 def test_float32_orbit_drift_over_1e5_steps():
@@ -355,7 +365,6 @@ def test_float32_orbit_drift_over_1e5_steps():
 
 
 @pytest.mark.slow
-@_BATCHING_REGRESSION  # passes (both dtypes, 353 s) with dynamics.py of 4694826
 @pytest.mark.parametrize("dtype", ["float64", "float32"])
 def test_ten_million_steps(dtype):
     """10⁷ steps of 16 chains (rigid body, β = 3, |μ| = 1.5, dt = 0.01, T = 10⁵ per chain),
