@@ -267,7 +267,12 @@ class StructureConstants(LieAlgebra):
     casimir_function: Callable | None = None
 
     def __init__(self, constants, casimirs: Callable | None = None, name: str = "g"):
-        c = np.array(constants, dtype=float)
+        try:
+            c = np.array(constants, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"structure constants must be a real array of shape (n, n, n), got {constants!r}"
+            ) from None
         if c.ndim != 3 or not (c.shape[0] == c.shape[1] == c.shape[2]) or c.shape[0] == 0:
             raise ValueError(
                 f"structure constants must have shape (n, n, n) with n >= 1, got shape {c.shape}"

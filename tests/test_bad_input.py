@@ -716,17 +716,7 @@ ROWS = [
 
 
 # Known gaps in files owned elsewhere, with the proposed fix (reported to the lead).
-GAPS = {
-    "Gaussian nan": "targets/gaussian.py: Gaussian accepts a NaN mean; in __post_init__ add "
-    "`if not np.all(np.isfinite(mean)): raise ValueError(f'mean must be finite, got {mean}')`",
-    "correlated_gaussian condition": "targets/gaussian.py: correlated_gaussian accepts "
-    "condition_number < 1; check finite_float('condition_number', …) >= 1",
-    "correlated_gaussian dimension": "targets/gaussian.py: correlated_gaussian(0, …) fails in "
-    "numpy ('zero-size array'); require an integer dimension >= 1, naming it",
-    "StructureConstants dtype": "algebras.py: StructureConstants([[['a']]]) raises numpy's "
-    "'could not convert string to float'; wrap np.array(constants, dtype=float) and raise "
-    "ValueError('structure constants must be a real array of shape (n, n, n) …')",
-}
+GAPS: dict[str, str] = {}  # rows whose constructor lacks a clear error (none at present)
 
 
 @pytest.mark.parametrize(

@@ -20,6 +20,8 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.linalg
 
+from liesample._validation import finite_float
+
 __all__ = [
     "Gaussian",
     "correlated_gaussian",
@@ -45,6 +47,8 @@ class Gaussian:
             raise ValueError(
                 f"mean must be (d,) and covariance (d, d), got {mean.shape}, {cov.shape}"
             )
+        if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(cov))):
+            raise ValueError(f"mean and covariance must be finite, got mean {mean}")
         if not np.allclose(cov, cov.T) or np.linalg.eigvalsh(cov).min() <= 0:
             raise ValueError("covariance must be symmetric positive definite")
         object.__setattr__(self, "mean", mean)
@@ -74,6 +78,11 @@ def correlated_gaussian(dimension, condition_number, *, seed=0, rotate=True, mea
     For ``dimension = 2`` the eigenvalues are ``1 ± ρ`` with ``ρ = (κ − 1)/(κ + 1)`` on the
     diagonals at 45°, i.e. unit variances and correlation ``ρ``.
     """
+    if not isinstance(dimension, (int, np.integer)) or isinstance(dimension, bool) or dimension < 1:
+        raise ValueError(f"dimension must be an integer >= 1, got {dimension!r}")
+    condition_number = finite_float("condition_number", condition_number)
+    if condition_number < 1:
+        raise ValueError(f"condition_number must be >= 1, got {condition_number}")
     if dimension == 2 and rotate:
         rho = (condition_number - 1.0) / (condition_number + 1.0)
         cov = np.array([[1.0, rho], [rho, 1.0]])
