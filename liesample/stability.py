@@ -85,7 +85,7 @@ def noise_curvatures(system, mu, directions=None):
         zero = jnp.zeros((), mu.dtype)
         return jax.jvp(slope, (zero,), (jnp.ones_like(zero),))[1]
 
-    return jax.vmap(along)(directions)
+    return jax.lax.map(along, directions, batch_size=8)  # bounded memory for large states
 
 
 def _chosen_directions(num_noises):
@@ -120,8 +120,8 @@ def stiffness(system, theta, position) -> float:
         if curvatures_on is None:  # one compilation per system, reused for every orbit
             chosen = _chosen_directions(system.num_noises)
             curvatures_on = jax.jit(
-                lambda position: jax.vmap(lambda m: noise_curvatures(system, m, chosen))(
-                    _orbit_points(system, position)
+                lambda position: jax.lax.map(
+                    lambda m: noise_curvatures(system, m, chosen), _orbit_points(system, position)
                 )
             )
             system.__dict__["_curvatures_on_orbit"] = curvatures_on
@@ -141,7 +141,7 @@ def check_step_size(system, integrator_name, step_size, theta, position, mode="w
     integrator's bound in :data:`STABILITY_LIMITS`; ``"off"`` or an unknown integrator: no check.
     Returns ``κ`` (or ``None`` when not checked)."""
     limit = STABILITY_LIMITS.get(integrator_name)
-    if mode == "off" or limit is None or theta == 0.0:
+    if mode == "off" or limit is None or theta == 0.0 or not system.curvature_bound:
         return None
     kappa = stability_number(system, step_size, theta, position)
     if kappa <= limit:

@@ -63,6 +63,10 @@ class LiePoissonSystem:
         ``β ↦ None``, raising ``ValueError`` (naming the bound) where ``exp(−βh)`` is not
         normalisable on the orbit (e.g. point vortices at strongly negative ``β``). ``None``
         (default): every finite ``β`` is admissible (compact orbit, continuous ``h``).
+    curvature_bound : bool
+        Whether the generic step-size check of :mod:`liesample.stability` (curvature of ``h``
+        along the noise flows, sampled on the orbit) applies. ``False`` where ``h`` is
+        singular on the orbit (point vortices: their integrator substeps instead).
     hamiltonian_pieces : tuple of callables or None
         Functions summing to ``h``, each exactly solved by one coadjoint move: its gradient is
         constant along its own flow, so ``Ad*_{exp(t ∇f(μ))} μ`` *is* that flow. The
@@ -88,6 +92,7 @@ class LiePoissonSystem:
     casimir_scale: Callable | None = None
     check_beta: Callable | None = None
     hamiltonian_pieces: tuple[Callable, ...] | None = None
+    curvature_bound: bool = True
 
     def __post_init__(self):
         if self.noise_groups is not None:

@@ -328,6 +328,7 @@ def point_vortices(circulations, max_degree: int = 2, radius: float = 1.0) -> Po
             "radius": radius,
         },
         check_beta=check_beta,
+        curvature_bound=False,  # h is singular at collisions: substepping handles stiffness
         circulations=gamma,
         radius=radius,
         max_degree=max_degree,
