@@ -66,8 +66,35 @@ def _positive_int(name, value, low=1):
     return int(value)
 
 
+class _IndependentChains:
+    """Estimates from per-chain time averages ``chain_means`` / ``chain_square_means`` (leading
+    axis: independent chains): mean, MCSE from the chains' spread, and ESS (batch means, one
+    batch per chain)."""
+
+    @property
+    def num_chains(self) -> int:
+        return self.chain_means.shape[0]
+
+    @property
+    def estimate(self) -> np.ndarray:
+        """Mean over chains, shape (levels, k)."""
+        return self.chain_means.mean(0)
+
+    @property
+    def mcse(self) -> np.ndarray:
+        """Standard error of :attr:`estimate` from the spread of independent chains."""
+        return self.chain_means.std(0, ddof=1) / math.sqrt(self.num_chains)
+
+    @property
+    def ess(self) -> np.ndarray:
+        """Effective sample size per level and observable: stationary variance / MCSE²."""
+        variance = self.chain_square_means.mean(0) - self.estimate**2
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return variance / self.mcse**2
+
+
 @dataclass(frozen=True)
-class CoupledAverages:
+class CoupledAverages(_IndependentChains):
     """Per-chain time averages at step sizes ``step_sizes`` driven by one Brownian path per chain.
 
     Attributes
@@ -92,27 +119,6 @@ class CoupledAverages:
     nonfinite_steps: np.ndarray
     wall_time: float
     kept_time: float
-
-    @property
-    def num_chains(self) -> int:
-        return self.chain_means.shape[0]
-
-    @property
-    def estimate(self) -> np.ndarray:
-        """Mean over chains, shape (levels, k)."""
-        return self.chain_means.mean(0)
-
-    @property
-    def mcse(self) -> np.ndarray:
-        """Standard error of :attr:`estimate` from the spread of independent chains."""
-        return self.chain_means.std(0, ddof=1) / math.sqrt(self.num_chains)
-
-    @property
-    def ess(self) -> np.ndarray:
-        """Effective sample size per level and observable: stationary variance / MCSE²."""
-        variance = self.chain_square_means.mean(0) - self.estimate**2
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return variance / self.mcse**2
 
     @property
     def tau_int(self) -> np.ndarray:
@@ -295,7 +301,7 @@ def coupled_ergodic_averages(
 
 
 @dataclass(frozen=True)
-class ChainAverages:
+class ChainAverages(_IndependentChains):
     """Per-chain time averages of observables from any BlackJAX-style sampler.
 
     ``chain_means``/``chain_square_means`` have shape ``(chains, k)``; ``info_means`` holds the
@@ -308,26 +314,6 @@ class ChainAverages:
     info_means: dict
     wall_time: float
     num_steps: int
-
-    @property
-    def num_chains(self) -> int:
-        return self.chain_means.shape[0]
-
-    @property
-    def estimate(self) -> np.ndarray:
-        return self.chain_means.mean(0)
-
-    @property
-    def mcse(self) -> np.ndarray:
-        """From the spread of the independent chains' means."""
-        return self.chain_means.std(0, ddof=1) / math.sqrt(self.num_chains)
-
-    @property
-    def ess(self) -> np.ndarray:
-        """Stationary variance / MCSE² (batch means, one batch per chain)."""
-        variance = self.chain_square_means.mean(0) - self.estimate**2
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return variance / self.mcse**2
 
 
 def ergodic_averages(
