@@ -82,7 +82,10 @@ def test_thinning_keeps_every_kth_state(plain, thinning):
     assert result.positions.shape == (3, num_draws, 3)
     assert result.num_steps == 60
     # Draw d is the state after (d + 1)·k steps, i.e. plain draw (d + 1)·k − 1.
-    np.testing.assert_array_equal(result.positions, plain.positions[:, thinning - 1 :: thinning])
+    # Thinning compiles a nested loop: the same operations, fused differently, so round-off.
+    np.testing.assert_allclose(
+        result.positions, plain.positions[:, thinning - 1 :: thinning], rtol=0, atol=1e-14
+    )
     # Diagnostics to round-off (see test_draws_do_not_depend_on_chunking).
     np.testing.assert_allclose(
         result.info["energy"], plain.info["energy"][:, thinning - 1 :: thinning], rtol=4e-16
@@ -109,7 +112,7 @@ def test_warmup_is_the_start_of_the_same_run(plain):
 
 def test_warmup_with_thinning(plain):
     result = run(num_draws=7, num_warmup=4, thinning=8)
-    np.testing.assert_array_equal(result.positions, plain.positions[:, 4 + 7 :: 8])
+    np.testing.assert_allclose(result.positions, plain.positions[:, 4 + 7 :: 8], rtol=0, atol=1e-14)
 
 
 @pytest.mark.parametrize(
