@@ -57,3 +57,27 @@ def concrete_array(value):
         return np.asarray(value)
     except jax.errors.TracerArrayConversionError:  # value checks are skipped under tracing
         return None
+
+
+def nonzero_circulations(circulations) -> np.ndarray:
+    """Point-vortex circulations ``(Γ_1, …, Γ_N)``: a read-only 1-D array, finite and nonzero."""
+    try:
+        gamma = np.array(circulations, dtype=float)
+    except (TypeError, ValueError):
+        raise TypeError(
+            f"circulations must be a 1-D sequence of nonzero finite reals, got {circulations!r}"
+        ) from None
+    if gamma.ndim != 1 or gamma.size < 1:
+        raise ValueError(
+            f"circulations must be a 1-D sequence (Γ_1, …, Γ_N) with N >= 1, got shape "
+            f"{gamma.shape}"
+        )
+    if not np.all(np.isfinite(gamma)):
+        raise ValueError(f"circulations must be finite, got {gamma}")
+    if np.any(gamma == 0.0):
+        raise ValueError(
+            f"circulations must be nonzero: vortex {int(np.argmax(gamma == 0.0))} has Γ = 0 (a "
+            "vortex without circulation does not move the fluid nor lie on the coadjoint orbit)"
+        )
+    gamma.setflags(write=False)
+    return gamma

@@ -52,7 +52,7 @@ from typing import TYPE_CHECKING
 import jax.numpy as jnp
 import numpy as np
 
-from liesample._validation import concrete_array, finite_float
+from liesample._validation import concrete_array, finite_float, nonzero_circulations
 from liesample.algebras import LieAlgebra, cross, so3
 from liesample.spherical_harmonics import num_harmonics, transport_modes
 from liesample.systems.base import LiePoissonSystem
@@ -238,29 +238,6 @@ class PointVortexSystem(LiePoissonSystem):
         return collision_rate(x, self.circulations)
 
 
-def _circulations(circulations) -> np.ndarray:
-    try:
-        gamma = np.array(circulations, dtype=float)
-    except (TypeError, ValueError):
-        raise TypeError(
-            f"circulations must be a 1-D sequence of nonzero finite reals, got {circulations!r}"
-        ) from None
-    if gamma.ndim != 1 or gamma.size < 1:
-        raise ValueError(
-            f"circulations must be a 1-D sequence (Γ_1, …, Γ_N) with N >= 1, got shape "
-            f"{gamma.shape}"
-        )
-    if not np.all(np.isfinite(gamma)):
-        raise ValueError(f"circulations must be finite, got {gamma}")
-    if np.any(gamma == 0.0):
-        raise ValueError(
-            f"circulations must be nonzero: vortex {int(np.argmax(gamma == 0.0))} has Γ = 0 (a "
-            "vortex without circulation does not move the fluid nor lie on the coadjoint orbit)"
-        )
-    gamma.setflags(write=False)
-    return gamma
-
-
 def point_vortices(circulations, max_degree: int = 2, radius: float = 1.0) -> PointVortexSystem:
     """Point vortices on the sphere with transport noise of degrees ``1 … L`` (module docstring).
 
@@ -282,7 +259,7 @@ def point_vortices(circulations, max_degree: int = 2, radius: float = 1.0) -> Po
         ``x₁·x₂/R²`` when ``N = 2``, else ``None``; ``check_beta`` refuses ``β`` where the Gibbs
         law is not normalisable (:func:`~liesample.targets.vortices.beta_bounds`).
     """
-    gamma = _circulations(circulations)
+    gamma = nonzero_circulations(circulations)
     if isinstance(max_degree, bool) or not isinstance(max_degree, (int, np.integer)):
         raise TypeError(f"max_degree must be an int >= 1, got {max_degree!r}")
     if max_degree < 1:

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import jax
 import numpy as np
 
-from liesample._validation import finite_float
+from liesample._validation import finite_float, nonzero_circulations
 
 __all__ = [
     "VortexPairLaw",
@@ -45,25 +45,9 @@ __all__ = [
 _ENUMERATE_UP_TO = 12
 
 
-def _circulations(circulations) -> np.ndarray:
-    gamma = np.asarray(circulations, dtype=float)
-    if gamma.ndim != 1 or gamma.size < 1:
-        raise ValueError(
-            f"circulations must be a 1-D sequence of N >= 1 reals, got {circulations!r}"
-        )
-    if not np.all(np.isfinite(gamma)):
-        raise ValueError(f"circulations must be finite, got {gamma}")
-    if np.any(gamma == 0.0):
-        raise ValueError(
-            f"circulations must be nonzero (vortex {int(np.argmax(gamma == 0.0))} has Γ = 0): a "
-            "vortex without circulation is not a point of the coadjoint orbit"
-        )
-    return gamma
-
-
 def pair_exponents(circulations, beta) -> np.ndarray:
     """``p_jk = βΓ_jΓ_k/(4π)`` for every pair (symmetric matrix, zero diagonal)."""
-    gamma = _circulations(circulations)
+    gamma = nonzero_circulations(circulations)
     beta = finite_float("beta", beta)
     p = beta * np.outer(gamma, gamma) / (4.0 * math.pi)
     np.fill_diagonal(p, 0.0)
@@ -81,7 +65,7 @@ def beta_bounds(circulations) -> tuple[float, float]:
     ``β > 0``: same-sign clusters never fail; the opposite-signed pair with the largest
     ``|Γ_jΓ_k|`` gives ``β < 4π/|Γ_jΓ_k|``, and for ``N ≤ 12`` every cluster is enumerated.
     """
-    gamma = _circulations(circulations)
+    gamma = nonzero_circulations(circulations)
     beta_min = -math.inf
     for sign in (1.0, -1.0):
         strengths = np.sort(np.abs(gamma[np.sign(gamma) == sign]))[::-1]
@@ -135,7 +119,7 @@ class VortexPairLaw:
 
     @classmethod
     def from_circulations(cls, circulations, beta) -> VortexPairLaw:
-        gamma = _circulations(circulations)
+        gamma = nonzero_circulations(circulations)
         if gamma.shape != (2,):
             raise ValueError(f"the pair law needs exactly 2 circulations, got {gamma.size}")
         check_vortex_beta(gamma, beta)
@@ -189,7 +173,7 @@ def gibbs_expectation(
     a float; the standard error is the delta-method one of a ratio estimator. Finite variance
     needs ``Σ_{j<k∈S} 2p_jk > −(n−1)`` on every cluster (e.g. every ``p_jk > −1/2``).
     """
-    gamma = _circulations(circulations)
+    gamma = nonzero_circulations(circulations)
     check_vortex_beta(gamma, beta)
     p = pair_exponents(gamma, beta)
     iu = np.triu_indices(gamma.size, 1)
