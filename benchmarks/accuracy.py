@@ -38,6 +38,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from benchmarks import common
+import liesample
 from liesample.diagnostics import expectation_table
 from liesample.integrators import get_integrator
 from liesample.samplers.lie_poisson_langevin import build_kernel, init
@@ -85,7 +86,7 @@ def _accumulating_run(integrator, tolerance):
 
         return jax.vmap(chain)(states, keys)
 
-    return jax.jit(run)
+    return liesample.jit(run)
 
 
 def _stored_run(integrator, n_keep_max):
@@ -111,7 +112,7 @@ def _stored_run(integrator, n_keep_max):
 
         return jax.vmap(chain)(states, keys)
 
-    return jax.jit(run)
+    return liesample.jit(run)
 
 
 def _steps(cfg, h):

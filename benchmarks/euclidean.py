@@ -163,7 +163,7 @@ def run_chains(sampler, state, key, num_draws):
 
         return jax.lax.scan(one, state, jax.random.split(key, num_draws))[1]
 
-    run = jax.jit(jax.vmap(chain))
+    run = liesample.jit(jax.vmap(chain))
     keys = jax.random.split(key, NUM_CHAINS)
     compiled = run.lower(keys).compile()
     (draws, steps, divergent), seconds = common.timed(compiled, keys)
@@ -262,7 +262,7 @@ def magnetic(target, key, num_warmup, num_draws, log):
         return jax.lax.scan(one, start, jax.random.split(key, num_draws))[1]
 
     keys = jax.random.split(key_sweep, NUM_CHAINS)
-    compiled = jax.jit(jax.vmap(chain, in_axes=(None, 0))).lower(zero, keys).compile()
+    compiled = liesample.jit(jax.vmap(chain, in_axes=(None, 0))).lower(zero, keys).compile()
     rows = []
     for angle in ANGLES:
         field = default_magnetic_field(imm, angle / step_size)

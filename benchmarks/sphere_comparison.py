@@ -191,7 +191,7 @@ def run_nuts(cfg, exact, log):
         return jax.lax.scan(one, state, keys[burn:])[1]
 
     keys = jax.random.split(key_run, cfg["nuts_chains"])
-    run = jax.jit(jax.vmap(chain)).lower(keys, starts).compile()
+    run = liesample.jit(jax.vmap(chain)).lower(keys, starts).compile()
     (positions, steps), wall = common.timed(run, keys, starts)
     y = np.asarray(positions)
     mu = common.RADIUS * y / np.linalg.norm(y, axis=-1, keepdims=True)
@@ -266,7 +266,7 @@ def _diffrax_run(solver_name, step_size, chains, total_time, burn_in, seed):
 
     starts = common.target().sample(jax.random.key(seed), chains)
     keys = jax.random.split(jax.random.key(seed + 1), chains)
-    run = jax.jit(jax.vmap(chain)).lower(keys, starts).compile()
+    run = liesample.jit(jax.vmap(chain)).lower(keys, starts).compile()
     (means, final), wall = common.timed(run, keys, starts)
     return np.asarray(means), np.asarray(final), wall, num_steps
 

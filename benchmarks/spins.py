@@ -110,7 +110,7 @@ def cost_table(sizes, max_seconds):
         keys = jax.random.split(jax.random.key(0), NUM_CHAINS)
         for label, step in samplers.items():
 
-            @jax.jit
+            @liesample.jit
             def run(starts, keys, n, step=step):
                 return jax.vmap(
                     lambda s, k: jax.lax.fori_loop(
@@ -166,7 +166,7 @@ def run_chains(step, starts, keys, num_draws, thinning, num_warmup):
 
         return jax.lax.scan(draw, s, jnp.arange(num_draws))[1]
 
-    compiled = jax.jit(jax.vmap(chain)).lower(starts, keys).compile()
+    compiled = liesample.jit(jax.vmap(chain)).lower(starts, keys).compile()
     draws, seconds = common.timed(compiled, starts, keys)
     return np.asarray(draws), seconds
 

@@ -19,6 +19,8 @@ import numpy as np
 
 from benchmarks import common
 
+import liesample
+
 RNG_ONLY = "RNG only (fold_in + 3 normals)"
 
 
@@ -34,7 +36,7 @@ def _loop(step):
 
         return jax.vmap(chain)(states, keys)
 
-    return jax.jit(run)
+    return liesample.jit(run)
 
 
 def _measure(run, states, keys, num_chains, cfg: common.Config):

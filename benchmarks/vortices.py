@@ -68,7 +68,7 @@ def _cost_per_step(system, integrator, repeats):
     def run(state, keys):
         return jax.lax.scan(lambda s, k: (algorithm.step(k, s)[0], None), state, keys)[0]
 
-    compiled = jax.jit(run).lower(state, keys).compile()
+    compiled = liesample.jit(run).lower(state, keys).compile()
     _, seconds = common.timed(compiled, state, keys)
     return seconds / repeats
 
@@ -102,7 +102,7 @@ def _final_states(algorithm, num_chains, num_steps, seed, num_vortices=2):
         steps = jax.random.split(key, num_steps)
         return jax.lax.scan(lambda s, k: (algorithm.step(k, s)[0], None), state, steps)[0].position
 
-    compiled = jax.jit(jax.vmap(chain)).lower(jnp.asarray(starts), keys).compile()
+    compiled = liesample.jit(jax.vmap(chain)).lower(jnp.asarray(starts), keys).compile()
     final, seconds = common.timed(compiled, jnp.asarray(starts), keys)
     return np.asarray(final), seconds
 
@@ -212,7 +212,7 @@ def substep_cost(quick, log):
 
         starts = jnp.asarray(uniform_sphere_points(jax.random.key(31), (num_chains, 2)))
         keys = jax.random.split(jax.random.key(32), num_chains)
-        compiled = jax.jit(jax.vmap(chain)).lower(starts, keys).compile()
+        compiled = liesample.jit(jax.vmap(chain)).lower(starts, keys).compile()
         (counts, completed), seconds = common.timed(compiled, starts, keys)
         plain = liesample.lie_poisson_langevin(
             system, beta=beta, sigma=sigma, step_size=dt, integrator="rkmk_heun", stability="off"

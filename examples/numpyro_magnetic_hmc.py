@@ -81,7 +81,7 @@ def main(seed: int = 0, num_draws: int = NUM_DRAWS):
 
         return jax.lax.scan(one, state, jax.random.split(key, num_draws))[1]
 
-    positions, divergent, acceptance = jax.jit(jax.vmap(chain))(
+    positions, divergent, acceptance = liesample.jit(jax.vmap(chain))(
         jax.random.split(key_sample, NUM_CHAINS)
     )
     constrained = jax.vmap(jax.vmap(postprocess_fn))(positions)

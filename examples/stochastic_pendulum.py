@@ -19,6 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 from matplotlib.figure import Figure
 
+import liesample
 from liesample.symplectic import (
     brownian_increments,
     stochastic_midpoint_step,
@@ -37,7 +38,7 @@ def main(output="stochastic_pendulum.png", num_paths=6, num_steps=2000, step_siz
     angles = np.linspace(0.3, 2.6, num_paths)
     starts = jnp.stack([jnp.asarray(angles), jnp.zeros(num_paths)], axis=1)
 
-    @jax.jit
+    @liesample.jit
     @jax.vmap
     def simulate(key, start):
         increments = brownian_increments(key, step_size, num_steps, system.num_drivers - 1)

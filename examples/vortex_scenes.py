@@ -54,7 +54,7 @@ def simulate(algorithm, position, num_steps: int, rng_key, record_every: int = 1
         return state, (state.position, info.energy)
 
     keys = jax.random.split(rng_key, num_steps)
-    _, (positions, energies) = jax.jit(lambda s: jax.lax.scan(one, s, keys))(state)
+    _, (positions, energies) = liesample.jit(lambda s: jax.lax.scan(one, s, keys))(state)
     positions = np.concatenate([np.asarray(position)[None], np.asarray(positions)])
     energies = np.asarray(energies)
     times = STEP_SIZE * np.arange(num_steps + 1)

@@ -4,6 +4,7 @@ The one equation is the Poisson–Langevin SDE (paper, ``eq:poisson-langevin-eq`
 declare a Poisson structure, a Hamiltonian and noise, and the dissipation is derived.
 """
 
+from liesample.compile import jit, safe_compiler_options
 from liesample import accuracy, algebras, drivers, integrators, structures, symplectic, systems
 from liesample.drivers import simulate
 from liesample.dynamics import PoissonLangevin, Scene
@@ -21,12 +22,14 @@ __all__ = [
     "algebras",
     "drivers",
     "integrators",
+    "jit",
     "lie_poisson_langevin",
     "load_chains",
     "magnetic_hmc",
     "magnetic_langevin",
     "sample",
     "sample_chains",
+    "safe_compiler_options",
     "simulate",
     "structures",
     "symplectic",

@@ -35,6 +35,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from liesample.compile import jit
 from liesample._validation import finite_float
 from liesample.dynamics import PoissonLangevin
 from liesample.integrators import DEFAULT_INTEGRATOR, get_integrator
@@ -183,7 +184,7 @@ def _coupled_runner(system, integrator, levels, observables, scene, example):
         return sums / kept, squares / kept, bad
 
     batched = jax.vmap(chain, in_axes=(0, 0, None, None, None, None, None))
-    return jax.jit(batched)
+    return jit(batched)
 
 
 @functools.lru_cache(maxsize=16)
@@ -375,7 +376,7 @@ def ergodic_averages(
         return total / num_steps, square / num_steps, infos / num_steps
 
     keys = jax.random.split(rng_key, starts.shape[0])
-    run = jax.jit(jax.vmap(chain)).lower(keys, starts).compile()
+    run = jit(jax.vmap(chain)).lower(keys, starts).compile()
     begin = time.perf_counter()
     means, squares, infos = jax.block_until_ready(run(keys, starts))
     wall = time.perf_counter() - begin

@@ -60,17 +60,8 @@ class LieAlgebra:
 
 
 def cross(a, b):
-    """``a × b`` over the last axis (length 3), broadcasting, written out by components.
-
-    XLA CPU in jax/jaxlib 0.12 miscompiled ``jit(vmap(loop))`` over moves like these (a
-    different result per chain than the single-chain step: wrong numbers, not round-off), with
-    ``jnp.cross`` and, in other graphs, with this form too; the project pins ``jax<0.12``, and
-    ``tests/stability/test_stability.py::test_batched_step_equals_one_chain`` guards it.
-    """
-
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return jnp.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+    """``a × b`` over the last axis (length 3), broadcasting."""
+    return jnp.cross(a, b)
 
 
 # Below this θ² the Taylor series (to θ⁴) is exact in float64 and smooth for autodiff.

@@ -32,6 +32,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from liesample.compile import jit
 from liesample._validation import finite_float
 from liesample.dynamics import PoissonLangevin, Scene
 from liesample.integrators import DEFAULT_INTEGRATOR, get_integrator
@@ -278,8 +279,11 @@ def simulate(
         return carry, carry[0]
 
     start = jnp.asarray(position, dtype=jnp.result_type(float))
-    (_, nonfinite), saved = jax.lax.scan(
-        block, (start, jnp.asarray(False)), save_every * jnp.arange(num_steps // save_every)
-    )
+    # Compiled by liesample.jit even when called eagerly or under an eager vmap (liesample.compile).
+    (_, nonfinite), saved = jit(
+        lambda start: jax.lax.scan(
+            block, (start, jnp.asarray(False)), save_every * jnp.arange(num_steps // save_every)
+        )
+    )(start)
     positions = jnp.concatenate([start[None], saved], axis=0)
     return Path(jnp.asarray(times[::save_every]), positions, nonfinite)

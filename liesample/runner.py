@@ -25,6 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm.auto import tqdm
 
+from liesample.compile import jit
 from liesample.sharding import chain_sharding, shard_chains, to_host
 
 # How per-step info is summarised over the steps a thinned draw spans.
@@ -173,7 +174,7 @@ def sample_chains(
 
         return jax.lax.scan(one, state, first_step + jnp.arange(num_steps))
 
-    @jax.jit
+    @jit
     def warmup(states, keys, first_step):
         return jax.vmap(lambda s, k: advance(s, k, first_step, num_warmup)[0])(states, keys)
 
@@ -189,7 +190,7 @@ def sample_chains(
         return jax.lax.scan(one_draw, state, jnp.arange(count))
 
     chunk = chunk_draws if chunk_draws is not None else max(1, math.ceil(num_draws / 20))
-    run_chunk = jax.jit(
+    run_chunk = jit(
         lambda states, keys, first_step, count: jax.vmap(
             lambda s, k: draws(s, k, first_step, count)
         )(states, keys),

@@ -50,6 +50,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from liesample.compile import jit
+
 __all__ = [
     "STABILITY_LIMITS",
     "check_step_size",
@@ -119,7 +121,7 @@ def stiffness(system, theta, position) -> float:
         curvatures_on = system.__dict__.get("_curvatures_on_orbit")
         if curvatures_on is None:  # one compilation per system, reused for every orbit
             chosen = _chosen_directions(system.num_noises)
-            curvatures_on = jax.jit(
+            curvatures_on = jit(
                 lambda position: jax.lax.map(
                     lambda m: noise_curvatures(system, m, chosen), _orbit_points(system, position)
                 )

@@ -52,7 +52,7 @@ def test_blackjax_shape():
     assert isinstance(state, AdjustedLiePoissonState)
     np.testing.assert_array_equal(sampler.init(MU0, jax.random.key(3)).position, MU0)
     np.testing.assert_allclose(state.energy, 0.5 * np.sum(MU0**2 / np.array(INERTIA)), rtol=1e-14)
-    new_state, info = jax.jit(sampler.step)(jax.random.key(0), state)
+    new_state, info = liesample.jit(sampler.step)(jax.random.key(0), state)
     assert isinstance(info, AdjustedLiePoissonInfo)
     assert set(info._fields) == {
         "acceptance_rate",
@@ -65,7 +65,7 @@ def test_blackjax_shape():
     assert float(info.energy) == pytest.approx(float(RIGID.hamiltonian(new_state.position)))
     # The module-level kernel with traced parameters gives the same step.
     kernel = module.build_kernel(RIGID)
-    again, _ = jax.jit(kernel)(jax.random.key(0), state, 0.3, 1.0, BETA)
+    again, _ = liesample.jit(kernel)(jax.random.key(0), state, 0.3, 1.0, BETA)
     np.testing.assert_allclose(again.position, new_state.position, rtol=1e-14)
 
 
@@ -83,7 +83,7 @@ def test_involution_applied_twice_is_identity(system, position):
     position = jnp.asarray(position, dtype=float)
     noise = jax.random.normal(jax.random.key(5), (system.num_noises,))
     step, sigma, beta = 0.7, 1.3, 2.0
-    forward = jax.jit(involution, static_argnums=0)
+    forward = liesample.jit(involution, static_argnums=0)
     proposal, reverse_noise, _, _ = forward(system, position, noise, step, sigma, beta)
     back, noise_back, energy, _ = forward(system, proposal, reverse_noise, step, sigma, beta)
     assert float(jnp.max(jnp.abs(proposal - position))) > 0.1  # a real move
@@ -107,7 +107,7 @@ def test_acceptance_tends_to_one_as_step_size_shrinks():
 
         return jax.lax.scan(body, module.init(start, RIGID), jax.random.split(key, 200))[1]
 
-    run = jax.jit(jax.vmap(chain, in_axes=(0, 0, None)))
+    run = liesample.jit(jax.vmap(chain, in_axes=(0, 0, None)))
     keys = jax.random.split(jax.random.key(2), 64)
     rejection = [1.0 - float(jnp.mean(run(keys, starts, step))) for step in (0.3, 0.03, 0.003)]
     assert rejection[0] > rejection[1] > rejection[2] >= 0.0
@@ -236,7 +236,7 @@ def test_nonfinite_proposals_are_rejected_and_flagged():
         state, info = sampler.step(key, state)
         return state, (state.position, info)
 
-    _, (positions, info) = jax.jit(
+    _, (positions, info) = liesample.jit(
         lambda s: jax.lax.scan(body, s, jax.random.split(jax.random.key(9), 400))
     )(sampler.init(start))
     flagged = np.asarray(info.nonfinite)

@@ -17,6 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
+import liesample
 from liesample import algebras
 from liesample.algebras import SE3, StructureConstants
 
@@ -31,7 +32,7 @@ class Compiled:
     def __init__(self, algebra):
         self.algebra = algebra
         for op in ("bracket", "ad_star", "coadjoint_exp", "casimirs"):
-            setattr(self, op, jax.jit(getattr(algebra, op)))
+            setattr(self, op, liesample.jit(getattr(algebra, op)))
 
     def __getattr__(self, name):
         return getattr(self.algebra, name)
@@ -157,7 +158,7 @@ def test_coadjoint_exp_is_a_one_parameter_group(rng, name):
     algebra, n = ALGEBRAS[name]
     mu = rng.normal(size=n)
     zeta = generator_scale(name) * rng.normal(size=n)
-    move = jax.jit(algebra.coadjoint_exp)
+    move = liesample.jit(algebra.coadjoint_exp)
     for s, t in [(0.3, 0.9), (-1.9, 0.7), (1.4, 1.1), (1.0, -1.0)]:
         composed = np.asarray(move(s * zeta, move(t * zeta, mu)))
         direct = np.asarray(move((s + t) * zeta, mu))
@@ -194,7 +195,7 @@ def test_coadjoint_exp_derivative_at_zero_is_ad_star(rng, name):
     # for expm-based algebras forward mode suffices (compiling expm's VJP costs seconds).
     closed_form = not isinstance(algebra.algebra, StructureConstants)
     for jac in (jax.jacfwd, jax.jacrev) if closed_form else (jax.jacfwd,):
-        got = jax.jit(jac(lambda z: algebra.coadjoint_exp(z, mu)))(jnp.zeros(n))
+        got = liesample.jit(jac(lambda z: algebra.coadjoint_exp(z, mu)))(jnp.zeros(n))
         np.testing.assert_allclose(got, expected, rtol=0, atol=1e-14)
 
 
@@ -207,7 +208,7 @@ def test_casimirs_preserved_by_repeated_moves(name):
     size = 0.1 if name == "sl2" else 1.0  # sl(2): hyperbolic random walk, keep |μ| moderate
     mu0 = jnp.asarray(np.random.default_rng(5).normal(size=n))
 
-    @jax.jit
+    @liesample.jit
     def run(mu, key):
         def move(mu, k):
             mu = algebra.coadjoint_exp(size * jax.random.normal(k, mu.shape), mu)
@@ -271,9 +272,9 @@ def test_se3_closed_form_is_smooth(rng):
     series switch (a wrong branch or a NaN in the unused branch would show here)."""
     mu, base = rng.normal(size=(2, 6))
     direction = base[:3] / np.linalg.norm(base[:3])
-    closed_fwd = jax.jit(jax.jacfwd(lambda z: se3.coadjoint_exp(z, mu)))
-    closed_rev = jax.jit(jax.jacrev(lambda z: se3.coadjoint_exp(z, mu)))
-    matrix_fwd = jax.jit(jax.jacfwd(lambda z: se3_structure_constants.coadjoint_exp(z, mu)))
+    closed_fwd = liesample.jit(jax.jacfwd(lambda z: se3.coadjoint_exp(z, mu)))
+    closed_rev = liesample.jit(jax.jacrev(lambda z: se3.coadjoint_exp(z, mu)))
+    matrix_fwd = liesample.jit(jax.jacfwd(lambda z: se3_structure_constants.coadjoint_exp(z, mu)))
     for angle in (0.0, 1e-9, 0.4999999, 0.5, 0.5000001, 2.0):
         zeta = jnp.concatenate([angle * direction, base[3:]])
         closed = closed_fwd(zeta)

@@ -84,7 +84,7 @@ def test_derived_dissipation_is_the_friction(field):
     dynamics = charged_particle_dynamics(system, beta=beta, sigma=sigma)
     sde = dynamics.sde
     states = random_states(3)
-    derived = jax.jit(
+    derived = liesample.jit(
         jax.vmap(
             lambda z: (
                 sde.dissipation(z),
@@ -154,7 +154,7 @@ def test_bracket_matches_the_poisson_tensor_and_is_antisymmetric():
     f = lambda z: jnp.sin(z[0]) * z[4] + z[2] ** 2
     g = lambda z: z[1] * z[3] - jnp.cos(z[5])
 
-    @jax.jit
+    @liesample.jit
     def pieces(z):
         tensor = structure.poisson_tensor(z)
         expected = jax.grad(f)(z) @ tensor @ jax.grad(g)(z)
@@ -170,7 +170,7 @@ def test_bracket_matches_the_poisson_tensor_and_is_antisymmetric():
 def test_vector_potential_field_is_the_curl_and_divergence_free():
     field = field_from_vector_potential(bottle_potential)
     positions = np.random.default_rng(4).normal(size=(6, 3))
-    fields, divergences = jax.jit(jax.vmap(lambda q: (field(q), jnp.trace(jax.jacfwd(field)(q)))))(
+    fields, divergences = liesample.jit(jax.vmap(lambda q: (field(q), jnp.trace(jax.jacfwd(field)(q)))))(
         jnp.asarray(positions)
     )
     np.testing.assert_allclose(fields, np.stack([bottle_field(q) for q in positions]), atol=ATOL)
@@ -196,7 +196,7 @@ def test_jacobi_identity_holds_for_a_field_from_a_vector_potential():
         3, lambda q: jnp.array([[0, q[2], -q[1]], [-q[2], 0, q[0]], [q[1], -q[0], 0]])
     )
 
-    @jax.jit
+    @liesample.jit
     def cyclic_sums(z):
         def broken_nested(u, v, w):
             return broken.bracket(linear(u), lambda y: broken.bracket(linear(v), linear(w), y), z)
@@ -218,7 +218,7 @@ def test_exact_magnetic_flow_is_orthogonal_including_singular_g():
     singular = np.zeros((4, 4))
     singular[:3, :3] = magnetic_structure(magnetic_field=[0.0, 0.0, 40.0]).magnetic_term
     generic = [[0, 3.0, 1, 0], [-3, 0, 2, 5], [-1, -2, 0, 1], [0, -5, -1, 0]]
-    flow = jax.jit(magnetic_flow)
+    flow = liesample.jit(magnetic_flow)
     for matrix in (
         np.zeros((4, 4)),
         singular,
@@ -367,7 +367,7 @@ def test_pure_friction_decreases_the_energy():
         sigma=0.0,
         theta=1.0,
     )
-    energy = np.asarray(jax.jit(jax.vmap(system.hamiltonian_fn()))(path.states))
+    energy = np.asarray(liesample.jit(jax.vmap(system.hamiltonian_fn()))(path.states))
     assert np.all(np.diff(energy) < 1e-12) and energy[-1] < 0.01 * energy[0]
 
 
@@ -379,7 +379,7 @@ def stationary_moments(system, beta, sigma, key, num_chains=256, num_steps=4000,
     cov_q = np.linalg.inv(STIFFNESS) / beta
     q0 = jax.random.multivariate_normal(key_q, jnp.zeros(2), jnp.asarray(cov_q), (num_chains,))
     p0 = jnp.sqrt(mass / beta) * jax.random.normal(key_p, (num_chains, 2))
-    run = jax.jit(jax.vmap(lambda k, z: dynamics.path(k, z, step_size, num_steps, 4).states[1:]))
+    run = liesample.jit(jax.vmap(lambda k, z: dynamics.path(k, z, step_size, num_steps, 4).states[1:]))
     states = run(jax.random.split(key_run, num_chains), jnp.concatenate([q0, p0], axis=1))
     q, p = states[..., :2], states[..., 2:]
     per_chain = jnp.stack(
@@ -440,7 +440,7 @@ def test_stationary_law_is_gibbs_in_a_position_dependent_field():
     key_q, key_p, key_run = jax.random.split(jax.random.key(23), 3)
     q0 = jax.random.normal(key_q, (num_chains, 3)) / jnp.sqrt(stiffness)
     p0 = jax.random.normal(key_p, (num_chains, 3))
-    run = jax.jit(jax.vmap(lambda k, z: dynamics.path(k, z, 0.05, 3000, 4)))
+    run = liesample.jit(jax.vmap(lambda k, z: dynamics.path(k, z, 0.05, 3000, 4)))
     path = run(jax.random.split(key_run, num_chains), jnp.concatenate([q0, p0], axis=1))
     assert bool(jnp.all(path.converged)) and not bool(jnp.any(path.nonfinite))
     per_chain = np.asarray(jnp.mean(path.states[:, 1:] ** 2, axis=1))

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 
+import liesample
 from liesample.algebras import so3
 from liesample.drivers import (
     BrownianMotion,
@@ -94,7 +95,7 @@ def final_states(driver, form, integrator="splitting", hamiltonian=False, system
         return path.positions[-1], path.nonfinite
 
     keys = jax.random.split(jax.random.key(2024), NUM_PATHS)
-    final, nonfinite = jax.jit(jax.vmap(one))(keys)
+    final, nonfinite = liesample.jit(jax.vmap(one))(keys)
     assert not np.any(np.asarray(nonfinite))
     return np.asarray(final)
 
@@ -138,7 +139,7 @@ def test_ito_without_its_correction_is_wrong():
 
         return jax.lax.scan(step, jnp.asarray(MU0), jnp.arange(num_steps))[0]
 
-    samples = np.asarray(jax.jit(jax.vmap(one))(jax.random.split(jax.random.key(7), NUM_PATHS)))
+    samples = np.asarray(liesample.jit(jax.vmap(one))(jax.random.split(jax.random.key(7), NUM_PATHS)))
     se = samples.std(0) / np.sqrt(NUM_PATHS)
     assert np.max(np.abs(samples.mean(0) - mean) / se) > 10
 
@@ -167,7 +168,7 @@ def test_casimirs_kept_pathwise_under_every_driver(name, integrator):
                 save_every=10,
             ).positions
 
-        paths = jax.jit(jax.vmap(one))(jax.random.split(jax.random.key(3), 8))
+        paths = liesample.jit(jax.vmap(one))(jax.random.split(jax.random.key(3), 8))
         reference = system.casimirs(start)
         errors = jax.vmap(jax.vmap(lambda m, s=system, c=reference: s.casimir_error(m, c)))(paths)
         assert float(jnp.max(errors)) < 1e-12

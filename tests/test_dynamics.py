@@ -86,8 +86,8 @@ def test_deterministic_vector_field_is_the_double_bracket(theta):
     dynamics = PoissonLangevin(
         SYSTEM, sigma=0.0, theta=theta, scene=Scene(hamiltonian=True, dissipation=True, noise=False)
     )
-    field = jax.jit(lambda m: dynamics.vector_field(m, 1.0))
-    generator = jax.jit(lambda m: dynamics.generator(m, 1.0))
+    field = liesample.jit(lambda m: dynamics.vector_field(m, 1.0))
+    generator = liesample.jit(lambda m: dynamics.generator(m, 1.0))
     for mu in random_states():
         omega = hamiltonian_grad(mu)
         expected = np.cross(mu, omega) + theta * np.cross(mu, np.cross(mu, omega))

@@ -143,7 +143,7 @@ def test_bad_initial_position(position, match):
 def test_casimirs_of_any_sign_are_valid_orbits():
     """Π·Γ > 0, = 0 (including Π = 0) and < 0 are all accepted, and casimir_error is finite."""
     sampler = liesample.lie_poisson_langevin(SYSTEM, beta=BETA, step_size=0.1)
-    step = jax.jit(sampler.step)
+    step = liesample.jit(sampler.step)
     for mu in ([0.5, 0, 0, 1, 0, 0], [0, 0, 0, 0, 0, 1], [0, 1, 0, 1, 0, 0], [-2, 1, 0, 1, 0, 0]):
         state = sampler.init(np.array(mu, dtype=float))
         state, info = step(jax.random.key(0), state)
@@ -171,7 +171,7 @@ def test_casimirs_preserved_over_many_steps():
         return state.position, worst
 
     keys = jax.random.split(jax.random.key(17), len(starts))
-    final, worst = jax.jit(jax.vmap(chain))(keys, starts)
+    final, worst = liesample.jit(jax.vmap(chain))(keys, starts)
     assert np.all(np.asarray(worst) < 1e-10), worst
     c0 = np.asarray(SYSTEM.casimirs(starts))
     c1 = np.asarray(SYSTEM.casimirs(final))
@@ -203,7 +203,7 @@ def test_without_gravity_pi_follows_the_rigid_body(integrator):
             return state, state.position
 
         return np.asarray(
-            jax.jit(lambda s: jax.lax.scan(step, s, jax.random.split(jax.random.key(5), 400))[1])(
+            liesample.jit(lambda s: jax.lax.scan(step, s, jax.random.split(jax.random.key(5), 400))[1])(
                 state
             )
         )
@@ -357,7 +357,7 @@ def ergodic_averages(system, beta, step_size, num_chains, total_time, seed):
 
     keys = jax.random.split(jax.random.key(seed), num_chains)
     starts = jnp.asarray(on_orbit(MU0, num_chains, seed))
-    return np.asarray(jax.jit(jax.vmap(chain))(keys, starts))
+    return np.asarray(liesample.jit(jax.vmap(chain))(keys, starts))
 
 
 @pytest.mark.parametrize("split_hamiltonian", [False, True])

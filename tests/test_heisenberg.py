@@ -157,7 +157,7 @@ def test_unit_spins_are_preserved_over_ten_thousand_steps():
         heisenberg(CHAIN), beta=BETA, sigma=1.0, step_size=0.05
     )
 
-    @jax.jit
+    @liesample.jit
     def run(state):
         def body(carry, step):
             state, worst = carry
@@ -203,7 +203,7 @@ def per_chain_averages(
 
     keys = jax.random.split(jax.random.key(seed), num_chains)
     starts = jnp.asarray(random_spins(shape, seed, chains=num_chains))
-    return np.asarray(jax.jit(jax.vmap(chain))(keys, starts))
+    return np.asarray(liesample.jit(jax.vmap(chain))(keys, starts))
 
 
 def assert_matches_fisher(averages):
@@ -277,7 +277,7 @@ def test_metropolis_reports_acceptance_and_energy():
     rates = {}
     for proposal, scale in (("uniform", 0.5), ("rotation", 0.2), ("rotation", 2.0)):
         algorithm = heisenberg_metropolis(system, beta=1.0, proposal=proposal, proposal_scale=scale)
-        state, info = jax.jit(algorithm.step)(jax.random.key(0), algorithm.init(start))
+        state, info = liesample.jit(algorithm.step)(jax.random.key(0), algorithm.init(start))
         assert 0.0 <= float(info.acceptance_rate) <= 1.0
         assert float(info.energy) == pytest.approx(float(system.hamiltonian(state.position)))
         np.testing.assert_allclose(
@@ -306,7 +306,7 @@ def test_pure_dissipation_aligns_the_ferromagnetic_chain(hamiltonian):
         system, sigma=0.0, theta=1.0, step_size=dt, hamiltonian=hamiltonian
     )
 
-    @jax.jit
+    @liesample.jit
     def run(state):
         def body(state, _):
             state, info = algorithm.step(jax.random.key(0), state)

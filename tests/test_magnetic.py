@@ -115,7 +115,7 @@ def test_proposal_is_an_involution(dense):
     metric = make_metric(imm)
     g = 2.0 * random_antisymmetric(d, seed=3)
 
-    @jax.jit
+    @liesample.jit
     def trajectory(q, p, field):
         step = magnetic_leapfrog(banana, metric, magnetic_flow(field, metric, eps), eps)
         q, p, _, _ = jax.lax.fori_loop(
@@ -156,7 +156,7 @@ def run_chains(algorithm, position, num_chains, num_draws, seed, num_warmup=200)
         _, (positions, info) = jax.lax.scan(one, state, keys)
         return positions[num_warmup:], jax.tree.map(lambda a: a[num_warmup:], info)
 
-    return jax.jit(jax.vmap(chain))(keys)
+    return liesample.jit(jax.vmap(chain))(keys)
 
 
 @pytest.mark.parametrize(
@@ -238,7 +238,7 @@ def langevin_run(field, step_size, num_steps, num_chains=16, seed=0):
         state, _ = jax.lax.scan(one, state, jax.random.split(jax.random.fold_in(key, 1), 500))
         return jax.lax.scan(one, state, jax.random.split(key, num_steps))[1]
 
-    z, divergent = jax.jit(jax.vmap(chain))(keys)
+    z, divergent = liesample.jit(jax.vmap(chain))(keys)
     assert not np.any(divergent)
     return np.asarray(z)
 

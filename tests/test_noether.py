@@ -50,7 +50,7 @@ def pi3_drift_along_sampler(system, integrator="splitting", beta=2.0, sigma=1.0,
 
         return jax.lax.scan(step, algorithm.init(START), jnp.arange(NUM_STEPS))[1]
 
-    pi3 = jax.jit(jax.vmap(chain))(jax.random.split(jax.random.key(11), 4))
+    pi3 = liesample.jit(jax.vmap(chain))(jax.random.split(jax.random.key(11), 4))
     return float(jnp.max(jnp.abs(pi3 - START[2])))
 
 

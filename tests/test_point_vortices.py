@@ -45,7 +45,7 @@ def run_chains(algorithm, starts, num_steps, rng_key):
         return state.position, jnp.any(nonfinite)
 
     keys = jax.random.split(rng_key, starts.shape[0])
-    positions, nonfinite = jax.jit(jax.vmap(one_chain))(jnp.asarray(starts), keys)
+    positions, nonfinite = liesample.jit(jax.vmap(one_chain))(jnp.asarray(starts), keys)
     return np.asarray(positions), bool(np.any(nonfinite))
 
 
@@ -57,7 +57,7 @@ def trajectory(algorithm, start, num_steps, rng_key=None):
         state, info = algorithm.step(key, state)
         return state, (state.position, info.energy)
 
-    _, (positions, energies) = jax.jit(
+    _, (positions, energies) = liesample.jit(
         lambda s: jax.lax.scan(one, s, jax.random.split(rng_key, num_steps))
     )(algorithm.init(start))
     return np.concatenate([np.asarray(start)[None], positions]), np.asarray(energies)
@@ -91,7 +91,7 @@ def test_transport_noise_moves_every_vortex_with_the_same_field():
     system = point_vortices([3.0, -0.5], max_degree=3)
     x = jnp.asarray([[0.6, 0.0, 0.8], [0.6, 1e-7, 0.8]])
     x = x / jnp.linalg.norm(x, axis=-1, keepdims=True)
-    fields = jax.jit(
+    fields = liesample.jit(
         jax.vmap(
             lambda c: system.algebra.ad_star(jax.vjp(system.noise_hamiltonians, x)[1](c)[0], x)
         )
@@ -309,7 +309,7 @@ def test_angular_momentum_under_pure_dissipation_with_complete_shells():
             dynamics = PoissonLangevin(sys, 0.0, 1.0, Scene(hamiltonian=False, noise=False))
             return sys.algebra.ad_star(dynamics.generator(x, 1.0), x)
 
-        return np.asarray(jax.jit(jax.vmap(field))(points))
+        return np.asarray(liesample.jit(jax.vmap(field))(points))
 
     rotation = jax.scipy.linalg.expm(jnp.asarray([[0, -0.3, 0.5], [0.3, 0, -0.2], [-0.5, 0.2, 0]]))
     field, rotated = dissipation_field(system, jnp.stack([x, x @ rotation.T]))

@@ -36,7 +36,7 @@ def deterministic_runner(integrator, theta=0.0, hamiltonian=True):
     sigma, theta, scene = make_dynamics(SYSTEM, sigma=0.0, theta=theta, hamiltonian=hamiltonian)
     kernel = lie_poisson_langevin.build_kernel(SYSTEM, integrator, scene)
 
-    @jax.jit
+    @liesample.jit
     def run(mu0, dt, num_steps):
         state = LiePoissonState(mu0, SYSTEM.casimirs(mu0))
         e0 = SYSTEM.hamiltonian(mu0)
@@ -128,7 +128,7 @@ def test_pure_dissipation_descends_to_the_largest_inertia_axis(integrator, hamil
         SYSTEM, sigma=0.0, theta=0.5, step_size=dt, integrator=integrator, hamiltonian=hamiltonian
     )
 
-    @jax.jit
+    @liesample.jit
     def run(state):
         def body(state, _):
             state, info = algorithm.step(jax.random.key(0), state)
@@ -167,7 +167,7 @@ def stochastic_runner(integrator, beta, sigma=1.0, step_size=0.05):
         SYSTEM, beta=beta, sigma=sigma, step_size=step_size, integrator=integrator
     )
 
-    @jax.jit
+    @liesample.jit
     def run(state, key, first_step, num_steps=CHUNK):
         def body(step, carry):
             state, worst, bad, total = carry

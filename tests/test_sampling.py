@@ -49,7 +49,7 @@ def ergodic_second_moments(integrator, beta, step_size, num_chains, total_time, 
         return total / num_steps
 
     keys = jax.random.split(jax.random.key(seed), num_chains)
-    return np.asarray(jax.jit(jax.vmap(chain))(keys, jnp.asarray(start_points(num_chains))))
+    return np.asarray(liesample.jit(jax.vmap(chain))(keys, jnp.asarray(start_points(num_chains))))
 
 
 def exact_second_moments(beta):
@@ -159,7 +159,7 @@ def test_isotropic_autocorrelation_matches_exact():
 
     num_chains = 20000
     keys = jax.random.split(jax.random.key(11), num_chains)
-    products = np.asarray(jax.jit(jax.vmap(chain))(keys, jnp.asarray(start_points(num_chains))))
+    products = np.asarray(liesample.jit(jax.vmap(chain))(keys, jnp.asarray(start_points(num_chains))))
     estimate = products.mean(0)
     se = products.std(0, ddof=1) / np.sqrt(num_chains)
     exact = np.asarray(isotropic_autocorrelation(lags * dt, RADIUS, sigma))

@@ -15,6 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+import liesample
 from liesample.symplectic import (
     brownian_increments,
     coarsen_increments,
@@ -80,7 +81,7 @@ def random_steps(system, count=5, seed=3, step_size=0.1):
 def test_midpoint_step_is_symplectic_pathwise_and_heun_is_not(name):
     system = SYSTEMS[name]
 
-    @jax.jit
+    @liesample.jit
     @jax.vmap
     def defects(z, increments):
         midpoint = symplecticity_defect(
@@ -102,7 +103,7 @@ def test_midpoint_step_is_symplectic_pathwise_and_heun_is_not(name):
 def test_midpoint_keeps_the_noether_momentum_of_a_symmetric_diffusion():
     system = rotation_invariant()
     increments = brownian_increments(jax.random.key(4), 0.02, 500, 3)
-    path = jax.jit(lambda z, inc: symplectic_path(system, z, inc))(
+    path = liesample.jit(lambda z, inc: symplectic_path(system, z, inc))(
         jnp.array([1.0, -0.3, 0.2, 0.8]), increments
     )
     q, p = np.asarray(path.states[:, :2]), np.asarray(path.states[:, 2:])
@@ -116,7 +117,7 @@ def strong_errors(system, scheme, num_paths=128, horizon=1.0, fine=2048, coarse=
     """RMS end-point error against the midpoint rule on the same path at ``Δt = horizon/fine``."""
     z0 = jnp.array([1.0, 0.5])
 
-    @jax.jit
+    @liesample.jit
     @jax.vmap
     def errors(key):
         increments = brownian_increments(key, horizon / fine, fine, system.num_drivers - 1)
@@ -174,7 +175,7 @@ def test_symplectic_path_rejects_bad_input():
 def test_non_convergence_is_flagged():
     """``H_2 = σ p²/2`` with a huge increment: the fixed-point map expands, the flag says so."""
     system = stochastic_pendulum(1.0, 1.0, quadratic_momentum_noise=True)
-    _, converged = jax.jit(lambda z, inc: stochastic_midpoint_step(system, z, inc))(
+    _, converged = liesample.jit(lambda z, inc: stochastic_midpoint_step(system, z, inc))(
         jnp.array([0.3, 1.0]), jnp.array([0.1, 10.0, 10.0])
     )
     assert not bool(converged)

@@ -35,6 +35,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from liesample.compile import jit
 from liesample._validation import concrete_array, finite_float
 from liesample.structures import (
     CanonicalStructure,
@@ -402,7 +403,7 @@ def _derived_friction_rate(system: ChargedParticleSystem, sde: PoissonLangevinSD
         sde.structure, sde.hamiltonian, sde.noise_hamiltonians, 1.0, 0.0, sde.scene
     )
     with jax.ensure_compile_time_eval():
-        dissipation, fields = jax.jit(
+        dissipation, fields = jit(
             jax.vmap(lambda z: (sde.dissipation(z), unit.noise_fields(z)))
         )(jnp.asarray(probes))
     dissipation, fields = np.asarray(dissipation), np.asarray(fields[0])
@@ -504,7 +505,7 @@ def charged_particle_path(
             raise ValueError(f"{name} must be an int >= 1, got {value!r}")
     if num_steps % thinning:
         raise ValueError(f"num_steps ({num_steps}) must be a multiple of thinning ({thinning})")
-    run = jax.jit(dynamics.path, static_argnums=(3, 4))
+    run = jit(dynamics.path, static_argnums=(3, 4))
     result = run(
         rng_key, jnp.asarray(initial_state, dtype=float), step_size, int(num_steps), int(thinning)
     )

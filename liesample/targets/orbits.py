@@ -25,6 +25,7 @@ import numpy as np
 from jax.scipy.special import i0e, i1e, logsumexp
 from scipy.special import roots_legendre
 
+from liesample.compile import jit
 from liesample._validation import finite_float, nonzero_vector3, principal_moments
 
 __all__ = [
@@ -119,14 +120,14 @@ def bingham_log_normalizer(lam):
     return _log_normalizer(_as_lam(lam))
 
 
-@jax.jit
+@jit
 def _log_normalizer(lam):
     shifted, c, order = _shift_and_order(lam)
     lk, la, lb = shifted[order[0]], shifted[order[1]], shifted[order[2]]
     return _LOG_2PI + _log_integral(lk, la, lb) - c
 
 
-_second_moments = jax.jit(lambda lam: -jax.grad(_log_normalizer)(lam))
+_second_moments = jit(lambda lam: -jax.grad(_log_normalizer)(lam))
 
 
 def bingham_second_moments(lam):
@@ -169,7 +170,7 @@ def bingham_marginal_density(t, lam, axis: int):
     return _marginal_density(jnp.asarray(t, dtype=lam.dtype), lam, axis)
 
 
-@partial(jax.jit, static_argnames=("axis",))
+@partial(jit, static_argnames=("axis",))
 def _marginal_density(t, lam, axis):
     shifted = lam - jnp.min(lam)  # f is invariant under λ → λ − c
     a, b = [i for i in range(3) if i != axis]
@@ -210,7 +211,7 @@ def _log_acceptance_ratio(x, A, omega, log_M):
     return -jnp.sum(A * x * x, axis=-1) + 1.5 * jnp.log(jnp.sum(omega * x * x, axis=-1)) - log_M
 
 
-@partial(jax.jit, static_argnames=("num_samples",))
+@partial(jit, static_argnames=("num_samples",))
 def _sample_bingham(rng_key, lam, num_samples: int):
     A, _, omega, log_M = _acg_envelope(lam)
     # Acceptance is ≥ 52% on S²: 2.2× oversampling usually finishes in one round.
@@ -574,7 +575,7 @@ def _sample_vmf_s2(key, direction, kappa, num):
     return w[:, None] * direction + jnp.sqrt(1.0 - w * w)[:, None] * v
 
 
-@partial(jax.jit, static_argnames=("num_samples",))
+@partial(jit, static_argnames=("num_samples",))
 def _sample_heavy_top(key, inertia, direction, kappa, beta, radius, s, log_g_max, num_samples):
     batch = 2 * num_samples + 64
 

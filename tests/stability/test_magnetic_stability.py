@@ -37,7 +37,7 @@ def ensemble(algorithm, num_chains=4000, num_steps=40):
         return jax.lax.scan(one, algorithm.init(start), jnp.arange(num_steps))[0].position
 
     keys = jax.random.split(jax.random.key(5), num_chains)
-    return starts, np.asarray(jax.jit(jax.vmap(chain))(keys, jnp.asarray(starts)))
+    return starts, np.asarray(liesample.jit(jax.vmap(chain))(keys, jnp.asarray(starts)))
 
 
 def test_huge_field_flow_is_orthogonal():
