@@ -38,14 +38,47 @@ def safe_compiler_options(compiler_options: dict | None = None) -> dict:
     return options
 
 
+def _inside_staged_computation() -> bool:
+    """Whether a call now would be traced into an enclosing ``jit`` (whose options then apply).
+
+    ``jax.jit`` refuses ``compiler_options`` on a nested jit; under an eager ``vmap`` or ``grad``
+    the function is still compiled on its own, so the options are kept there.
+    """
+    try:
+        from jax._src import core
+
+        trace = core.trace_ctx.trace
+        while trace is not None:
+            if type(trace).__name__ == "DynamicJaxprTrace":
+                return True
+            trace = getattr(trace, "parent_trace", None)
+        return False
+    except (ImportError, AttributeError):  # another jax layout: protect top-level calls only
+        from jax._src import core
+
+        return not core.trace_state_clean()
+
+
 def jit(fun=None, /, **jit_kwargs):
     """``jax.jit`` with :func:`safe_compiler_options`; usable as ``@jit`` or ``@jit(...)``.
 
-    Takes every keyword of ``jax.jit`` (``static_argnums``, ``donate_argnums``, …). The
-    protection applies to the outermost compiled function: a ``jax.jit`` nested inside is
-    inlined into it, so wrapping the outer ``vmap`` of a loop is what counts.
+    Takes every keyword of ``jax.jit`` (``static_argnums``, ``donate_argnums``, …). Called at top
+    level, under an eager ``vmap`` or ``grad``, or through ``.lower(...).compile()``, it compiles
+    with the pass disabled. Called inside another ``jax.jit`` it is inlined there (``jax.jit``
+    takes compiler options only at the top), so wrap the outermost function in ``liesample.jit``.
     """
     if fun is None:
         return functools.partial(jit, **jit_kwargs)
-    jit_kwargs["compiler_options"] = safe_compiler_options(jit_kwargs.get("compiler_options"))
-    return jax.jit(fun, **jit_kwargs)
+    options = safe_compiler_options(jit_kwargs.pop("compiler_options", None))
+    safe = jax.jit(fun, compiler_options=options, **jit_kwargs)
+    nested = jax.jit(fun, **jit_kwargs)
+
+    @functools.wraps(fun)
+    def compiled(*args, **kwargs):
+        chosen = nested if _inside_staged_computation() else safe
+        return chosen(*args, **kwargs)
+
+    compiled.lower = safe.lower
+    compiled.trace = safe.trace
+    compiled.eval_shape = safe.eval_shape
+    return compiled

@@ -91,6 +91,18 @@ def test_safe_compiler_options_keep_user_options():
     assert safe_compiler_options(options) == options  # idempotent
 
 
+def test_eager_vmap_of_liesample_jit_keeps_the_protection():
+    """``jax.vmap(liesample.jit(f))`` called eagerly compiles the batched loop on its own."""
+    assert _batched_error(lambda _: jax.vmap(liesample.jit(_two_steps))) < 1e-12
+
+
+def test_liesample_jit_nests_inside_jax_jit():
+    """Inside another ``jax.jit`` it is inlined (jax refuses options on nested jits)."""
+    inner = liesample.jit(lambda x: jnp.sin(x) * 2.0)
+    assert float(jax.jit(lambda x: inner(x) + 1.0)(0.0)) == 1.0
+    assert float(jax.grad(inner)(0.0)) == 2.0
+
+
 def test_jit_as_decorator_with_arguments():
     @liesample.jit(static_argnums=1)
     def power(x, n):
