@@ -24,8 +24,9 @@ from dataclasses import dataclass
 import jax
 import jax.numpy as jnp
 
+from liesample._validation import finite_float
 from liesample.structures import LiePoissonStructure, PoissonLangevinSDE
-from liesample.systems.base import LiePoissonSystem
+from liesample.system_base import LiePoissonSystem
 
 
 @dataclass(frozen=True)
@@ -59,6 +60,40 @@ class Scene:
     def effects(self) -> tuple[str, ...]:
         """Names of the enabled effects, in a fixed order."""
         return tuple(n for n in ("hamiltonian", "dissipation", "noise") if getattr(self, n))
+
+
+def make_dynamics(system, *, beta=None, sigma=1.0, theta=None, hamiltonian=True):
+    """Validate ``(β, σ, θ)`` and return ``(sigma, theta, scene)``.
+
+    With noise (``σ > 0``) the dissipation is derived, ``θ = βσ²/2``, so ``β`` is required and
+    ``θ`` may not be given. Without noise (``σ = 0``) there is no temperature; ``θ ≥ 0`` sets a
+    pure energy-descent flow. Effects whose coefficient vanishes are left out of the scene.
+    ``system`` is anything with a ``check_beta`` attribute (``None`` or ``β ↦ None``, raising
+    where ``exp(−βh)`` is not normalisable).
+    """
+    sigma = finite_float("sigma", sigma, nonnegative=True)
+    if sigma > 0:
+        if beta is None:
+            raise ValueError("beta is required when sigma > 0 (the target is exp(-beta*h))")
+        beta = finite_float("beta", beta)
+        if system.check_beta is not None:
+            system.check_beta(beta)
+        if theta is not None:
+            raise ValueError(
+                "theta is derived from beta and sigma (theta = beta*sigma**2/2); pass beta, not theta"
+            )
+        theta = 0.5 * beta * sigma**2
+    else:
+        if beta is not None:
+            raise ValueError(
+                "beta needs noise: with sigma = 0 nothing is sampled; pass theta >= 0 for a "
+                "noise-free dissipative flow, or sigma > 0 to sample exp(-beta*h)"
+            )
+        theta = finite_float("theta", 0.0 if theta is None else theta, nonnegative=True)
+    if not isinstance(hamiltonian, bool):
+        raise TypeError(f"hamiltonian must be a bool, got {hamiltonian!r}")
+    scene = Scene(hamiltonian=hamiltonian, dissipation=theta != 0.0, noise=sigma > 0)
+    return sigma, theta, scene
 
 
 @dataclass(frozen=True)

@@ -3,8 +3,11 @@
 Each integrator consumes generators ``ζ ∈ g`` from :meth:`PoissonLangevin.generator` and, except
 for the ambient baseline, moves only by ``Ad*_{exp ζ}`` (``coadjoint_exp``), so the state stays on
 its coadjoint orbit to round-off (MATH.md §2). All read the SDE in the Stratonovich sense; none
-adds an Itô correction. ``weak_order`` is the order of the bias of ergodic averages in the step
-size, measured in ``tests/test_sampling.py`` and ``benchmarks/``.
+adds an Itô correction. Each :class:`Integrator` declares what it guarantees — its weak order
+(the order of the bias of ergodic averages in the step size, measured in
+``tests/test_sampling.py`` and ``benchmarks/``), whether that order needs linear noise
+Hamiltonians, whether it preserves the orbit, its stability limit and its stochastic form — and
+:mod:`liesample.stability`, the samplers and the benchmark report read these attributes.
 """
 
 from __future__ import annotations
@@ -16,6 +19,8 @@ import jax
 import jax.numpy as jnp
 
 from liesample.dynamics import PoissonLangevin, Scene
+
+FORMS = ("stratonovich", "ito")
 
 
 @dataclass(frozen=True)
@@ -35,6 +40,16 @@ class Integrator:
         Whether Casimirs are preserved to round-off (moves by the coadjoint action only).
     step : callable
     description : str
+    linear_noise_only : bool
+        ``True`` when ``weak_order`` holds only for noise Hamiltonians linear in ``μ``
+        (constant ``∇ĥ_i``): the scheme evaluates the noise generator once, at the start of the
+        step, so with non-linear ``ĥ_i`` it misses the Stratonovich correction and is
+        inconsistent (it converges to another SDE).
+    stability_limit : float or None
+        Largest stable stability number ``κ = dt·θ·max_i |h''_i|`` (:mod:`liesample.stability`),
+        or ``None`` where no bound is claimed (the check is skipped).
+    form : {"stratonovich", "ito"}
+        The reading of the noise that the one-step map is consistent with.
     """
 
     name: str
@@ -42,9 +57,25 @@ class Integrator:
     preserves_orbit: bool
     step: Callable
     description: str
+    linear_noise_only: bool = False
+    stability_limit: float | None = None
+    form: str = "stratonovich"
+
+    def __post_init__(self):
+        if self.form not in FORMS:
+            raise ValueError(f"form must be one of {FORMS}, got {self.form!r}")
+        if isinstance(self.weak_order, bool) or not isinstance(self.weak_order, int):
+            raise TypeError(f"weak_order must be an int, got {self.weak_order!r}")
+        if self.stability_limit is not None and not self.stability_limit > 0:
+            raise ValueError(f"stability_limit must be > 0 or None, got {self.stability_limit!r}")
 
     def __call__(self, dynamics: PoissonLangevin, mu, dt, dW=None):
         return self.step(dynamics, mu, dt, dW)
+
+    def wrapping(self, step: Callable, name: str, description: str, **changes) -> Integrator:
+        """An integrator built on this one (substeps, another dissipation, …): it inherits this
+        one's declarations unless ``changes`` overrides them."""
+        return replace(self, name=name, step=step, description=description, **changes)
 
 
 def _lie_euler(dynamics, mu, dt, dW):
@@ -128,6 +159,9 @@ def _euler_heun(dynamics, mu, dt, dW):
     return mu + 0.5 * (increment_start + increment_end)
 
 
+# Euler and Heun applied to y' = −λy are stable iff λ dt ≤ 2 (liesample.stability).
+_EULER_HEUN_STABILITY = 2.0
+
 INTEGRATORS: dict[str, Integrator] = {
     integrator.name: integrator
     for integrator in (
@@ -138,6 +172,7 @@ INTEGRATORS: dict[str, Integrator] = {
             step=_rkmk_heun,
             description="Heun (RKMK2) on the joint generator: second order without noise, first "
             "order with non-commuting noise",
+            stability_limit=_EULER_HEUN_STABILITY,
         ),
         Integrator(
             "splitting",
@@ -146,13 +181,17 @@ INTEGRATORS: dict[str, Integrator] = {
             step=_splitting,
             description="Hamiltonian | each noise direction, Heun on the group: second order "
             "(default)",
+            stability_limit=_EULER_HEUN_STABILITY,
         ),
         Integrator(
             "lie_euler",
             weak_order=1,
             preserves_orbit=True,
             step=_lie_euler,
-            description="coadjoint Lie–Euler: first order, orbit-preserving",
+            description="coadjoint Lie–Euler: first order, orbit-preserving; consistent only "
+            "for linear noise Hamiltonians",
+            linear_noise_only=True,
+            stability_limit=_EULER_HEUN_STABILITY,
         ),
         Integrator(
             "euler_heun",
@@ -160,6 +199,7 @@ INTEGRATORS: dict[str, Integrator] = {
             preserves_orbit=False,
             step=_euler_heun,
             description="ambient Euler–Heun: baseline for comparison, drifts off the orbit",
+            stability_limit=None,  # its orbit radius drifts, and κ with it: no bound claimed
         ),
     )
 }

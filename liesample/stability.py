@@ -51,6 +51,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from liesample.compile import jit
+from liesample.integrators import INTEGRATORS, Integrator
 
 __all__ = [
     "STABILITY_LIMITS",
@@ -60,8 +61,9 @@ __all__ = [
     "stiffness",
 ]
 
-STABILITY_LIMITS = {"splitting": 2.0, "rkmk_heun": 2.0, "lie_euler": 2.0, "euler_heun": 2.0}
-"""Largest stable ``κ = step_size · θ · max_i |h''_i|`` of each integrator (module docstring)."""
+STABILITY_LIMITS = {name: i.stability_limit for name, i in INTEGRATORS.items()}
+"""Largest stable ``κ = step_size · θ · max_i |h''_i|`` of each built-in integrator, as it declares
+(``Integrator.stability_limit``; module docstring)."""
 
 STABILITY_MODES = ("warn", "raise", "off")
 
@@ -138,11 +140,15 @@ def stability_number(system, step_size, theta, position) -> float:
     return step_size * stiffness(system, theta, position)
 
 
-def check_step_size(system, integrator_name, step_size, theta, position, mode="warn"):
+def check_step_size(system, integrator, step_size, theta, position, mode="warn"):
     """Warn (``mode="warn"``) or raise ``ValueError`` (``"raise"``) when ``κ`` exceeds the
-    integrator's bound in :data:`STABILITY_LIMITS`; ``"off"`` or an unknown integrator: no check.
+    integrator's declared ``stability_limit`` (an :class:`~liesample.integrators.Integrator` or
+    a built-in's name); ``"off"``, an unknown name or no declared limit: no check.
     Returns ``κ`` (or ``None`` when not checked)."""
-    limit = STABILITY_LIMITS.get(integrator_name)
+    if not isinstance(integrator, Integrator):
+        integrator = INTEGRATORS.get(integrator)
+    limit = None if integrator is None else integrator.stability_limit
+    integrator_name = None if integrator is None else integrator.name
     if mode == "off" or limit is None or theta == 0.0 or not system.curvature_bound:
         return None
     kappa = stability_number(system, step_size, theta, position)

@@ -73,7 +73,7 @@ def adaptive_substepping(
     """An :class:`Integrator` that runs ``base`` on adaptive substeps (module docstring).
 
     Pass it as ``integrator=`` to :func:`liesample.lie_poisson_langevin`. Its weak order and
-    orbit preservation are those of ``base``.
+    orbit preservation (every declaration) are those of ``base``.
     """
     base = get_integrator(base)
     safety = finite_float("safety", safety, positive=True)
@@ -87,11 +87,9 @@ def adaptive_substepping(
             base, rate_fn, dynamics, mu, dt, dW, safety=safety, max_substeps=max_substeps
         )[0]
 
-    return Integrator(
+    return base.wrapping(
+        step,
         name or f"{base.name}+substeps",
-        weak_order=base.weak_order,
-        preserves_orbit=base.preserves_orbit,
-        step=step,
-        description=f"{base.name} on adaptive substeps h = min(remaining, {safety:g}/rate(μ)), "
+        f"{base.name} on adaptive substeps h = min(remaining, {safety:g}/rate(μ)), "
         f"at most {max_substeps} per step",
     )

@@ -37,6 +37,7 @@ import numpy as np
 
 from liesample.compile import jit
 from liesample._validation import concrete_array, finite_float
+from liesample.dynamics import make_dynamics
 from liesample.structures import (
     CanonicalStructure,
     PoissonLangevinSDE,
@@ -435,8 +436,6 @@ def charged_particle_dynamics(
     noise ``θ ≥ 0`` sets a pure friction flow and there is no ``β``. ``magnetic=False`` switches
     the field off (structurally). The scene holds only effects with a nonzero coefficient.
     """
-    from liesample.samplers.lie_poisson_langevin import make_dynamics
-
     if not isinstance(system, ChargedParticleSystem):
         raise TypeError(f"system must come from charged_particle(...), got {type(system).__name__}")
     if integrator not in INTEGRATORS:

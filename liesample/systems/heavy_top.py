@@ -21,6 +21,7 @@ from liesample._validation import finite_float, nonzero_vector3, principal_momen
 from liesample.algebras import se3
 from liesample.systems.base import LiePoissonSystem
 from liesample.systems.rigid_body import kinetic_pieces
+from liesample.targets import HeavyTopGibbs
 
 
 def heavy_top(
@@ -90,8 +91,6 @@ def heavy_top(
         return jnp.full(mu.shape[:-1] + (2,), jnp.sum(mu * mu, axis=-1)[..., None])
 
     def reference(beta, position):
-        from liesample.targets import HeavyTopGibbs
-
         position = np.asarray(position, dtype=float)
         pi, gamma = position[:3], position[3:]
         return HeavyTopGibbs(

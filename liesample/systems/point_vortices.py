@@ -47,19 +47,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING
 
 import jax.numpy as jnp
 import numpy as np
 
 from liesample._validation import concrete_array, finite_float, nonzero_circulations
 from liesample.algebras import LieAlgebra, cross, so3
+from liesample.dynamics import Scene
+from liesample.integrators import Integrator, get_integrator
 from liesample.spherical_harmonics import num_harmonics, transport_modes
+from liesample.substepping import adaptive_substepping
 from liesample.systems.base import LiePoissonSystem
 from liesample.targets.vortices import VortexPairLaw, check_vortex_beta
-
-if TYPE_CHECKING:  # the engine imports liesample.systems: import it lazily (no cycle)
-    from liesample.integrators import Integrator
 
 __all__ = [
     "PointVortexSystem",
@@ -326,9 +325,6 @@ def _closed_form_generator(system: PointVortexSystem, x):
 def _with_all_modes_dissipation(system: PointVortexSystem, base):
     """Strang composition ``D(dt/2) ∘ base(Hamiltonian + noise)(dt) ∘ D(dt/2)`` where ``D`` is the
     closed-form dissipation, each half advanced by Heun on the group."""
-    from liesample.dynamics import Scene
-    from liesample.integrators import Integrator
-
     move = system.algebra.coadjoint_exp
 
     def dissipate(x, tau):
@@ -349,13 +345,12 @@ def _with_all_modes_dissipation(system: PointVortexSystem, base):
             x = base(replace(dynamics, scene=rest), x, dt, dW)
         return dissipate(x, tau)
 
-    return Integrator(
+    return base.wrapping(
+        step,
         f"{base.name}+all_modes",
-        weak_order=1,
-        preserves_orbit=base.preserves_orbit,
-        step=step,
-        description=f"{base.name} with the paper's closed-form (all-modes) dissipation in place "
+        f"{base.name} with the paper's closed-form (all-modes) dissipation in place "
         "of the derived one (Strang): not Gibbs-exact",
+        weak_order=1,
     )
 
 
@@ -408,10 +403,6 @@ def point_vortex_integrator(
     max_substeps : int
         Cap per step (beyond it the rest of the step is dropped; :mod:`liesample.substepping`).
     """
-    # Imported here: the engine imports liesample.systems, which imports this module.
-    from liesample.integrators import get_integrator
-    from liesample.substepping import adaptive_substepping
-
     if not isinstance(system, PointVortexSystem):
         raise TypeError(f"system must be a PointVortexSystem, got {type(system).__name__}")
     if dissipation not in ("truncated", "all_modes"):

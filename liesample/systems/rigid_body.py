@@ -16,6 +16,7 @@ import numpy as np
 from liesample._validation import principal_moments
 from liesample.algebras import so3
 from liesample.systems.base import LiePoissonSystem
+from liesample.targets import RestrictedGaussian
 
 
 def kinetic_pieces(inverse_inertia, momentum):
@@ -64,8 +65,6 @@ def rigid_body(inertia=(1.0, 2.0, 4.0), split_hamiltonian: bool = False) -> LieP
         return mu  # ĥ_i = e_i·μ: rotations about the body axes
 
     def reference(beta, position):
-        from liesample.targets import RestrictedGaussian
-
         radius = float(np.linalg.norm(np.asarray(position)))
         return RestrictedGaussian(inertia=moments, beta=float(beta), radius=radius)
 
