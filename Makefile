@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 JOBS ?= 2
 
-.PHONY: demo test test-slow bench clean check-python
+.PHONY: demo test test-slow test-oldest bench clean check-python
 
 check-python:
 	@test -n "$(PYTHON)" || { echo "error: Python >= 3.12 not found (tried: $(PY_CANDIDATES))"; exit 1; }
@@ -30,6 +30,19 @@ test: $(BIN)/.installed-test
 test-slow: $(BIN)/.installed-test
 	$(BIN)/python -m pytest -n $(JOBS) -q -m slow
 
+# The oldest supported jax, in its own venv: `make test-oldest` runs the default suite on it.
+OLDEST_JAX := 0.11.2
+VENV_OLDEST := .venv-oldest
+
+$(VENV_OLDEST)/bin/.installed-test: pyproject.toml | check-python
+	$(PYTHON) -m venv $(VENV_OLDEST)
+	$(VENV_OLDEST)/bin/pip install -q --upgrade pip
+	$(VENV_OLDEST)/bin/pip install -q -e '.[test]' 'jax==$(OLDEST_JAX)' 'jaxlib==$(OLDEST_JAX)'
+	touch $@
+
+test-oldest: $(VENV_OLDEST)/bin/.installed-test
+	$(VENV_OLDEST)/bin/python -m pytest -n $(JOBS) -q
+
 $(BIN)/.installed-bench: $(BIN)/.installed
 	$(BIN)/pip install -q -e '.[bench]'
 	touch $@
@@ -38,4 +51,4 @@ bench: $(BIN)/.installed-bench
 	$(BIN)/python benchmarks/run.py
 
 clean:
-	rm -rf $(VENV) liesample-demo-output .pytest_cache
+	rm -rf $(VENV) $(VENV_OLDEST) liesample-demo-output .pytest_cache
