@@ -13,6 +13,9 @@ from liesample.samplers.adjusted_lie_poisson import adjusted_lie_poisson
 from liesample.samplers.lie_poisson_langevin import lie_poisson_langevin
 from liesample.samplers.magnetic_hmc import magnetic_hmc
 from liesample.samplers.magnetic_langevin import magnetic_langevin
+from liesample.samplers.spins_heat_bath import heisenberg_heat_bath
+from liesample.samplers.spins_metropolis import heisenberg_metropolis
+from liesample.samplers.spins_wolff import heisenberg_wolff
 
 __all__ = [
     "PoissonLangevin",
@@ -21,6 +24,9 @@ __all__ = [
     "adjusted_lie_poisson",
     "algebras",
     "drivers",
+    "heisenberg_heat_bath",
+    "heisenberg_metropolis",
+    "heisenberg_wolff",
     "integrators",
     "jit",
     "lie_poisson_langevin",

@@ -176,34 +176,34 @@ ROWS = [
         ValueError,
         "anisotropy.*finite",
     ),
-    # ---- systems.heisenberg_metropolis
+    # ---- liesample.heisenberg_metropolis
     (
         "metropolis system",
-        lambda: systems.heisenberg_metropolis(RIGID, beta=1.0),
+        lambda: liesample.heisenberg_metropolis(RIGID, beta=1.0),
         TypeError,
         "system",
     ),
     (
         "metropolis beta nan",
-        lambda: systems.heisenberg_metropolis(CHAIN, beta=NAN),
+        lambda: liesample.heisenberg_metropolis(CHAIN, beta=NAN),
         ValueError,
         "beta.*finite",
     ),
     (
         "metropolis proposal",
-        lambda: systems.heisenberg_metropolis(CHAIN, beta=1.0, proposal="gauss"),
+        lambda: liesample.heisenberg_metropolis(CHAIN, beta=1.0, proposal="gauss"),
         ValueError,
         "proposal",
     ),
     (
         "metropolis proposal_scale",
-        lambda: systems.heisenberg_metropolis(CHAIN, beta=1.0, proposal_scale=0.0),
+        lambda: liesample.heisenberg_metropolis(CHAIN, beta=1.0, proposal_scale=0.0),
         ValueError,
         "proposal_scale.*> 0",
     ),
     (
         "metropolis init off orbit",
-        lambda: systems.heisenberg_metropolis(CHAIN, beta=1.0).init(2.0 * CHAIN.default_position),
+        lambda: liesample.heisenberg_metropolis(CHAIN, beta=1.0).init(2.0 * CHAIN.default_position),
         ValueError,
         "unit spins",
     ),

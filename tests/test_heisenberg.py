@@ -20,7 +20,8 @@ from liesample.systems.heisenberg import (
     neighbour_sum,
     noise_groups,
 )
-from liesample.systems.heisenberg_metropolis import heisenberg_metropolis, local_energy_change
+from liesample.samplers.spins import local_energy_change
+from liesample.samplers.spins_metropolis import heisenberg_metropolis
 from liesample.targets import heisenberg_chain_correlation
 
 BETA = 2.0  # βJ = 2: u = 0.537, u³ = 0.155

@@ -4,7 +4,6 @@ from liesample.systems.base import LiePoissonSystem, lie_poisson_system
 from liesample.systems.charged_particle import charged_particle, charged_particle_path
 from liesample.systems.heavy_top import heavy_top
 from liesample.systems.heisenberg import heisenberg
-from liesample.systems.heisenberg_metropolis import heisenberg_metropolis
 from liesample.systems.point_vortices import point_vortex_integrator, point_vortices
 from liesample.systems.rigid_body import rigid_body
 
@@ -14,7 +13,6 @@ __all__ = [
     "charged_particle_path",
     "heavy_top",
     "heisenberg",
-    "heisenberg_metropolis",
     "lie_poisson_system",
     "point_vortex_integrator",
     "point_vortices",

@@ -38,6 +38,7 @@ import numpy as np
 from liesample._validation import concrete_array, finite_float
 from liesample.algebras import so3
 from liesample.systems.base import LiePoissonSystem
+from liesample.targets.spins import HeisenbergChainReference, HeisenbergRingReference
 
 __all__ = [
     "SpinLatticeSystem",
@@ -202,8 +203,8 @@ def heisenberg(
         A :class:`LiePoissonSystem` on ``(so(3)*)^N`` with state shape ``(*shape, 3)``, ``3N``
         noise Hamiltonians ``e_i·s_k`` (grouped by :func:`noise_groups`), unit spins checked at
         ``init`` and default position all spins along ``e_z``. ``reference(beta)`` is the exact
-        :class:`HeisenbergChainReference` for an open chain with ``B = 0``, ``D = 0``, else
-        ``None``.
+        :class:`HeisenbergChainReference` for an open chain with ``B = 0``, ``D = 0``,
+        :class:`HeisenbergRingReference` for a periodic one, else ``None``.
     """
     shape = lattice_shape(shape)
     coupling = finite_float("coupling", coupling)
@@ -231,15 +232,14 @@ def heisenberg(
     def noise_hamiltonians(s):
         return jnp.reshape(s, (-1,))  # ĥ_{k,i} = e_i·s_k, index 3k + i
 
-    exact_chain = len(shape) == 1 and not periodic and not has_field and anisotropy == 0.0
+    exact_chain = len(shape) == 1 and not has_field and anisotropy == 0.0
 
     def reference(beta, position=None):
         del position  # the law does not depend on the (unit-spin) orbit
         if not exact_chain:
             return None
-        from liesample.targets.spins import HeisenbergChainReference
-
-        return HeisenbergChainReference(length=shape[0], beta=float(beta), coupling=coupling)
+        law = HeisenbergRingReference if periodic else HeisenbergChainReference
+        return law(length=shape[0], beta=float(beta), coupling=coupling)
 
     default_position = np.zeros((*shape, 3))
     default_position[..., 2] = 1.0
