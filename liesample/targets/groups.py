@@ -1,0 +1,232 @@
+"""Exact references for laws on spheres and Lie groups (tests of the geometric samplers).
+
+- von Mises–Fisher on ``Sⁿ``: ``p(x) ∝ exp(κ μ·x)`` (uniform base measure); its mean is
+  ``A_d(κ) μ`` with ``A_d(κ) = I_{d/2}(κ)/I_{d/2−1}(κ)``, ``d = n + 1``.
+- matrix Fisher on ``SO(3)``: ``p(R) ∝ exp(tr(FᵀR))`` (Haar base measure). With the proper
+  SVD ``F = U diag(s) Vᵀ`` (``det U = det V = 1``, ``s₃`` signed) the normaliser is the 1-D
+  integral ``c(s) = ∫_{−1}^{1} ½ I₀(½(s_i − s_j)(1 − u)) I₀(½(s_i + s_j)(1 + u)) e^{s_k u} du``
+  for any permutation ``(i, j, k)`` (the law is a Bingham law on ``S³`` in quaternions), and
+  ``E[R] = U diag(∂ log c/∂s) Vᵀ`` with ``∂c/∂s_k = ∫ u K_k(u) du`` (only ``e^{s_k u}`` depends
+  on ``s_k`` in the ``k``-th form).
+- lattice gauge theories in 2-D with open boundaries: after a maximal-tree gauge fixing the
+  plaquette variables are independent, so ``E[cos θ_P] = I₁(β)/I₀(β)`` for U(1) with
+  ``S = −β Σ cos θ_P`` and ``E[½ tr U_P] = I₂(β)/I₁(β)`` for SU(2) with
+  ``S = −(β/2) Σ tr U_P`` (Haar law of ``½ tr U`` is ``(2/π) sin²α dα``, ``cos α = ½ tr U``).
+- the posterior of the mean direction and the log-concentration of von Mises–Fisher data on
+  ``S²``, exact by 1-D quadrature over ``η = log κ`` (the direction integrates out in closed
+  form: ``∫ e^{κ μ·S} dσ(μ) = sinh(κR)/(κR)``, ``R = |S|``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax.numpy as jnp
+import numpy as np
+from scipy import integrate, special
+
+from liesample._validation import finite_float
+
+__all__ = [
+    "MatrixFisher",
+    "VonMisesFisher",
+    "VonMisesFisherPosterior",
+    "su2_plaquette_mean",
+    "u1_plaquette_mean",
+    "vmf_mean_resultant_length",
+]
+
+
+def vmf_mean_resultant_length(kappa, d: int) -> float:
+    """``A_d(κ) = I_{d/2}(κ)/I_{d/2−1}(κ)``: ``E[μ·x]`` for the vMF law on ``S^{d−1}``."""
+    kappa = finite_float("kappa", kappa, nonnegative=True)
+    if kappa == 0.0:
+        return 0.0
+    return float(special.ive(d / 2.0, kappa) / special.ive(d / 2.0 - 1.0, kappa))
+
+
+def u1_plaquette_mean(beta) -> float:
+    """``E[cos θ_P] = I₁(β)/I₀(β)`` (2-D U(1) gauge theory, open boundaries)."""
+    beta = finite_float("beta", beta)
+    return float(special.ive(1, beta) / special.ive(0, beta))
+
+
+def su2_plaquette_mean(beta) -> float:
+    """``E[½ tr U_P] = I₂(β)/I₁(β)`` (2-D SU(2) gauge theory, open boundaries, β > 0)."""
+    beta = finite_float("beta", beta, positive=True)
+    return float(special.ive(2, beta) / special.ive(1, beta))
+
+
+def _unit_vector(name, value) -> np.ndarray:
+    v = np.array(value, dtype=float)
+    if v.ndim != 1 or v.size < 2 or not np.all(np.isfinite(v)):
+        raise ValueError(f"{name} must be a finite vector of length >= 2, got {value!r}")
+    norm = np.linalg.norm(v)
+    if abs(norm - 1.0) > 1e-10:
+        raise ValueError(f"{name} must be a unit vector, got norm {norm}")
+    return v
+
+
+@dataclasses.dataclass(frozen=True)
+class VonMisesFisher:
+    """``p(x) ∝ exp(κ μ·x)`` on ``S^{d−1}`` with respect to the uniform law."""
+
+    mean_direction: np.ndarray
+    kappa: float
+
+    def __post_init__(self):
+        object.__setattr__(self, "mean_direction", _unit_vector("mean_direction",
+                                                                self.mean_direction))
+        object.__setattr__(self, "kappa", finite_float("kappa", self.kappa, nonnegative=True))
+
+    @property
+    def d(self) -> int:
+        return self.mean_direction.size
+
+    def logdensity(self, x):
+        """Unnormalised ``κ μ·x`` (jax-traceable)."""
+        return self.kappa * jnp.sum(jnp.asarray(self.mean_direction) * x, -1)
+
+    @property
+    def mean_resultant_length(self) -> float:
+        return vmf_mean_resultant_length(self.kappa, self.d)
+
+    def mean(self) -> np.ndarray:
+        return self.mean_resultant_length * self.mean_direction
+
+
+def _matrix_fisher_kernel(s, k, u):
+    """``K_k(u)·e^{−shift}``: the integrand of ``c(s)`` in its ``k``-th form, scaled."""
+    i, j = [m for m in range(3) if m != k]
+    a = 0.5 * abs(s[i] - s[j]) * (1.0 - u)
+    b = 0.5 * abs(s[i] + s[j]) * (1.0 + u)
+    return 0.5 * special.ive(0, a) * special.ive(0, b), a + b + s[k] * u
+
+
+@dataclasses.dataclass(frozen=True)
+class MatrixFisher:
+    """``p(R) ∝ exp(tr(FᵀR))`` on ``SO(3)`` with respect to Haar measure."""
+
+    F: np.ndarray
+
+    def __post_init__(self):
+        F = np.array(self.F, dtype=float)
+        if F.shape != (3, 3) or not np.all(np.isfinite(F)):
+            raise ValueError(f"F must be a finite 3x3 matrix, got {self.F!r}")
+        object.__setattr__(self, "F", F)
+
+    def proper_svd(self):
+        """``(U, s, V)`` with ``F = U diag(s) Vᵀ``, ``U, V ∈ SO(3)``."""
+        u, s, vt = np.linalg.svd(self.F)
+        v = vt.T
+        det_u, det_v = np.sign(np.linalg.det(u)), np.sign(np.linalg.det(v))
+        s = s * np.array([1.0, 1.0, det_u * det_v])
+        return u * np.array([1.0, 1.0, det_u]), s, v * np.array([1.0, 1.0, det_v])
+
+    def _integrals(self, s, k):
+        nodes = np.linspace(-1.0, 1.0, 3)
+        shift = max(_matrix_fisher_kernel(s, k, u)[1] for u in nodes)
+
+        def f(u, power):
+            scaled, exponent = _matrix_fisher_kernel(s, k, u)
+            return u**power * scaled * np.exp(exponent - shift)
+
+        opts = dict(epsabs=1e-14, epsrel=1e-12, limit=200)  # the scaled integrand is <= 1
+        z = integrate.quad(f, -1.0, 1.0, args=(0,), **opts)[0]
+        dz = integrate.quad(f, -1.0, 1.0, args=(1,), **opts)[0]
+        return z, dz, shift
+
+    def log_normalizer(self) -> float:
+        """``log ∫_{SO(3)} exp(tr(FᵀR)) dR`` (Haar probability measure; 0 for ``F = 0``)."""
+        _, s, _ = self.proper_svd()
+        z, _, shift = self._integrals(s, 2)
+        return float(np.log(z) + shift)
+
+    def mean(self) -> np.ndarray:
+        """``E[R] = U diag(∂ log c/∂s) Vᵀ``."""
+        u, s, v = self.proper_svd()
+        diag = []
+        for k in range(3):
+            z, dz, _ = self._integrals(s, k)
+            diag.append(dz / z)
+        return u @ np.diag(diag) @ v.T
+
+    def logdensity(self, R):
+        return jnp.sum(jnp.asarray(self.F) * R, axis=(-2, -1))
+
+
+def _log_vmf_normalizer_s2(kappa):
+    """``log(κ/sinh κ)``: minus the log normaliser of vMF on S² (uniform base law)."""
+    kappa = np.asarray(kappa, dtype=float)
+    return np.log(2.0 * kappa) - kappa - np.log1p(-np.exp(-2.0 * kappa))
+
+
+@dataclasses.dataclass(frozen=True)
+class VonMisesFisherPosterior:
+    """Posterior of ``(μ, η = log κ)`` for iid vMF data ``x_1…x_N`` on ``S²``.
+
+    Prior: ``μ`` uniform on ``S²``, ``η ~ N(prior_mean, prior_sd²)``. The log-density with
+    respect to uniform × Lebesgue is ``N log(κ/sinh κ) + κ μ·S + log N(η)``, ``S = Σ x_i``.
+    """
+
+    data: np.ndarray
+    prior_mean: float = 0.0
+    prior_sd: float = 1.0
+
+    def __post_init__(self):
+        x = np.array(self.data, dtype=float)
+        if x.ndim != 2 or x.shape[1] != 3 or x.shape[0] < 1:
+            raise ValueError(f"data must be an (N, 3) array of unit vectors, got {x.shape}")
+        if not np.allclose(np.linalg.norm(x, axis=1), 1.0, atol=1e-10, rtol=0.0):
+            raise ValueError("data must be unit vectors")
+        object.__setattr__(self, "data", x)
+        finite_float("prior_mean", self.prior_mean)
+        finite_float("prior_sd", self.prior_sd, positive=True)
+
+    @property
+    def resultant(self) -> np.ndarray:
+        return self.data.sum(0)
+
+    def logdensity(self, position):
+        """``position = {"direction": unit 3-vector, "log_kappa": scalar}`` (jax-traceable)."""
+        mu, eta = position["direction"], position["log_kappa"]
+        kappa = jnp.exp(eta)
+        n = self.data.shape[0]
+        log_c = jnp.log(2.0 * kappa) - kappa - jnp.log1p(-jnp.exp(-2.0 * kappa))
+        prior = -0.5 * ((eta - self.prior_mean) / self.prior_sd) ** 2
+        return n * log_c + kappa * jnp.dot(mu, jnp.asarray(self.resultant)) + prior
+
+    def _log_marginal(self, eta):
+        """Unnormalised log-density of ``η`` (``μ`` integrated out)."""
+        kappa = np.exp(eta)
+        r = np.linalg.norm(self.resultant)
+        kr = kappa * r
+        log_sinhc = kr + np.log1p(-np.exp(-2.0 * kr)) - np.log(2.0 * kr)  # log(sinh(κR)/(κR))
+        prior = -0.5 * ((eta - self.prior_mean) / self.prior_sd) ** 2
+        return self.data.shape[0] * _log_vmf_normalizer_s2(kappa) + log_sinhc + prior
+
+    def expectations(self) -> dict:
+        """``E[η]``, ``Var[η]``, ``E[μ]`` (vector) by quadrature over ``η``."""
+        grid = np.linspace(self.prior_mean - 12 * self.prior_sd, self.prior_mean + 12 * self.prior_sd,
+                           20001)
+        grid = grid[grid > -30.0]
+        logp = self._log_marginal(grid)
+        weights = np.exp(logp - logp.max())
+        weights /= integrate.trapezoid(weights, grid)
+        # Refine around the bulk (the posterior is much narrower than the prior).
+        bulk = grid[weights > weights.max() * 1e-18]
+        lo, hi = bulk.min(), bulk.max()
+
+        def moment(f):
+            shift = logp.max()
+            val = integrate.quad(lambda e: f(e) * np.exp(self._log_marginal(e) - shift), lo, hi,
+                                 epsabs=0.0, epsrel=1e-12, limit=400, points=None)[0]
+            return val
+
+        z = moment(lambda e: 1.0)
+        mean_eta = moment(lambda e: e) / z
+        var_eta = moment(lambda e: (e - mean_eta) ** 2) / z
+        r = np.linalg.norm(self.resultant)
+        a = moment(lambda e: vmf_mean_resultant_length(np.exp(e) * r, 3)) / z
+        return {"log_kappa": mean_eta, "log_kappa_var": var_eta,
+                "direction": a * self.resultant / r}
