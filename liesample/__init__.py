@@ -41,3 +41,10 @@ __all__ = [
     "symplectic",
     "systems",
 ]
+
+# Lie groups and spheres as parameter spaces (geometric HMC and Langevin on T*G).
+from liesample import spaces  # noqa: E402
+from liesample.samplers.geometric_hmc import geometric_hmc  # noqa: E402
+from liesample.samplers.geometric_langevin import geometric_langevin  # noqa: E402
+
+__all__ += ["geometric_hmc", "geometric_langevin", "spaces"]
