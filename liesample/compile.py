@@ -38,18 +38,22 @@ def safe_compiler_options(compiler_options: dict | None = None) -> dict:
     return options
 
 
-def _inside_staged_computation() -> bool:
-    """Whether a call now would be traced into an enclosing ``jit`` (whose options then apply).
+# Traces under which a jitted call is still compiled on its own (eagerly, possibly batched).
+_EAGER_TRACES = {"EvalTrace", "BatchTrace"}
 
-    ``jax.jit`` refuses ``compiler_options`` on a nested jit; under an eager ``vmap`` or ``grad``
-    the function is still compiled on its own, so the options are kept there.
+
+def _inside_staged_computation() -> bool:
+    """Whether a call now may be staged into an enclosing computation (``jit``, ``grad``, …).
+
+    ``jax.jit`` refuses ``compiler_options`` on a nested jit; under an eager ``vmap`` the
+    function is still compiled on its own, so the options are kept there (and only there).
     """
     try:
         from jax._src import core
 
         trace = core.trace_ctx.trace
         while trace is not None:
-            if type(trace).__name__ == "DynamicJaxprTrace":
+            if type(trace).__name__ not in _EAGER_TRACES:
                 return True
             trace = getattr(trace, "parent_trace", None)
         return False
@@ -63,9 +67,10 @@ def jit(fun=None, /, **jit_kwargs):
     """``jax.jit`` with :func:`safe_compiler_options`; usable as ``@jit`` or ``@jit(...)``.
 
     Takes every keyword of ``jax.jit`` (``static_argnums``, ``donate_argnums``, …). Called at top
-    level, under an eager ``vmap`` or ``grad``, or through ``.lower(...).compile()``, it compiles
-    with the pass disabled. Called inside another ``jax.jit`` it is inlined there (``jax.jit``
-    takes compiler options only at the top), so wrap the outermost function in ``liesample.jit``.
+    level, under an eager ``vmap``, or through ``.lower(...).compile()``, it compiles with the
+    pass disabled. Inside another ``jax.jit`` (or ``grad``) it is traced into the enclosing
+    computation (``jax.jit`` takes compiler options only at the top), so wrap the outermost
+    function in ``liesample.jit``.
     """
     if fun is None:
         return functools.partial(jit, **jit_kwargs)
