@@ -99,7 +99,7 @@ def build_kernel(system: SpinLatticeSystem):
         r = von_mises_fisher(key_r, jnp.array([0.0, 0.0, 1.0], s.dtype), 0.0)  # uniform on S²
         # projections; the sentinel site N (no neighbour) never joins
         projection = jnp.append(s @ r, 0.0)
-        seed = jax.random.randint(key_seed, (), 0, num_sites)
+        seed = jax.random.randint(key_seed, (), 0, num_sites, dtype=jnp.int32)
         in_cluster = jnp.zeros(num_sites + 1, bool).at[seed].set(True).at[num_sites].set(True)
         queue = jnp.zeros(num_sites + 1, jnp.int32).at[0].set(seed)
         factor = -2.0 * beta * coupling
