@@ -15,6 +15,9 @@ The algebras here:
   acts copy by copy, vectorised, with no loop over the blocks.
 - :class:`SE3` (``se3``): ``se(3)* = so(3)* ⋉ R³``, the heavy top, state ``(Π, Γ)`` of shape
   ``(..., 6)``; closed-form coadjoint action (MATH.md §2).
+- :class:`Unitary` (``unitary(N)``): ``u(N)`` on real ``N × N`` coordinates, ``Ad*`` by unitary
+  conjugation (``expm``), O(N³); Casimirs the spectrum. Zeitlin's model of 2-D Euler on the
+  sphere (:mod:`liesample.systems.zeitlin`) lives on it.
 - :class:`StructureConstants`: any finite-dimensional algebra from its structure constants,
   validated (antisymmetry, Jacobi); ``coadjoint_exp`` by a matrix exponential. Instances:
   ``se3_structure_constants`` (cross-checks :class:`SE3`), and the non-compact ``sl2`` and
@@ -376,3 +379,122 @@ se3_structure_constants = StructureConstants(
 )
 sl2 = StructureConstants(_sl2_constants(), casimirs=_sl2_casimir, name="sl(2,R)")
 se2 = StructureConstants(_se2_constants(), casimirs=_se2_casimir, name="se(2)")
+
+
+# ---------------------------------------------------------------------------------------------
+# u(N) on real N×N coordinates, coadjoint action by conjugation
+# ---------------------------------------------------------------------------------------------
+
+
+def _transpose(x):
+    return jnp.swapaxes(x, -1, -2)
+
+
+@dataclass(frozen=True, init=False)
+class Unitary(LieAlgebra):
+    """``u(N)`` and its dual on real ``(..., N, N)`` arrays; coadjoint action by conjugation.
+
+    An element of ``u(N)`` is a skew-Hermitian matrix ``W = A + iS`` (``A`` real antisymmetric, ``S``
+    real symmetric). liesample stores it as the **real** matrix ``x = A + S`` (shape ``(..., N, N)``):
+    ``A`` and ``S`` are the antisymmetric and symmetric parts of ``x``, so the map is a linear
+    bijection ``R^{N×N} → u(N)`` and every engine piece (real Brownian increments, ``jax.grad``,
+    ``jnp.where`` guards) works unchanged.
+
+    **Pairing.** ``⟨W, Ξ⟩ = −tr(WΞ) = Re tr(W*Ξ)`` (the Frobenius inner product). In the real
+    coordinates it is the plain sum ``Σ_ij x_ij y_ij`` (the cross terms ``A·T`` and ``S·B`` vanish), so
+    it is :meth:`LieAlgebra.pairing` and ``jax.grad`` of a real function of ``x`` *is* the Riesz
+    representative of its differential: no conjugation convention enters. ``g*`` is identified with
+    ``g`` by this pairing.
+
+    **Bracket and coadjoint action** (MATH.md §2 conventions, ``⟨ad*_Ξ W, H⟩ = ⟨W, [Ξ, H]⟩``):
+
+    - ``[Ξ, H] = ΞH − HΞ`` (matrix commutator);
+    - ``ad*_Ξ W = [W, Ξ]`` (from ``−tr(W[Ξ, H]) = −tr([W, Ξ] H)``);
+    - ``coadjoint_exp(Z, W) = e^{−Z} W e^{Z}``, the time-one flow of ``Ẇ = [W, Z]``: a unitary
+      conjugation, so the spectrum of ``W`` is kept to round-off (``expm`` of a skew-Hermitian
+      matrix by a diagonal Padé approximant and squaring is unitary to round-off). O(N³).
+
+    Casimirs: the spectrum of the Hermitian matrix ``iW`` (ascending) and ``‖W‖² = −tr(W²)``, shape
+    ``(..., N + 1)``; the orbits are the isospectral sets ``{U W₀ U*}``. Everything broadcasts over
+    leading axes (a stack of chains). ``N = 2``: ``su(2) ≅ so(3)`` (``liesample.systems.zeitlin``).
+
+    Parameters
+    ----------
+    size : int
+        ``N ≥ 1``.
+    """
+
+    size: int = 2
+
+    def __init__(self, size: int):
+        if isinstance(size, bool) or not isinstance(size, int) or size < 1:
+            raise ValueError(f"size N of u(N) must be an int >= 1, got {size!r}")
+        object.__setattr__(self, "size", size)
+        object.__setattr__(self, "name", f"u({size})")
+
+    def _check(self, x):
+        if jnp.shape(x)[-2:] != (self.size, self.size):
+            raise ValueError(
+                f"{self.name} elements are real arrays of shape (..., {self.size}, {self.size}), "
+                f"got shape {jnp.shape(x)}"
+            )
+
+    def to_matrix(self, x):
+        """The skew-Hermitian matrix ``W`` (complex) of the real coordinates ``x``."""
+        self._check(x)
+        x = jnp.asarray(x)
+        xt = _transpose(x)
+        return 0.5 * (x - xt) + 0.5j * (x + xt)
+
+    def from_matrix(self, w):
+        """The real coordinates of the skew-Hermitian part ``(W − W*)/2`` of a complex matrix.
+
+        For a skew-Hermitian ``W`` this is ``Re W + Im W``, the inverse of :meth:`to_matrix`.
+        """
+        self._check(w)
+        w = jnp.asarray(w)
+        re, im = jnp.real(w), jnp.imag(w)
+        return 0.5 * (re - _transpose(re)) + 0.5 * (im + _transpose(im))
+
+    def bracket(self, xi, eta):
+        """``[Ξ, H] = ΞH − HΞ``."""
+        a, b = self.to_matrix(xi), self.to_matrix(eta)
+        return self.from_matrix(a @ b - b @ a)
+
+    def ad_star(self, xi, mu):
+        """``ad*_Ξ W = [W, Ξ] = WΞ − ΞW``."""
+        a, w = self.to_matrix(xi), self.to_matrix(mu)
+        return self.from_matrix(w @ a - a @ w)
+
+    def group_element(self, zeta):
+        """``U = e^{−Z}`` (unitary), so that ``coadjoint_exp(ζ, W) = U W U*``."""
+        return jax.scipy.linalg.expm(-self.to_matrix(zeta))
+
+    def coadjoint_exp(self, zeta, mu):
+        """``e^{−Z} W e^{Z}``: the time-one flow of ``Ẇ = [W, Z]`` (isospectral)."""
+        zeta, mu = jnp.broadcast_arrays(jnp.asarray(zeta), jnp.asarray(mu))
+        u = self.group_element(zeta)
+        w = self.to_matrix(mu)
+        return self.from_matrix(u @ w @ jnp.conj(_transpose(u)))
+
+    def spectrum(self, mu):
+        """Eigenvalues of the Hermitian matrix ``iW``, ascending, shape ``(..., N)``."""
+        return jnp.linalg.eigvalsh(1j * self.to_matrix(mu))
+
+    def casimirs(self, mu):
+        """``(spectrum of iW, ‖W‖²)``, shape ``(..., N + 1)``; ``‖W‖² = Σ_ij x_ij²``."""
+        norm_sq = jnp.sum(jnp.asarray(mu) ** 2, axis=(-2, -1))
+        return jnp.concatenate([self.spectrum(mu), norm_sq[..., None]], axis=-1)
+
+    def casimir_scale(self, mu):
+        """Round-off scale of each Casimir: ``‖W‖`` for the eigenvalues, ``‖W‖²`` for the norm."""
+        norm_sq = jnp.sum(jnp.asarray(mu) ** 2, axis=(-2, -1))[..., None]
+        size = jnp.sqrt(norm_sq)
+        return jnp.concatenate(
+            [jnp.broadcast_to(size, norm_sq.shape[:-1] + (self.size,)), norm_sq], axis=-1
+        )
+
+
+def unitary(size: int) -> Unitary:
+    """``u(N)`` (:class:`Unitary`)."""
+    return Unitary(size)

@@ -6,6 +6,7 @@ from liesample.systems.heavy_top import heavy_top
 from liesample.systems.heisenberg import heisenberg
 from liesample.systems.point_vortices import point_vortex_integrator, point_vortices
 from liesample.systems.rigid_body import rigid_body
+from liesample.systems.zeitlin import isospectral_midpoint, zeitlin_euler
 
 __all__ = [
     "LiePoissonSystem",
@@ -17,4 +18,6 @@ __all__ = [
     "point_vortex_integrator",
     "point_vortices",
     "rigid_body",
+    "isospectral_midpoint",
+    "zeitlin_euler",
 ]

@@ -1,0 +1,458 @@
+"""Zeitlin's su(N) model of 2-D Euler on the sphere, with transport noise and derived dissipation.
+
+The paper's dissipative SALT-Euler equation (``eq:salt-euler-with-dissipation``) is formal in
+infinite dimensions; Zeitlin's quantisation is its structure-preserving finite model. The
+vorticity is a skew-Hermitian trace-free matrix ``W ∈ su(N)``, stored as the real ``N × N``
+coordinates of :class:`liesample.algebras.Unitary` (``x = Re W + Im W``; pairing
+``⟨W, Ξ⟩ = −tr(WΞ)``, the Frobenius product). With the engine's conventions (MATH.md §2)
+``Ẇ = ad*_{∇h} W = [W, ∇h]``; ``∇h = −P`` below, so this is Zeitlin's ``Ẇ = [P, W]``.
+
+**Quantised harmonics** (Hoppe–Yau). ``S₁, S₂, S₃`` are the spin-``s = (N−1)/2`` matrices
+(``S₃ = diag(s, s−1, …, −s)``, ``S₊ = S₁ + iS₂`` upper bidiagonal). The quantised Laplacian is
+``Δ_N W = −Σ_k [S_k, [S_k, W]]``; it maps each diagonal of ``W`` to itself (``[S₃, ·]`` is ``m`` on
+the ``m``-th superdiagonal), acting there as a real symmetric tridiagonal matrix whose
+eigenvalues are ``ℓ(ℓ+1)``, ``ℓ = |m| … N−1``. Its eigenvectors ``T_ℓm`` (computed once per
+``N`` in NumPy, ``scipy.linalg.eigh_tridiagonal``: O(N³) time, N³ floats of memory) have the
+Condon–Shortley phases of spherical tensor operators: ``T_ℓ0`` has a positive leading
+coefficient as a polynomial in ``S₃`` (so its value at the north pole ``μ = s`` is positive) and
+``[S₊, T_ℓm] = √(ℓ(ℓ+1) − m(m+1)) T_ℓ,m+1``, which makes the coherent-state symbol of ``T_ℓm``
+a positive multiple of ``Y_ℓm`` (``tests/test_zeitlin.py`` checks it). The real orthonormal basis
+``E_ℓm`` of ``u(N)`` matches :mod:`liesample.spherical_harmonics` (no Condon–Shortley phase)::
+
+    E_ℓ0 = i T_ℓ0,   E_ℓm = (−1)^m i (T_ℓm + T_ℓmᵀ)/√2,   E_ℓ,−m = (−1)^m (T_ℓm − T_ℓmᵀ)/√2,
+
+so the vorticity ``ω = Σ ω_ℓm Y_ℓm`` (``ℓ < N``, ``Y_ℓm`` orthonormal on the unit sphere) is
+``W = Σ ω_ℓm E_ℓm`` and ``‖W‖² = ∫ω²`` (enstrophy ×2). ``ℓ = 0`` is the trace, absent in su(N).
+
+**Hamiltonian.** ``P = Δ_N⁻¹ W`` (trace-free) and ``h(W) = ½ tr(PW) = −½⟨W, Δ_N⁻¹W⟩
+= ½ Σ_ℓm ω_ℓm² / (ℓ(ℓ+1)) ≥ 0``, the kinetic energy ``½∫|∇ψ|²`` of the band-limited flow.
+``Δ_N⁻¹`` is applied by one batched tridiagonal solve over the ``2N − 1`` diagonals (O(N²));
+the coadjoint move costs O(N³) (``expm``).
+
+**Noise.** ``ĥ_ℓm(W) = ⟨W, ψ_ℓm⟩`` for ``1 ≤ ℓ ≤ L`` with ``ψ_ℓm = (ℓ(ℓ+1))^{−n/2} E_ℓm``,
+orthonormal in the ``⟨α, (−Δ)ⁿβ⟩`` inner product (the paper's choice, with ``n`` =
+``noise_smoothness``; default ``n = 1``: the noise velocity fields are L²-orthonormal). Linear,
+so ``adjusted_lie_poisson`` applies; the dissipation is derived by the engine.
+
+**N = 2**: ``su(2) ≅ so(3)`` by ``μ ↦ W = −i Σ_k μ_k σ_k`` (Pauli matrices; a Lie algebra map
+with ``[W(μ), W(ν)]/2 = W(μ×ν)/… `` up to the factor 2 of the dual pairing, ``⟨W(μ), W(ν)⟩ = 2μ·ν``):
+``h = ½|μ|²`` (the rigid body with isotropic inertia 1) and the ``ℓ = 1`` noise with ``n = 1``
+is ``ĥ = Rμ`` for a rotation ``R`` (:func:`so3_from_su2`, :func:`su2_from_so3`).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import scipy.linalg
+
+from liesample._validation import concrete_array
+from liesample.algebras import Unitary
+from liesample.integrators import Integrator
+from liesample.spherical_harmonics import degrees_and_orders, real_spherical_harmonics
+from liesample.system_base import LiePoissonSystem
+from liesample.targets.zeitlin import UnitaryOrbitLaw
+
+__all__ = [
+    "QuantisedHarmonics",
+    "isospectral_midpoint",
+    "quantised_harmonics",
+    "random_vorticity",
+    "so3_from_su2",
+    "su2_from_so3",
+    "zeitlin_euler",
+]
+
+
+def _check_size(size):
+    if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or size < 2:
+        raise ValueError(f"N must be an int >= 2 (su(N) with N = 1 is trivial), got {size!r}")
+    return int(size)
+
+
+class QuantisedHarmonics:
+    """The quantised spherical harmonics of su(N) and the operators built on them.
+
+    Every method takes real ``(..., N, N)`` coordinates (:class:`liesample.algebras.Unitary`) and
+    broadcasts over leading axes. Build with :func:`quantised_harmonics` (cached per ``N``).
+    """
+
+    def __init__(self, size: int):
+        n = self.size = _check_size(size)
+        s = 0.5 * (n - 1)
+        mu = s - np.arange(n)
+        # (S₊)_{i,i+1} = √(s(s+1) − μ_{i+1}(μ_{i+1}+1))
+        ladder = np.sqrt(s * (s + 1) - mu[1:] * (mu[1:] + 1))
+        # On the m-th diagonal (entries x_k = W[k, k+m]), L = Σ_k [S_k,[S_k,·]] is tridiagonal:
+        # (Lx)_k = (2s(s+1) − 2μ_k μ_{k+m}) x_k − a_k a_{k+m} x_{k+1} − a_{k−1} a_{k+m−1} x_{k−1}.
+        diagonal = np.ones((n, n))
+        off = np.zeros((n, n))
+        vectors = np.zeros((n, n, n))
+        for m in range(n):
+            length = n - m
+            diagonal[m, :length] = 2 * s * (s + 1) - 2 * mu[:length] * mu[m : m + length]
+            off[m, : length - 1] = -ladder[: length - 1] * ladder[m : m + length - 1]
+            values, v = scipy.linalg.eigh_tridiagonal(diagonal[m, :length], off[m, : length - 1])
+            ell = np.arange(m, n)
+            if not np.allclose(values, ell * (ell + 1), rtol=1e-9, atol=1e-9 * n * n):
+                raise ArithmeticError(f"quantised Laplacian spectrum is off for N = {n}, m = {m}")
+            vectors[m, :length, :length] = v
+        # Phases (module docstring). m = 0: ⟨S₃ T_{ℓ−1,0}, T_ℓ0⟩ > 0, i.e. positive leading
+        # coefficients, T_00 ∝ I positive; robust where the pole value itself is tiny.
+        v0 = vectors[0]
+        if v0[:, 0].sum() < 0:
+            v0[:, 0] *= -1
+        for ell in range(1, n):
+            if np.sum(mu * v0[:, ell - 1] * v0[:, ell]) < 0:
+                v0[:, ell] *= -1
+        # m → m+1: ⟨[S₊, T_ℓm], T_ℓ,m+1⟩ > 0, with [S₊, T]_{p,p+m+1} = a_p x_{p+1} − x_p a_{p+m}.
+        for m in range(n - 1):
+            length = n - m
+            x = vectors[m, :length, 1:length]  # ℓ = m+1 … N−1
+            raised = ladder[: length - 1, None] * x[1:] - x[:-1] * ladder[m : m + length - 1, None]
+            overlap = np.sum(raised * vectors[m + 1, : length - 1, : length - 1], axis=0)
+            vectors[m + 1, :, : length - 1] *= np.where(overlap < 0, -1.0, 1.0)
+        self.spin = s
+        self.ladder = ladder
+        self.eigenvectors = vectors  # [m, position along the diagonal, ℓ − m]
+        index = np.arange(n)
+        valid = index[None, :] < n - index[:, None]  # [m, k]: k < N − m
+        self._valid = valid
+        k, m = index[None, :], index[:, None]
+        # Gather of the diagonals: upper[m, k] = x[k, k+m], lower[m, k] = x[k+m, k] (padded).
+        self._upper_index = np.where(valid, k * n + k + m, 0)
+        self._lower_index = np.where(valid, (k + m) * n + k, 0)
+        # Scatter back as a gather from concat(upper, lower) (flattened).
+        i, j = index[:, None], index[None, :]
+        self._unpack_index = np.where(j >= i, (j - i) * n + i, n * n + (i - j) * n + j)
+        # The tridiagonal solves of Δ_N⁻¹: padded rows are identities; on m = 0 (kernel: I) the
+        # last unknown is pinned to 0, the others solved, and the mean removed afterwards.
+        d, lo, up = diagonal.copy(), np.zeros((n, n)), np.zeros((n, n))
+        up[:, :-1] = off[:, :-1]
+        lo[:, 1:] = off[:, :-1]
+        d[0, n - 1], lo[0, n - 1], up[0, n - 2] = 1.0, 0.0, 0.0
+        self._solve_bands = (lo, d, up)
+        ell = index[:, None] + index[None, :]  # [m, k] -> ℓ = m + k
+        self._ell = np.where(valid, ell, 0)
+        # Coefficient vector order: ℓ = 0 … N−1, m = −ℓ … ℓ (liesample.spherical_harmonics).
+        ell_c, m_c = degrees_and_orders(n - 1)
+        am = np.abs(m_c)
+        sign = (-1.0) ** am
+        self._coef_rows = am * n + (ell_c - am)  # into the flattened [m, ℓ − m] arrays
+        root = 1.0 / math.sqrt(2.0)
+        self._coef_upper = np.where(m_c == 0, 1.0, sign * root)
+        self._coef_lower = np.where(m_c == 0, 0.0, np.where(m_c > 0, 1.0, -1.0) * sign * root)
+        self.degrees, self.orders = ell_c, m_c
+
+    # -- diagonals ------------------------------------------------------------------------
+
+    def _pack(self, x):
+        """``(..., 2, N, N)``: the upper and lower diagonals ``[m, k]``, zero-padded."""
+        flat = jnp.reshape(x, jnp.shape(x)[:-2] + (self.size * self.size,))
+        valid = jnp.asarray(self._valid, dtype=flat.dtype)
+        upper = flat[..., self._upper_index] * valid
+        lower = flat[..., self._lower_index] * valid
+        return jnp.stack([upper, lower], axis=-3)
+
+    def _unpack(self, packed):
+        flat = jnp.reshape(packed, jnp.shape(packed)[:-3] + (2 * self.size * self.size,))
+        return flat[..., self._unpack_index]
+
+    # -- operators ------------------------------------------------------------------------
+
+    def laplacian(self, x):
+        """``Δ_N W = −Σ_k [S_k, [S_k, W]]`` (eigenvalues ``−ℓ(ℓ+1)``), in O(N²)."""
+        p = self._pack(x)
+        lo, d, up = (jnp.asarray(b) for b in self._operator_bands())
+        shifted_up = jnp.concatenate([p[..., 1:], jnp.zeros_like(p[..., :1])], axis=-1)
+        shifted_down = jnp.concatenate([jnp.zeros_like(p[..., :1]), p[..., :-1]], axis=-1)
+        return -self._unpack(d * p + up * shifted_up + lo * shifted_down)
+
+    def _operator_bands(self):
+        n = self.size
+        valid = self._valid
+        s, mu = self.spin, self.spin - np.arange(n)
+        d = np.zeros((n, n))
+        up = np.zeros((n, n))
+        for m in range(n):
+            length = n - m
+            d[m, :length] = 2 * s * (s + 1) - 2 * mu[:length] * mu[m : m + length]
+            up[m, : length - 1] = -self.ladder[: length - 1] * self.ladder[m : m + length - 1]
+        lo = np.zeros((n, n))
+        lo[:, 1:] = up[:, :-1]
+        return lo * valid, d * valid, up * valid
+
+    def inverse_laplacian(self, x):
+        """``P = Δ_N⁻¹ W`` on trace-free ``W`` (the trace part is sent to 0): one batched
+        tridiagonal solve over the diagonals, O(N²)."""
+        n = self.size
+        p = self._pack(x)
+        mean = jnp.mean(p[..., 0, 0, :], axis=-1, keepdims=True)
+        # m = 0 appears as both upper[0] and lower[0]: make it trace-free, pin its last entry.
+        main = (p[..., 0, 0, :] - mean).at[..., n - 1].set(0.0)
+        p = p.at[..., 0, 0, :].set(main).at[..., 1, 0, :].set(main)
+        lo, d, up = (jnp.broadcast_to(jnp.asarray(b, p.dtype), p.shape) for b in self._solve_bands)
+        y = jax.lax.linalg.tridiagonal_solve(lo, d, up, p[..., None])[..., 0]
+        y0 = y[..., 0, 0, :] - jnp.mean(y[..., 0, 0, :], axis=-1, keepdims=True)
+        y = y.at[..., 0, 0, :].set(y0).at[..., 1, 0, :].set(y0)
+        return -self._unpack(y * jnp.asarray(self._valid, p.dtype))
+
+    def energy(self, x):
+        """``h = −½⟨W, Δ_N⁻¹W⟩ = ½ Σ ω_ℓm²/(ℓ(ℓ+1))`` (shape ``x.shape[:-2]``)."""
+        return -0.5 * jnp.sum(x * self.inverse_laplacian(x), axis=(-2, -1))
+
+    # -- spherical-harmonic coefficients --------------------------------------------------
+
+    def coefficients(self, x):
+        """``ω_ℓm`` with ``W = Σ ω_ℓm E_ℓm``, shape ``(..., N²)``, order ``(ℓ, m)`` as in
+        :func:`liesample.spherical_harmonics.degrees_and_orders` (``ℓ ≤ N−1``). O(N³)."""
+        v = jnp.asarray(self.eigenvectors, dtype=jnp.result_type(x, float))
+        p = self._pack(x)
+        c = jnp.einsum("mik,...mi->...mk", v, p)  # [..., 2, m, ℓ − m]
+        flat = jnp.reshape(c, c.shape[:-2] + (self.size * self.size,))
+        upper, lower = flat[..., 0, self._coef_rows], flat[..., 1, self._coef_rows]
+        return self._coef_upper * upper + self._coef_lower * lower
+
+    def from_coefficients(self, coefficients):
+        """The inverse of :meth:`coefficients` (the transform is orthogonal)."""
+        coefficients = jnp.asarray(coefficients)
+        n = self.size
+        if coefficients.shape[-1:] != (n * n,):
+            raise ValueError(f"coefficients must have shape (..., {n * n}), got {coefficients.shape}")
+        batch = coefficients.shape[:-1]
+        upper = jnp.zeros(batch + (n * n,), coefficients.dtype)
+        lower = jnp.zeros(batch + (n * n,), coefficients.dtype)
+        upper = upper.at[..., self._coef_rows].add(self._coef_upper * coefficients)
+        lower = lower.at[..., self._coef_rows].add(self._coef_lower * coefficients)
+        c = jnp.stack([upper, lower], axis=-2).reshape(batch + (2, n, n))
+        v = jnp.asarray(self.eigenvectors, dtype=coefficients.dtype)
+        p = jnp.einsum("mik,...mk->...mi", v, c)
+        return self._unpack(p)
+
+    def basis(self, max_degree: int, min_degree: int = 1) -> np.ndarray:
+        """The matrices ``E_ℓm`` (real coordinates), ``min ≤ ℓ ≤ max``, shape ``(K, N, N)``."""
+        if not 0 <= min_degree <= max_degree < self.size:
+            raise ValueError(
+                f"degrees must satisfy 0 <= min_degree <= max_degree <= N − 1 = {self.size - 1}, "
+                f"got min_degree={min_degree}, max_degree={max_degree}"
+            )
+        first, last = min_degree**2, (max_degree + 1) ** 2
+        eye = np.eye(self.size * self.size)[first:last]
+        with jax.ensure_compile_time_eval():
+            return np.asarray(self.from_coefficients(jnp.asarray(eye)))
+
+    def energy_spectrum(self, x):
+        """Energy per degree ``ε_ℓ = ½ Σ_m ω_ℓm²/(ℓ(ℓ+1))``, ``ℓ = 1 … N−1`` (shape ``(..., N−1)``)."""
+        c = self.coefficients(x)
+        ell = self.degrees
+        weights = np.where(ell > 0, 0.5 / np.maximum(ell * (ell + 1), 1), 0.0)
+        per_mode = weights * c**2
+        onehot = (ell[:, None] == np.arange(1, self.size)[None, :]).astype(float)
+        return per_mode @ jnp.asarray(onehot, dtype=per_mode.dtype)
+
+    def grid(self, x, num_theta: int = 64, num_phi: int = 128):
+        """The vorticity ``ω(θ, φ) = Σ ω_ℓm Y_ℓm`` on a ``(num_theta, num_phi)`` grid
+        (cell-centred colatitudes, longitudes from 0): ``(theta, phi, values)``, values of shape
+        ``x.shape[:-2] + (num_theta, num_phi)``. Evaluated row by row (bounded memory)."""
+        theta = (np.arange(num_theta) + 0.5) * np.pi / num_theta
+        phi = np.arange(num_phi) * 2 * np.pi / num_phi
+        c = self.coefficients(jnp.asarray(x, dtype=float))
+
+        def row(t):
+            points = jnp.stack(
+                [jnp.sin(t) * jnp.cos(phi), jnp.sin(t) * jnp.sin(phi), jnp.cos(t) + 0 * phi], -1
+            )
+            y = real_spherical_harmonics(points, self.size - 1)  # (num_phi, N²)
+            return jnp.einsum("pk,...k->...p", y, c)
+
+        values = jax.lax.map(row, jnp.asarray(theta))  # (num_theta, ..., num_phi)
+        return theta, phi, jnp.moveaxis(values, 0, -2)
+
+
+@functools.lru_cache(maxsize=8)
+def quantised_harmonics(size: int) -> QuantisedHarmonics:
+    """:class:`QuantisedHarmonics` of ``su(N)``, built once per ``N``."""
+    return QuantisedHarmonics(size)
+
+
+def random_vorticity(size: int, seed: int = 0, slope: float = 1.0, enstrophy: float = 1.0):
+    """A trace-free vorticity with Gaussian coefficients ``ω_ℓm ∝ ℓ^{−slope/2}`` (all ``ℓ ≥ 1``),
+    scaled to ``‖W‖² = enstrophy``; real coordinates, shape ``(N, N)``."""
+    basis = quantised_harmonics(size)
+    rng = np.random.default_rng(seed)
+    ell = basis.degrees
+    c = rng.standard_normal(ell.shape) * np.where(ell > 0, np.maximum(ell, 1.0) ** (-slope / 2), 0.0)
+    c *= math.sqrt(enstrophy / np.sum(c**2))
+    with jax.ensure_compile_time_eval():
+        return np.asarray(basis.from_coefficients(jnp.asarray(c)))
+
+
+def su2_from_so3(mu):
+    """``μ ∈ so(3)* ↦ W = −i Σ_k μ_k σ_k ∈ su(2)*`` in real coordinates, shape ``(..., 2, 2)``."""
+    mu = jnp.asarray(mu)
+    m1, m2, m3 = mu[..., 0], mu[..., 1], mu[..., 2]
+    return jnp.stack([jnp.stack([-m3, -m1 - m2], -1), jnp.stack([m2 - m1, m3], -1)], -2)
+
+
+def so3_from_su2(x):
+    """The inverse of :func:`su2_from_so3` on trace-free ``x``."""
+    x = jnp.asarray(x)
+    m1 = -0.5 * (x[..., 0, 1] + x[..., 1, 0])
+    m2 = 0.5 * (x[..., 1, 0] - x[..., 0, 1])
+    return jnp.stack([m1, m2, x[..., 1, 1]], -1)
+
+
+class ZeitlinSystem(LiePoissonSystem):
+    """A :class:`LiePoissonSystem` whose states must also be trace-free (su(N), not u(N))."""
+
+    def check_position(self, position, name: str = "position"):
+        super().check_position(position, name)
+        value = concrete_array(position)
+        if value is not None:
+            trace, size = float(np.trace(value)), float(np.linalg.norm(value))
+            if abs(trace) > 1e-10 * max(size, 1e-300):
+                raise ValueError(
+                    f"{name} must be trace-free (a vorticity in su(N)); its trace is {trace:.3g}. "
+                    "Subtract trace/N from the diagonal"
+                )
+
+
+def zeitlin_euler(size: int, noise_degree: int = 2, noise_smoothness: int = 1, position=None):
+    """Zeitlin's su(N) Euler equations on the sphere with transport noise (module docstring).
+
+    Parameters
+    ----------
+    size : int
+        ``N ≥ 2``; the vorticity is resolved up to degree ``ℓ = N − 1``.
+    noise_degree : int
+        ``L``: noise Hamiltonians from the ``L(L+2)`` modes ``1 ≤ ℓ ≤ L`` (``L ≤ N − 1``).
+    noise_smoothness : int
+        ``n ≥ 0``: ``ψ_ℓm = (ℓ(ℓ+1))^{−n/2} E_ℓm`` is orthonormal in ``⟨α, (−Δ)ⁿβ⟩``.
+    position : array (N, N), optional
+        Default start; :func:`random_vorticity` (seed 0, unit enstrophy) when omitted.
+
+    Returns
+    -------
+    LiePoissonSystem
+        Algebra ``u(N)`` (:class:`liesample.algebras.Unitary`); Casimirs the spectrum of
+        ``iW`` and ``‖W‖²``. ``system.params["harmonics"]`` is the :class:`QuantisedHarmonics`.
+        ``system.reference(beta, position)`` is the exact orbit law by Haar importance sampling
+        (:class:`liesample.targets.zeitlin.UnitaryOrbitLaw`), for small ``N``.
+    """
+    size = _check_size(size)
+    for name, value, low, high in (
+        ("noise_degree", noise_degree, 1, size - 1),
+        ("noise_smoothness", noise_smoothness, 0, None),
+    ):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            raise TypeError(f"{name} must be an int, got {value!r}")
+        if value < low or (high is not None and value > high):
+            allowed = f"{low} … {high}" if high is not None else f">= {low}"
+            raise ValueError(f"{name} must be in {allowed} for N = {size}, got {value}")
+    harmonics = quantised_harmonics(size)
+    algebra = Unitary(size)
+    modes = harmonics.basis(noise_degree, 1)
+    ell = harmonics.degrees[1 : (noise_degree + 1) ** 2]
+    streams = modes * (ell * (ell + 1.0))[:, None, None] ** (-0.5 * noise_smoothness)
+    streams.setflags(write=False)
+
+    def hamiltonian(x):
+        return harmonics.energy(x)
+
+    def noise_hamiltonians(x):
+        return jnp.einsum("knm,...nm->...k", jnp.asarray(streams, dtype=x.dtype), x)
+
+    def reference(beta, position):
+        return UnitaryOrbitLaw(
+            lambda xs: np.asarray(jax.jit(hamiltonian)(jnp.asarray(xs))), position, beta
+        )
+
+    if position is None:
+        position = random_vorticity(size)
+    position = np.array(position, dtype=float)
+    system = ZeitlinSystem(
+        name=f"Zeitlin su({size}) Euler",
+        algebra=algebra,
+        hamiltonian=hamiltonian,
+        noise_hamiltonians=noise_hamiltonians,
+        num_noises=len(streams),
+        event_shape=(size, size),
+        default_position=position,
+        reference=reference,
+        params={
+            "N": size,
+            "noise_degree": noise_degree,
+            "noise_smoothness": noise_smoothness,
+            "harmonics": harmonics,
+            "noise_streams": streams,
+        },
+        positive_casimirs=(size,),
+        casimir_scale=algebra.casimir_scale,
+    )
+    system.check_position(position)
+    return system
+
+
+# ---------------------------------------------------------------------------------------------
+# Isospectral midpoint (Modin–Viviani)
+# ---------------------------------------------------------------------------------------------
+
+_MIDPOINT_TOLERANCE = 1e-14
+_MIDPOINT_MAX_ITERATIONS = 100
+
+
+def _isospectral_midpoint(dynamics, mu, dt, dW):
+    """One step of the isospectral midpoint rule for ``Ẇ = [B(W), W]``, ``B = −ζ`` (the engine's
+    generator, so ``ad*_ζ W = [W, ζ] = [B, W]``), with the step's ``dt``/``dW`` frozen.
+
+    With ``A = ½ B(W̃)``: ``W_n = (I − A) W̃ (I + A)`` defines ``W̃`` (fixed-point iteration
+    ``W̃ ← W_n + [A, W̃] + A W̃ A`` to relative ``1e-14``), and ``W_{n+1} = (I + A) W̃ (I − A)``
+    ``= W_n + 2[A, W̃] … `` is computed as ``C W_n C*`` with the Cayley transform
+    ``C = (I + A)(I − A)⁻¹`` (unitary: ``A`` is skew-Hermitian), which is the same matrix when
+    ``W̃`` solves its equation and isospectral to round-off whatever the iteration's residual.
+    """
+    algebra = dynamics.algebra
+    if not isinstance(algebra, Unitary):
+        raise TypeError(
+            f"isospectral_midpoint needs a system on u(N) (liesample.algebras.Unitary), "
+            f"got the algebra {algebra.name}"
+        )
+    w0 = algebra.to_matrix(mu)
+
+    def half_b(x):
+        return -0.5 * algebra.to_matrix(dynamics.generator(x, dt, dW))
+
+    def update(x):
+        a, w = half_b(x), algebra.to_matrix(x)
+        return algebra.from_matrix(w0 + a @ w - w @ a + a @ w @ a)
+
+    scale = jnp.sqrt(jnp.sum(mu * mu))
+
+    def not_done(carry):
+        x, previous, count = carry
+        change = jnp.sqrt(jnp.sum((x - previous) ** 2))
+        return (change > _MIDPOINT_TOLERANCE * scale) & (count < _MIDPOINT_MAX_ITERATIONS)
+
+    def iterate(carry):
+        x, _, count = carry
+        return update(x), x, count + 1
+
+    x_mid, _, _ = jax.lax.while_loop(not_done, iterate, (update(mu), mu, 1))
+    a = half_b(x_mid)
+    eye = jnp.eye(algebra.size, dtype=a.dtype)
+    cayley = jnp.linalg.solve(eye - a, eye + a)  # (I + A)(I − A)⁻¹ (the factors commute)
+    return algebra.from_matrix(cayley @ w0 @ jnp.conj(jnp.swapaxes(cayley, -1, -2)))
+
+
+isospectral_midpoint = Integrator(
+    "isospectral_midpoint",
+    weak_order=1,
+    preserves_orbit=True,
+    step=_isospectral_midpoint,
+    description="Modin–Viviani isospectral midpoint on u(N): implicit, second order without "
+    "noise, a Cayley conjugation (isospectral to round-off)",
+)
