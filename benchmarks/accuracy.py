@@ -64,13 +64,13 @@ def _accumulating_run(integrator, tolerance):
                 kept = i >= n_burn
                 s2 = jnp.where(kept, s2 + m2, s2)
                 s4 = jnp.where(kept, s4 + m2 * m2, s4)
-                off = (info.casimir_error > tolerance) | info.nonfinite
+                off = (info.casimir_error > tolerance) | info.is_divergent
                 first_off = jnp.where((first_off < 0) & off, i, first_off)
                 return (
                     state,
                     s2,
                     s4,
-                    nonfinite + info.nonfinite.astype(jnp.int64),
+                    nonfinite + info.is_divergent.astype(jnp.int64),
                     jnp.maximum(drift_max, info.casimir_error),
                     first_off,
                 )
@@ -103,7 +103,7 @@ def _stored_run(integrator, n_keep_max):
             def body(j, carry):
                 state, buffer, nonfinite = carry
                 state, info = step(jax.random.fold_in(key, n_burn + j), state, h)
-                return state, buffer.at[j].set(state.position), nonfinite | info.nonfinite
+                return state, buffer.at[j].set(state.position), nonfinite | info.is_divergent
 
             _, buffer, nonfinite = jax.lax.fori_loop(
                 0, n_keep, body, (state, buffer, jnp.zeros((), bool))

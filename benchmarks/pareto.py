@@ -213,7 +213,7 @@ def run_system(name, cfg, log):
             observables,
             num_steps=cfg["adjusted_steps"],
             num_warmup=10,
-            info_fields=("acceptance_rate", "nonfinite"),
+            info_fields=("acceptance_rate", "is_divergent"),
         )
         variance = result.chain_square_means.mean(0) - result.estimate**2
         row = _row(

@@ -406,7 +406,7 @@ def run_liesample(cfg, exact, log):
         _squares,
         num_steps=round((total - burn) / h),
         num_warmup=round(burn / h),
-        info_fields=("nonfinite",),
+        info_fields=("is_divergent",),
     )
     wall = result.wall_time  # burn-in included
     rows.append(
@@ -475,7 +475,7 @@ def run_liesample(cfg, exact, log):
             _squares,
             num_steps=cfg["adjusted_steps"],
             num_warmup=10,
-            info_fields=("acceptance_rate", "nonfinite"),
+            info_fields=("acceptance_rate", "is_divergent"),
         )
         rows.append(
             _summary(

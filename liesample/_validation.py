@@ -81,3 +81,22 @@ def nonzero_circulations(circulations) -> np.ndarray:
         )
     gamma.setflags(write=False)
     return gamma
+
+
+def prng_key(rng_key, name: str = "rng_key"):
+    """A typed JAX key from either key style: ``jax.random.key(seed)`` (returned as is) or the
+    raw ``uint32`` key data of ``jax.random.PRNGKey(seed)`` (wrapped, same random stream); a
+    leading batch axis is kept. Anything else is a ``TypeError`` that says what is allowed."""
+    import jax.numpy as jnp
+
+    if isinstance(rng_key, jax.Array) and jnp.issubdtype(rng_key.dtype, jax.dtypes.prng_key):
+        return rng_key
+    array = concrete_array(rng_key) if not isinstance(rng_key, jax.Array) else rng_key
+    if array is not None and getattr(array, "dtype", None) == np.uint32:
+        key_shape = jax.random.key_data(jax.random.key(0)).shape
+        if tuple(array.shape[-len(key_shape) :]) == key_shape:
+            return jax.random.wrap_key_data(jnp.asarray(array, dtype=jnp.uint32))
+    raise TypeError(
+        f"{name} must be a JAX random key, jax.random.key(seed) or jax.random.PRNGKey(seed); "
+        f"got {rng_key!r}"
+    )

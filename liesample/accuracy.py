@@ -29,26 +29,28 @@ import functools
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from liesample.compile import jit
-from liesample._validation import finite_float
-from liesample.dynamics import PoissonLangevin
+from liesample._validation import finite_float, prng_key
+from liesample.dynamics import PoissonLangevin, make_dynamics
 from liesample.integrators import DEFAULT_INTEGRATOR, get_integrator
-from liesample.samplers.lie_poisson_langevin import make_dynamics
+from liesample.stability import stiffness
 from liesample.systems.base import LiePoissonSystem
 
 __all__ = [
+    "DEFAULT_RELATIVE_TOLERANCE",
     "ChainAverages",
     "CoupledAverages",
     "RichardsonRomberg",
     "StepSizeChoice",
     "choose_step_size",
     "coupled_ergodic_averages",
+    "default_step_size",
     "ergodic_averages",
     "richardson_romberg",
     "richardson_romberg_run",
@@ -59,6 +61,11 @@ _RESOLVED_Z = 2.0
 # The slope used to extrapolate the bias down is never taken below this (a flatter observed
 # slope is noise or a regime far from asymptotic; the user should lower the pilot step sizes).
 _MIN_SLOPE = 0.5
+
+DEFAULT_RELATIVE_TOLERANCE = 0.05
+"""Default bias tolerance of :func:`default_step_size`: ``|bias| ≤ 0.05 × posterior sd`` of each
+observable (about 1/20 of the spread: well below the MCSE of runs with fewer than ~400 effective
+draws)."""
 
 
 def _positive_int(name, value, low=1):
@@ -240,7 +247,7 @@ class _CoupledRun:
         num_burn = round(burn_in / step_size)
         if num_burn >= num_total:
             raise ValueError(f"burn_in ({burn_in}) must be shorter than total_time ({total_time})")
-        keys = jax.random.split(rng_key, self.starts.shape[0])
+        keys = jax.random.split(prng_key(rng_key), self.starts.shape[0])
         dtype = self.starts.dtype
         args = (
             keys,
@@ -375,7 +382,7 @@ def ergodic_averages(
         _, total, square, infos = jax.lax.fori_loop(0, num_warmup + num_steps, body, carry)
         return total / num_steps, square / num_steps, infos / num_steps
 
-    keys = jax.random.split(rng_key, starts.shape[0])
+    keys = jax.random.split(prng_key(rng_key), starts.shape[0])
     run = jit(jax.vmap(chain)).lower(keys, starts).compile()
     begin = time.perf_counter()
     means, squares, infos = jax.block_until_ready(run(keys, starts))
@@ -505,7 +512,9 @@ class StepSizeChoice:
     Attributes
     ----------
     step_size, sigma, integrator : what to pass to :func:`liesample.lie_poisson_langevin`.
-    tolerance : the requested bound on ``|bias|`` of every observable.
+    tolerance : the requested absolute bound on ``|bias|`` of every observable (or ``None``).
+    relative_tolerance : the requested bound in posterior sd (or ``None``).
+    tolerances : array (k,), the absolute bound applied per observable (``inf``: not bounded).
     predicted_bias_bound : array (k,)
         Upper bound (2 SE) on ``|bias|`` at ``step_size`` from the model ``C h^q``.
     slope : array (k,)
@@ -522,16 +531,46 @@ class StepSizeChoice:
     step_size: float
     sigma: float
     integrator: str
-    tolerance: float
+    tolerance: float | None
     predicted_bias_bound: np.ndarray
     slope: np.ndarray
     steps_per_effective_sample: float
     candidates: list = field(default_factory=list)
     pilot_wall_time: float = 0.0
+    relative_tolerance: float | None = None
+    tolerances: np.ndarray | None = None
 
     def sampler_kwargs(self) -> dict:
         """Keyword arguments for :func:`liesample.lie_poisson_langevin` (with ``beta``)."""
         return {"step_size": self.step_size, "sigma": self.sigma, "integrator": self.integrator}
+
+
+def _tolerances(averages: CoupledAverages, tolerance, relative_tolerance):
+    """Per-observable absolute tolerances, and the averages the bias model is applied to.
+
+    Absolute: ``tolerance`` on each observable's mean. Relative: ``relative_tolerance × sd`` on
+    each mean and ``2 × relative_tolerance × variance`` on each variance (so the sd is within
+    ``relative_tolerance`` of itself), the variance taken per chain (``E[f²] − E[f]²`` of its
+    time averages: coupled levels share its finite-time bias, which cancels in the
+    differences) and the stationary sd from the finest level. Observables constant to
+    round-off are not bounded (``inf``). Returns ``(tolerances, averages)``.
+    """
+    if relative_tolerance is None:
+        return np.full(averages.chain_means.shape[-1], tolerance), averages
+    means = averages.chain_means
+    variances = np.maximum(averages.chain_square_means - means**2, 0.0)
+    finest = means[:, -1].mean(0)
+    variance = np.maximum(averages.chain_square_means[:, -1].mean(0) - finest**2, 0.0)
+    sd = np.sqrt(variance)
+    constant = sd <= 1e-7 * (np.abs(finest) + np.max(sd, initial=0.0) + 1e-300)
+    tolerances = np.concatenate(
+        [
+            np.where(constant, np.inf, relative_tolerance * sd),
+            np.where(constant, np.inf, 2.0 * relative_tolerance * variance),
+        ]
+    )
+    augmented = replace(averages, chain_means=np.concatenate([means, variances], axis=-1))
+    return tolerances, augmented
 
 
 def _bias_model(averages: CoupledAverages, weak_order: float, tolerance: float):
@@ -556,8 +595,8 @@ def _bias_model(averages: CoupledAverages, weak_order: float, tolerance: float):
     slope = np.where(resolved, np.clip(observed, _MIN_SLOPE, weak_order), weak_order)
     finest = averages.step_sizes[2]
     bound = (np.abs(m2) + _RESOLVED_Z * s2) / (2.0**slope - 1.0)
-    with np.errstate(divide="ignore"):
-        steps = finest * (tolerance / bound) ** (1.0 / slope)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        steps = np.nan_to_num(finest * (tolerance / bound) ** (1.0 / slope), nan=np.inf)
     step = float(min(np.min(steps), averages.step_sizes[0]))
     predicted = bound * (step / finest) ** slope
     return step, predicted, slope, observed, (m1, s1, m2, s2)
@@ -566,8 +605,9 @@ def _bias_model(averages: CoupledAverages, weak_order: float, tolerance: float):
 def choose_step_size(
     system: LiePoissonSystem,
     beta,
-    tolerance,
+    tolerance=None,
     *,
+    relative_tolerance=None,
     observables: Callable,
     initial_positions,
     rng_key,
@@ -578,7 +618,8 @@ def choose_step_size(
     burn_in=5.0,
     max_refinements: int = 2,
 ) -> StepSizeChoice:
-    """Pick the step size (and σ) whose bias on every observable is at most ``tolerance``.
+    """Pick the step size (and σ) whose bias on every observable is at most ``tolerance``
+    (absolute) or ``relative_tolerance`` × its posterior sd.
 
     For each σ in ``sigmas``, one coupled pilot (:func:`coupled_ergodic_averages`, levels
     ``h, h/2, h/4`` with ``h = pilot_step_size / σ²``: noise and dissipation scale with
@@ -590,9 +631,18 @@ def choose_step_size(
 
     Parameters
     ----------
-    tolerance : float
+    tolerance : float, optional
         Bound on the absolute bias of each observable (> 0). The statistical error of the
         production run comes on top; size the run for it.
+    relative_tolerance : float, optional
+        Bound on the bias of each observable relative to its stationary standard deviation
+        (measured on the pilot's finest level); observables constant to round-off are not
+        bounded; the variance of each observable is bounded too (by ``2 × relative_tolerance ×
+        variance``, i.e. its sd is within ``relative_tolerance`` of itself), so the arrays of
+        the result list the means' entries, then the variances'. Give this or ``tolerance``;
+        with neither,
+        :data:`DEFAULT_RELATIVE_TOLERANCE` (0.05 sd) applies.
+    rng_key : jax.random.key or jax.random.PRNGKey
     observables : callable
         ``μ ↦`` array (k,): the expectations that must be accurate.
     initial_positions : array (chains, *event_shape)
@@ -611,7 +661,15 @@ def choose_step_size(
     -------
     StepSizeChoice
     """
-    tolerance = finite_float("tolerance", tolerance, positive=True)
+    if tolerance is not None and relative_tolerance is not None:
+        raise ValueError("give tolerance (absolute) or relative_tolerance, not both")
+    if tolerance is None and relative_tolerance is None:
+        relative_tolerance = DEFAULT_RELATIVE_TOLERANCE
+    if tolerance is not None:
+        tolerance = finite_float("tolerance", tolerance, positive=True)
+    else:
+        relative_tolerance = finite_float("relative_tolerance", relative_tolerance, positive=True)
+    rng_key = prng_key(rng_key)
     integrator = get_integrator(integrator)
     if np.ndim(sigmas) != 1 or len(sigmas) < 1:
         raise ValueError(f"sigmas must be a non-empty sequence of floats > 0, got {sigmas!r}")
@@ -632,8 +690,9 @@ def choose_step_size(
                 burn_in=burn_in,
             )
             wall += pilot.wall_time
+            tolerances, modelled = _tolerances(pilot, tolerance, relative_tolerance)
             step, predicted, slope, observed, (m1, s1, m2, s2) = _bias_model(
-                pilot, integrator.weak_order, tolerance
+                modelled, integrator.weak_order, tolerances
             )
             pilots.append(
                 {
@@ -663,6 +722,7 @@ def choose_step_size(
                 "tau_int": tau,
                 "steps_per_effective_sample": float(np.max(tau) / step),
                 "nonfinite_steps": int(pilot.nonfinite_steps.sum()),
+                "tolerances": tolerances,
                 "pilots": pilots,
             }
         )
@@ -672,9 +732,79 @@ def choose_step_size(
         sigma=best["sigma"],
         integrator=integrator.name,
         tolerance=tolerance,
+        relative_tolerance=relative_tolerance,
+        tolerances=best["tolerances"],
         predicted_bias_bound=best["predicted_bias_bound"],
         slope=best["slope"],
         steps_per_effective_sample=best["steps_per_effective_sample"],
         candidates=candidates,
         pilot_wall_time=wall,
     )
+
+
+# --------------------------------------------------------------------------- default step size
+
+_PILOT_CHAINS = 16
+_PILOT_COARSE_STEPS = 2000
+_MAX_PILOT_TIME = 50.0
+
+
+def _coordinates(mu):
+    return jnp.ravel(mu)
+
+
+def default_step_size(
+    system: LiePoissonSystem,
+    beta,
+    *,
+    sigma=1.0,
+    integrator=DEFAULT_INTEGRATOR,
+    initial_positions=None,
+    rng_key=None,
+    relative_tolerance=DEFAULT_RELATIVE_TOLERANCE,
+) -> StepSizeChoice:
+    """The step size :func:`liesample.lie_poisson_langevin` uses when none is given.
+
+    :func:`choose_step_size` on the coordinates of ``μ`` with ``relative_tolerance`` (bias at
+    most 0.05 posterior sd by default), with pilots scaled to the problem: the coarsest pilot
+    step is ``min(0.4/σ², 1/s)`` with ``s = θ·max_i|h''_i|`` the stiffness on the orbit
+    (:mod:`liesample.stability`), i.e. half the stability bound ``κ ≤ 2``, so every level of
+    the pilot and the chosen step are stable; the pilot runs ``min(50, 2000 h)`` time units
+    (10 % burn-in) on 16 chains started from ``initial_positions`` (cycled; default: the
+    system's default position), ``rng_key`` default ``jax.random.key(0)``.
+    """
+    integrator = get_integrator(integrator)
+    sigma, theta, _ = make_dynamics(system, beta=beta, sigma=sigma)
+    if initial_positions is None:
+        initial_positions = np.asarray(system.default_position)[None]
+    starts = np.asarray(initial_positions, dtype=float)
+    if starts.ndim != len(system.event_shape) + 1 or starts.shape[0] < 1:
+        raise ValueError(
+            f"initial_positions must have shape (chains, *{tuple(system.event_shape)}), got "
+            f"{starts.shape}"
+        )
+    starts = starts[np.arange(_PILOT_CHAINS) % starts.shape[0]]
+    stiff = max(
+        stiffness(system, theta, start) if system.curvature_bound else 0.0
+        for start in _distinct(starts)
+    )
+    coarse = 0.4 / sigma**2 if stiff == 0.0 else min(0.4 / sigma**2, 1.0 / stiff)
+    pilot_time = min(_MAX_PILOT_TIME, _PILOT_COARSE_STEPS * coarse)
+    return choose_step_size(
+        system,
+        beta,
+        relative_tolerance=relative_tolerance,
+        observables=_coordinates,
+        initial_positions=starts,
+        rng_key=jax.random.key(0) if rng_key is None else rng_key,
+        integrator=integrator,
+        sigmas=(sigma,),
+        pilot_step_size=coarse * sigma**2,
+        pilot_time=pilot_time,
+        burn_in=0.1 * pilot_time,
+    )
+
+
+def _distinct(starts):
+    _, first = np.unique(starts.reshape(len(starts), -1), axis=0, return_index=True)
+    return starts[np.sort(first)]

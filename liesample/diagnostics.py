@@ -19,6 +19,8 @@ import scipy.fft
 import xarray as xr
 from arviz_base import from_dict
 
+from liesample.samplers.contract import SAMPLE_STATS_NAMES
+
 __all__ = [
     "autocovariance",
     "casimir_drift",
@@ -28,13 +30,10 @@ __all__ = [
     "to_datatree",
 ]
 
-# Sampler info key -> ArviZ ``sample_stats`` name.
-_SAMPLE_STATS_NAMES = {
-    "energy": "energy",
-    "nonfinite": "diverging",
-    "acceptance_rate": "acceptance_rate",
-    "casimir_error": "casimir_error",
-}
+# Sampler info key -> ArviZ ``sample_stats`` name: the Info contract's, and ``nonfinite``
+# (the divergence flag's name in liesample < 0.2 output) read as ``diverging``.
+_SAMPLE_STATS_NAMES = {**SAMPLE_STATS_NAMES, "nonfinite": "diverging"}
+_DIVERGENCE_KEYS = ("is_divergent", "diverging", "nonfinite")
 
 # Quantiles for the tail ESS (Vehtari et al. 2021): min of the ESS of the 5% and 95% quantiles.
 _TAIL_PROB = (0.05, 0.95)
@@ -129,10 +128,12 @@ def to_datatree(
     positions : array_like, shape (chains, draws, \\*event_shape)
         Sampled states.
     info : mapping, NamedTuple or dataclass, optional
-        Per-draw arrays shaped ``(chains, draws)``. Recognised keys are renamed to ArviZ's
-        ``sample_stats`` names: ``energy`` -> ``energy``, ``nonfinite`` -> ``diverging``
-        (stored as bool), ``acceptance_rate`` and ``casimir_error`` unchanged. Other keys are
-        stored under their own names. ``None`` gives a tree without ``sample_stats``.
+        Per-draw arrays shaped ``(chains, draws)`` (the Info contract of
+        :mod:`liesample.samplers.contract`). Recognised keys are renamed to ArviZ's
+        ``sample_stats`` names: ``is_divergent`` -> ``diverging`` (stored as bool; a legacy
+        ``nonfinite`` too), ``acceptance_rate``, ``energy`` and ``casimir_error`` unchanged.
+        Other keys are stored under their own names. ``None`` gives a tree without
+        ``sample_stats``.
     var_name : str, default "mu"
         Name of the sampled variable in the ``posterior`` group.
     event_dims : sequence of str, default ("component",)
@@ -409,19 +410,23 @@ def casimir_drift(info) -> dict[str, float]:
 
 
 def count_nonfinite(info) -> int:
-    """Number of draws, over all chains, flagged ``nonfinite`` by the sampler.
+    """Number of draws, over all chains, flagged divergent (non-finite state or energy).
 
     Parameters
     ----------
     info : mapping, NamedTuple or dataclass
-        Must contain ``nonfinite`` (bool) shaped ``(chains, draws)``.
+        Must contain ``is_divergent`` (the Info contract), ``diverging`` (ArviZ's name) or
+        ``nonfinite`` (legacy), bool, shaped ``(chains, draws)``.
 
     Returns
     -------
     int
     """
     items = _info_dict(info)
-    if "nonfinite" not in items:
-        raise ValueError(f"info must contain 'nonfinite', got keys {sorted(items)}")
-    flags = _chain_draw_array(items["nonfinite"], "info['nonfinite']")
+    key = next((k for k in _DIVERGENCE_KEYS if k in items), None)
+    if key is None:
+        raise ValueError(
+            f"info must contain one of {list(_DIVERGENCE_KEYS)}, got keys {sorted(items)}"
+        )
+    flags = _chain_draw_array(items[key], f"info[{key!r}]")
     return int(np.count_nonzero(flags))

@@ -25,11 +25,13 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm.auto import tqdm
 
+from liesample._validation import finite_float, prng_key
 from liesample.compile import jit
+from liesample.samplers.contract import reduce_over_thinning
 from liesample.sharding import chain_sharding, shard_chains, to_host
 
-# How per-step info is summarised over the steps a thinned draw spans.
-_REDUCE_OVER_THINNING = {"nonfinite": jnp.any, "casimir_error": jnp.max}
+DEFAULT_MIN_ACCEPTANCE_RATE = 0.05
+"""A chain whose mean acceptance rate over the run is below this is reported as stuck."""
 
 # Test hook: called as ``_after_chunk_hook(draws_done)`` once a chunk is saved to ``output``
 # (tests/test_resume.py kills the process there to simulate an interruption).
@@ -39,23 +41,26 @@ _FORMAT = "liesample-chains-1"
 
 
 class NonFiniteStateError(FloatingPointError):
-    """A chain produced a non-finite state (the sampler kept the previous one and flagged it)."""
+    """A chain diverged: a step produced a non-finite state or energy (the sampler kept the
+    previous state and flagged ``info.is_divergent``)."""
 
 
 @dataclass(frozen=True)
 class ChainsResult:
     """Draws of ``positions`` with shape ``(chains, draws, *event_shape)``, per-draw ``info``
-    arrays with shape ``(chains, draws)``, and the sampling wall time in seconds (compilation
-    excluded; on a resumed run, the time of this session only)."""
+    arrays with shape ``(chains, draws)``, the sampling wall time in seconds (compilation
+    excluded; on a resumed run, the time of this session only), and the sampler's ``settings``
+    after warm-up (step size and how it was chosen, stability mode, …)."""
 
     positions: np.ndarray
     info: dict
     wall_time: float
     num_steps: int
+    settings: dict = None
 
 
 def _check_run_arguments(
-    initial_positions, num_draws, num_warmup, thinning, on_nonfinite, chunk_draws
+    initial_positions, num_draws, num_warmup, thinning, on_nonfinite, chunk_draws, adapt
 ):
     if np.ndim(initial_positions) < 1 or np.shape(initial_positions)[0] < 1:
         raise ValueError(
@@ -77,6 +82,45 @@ def _check_run_arguments(
         raise ValueError(f"chunk_draws must be None or an integer >= 1, got {chunk_draws!r}")
     if on_nonfinite not in ("warn", "raise"):
         raise ValueError(f"on_nonfinite must be 'warn' or 'raise', got {on_nonfinite!r}")
+    if adapt not in (None, True, False):
+        raise TypeError(f"adapt must be None, True or False, got {adapt!r}")
+    if adapt is True and num_warmup == 0:
+        raise ValueError("adapt=True needs warm-up steps: pass num_warmup > 0")
+
+
+def _wants_adaptation(algorithm, adapt, num_warmup) -> bool:
+    """``adapt=None``: adapt what the user left unset (a sampler built without ``step_size``)
+    when there is a warm-up; ``True``: adapt (the sampler must support it); ``False``: never."""
+    hook = getattr(algorithm, "adapt", None)
+    if adapt is True and hook is None:
+        raise ValueError(
+            f"adapt=True: {type(algorithm).__name__} has no warm-up adaptation; the orbit "
+            "samplers (liesample.lie_poisson_langevin, liesample.adjusted_lie_poisson) have one, "
+            "the magnetic samplers are tuned with blackjax.window_adaptation"
+        )
+    if adapt is None:
+        settings = getattr(algorithm, "settings", {})
+        return hook is not None and num_warmup > 0 and settings.get("step_size_source") not in (
+            None,
+            "given",
+        )
+    return bool(adapt)
+
+
+def _check_starts(algorithm, initial_positions, num_chains, step_size_checks=True):
+    """Every start checked: in one vectorised call when the sampler has ``check_positions``,
+    else its ``init`` on each distinct start; errors name the first bad chain."""
+    hook = getattr(algorithm, "check_positions", None)
+    if hook is not None:
+        hook(np.asarray(initial_positions), step_size_checks=step_size_checks)
+        return
+    flat = np.asarray(initial_positions).reshape(num_chains, -1)
+    _, first_chains = np.unique(flat, axis=0, return_index=True)
+    for chain in np.sort(first_chains):
+        try:
+            algorithm.init(initial_positions[chain])
+        except (ValueError, TypeError) as error:
+            raise type(error)(f"initial_positions[{chain}]: {error}") from None
 
 
 def sample_chains(
@@ -93,6 +137,8 @@ def sample_chains(
     devices=None,
     output=None,
     resume: bool = False,
+    adapt: bool | None = None,
+    min_acceptance_rate: float = DEFAULT_MIN_ACCEPTANCE_RATE,
 ) -> ChainsResult:
     """Run ``len(initial_positions)`` chains of ``algorithm`` in parallel (``jax.vmap``).
 
@@ -100,18 +146,30 @@ def sample_chains(
     ----------
     algorithm : blackjax.base.SamplingAlgorithm
         ``init(position)`` and ``step(rng_key, state) -> (state, info)``; ``state.position``
-        is recorded.
-    rng_key : jax.Array
+        is recorded. liesample's samplers (:class:`liesample.samplers.contract.Sampler`) also
+        check every start in one vectorised call, record their settings, and adapt.
+    rng_key : jax.random.key or jax.random.PRNGKey
     initial_positions : array, shape ``(chains, *event_shape)``
     num_draws : int
         Draws kept per chain, each ``thinning`` steps apart, after ``num_warmup`` steps.
+    num_warmup : int
+        Steps run and discarded before the first draw; the adaptation happens there.
+    adapt : None, True or False
+        Warm-up adaptation of the step size. ``None`` (default): adapt a sampler built without
+        ``step_size`` when ``num_warmup > 0`` (the unadjusted sampler then chooses its step
+        from the bias model on the run's starts, the adjusted one tunes it by dual averaging to
+        its target acceptance); ``True``: adapt even a given step size; ``False``: never.
     progress : bool
         Show a progress bar (tqdm) over the draws (on a resumed run it starts at the draws
         already saved).
     chunk_draws : int, optional
         Draws per compiled chunk (default: about 20 chunks); also the unit of saving.
     on_nonfinite : {"warn", "raise"}
-        What to do if any step produced a non-finite state (``info.nonfinite``).
+        What to do if any step diverged (``info.is_divergent``: a non-finite state or energy):
+        a ``RuntimeWarning`` naming the chains, or :class:`NonFiniteStateError`.
+    min_acceptance_rate : float
+        Chains whose mean ``acceptance_rate`` over the draws is below this are reported as
+        stuck (``RuntimeWarning`` naming them); 0 disables the check.
     devices : None, "all", int, sequence of jax devices, or NamedSharding
         Split the chains over these devices (:func:`liesample.sharding.chain_sharding`); the
         number of chains must be a multiple of the number of devices. ``None``: one device.
@@ -127,7 +185,11 @@ def sample_chains(
         uninterrupted run.
     """
     _check_run_arguments(
-        initial_positions, num_draws, num_warmup, thinning, on_nonfinite, chunk_draws
+        initial_positions, num_draws, num_warmup, thinning, on_nonfinite, chunk_draws, adapt
+    )
+    rng_key = prng_key(rng_key)
+    min_acceptance_rate = finite_float(
+        "min_acceptance_rate", min_acceptance_rate, nonnegative=True
     )
     if not isinstance(resume, bool):
         raise TypeError(f"resume must be a bool, got {resume!r}")
@@ -138,14 +200,9 @@ def sample_chains(
     if not np.all(np.isfinite(np.asarray(initial_positions))):
         raise ValueError("initial_positions must be finite")
     sharding = chain_sharding(devices, num_chains)
-    # Concrete checks (shape, orbit, constraints) of every distinct start; chains often share one.
-    flat = np.asarray(initial_positions).reshape(num_chains, -1)
-    _, first_chains = np.unique(flat, axis=0, return_index=True)
-    for chain in np.sort(first_chains):
-        try:
-            algorithm.init(initial_positions[chain])
-        except (ValueError, TypeError) as error:
-            raise type(error)(f"initial_positions[{chain}]: {error}") from None
+    adapting = _wants_adaptation(algorithm, adapt, num_warmup)
+    # Concrete checks (shape, orbit, constraints, energy, step size) of every start.
+    _check_starts(algorithm, initial_positions, num_chains, step_size_checks=not adapting)
     states = jax.vmap(algorithm.init)(initial_positions)
     chain_keys = jax.random.split(rng_key, num_chains)
 
@@ -167,6 +224,17 @@ def sample_chains(
                 states = saved_states
 
     states, chain_keys = shard_chains((states, chain_keys), sharding)
+    run_warmup = num_warmup > 0 and done == 0
+    if adapting:
+        # Deterministic given rng_key: a resumed run re-derives the same parameters.
+        algorithm, adapted = algorithm.adapt(
+            rng_key, chain_keys, states, initial_positions, num_warmup
+        )
+        _check_starts(algorithm, initial_positions, num_chains)
+        if adapted is not None:
+            run_warmup = False
+            if done == 0:
+                states = adapted
 
     def advance(state, key, first_step, num_steps):
         def one(state, step):
@@ -182,8 +250,7 @@ def sample_chains(
         def one_draw(state, draw):
             state, infos = advance(state, key, first_step + draw * thinning, thinning)
             info = {
-                name: _REDUCE_OVER_THINNING.get(name, lambda v: v[-1])(value)
-                for name, value in infos._asdict().items()
+                name: reduce_over_thinning(name)(value) for name, value in infos._asdict().items()
             }
             return state, (state.position, info)
 
@@ -197,7 +264,6 @@ def sample_chains(
         static_argnums=3,
     )
     remaining = num_draws - done
-    run_warmup = num_warmup > 0 and done == 0
     # Compile outside the timed region (one chunk shape, plus the last partial one).
     if run_warmup:
         warmup = warmup.lower(states, chain_keys, 0).compile()
@@ -239,25 +305,54 @@ def sample_chains(
 
     info = {name: np.concatenate([i[name] for i in infos], axis=1) for name in infos[0]}
     result = ChainsResult(
-        np.concatenate(positions, axis=1), info, wall_time, num_warmup + num_draws * thinning
+        np.concatenate(positions, axis=1),
+        info,
+        wall_time,
+        num_warmup + num_draws * thinning,
+        dict(getattr(algorithm, "settings", {}), num_warmup=num_warmup, adapted=adapting),
     )
-    _report_nonfinite(result, on_nonfinite)
+    _report_divergences(result, on_nonfinite)
+    _report_stuck_chains(result, min_acceptance_rate)
     return result
 
 
-def _report_nonfinite(result: ChainsResult, on_nonfinite: str):
-    flags = result.info.get("nonfinite")
+def _chain_list(chains, limit=10) -> str:
+    shown = ", ".join(str(int(c)) for c in chains[:limit])
+    return shown + (f", … ({len(chains)} in all)" if len(chains) > limit else "")
+
+
+def _report_divergences(result: ChainsResult, on_nonfinite: str):
+    flags = result.info.get("is_divergent")
     if flags is None or not np.any(flags):
         return
     chains = np.flatnonzero(np.any(flags, axis=1))
     message = (
-        f"{int(np.sum(flags))} draws in {len(chains)} chain(s) (first: chain {chains[0]}) hit a "
-        "non-finite state; those steps were rejected and flagged in info['nonfinite']. "
-        "Reduce step_size or sigma."
+        f"{int(np.sum(flags))} draws in {len(chains)} chain(s) (chains {_chain_list(chains)}) "
+        "contain a divergent step (a non-finite state or energy); those steps were rejected "
+        "and flagged in info['is_divergent'] (sample_stats 'diverging'). Reduce step_size or "
+        "sigma."
     )
     if on_nonfinite == "raise":
         raise NonFiniteStateError(message)
     warnings.warn(message, RuntimeWarning, stacklevel=3)
+
+
+def _report_stuck_chains(result: ChainsResult, threshold: float):
+    rates = result.info.get("acceptance_rate")
+    if rates is None or threshold == 0.0:
+        return
+    per_chain = np.mean(rates, axis=1)
+    chains = np.flatnonzero(per_chain < threshold)
+    if chains.size == 0:
+        return
+    worst = ", ".join(f"chain {int(c)}: {per_chain[c]:.3f}" for c in chains[:5])
+    warnings.warn(
+        f"{len(chains)} chain(s) are stuck: their mean acceptance rate is below "
+        f"{threshold:g} (chains {_chain_list(chains)}; {worst}). Use a smaller step_size, or "
+        "let the warm-up adapt it (leave step_size unset and pass num_warmup > 0).",
+        RuntimeWarning,
+        stacklevel=3,
+    )
 
 
 # --------------------------------------------------------------------------- saved runs
@@ -444,6 +539,8 @@ def sample(
     devices=None,
     output=None,
     resume: bool = False,
+    adapt: bool | None = None,
+    min_acceptance_rate: float = DEFAULT_MIN_ACCEPTANCE_RATE,
     var_name: str = "mu",
     event_dims=("component",),
     coords=None,
@@ -452,9 +549,15 @@ def sample(
     """Run chains with :func:`sample_chains` and return an ArviZ ``DataTree``.
 
     The tree has ``posterior/<var_name>`` with dims ``(chain, draw, *event_dims)`` and
-    ``sample_stats`` (``energy``, ``diverging``, ``casimir_error``); its attributes record the
-    wall time, the number of steps and ``attrs``. ``chunk_draws``, ``devices``, ``output`` and
-    ``resume`` are passed to :func:`sample_chains` (sharded chains, incremental saving, resume).
+    ``sample_stats`` under ArviZ's names (``diverging``, ``acceptance_rate``, ``energy``, and the
+    sampler's own fields such as ``casimir_error``); its attributes record the wall time, the
+    number of steps, the sampler's settings (``sampler``, ``step_size`` and
+    ``step_size_source``, ``stability`` mode and ``stability_number``, …), whether the warm-up
+    adapted, and ``attrs``. The other arguments are those of :func:`sample_chains` (warm-up
+    adaptation, divergence and stuck-chain reports, sharded chains, incremental saving, resume).
+
+    Example: ``sample(liesample.adjusted_lie_poisson(system, beta=1.0), key, starts, 1000,
+    num_warmup=500)`` tunes the step size by dual averaging in the warm-up, then samples.
     """
     from liesample.diagnostics import to_datatree
 
@@ -471,7 +574,12 @@ def sample(
         devices=devices,
         output=output,
         resume=resume,
+        adapt=adapt,
+        min_acceptance_rate=min_acceptance_rate,
     )
+    settings = {
+        k: v for k, v in (result.settings or {}).items() if k not in ("num_warmup", "step_size")
+    }
     return to_datatree(
         result.positions,
         result.info,
@@ -479,10 +587,13 @@ def sample(
         event_dims=event_dims,
         coords=coords,
         thinning=thinning,
+        step_size=(result.settings or {}).get("step_size"),
         attrs={
             "wall_time_seconds": result.wall_time,
             "num_steps": result.num_steps,
             "num_warmup": num_warmup,
+            "on_nonfinite": on_nonfinite,
+            **settings,
             **(attrs or {}),
         },
     )

@@ -54,8 +54,12 @@ from liesample.compile import jit
 from liesample.integrators import INTEGRATORS, Integrator
 
 __all__ = [
+    "FLOAT32_MIN_STABLE_STEP",
+    "FLOAT32_MIN_RELATIVE_SPREAD",
     "STABILITY_LIMITS",
+    "check_precision",
     "check_step_size",
+    "largest_stable_step",
     "noise_curvatures",
     "stability_number",
     "stiffness",
@@ -65,7 +69,9 @@ STABILITY_LIMITS = {name: i.stability_limit for name, i in INTEGRATORS.items()}
 """Largest stable ``κ = step_size · θ · max_i |h''_i|`` of each built-in integrator, as it declares
 (``Integrator.stability_limit``; module docstring)."""
 
-STABILITY_MODES = ("warn", "raise", "off")
+STABILITY_MODES = ("raise", "warn", "off")
+"""``"raise"`` (the samplers' default): refuse a step beyond the bound, naming the largest
+allowed one; ``"warn"``: a ``UserWarning`` and run; ``"off"``: no check."""
 
 _NUM_ORBIT_POINTS = 32
 _MAX_DIRECTIONS = 12
@@ -159,10 +165,74 @@ def check_step_size(system, integrator, step_size, theta, position, mode="warn")
         f"step_size={step_size:g} is beyond the stable bound of the {integrator_name!r} "
         f"integrator on this orbit of the {system.name}: "
         f"κ = step_size·θ·max_i|h''_i| = {kappa:.3g} > {limit:g} (θ = {theta:.3g}), i.e. "
-        f"step_size must be <= {largest:.3g}; reduce step_size, sigma or beta "
-        "(see liesample.stability), or pass stability='off' to run anyway"
+        f"step_size must be <= {largest:.3g}; reduce step_size (or leave it unset: the sampler "
+        "then chooses one below the bound), sigma or beta (see liesample.stability), or pass "
+        "stability='warn' or 'off' to run anyway (the chain then samples a wrong law)"
     )
     if mode == "raise":
         raise ValueError(message)
     warnings.warn(message, UserWarning, stacklevel=4)
     return kappa
+
+
+def largest_stable_step(system, integrator, theta, position) -> float:
+    """The largest ``step_size`` with ``κ ≤`` the integrator's ``stability_limit`` on the orbit
+    through ``position`` (``inf`` where there is no bound: no dissipation, flat ``h``, no declared
+    limit, or a system without the curvature bound)."""
+    if not isinstance(integrator, Integrator):
+        integrator = INTEGRATORS.get(integrator)
+    limit = None if integrator is None else integrator.stability_limit
+    if limit is None or theta == 0.0 or not system.curvature_bound:
+        return float("inf")
+    stiff = stiffness(system, theta, position)
+    return float("inf") if stiff == 0.0 else limit / stiff
+
+
+# --------------------------------------------------------------------------- float32
+
+FLOAT32_MIN_STABLE_STEP = 1e-3
+"""float32 is not enough when the stable step ``2/(θ max|h''|)`` is below this: a unit of
+physical time then takes over a thousand steps, and round-off (``ε₃₂ ≈ 1.2e-7`` per step,
+growing like ``ε₃₂ √n``) reaches ``1e-4`` in the Casimirs and averages over ``10⁶`` steps."""
+
+FLOAT32_MIN_RELATIVE_SPREAD = 1e-3
+"""float32 is not enough when the target's spread along its stiffest noise direction,
+``1/√(|β| max|h''|)``, is below this fraction of the state's size ``max|μ|``: each coadjoint
+step then rounds by ``ε₃₂ max|μ|``, a visible fraction of the fluctuations being sampled."""
+
+_PRECISION_WARNED: set = set()
+
+
+def check_precision(system, beta, theta, position, dtype) -> bool:
+    """Warn once per system (``UserWarning``) when a sampler runs in float32 on a problem that
+    needs float64, by the two rules :data:`FLOAT32_MIN_STABLE_STEP` and
+    :data:`FLOAT32_MIN_RELATIVE_SPREAD`. Returns whether float32 was judged insufficient."""
+    if jnp.dtype(dtype) != jnp.float32 or theta == 0.0 or not system.curvature_bound:
+        return False
+    position = np.asarray(position, dtype=float)
+    curvature = stiffness(system, theta, position) / theta  # max_i |h''_i| on the orbit
+    if curvature == 0.0:
+        return False
+    stable_step = 2.0 / (theta * curvature)
+    spread = 1.0 / np.sqrt(abs(beta) * curvature) if beta else np.inf
+    size = float(np.max(np.abs(position)))
+    reasons = []
+    if stable_step < FLOAT32_MIN_STABLE_STEP:
+        reasons.append(f"the stable step {stable_step:.3g} is below {FLOAT32_MIN_STABLE_STEP:g}")
+    if spread < FLOAT32_MIN_RELATIVE_SPREAD * size:
+        reasons.append(
+            f"the target's spread {spread:.3g} is below {FLOAT32_MIN_RELATIVE_SPREAD:g} of the "
+            f"state's size {size:.3g}"
+        )
+    if not reasons:
+        return False
+    if system.name not in _PRECISION_WARNED:
+        _PRECISION_WARNED.add(system.name)
+        warnings.warn(
+            f"the {system.name} is sampled in float32, but {' and '.join(reasons)}: float32 "
+            "round-off will show in the Casimirs and the averages. Call "
+            'jax.config.update("jax_enable_x64", True) at start-up (see liesample.stability)',
+            UserWarning,
+            stacklevel=4,
+        )
+    return True

@@ -59,7 +59,7 @@ def test_blackjax_shape():
         "is_accepted",
         "energy",
         "casimir_error",
-        "nonfinite",
+        "is_divergent",
     }
     assert 0.0 <= float(info.acceptance_rate) <= 1.0
     assert float(info.energy) == pytest.approx(float(RIGID.hamiltonian(new_state.position)))
@@ -139,7 +139,7 @@ def test_exact_on_the_rigid_body_where_the_unadjusted_chain_is_biased():
     assert np.all(np.abs(z_adjusted) < 4.0), z_adjusted
     acceptance = float(np.mean(result.info_means["acceptance_rate"]))
     assert 0.3 < acceptance < 0.95
-    assert not np.any(result.info_means["nonfinite"])
+    assert not np.any(result.info_means["is_divergent"])
 
 
 def test_exact_on_the_heavy_top_where_the_unadjusted_chain_is_biased():
@@ -239,7 +239,7 @@ def test_nonfinite_proposals_are_rejected_and_flagged():
     _, (positions, info) = liesample.jit(
         lambda s: jax.lax.scan(body, s, jax.random.split(jax.random.key(9), 400))
     )(sampler.init(start))
-    flagged = np.asarray(info.nonfinite)
+    flagged = np.asarray(info.is_divergent)
     assert 10 < flagged.sum() < 390
     assert not np.any(np.asarray(info.is_accepted)[flagged])
     assert np.all(np.asarray(info.acceptance_rate)[flagged] == 0.0)

@@ -148,7 +148,7 @@ def test_casimirs_of_any_sign_are_valid_orbits():
         state = sampler.init(np.array(mu, dtype=float))
         state, info = step(jax.random.key(0), state)
         assert np.isfinite(float(info.casimir_error)) and float(info.casimir_error) < 1e-14
-        assert not bool(info.nonfinite)
+        assert not bool(info.is_divergent)
 
 
 def test_casimirs_preserved_over_many_steps():

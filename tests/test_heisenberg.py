@@ -164,7 +164,7 @@ def test_unit_spins_are_preserved_over_ten_thousand_steps():
             state, worst = carry
             state, info = algorithm.step(jax.random.fold_in(jax.random.key(3), step), state)
             error = jnp.max(jnp.abs(jnp.linalg.norm(state.position, axis=-1) - 1.0))
-            return (state, jnp.maximum(worst, error)), info.nonfinite
+            return (state, jnp.maximum(worst, error)), info.is_divergent
 
         return jax.lax.scan(body, (state, 0.0), jnp.arange(num_steps))
 

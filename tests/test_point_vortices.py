@@ -37,7 +37,7 @@ def run_chains(algorithm, starts, num_steps, rng_key):
     def one_chain(start, key):
         def one(state, step_key):
             state, info = algorithm.step(step_key, state)
-            return state, info.nonfinite
+            return state, info.is_divergent
 
         state, nonfinite = jax.lax.scan(
             one, algorithm.init(start), jax.random.split(key, num_steps)

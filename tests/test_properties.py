@@ -148,7 +148,7 @@ def test_one_step_stays_on_the_orbit(name, integrator):
         state = lpl.init(position, system)
         theta = 0.5 * beta * sigma**2
         new, info = kernel(jax.random.key(seed), state, step_size, sigma, theta)
-        assert not bool(info.nonfinite)
+        assert not bool(info.is_divergent)
         assert np.all(np.isfinite(np.asarray(new.position)))
         assert float(info.casimir_error) < 1e-12
         np.testing.assert_allclose(

@@ -92,7 +92,7 @@ def test_killed_run_resumes_to_the_same_draws(tmp_path, uninterrupted):
 
     resumed = run(output=path, resume=True)
     np.testing.assert_array_equal(resumed.positions, uninterrupted.positions)
-    np.testing.assert_array_equal(resumed.info["nonfinite"], uninterrupted.info["nonfinite"])
+    np.testing.assert_array_equal(resumed.info["is_divergent"], uninterrupted.info["is_divergent"])
     np.testing.assert_allclose(resumed.info["energy"], uninterrupted.info["energy"], rtol=4e-16)
     assert resumed.num_steps == uninterrupted.num_steps
     # …and the file now holds the whole run.
@@ -105,8 +105,8 @@ def test_saved_run_equals_returned_run_and_can_be_extended(tmp_path, uninterrupt
     np.testing.assert_array_equal(first.positions, uninterrupted.positions[:, :12])
     saved = load_chains(path)
     np.testing.assert_array_equal(saved.positions, first.positions)
-    np.testing.assert_array_equal(saved.info["nonfinite"], first.info["nonfinite"])
-    assert saved.info["nonfinite"].dtype == bool
+    np.testing.assert_array_equal(saved.info["is_divergent"], first.info["is_divergent"])
+    assert saved.info["is_divergent"].dtype == bool
     # Extend the same run to more draws; the progress bar starts at the saved draws.
     bars = []
 

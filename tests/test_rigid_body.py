@@ -175,7 +175,7 @@ def stochastic_runner(integrator, beta, sigma=1.0, step_size=0.05):
             return (
                 state,
                 jnp.maximum(worst, info.casimir_error),
-                bad | info.nonfinite,
+                bad | info.is_divergent,
                 total + info.energy,
             )
 

@@ -51,7 +51,7 @@ SCRIPT = textwrap.dedent(
         for devices in choices:
             sharded = liesample.sample_chains(algorithm, key, starts, 12, devices=devices, **run)
             np.testing.assert_allclose(sharded.positions, plain.positions, rtol=0, atol=1e-13)
-            np.testing.assert_array_equal(sharded.info["nonfinite"], plain.info["nonfinite"])
+            np.testing.assert_array_equal(sharded.info["is_divergent"], plain.info["is_divergent"])
             np.testing.assert_allclose(
                 sharded.info["energy"], plain.info["energy"], rtol=0, atol=1e-13
             )

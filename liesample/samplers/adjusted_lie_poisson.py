@@ -31,24 +31,39 @@ reversible, and alone the noise + dissipation dynamics already has ``exp(−βh)
 reversible invariant law (its generator is self-adjoint in ``L²(exp(−βh))``, MATH.md §1).
 As ``dt → 0`` the acceptance rate tends to 1 and the chain is the unadjusted Lie–Euler chain of
 that scene; at large ``dt`` rejections remove the bias instead of leaving it in the averages.
+
+**Step size.** Any step is exact, but a too large one is rejected nearly always (a *stuck*
+chain, which :func:`liesample.sample` reports). Under ``liesample.sample(..., num_warmup=N)``
+the step is tuned in the warm-up by dual averaging (Hoffman & Gelman 2014, as in
+``blackjax.window_adaptation``) so that the mean acceptance rate over the chains reaches
+``target_acceptance_rate`` (default 0.574, MALA's optimal rate, Roberts & Rosenthal 1998). Without
+warm-up and without ``step_size`` the step is ``κ = 1.3 m^{−1/3}`` in units of the stiffness
+(``κ = dt·θ·max|h''|``, :mod:`liesample.stability`; ``m`` noise directions), MALA's optimal
+scaling for a near-Gaussian target.
 """
 
 from __future__ import annotations
 
 from typing import NamedTuple
 
-import blackjax
 import jax
 import jax.numpy as jnp
 import numpy as np
+from blackjax.adaptation.step_size import dual_averaging_adaptation
 
-from liesample._validation import finite_float
+from liesample._validation import concrete_array, finite_float
+from liesample.compile import jit
 from liesample.dynamics import PoissonLangevin, Scene
+from liesample.samplers._starts import check_orbit_starts, check_start_energy, distinct_orbits
+from liesample.samplers.contract import Sampler, sampling_api
+from liesample.stability import check_precision, stiffness
 from liesample.systems.base import LiePoissonSystem
 
 __all__ = [
     "AdjustedLiePoissonInfo",
     "AdjustedLiePoissonState",
+    "DEFAULT_TARGET_ACCEPTANCE_RATE",
+    "adjusted_lie_poisson",
     "as_top_level_api",
     "build_kernel",
     "check_linear_noise",
@@ -58,6 +73,9 @@ __all__ = [
 
 # Noise and dissipation only (the reversible part of the SDE; see the module docstring).
 _NOISE_SCENE = Scene(hamiltonian=False, dissipation=True, noise=True)
+
+DEFAULT_TARGET_ACCEPTANCE_RATE = 0.574
+"""Mean acceptance rate the warm-up's dual averaging aims at (MALA's optimum)."""
 
 
 class AdjustedLiePoissonState(NamedTuple):
@@ -76,20 +94,20 @@ class AdjustedLiePoissonState(NamedTuple):
 
 
 class AdjustedLiePoissonInfo(NamedTuple):
-    """What one step did.
+    """What one step did (the Info contract of :mod:`liesample.samplers.contract`).
 
-    acceptance_rate : ``min(1, exp(L))`` of the proposal (0 for a non-finite one).
+    is_divergent : the proposal (or its energy, drift or ratio) was NaN/inf; it was rejected.
+    acceptance_rate : ``min(1, exp(L))`` of the proposal (0 for a divergent one).
+    energy : ``h`` at the chain's state after the step.
     is_accepted : whether the chain moved.
-    energy : ``h`` at the new state.
     casimir_error : relative Casimir drift of the new state (``LiePoissonSystem.casimir_error``).
-    nonfinite : the proposal (or its energy, drift or ratio) was NaN/inf; it was rejected.
     """
 
+    is_divergent: jax.Array
     acceptance_rate: jax.Array
-    is_accepted: jax.Array
     energy: jax.Array
+    is_accepted: jax.Array
     casimir_error: jax.Array
-    nonfinite: jax.Array
 
 
 def check_linear_noise(system: LiePoissonSystem) -> None:
@@ -126,12 +144,19 @@ def _dynamics(system, sigma, beta):
 
 
 def init(position, system: LiePoissonSystem, rng_key=None) -> AdjustedLiePoissonState:
-    """Initial state on the orbit through ``position`` (no key needed; ``rng_key`` is ignored)."""
+    """Initial state on the orbit through ``position`` (no key needed; ``rng_key`` is ignored).
+
+    Raises ``ValueError`` for a bad start and, when ``position`` is concrete, for a start where
+    the energy ``h`` is not finite.
+    """
     del rng_key
     system.check_position(position)
     position = jnp.asarray(position, dtype=jnp.result_type(float))
     dynamics = PoissonLangevin(system, sigma=1.0, theta=1.0, scene=_NOISE_SCENE)
     energy, brackets = _energy_and_brackets(dynamics, position)
+    value = concrete_array(energy)
+    if value is not None:
+        check_start_energy(system, position, value)
     return AdjustedLiePoissonState(position, system.casimirs(position), energy, brackets)
 
 
@@ -192,20 +217,61 @@ def build_kernel(system: LiePoissonSystem):
             jnp.where(is_accepted, brackets, state.brackets),
         )
         info = AdjustedLiePoissonInfo(
-            acceptance_rate,
-            is_accepted,
-            new_state.energy,
-            system.casimir_error(new_state.position, state.reference_casimirs),
             nonfinite,
+            acceptance_rate,
+            new_state.energy,
+            is_accepted,
+            system.casimir_error(new_state.position, state.reference_casimirs),
         )
         return new_state, info
 
     return kernel
 
 
+def _default_step_size(system, beta, sigma, position) -> float:
+    """``κ = 1.3 m^{−1/3}`` in units of the stiffness on the orbit of ``position`` (module
+    docstring), or ``0.4/σ²`` where ``h`` is flat along the noise (no stiffness)."""
+    theta = 0.5 * beta * sigma**2
+    stiff = stiffness(system, theta, np.asarray(position)) if system.curvature_bound else 0.0
+    if stiff == 0.0:
+        return 0.4 / sigma**2
+    return 1.3 * system.num_noises ** (-1.0 / 3.0) / stiff
+
+
+def dual_averaging_warmup(kernel, target_acceptance_rate):
+    """``run(chain_keys, states, initial_step, sigma, beta, num_steps) -> (states, step_size,
+    mean_acceptance)``: ``num_steps`` vmapped steps whose shared step size is tuned by dual
+    averaging (``blackjax.adaptation.step_size.dual_averaging_adaptation``) on the mean
+    acceptance over the chains; step ``i`` of chain ``c`` uses ``fold_in(key_c, i)`` as the
+    runner does. The final step is the dual-averaging average ``exp(log_step_size_avg)``."""
+    da_init, da_update, da_final = dual_averaging_adaptation(target_acceptance_rate)
+
+    def run(chain_keys, states, initial_step, sigma, beta, num_steps):
+        def one(carry, i):
+            states, da = carry
+            step_size = jnp.exp(da.log_step_size)
+            keys = jax.vmap(lambda k: jax.random.fold_in(k, i))(chain_keys)
+            states, infos = jax.vmap(kernel, in_axes=(0, 0, None, None, None))(
+                keys, states, step_size, sigma, beta
+            )
+            rate = jnp.mean(infos.acceptance_rate)
+            return (states, da_update(da, rate)), rate
+
+        da = da_init(initial_step)
+        (states, da), rates = jax.lax.scan(one, (states, da), jnp.arange(num_steps))
+        return states, da_final(da), jnp.mean(rates[num_steps // 2 :])
+
+    return jit(run, static_argnums=5)
+
+
 def as_top_level_api(
-    system: LiePoissonSystem, *, beta, sigma=1.0, step_size
-) -> blackjax.base.SamplingAlgorithm:
+    system: LiePoissonSystem,
+    *,
+    beta,
+    sigma=1.0,
+    step_size=None,
+    target_acceptance_rate=DEFAULT_TARGET_ACCEPTANCE_RATE,
+) -> Sampler:
     """Metropolis-adjusted Lie–Poisson sampler of ``exp(−βh)`` on the orbit of the initial state.
 
     Parameters
@@ -215,15 +281,24 @@ def as_top_level_api(
     beta : float
         Inverse temperature, finite (and admissible for the system).
     sigma : float
-        Noise strength ``σ > 0``. Only ``σ²·step_size`` matters for the move (there is no
-        Hamiltonian drift), so ``σ`` and ``step_size`` are one knob: the rotation angle per step.
-    step_size : float
+        Noise strength ``σ > 0`` (default 1). Only ``σ²·step_size`` matters for the move (there
+        is no Hamiltonian drift), so ``σ`` and ``step_size`` are one knob: the rotation angle
+        per step.
+    step_size : float or None
         Time step ``dt > 0``; any value gives the exact law, larger ones lower acceptance.
+        ``None`` (default): tuned in the warm-up of ``liesample.sample(..., num_warmup=N)`` by
+        dual averaging to ``target_acceptance_rate``; used directly (no warm-up), the step is
+        ``κ = 1.3 m^{−1/3}`` in units of the stiffness on the first start's orbit (module
+        docstring). A given step is kept unless ``liesample.sample(..., adapt=True)``.
+    target_acceptance_rate : float in (0, 1)
+        What the warm-up's dual averaging aims at (default 0.574).
 
     Returns
     -------
-    blackjax.base.SamplingAlgorithm
-        ``init(position)`` and ``step(rng_key, state) -> (state, info)``.
+    liesample.samplers.contract.Sampler
+        ``init(position)`` and ``step(rng_key, state) -> (state, info)`` (``info``: the Info
+        contract plus ``is_accepted`` and ``casimir_error``); ``rng_key`` may be
+        ``jax.random.key`` or ``jax.random.PRNGKey``.
     """
     if not isinstance(system, LiePoissonSystem):
         raise TypeError(f"system must be a LiePoissonSystem, got {type(system).__name__}")
@@ -231,16 +306,83 @@ def as_top_level_api(
     if system.check_beta is not None:
         system.check_beta(beta)
     sigma = finite_float("sigma", sigma, positive=True)
-    step_size = finite_float("step_size", step_size, positive=True)
+    if step_size is not None:
+        step_size = finite_float("step_size", step_size, positive=True)
+    target = finite_float("target_acceptance_rate", target_acceptance_rate)
+    if not 0.0 < target < 1.0:
+        raise ValueError(f"target_acceptance_rate must be in (0, 1), got {target}")
     kernel = build_kernel(system)
+    settings = {
+        "sampler": "adjusted_lie_poisson",
+        "system": system.name,
+        "beta": beta,
+        "sigma": sigma,
+        "step_size": step_size,
+        "step_size_source": "given" if step_size is not None else "automatic (not yet chosen)",
+        "target_acceptance_rate": target,
+    }
+    chosen = [step_size]
+
+    def resolve(position):
+        if chosen[0] is None:
+            chosen[0] = _default_step_size(system, beta, sigma, position)
+            settings.update(
+                step_size=chosen[0],
+                step_size_source="default: kappa = 1.3 m^(-1/3) (no warm-up adaptation)",
+            )
+        return chosen[0]
+
+    def check_orbits(positions, representatives):
+        for chain in representatives:
+            position = positions[chain]
+            check_precision(system, beta, 0.5 * beta * sigma**2, position, position.dtype)
 
     def init_fn(position, rng_key=None):
-        return init(position, system, rng_key)
+        state = init(position, system, rng_key)
+        if concrete_array(position) is not None:
+            resolve(np.asarray(state.position))
+            check_orbits(np.asarray(state.position)[None], [0])
+        return state
 
     def step_fn(rng_key, state):
-        return kernel(rng_key, state, step_size, sigma, beta)
+        return kernel(rng_key, state, resolve(system.default_position), sigma, beta)
 
-    return blackjax.base.SamplingAlgorithm(init_fn, step_fn)
+    def check_positions(positions, *, step_size_checks=True):
+        positions = np.asarray(positions, dtype=jnp.result_type(float))
+        casimirs = check_orbit_starts(system, positions)
+        if step_size_checks:
+            resolve(positions[0])
+            check_orbits(positions, distinct_orbits(casimirs))
+
+    def adapt(rng_key, chain_keys, states, initial_positions, num_warmup):
+        del rng_key
+        initial = chosen[0]
+        if initial is None:
+            initial = _default_step_size(system, beta, sigma, np.asarray(initial_positions[0]))
+        run = dual_averaging_warmup(kernel, target)
+        dtype = states.position.dtype
+        states, tuned_step, rate = run(
+            chain_keys,
+            states,
+            jnp.asarray(initial, dtype),
+            jnp.asarray(sigma, dtype),
+            jnp.asarray(beta, dtype),
+            num_warmup,
+        )
+        tuned = as_top_level_api(
+            system, beta=beta, sigma=sigma, step_size=float(tuned_step), target_acceptance_rate=target
+        )
+        tuned.settings["step_size_source"] = (
+            f"warm-up dual averaging to mean acceptance {target:g} over chains, from "
+            f"{initial:.4g}; mean acceptance in the second half of the warm-up {float(rate):.3f}"
+        )
+        return tuned, states
+
+    return Sampler(
+        init_fn, step_fn, settings=settings, check_positions=check_positions, adapt=adapt
+    )
 
 
-adjusted_lie_poisson = blackjax.GenerateSamplingAPI(as_top_level_api, init, build_kernel)
+adjusted_lie_poisson = sampling_api(
+    as_top_level_api, init, build_kernel, "adjusted_lie_poisson", __name__
+)

@@ -4,30 +4,49 @@ A BlackJAX-shaped module (``State``/``Info``, ``init``, ``build_kernel``, ``as_t
 The chain is the Poisson–Langevin SDE of MATH.md §1 with ``θ = βσ²/2`` (paper,
 ``eq:lie-poisson-langevin``), whose invariant law on the orbit of the initial state is
 ``∝ exp(−βh)``; the discretisation bias is that of the chosen integrator.
+
+Safe defaults: a step size beyond the measured stability bound (:mod:`liesample.stability`) is
+refused, and without a step size the sampler picks one below the bound whose predicted bias is
+at most :data:`DEFAULT_BIAS_TOLERANCE` posterior standard deviations
+(:func:`liesample.accuracy.default_step_size`).
 """
 
 from __future__ import annotations
 
 from typing import NamedTuple
 
-import blackjax
 import jax
 import jax.numpy as jnp
+import numpy as np
 
+from liesample import accuracy
 from liesample._validation import concrete_array, finite_float
 from liesample.dynamics import PoissonLangevin, Scene, make_dynamics
 from liesample.integrators import DEFAULT_INTEGRATOR, get_integrator
-from liesample.stability import STABILITY_MODES, check_step_size
+from liesample.samplers._starts import check_orbit_starts, check_start_energy, distinct_orbits
+from liesample.samplers.contract import Sampler, sampling_api
+from liesample.stability import (
+    STABILITY_MODES,
+    check_precision,
+    check_step_size,
+    stability_number,
+)
 from liesample.systems.base import LiePoissonSystem
 
 __all__ = [
+    "DEFAULT_BIAS_TOLERANCE",
     "LiePoissonInfo",
     "LiePoissonState",
     "as_top_level_api",
     "build_kernel",
     "init",
+    "lie_poisson_langevin",
     "make_dynamics",
 ]
+
+DEFAULT_BIAS_TOLERANCE = accuracy.DEFAULT_RELATIVE_TOLERANCE
+"""Default bias tolerance of the automatic step size, in posterior standard deviations of the
+state's coordinates."""
 
 
 class LiePoissonState(NamedTuple):
@@ -42,31 +61,38 @@ class LiePoissonState(NamedTuple):
 
 
 class LiePoissonInfo(NamedTuple):
-    """What one step did.
+    """What one step did (the Info contract of :mod:`liesample.samplers.contract`).
 
-    energy : ``h`` at the new state.
+    is_divergent : the proposed state or its energy was NaN/inf; the step was rejected and the
+        chain kept its previous state.
+    acceptance_rate : 1.0 for a step taken, 0.0 for a divergent (rejected) one; the sampler is
+        unadjusted, so there is no other test.
+    energy : ``h`` at the chain's state after the step.
     casimir_error : largest relative drift ``|C − C₀|/|C₀|`` of the Casimirs; for systems that
         declare a ``casimir_scale`` (a Casimir may be zero, e.g. the heavy top's ``Π·Γ``) the
         denominator is ``max(|C₀|, scale(μ))`` (``LiePoissonSystem.casimir_error``).
-    nonfinite : the step produced NaN/inf; the chain then kept its previous state.
     """
 
+    is_divergent: jax.Array
+    acceptance_rate: jax.Array
     energy: jax.Array
     casimir_error: jax.Array
-    nonfinite: jax.Array
 
 
 def init(position, system: LiePoissonSystem, rng_key=None) -> LiePoissonState:
-    """Initial state on the orbit through ``position`` (no key needed; ``rng_key`` is ignored)."""
+    """Initial state on the orbit through ``position`` (no key needed; ``rng_key`` is ignored).
+
+    Raises ``ValueError`` for a bad start (shape, non-finite, degenerate orbit) and, when
+    ``position`` is concrete, for a start where the energy ``h`` is not finite.
+    """
     del rng_key
     system.check_position(position)
     position = jnp.asarray(position, dtype=jnp.result_type(float))
+    value = concrete_array(position)
+    if value is not None:
+        with jax.ensure_compile_time_eval():
+            check_start_energy(system, value, np.asarray(system.hamiltonian(position)))
     return LiePoissonState(position, system.casimirs(position))
-
-
-def _info(system, position, reference_casimirs, nonfinite):
-    drift = system.casimir_error(position, reference_casimirs)
-    return LiePoissonInfo(system.hamiltonian(position), drift, nonfinite)
 
 
 def build_kernel(
@@ -75,7 +101,7 @@ def build_kernel(
     """Build ``kernel(rng_key, state, step_size, sigma, theta) -> (state, info)``.
 
     The scene and integrator are structural (they decide what is traced); ``step_size``,
-    ``sigma`` and ``theta`` may be traced values.
+    ``sigma`` and ``theta`` may be traced values. ``rng_key`` may be either key style.
     """
     integrator = get_integrator(integrator)
     scene = Scene() if scene is None else scene
@@ -84,12 +110,42 @@ def build_kernel(
         dynamics = PoissonLangevin(system, sigma=sigma, theta=theta, scene=scene)
         dW = dynamics.brownian_increments(rng_key, step_size, state.position.dtype)
         proposal = integrator(dynamics, state.position, step_size, dW)
-        nonfinite = ~jnp.all(jnp.isfinite(proposal))
-        position = jnp.where(nonfinite, state.position, proposal)
-        new_state = LiePoissonState(position, state.reference_casimirs)
-        return new_state, _info(system, position, state.reference_casimirs, nonfinite)
+        divergent = ~(
+            jnp.all(jnp.isfinite(proposal)) & jnp.isfinite(system.hamiltonian(proposal))
+        )
+        position = jnp.where(divergent, state.position, proposal)
+        energy = system.hamiltonian(position)
+        info = LiePoissonInfo(
+            divergent,
+            jnp.where(divergent, 0.0, 1.0).astype(position.dtype),
+            energy,
+            system.casimir_error(position, state.reference_casimirs),
+        )
+        return LiePoissonState(position, state.reference_casimirs), info
 
     return kernel
+
+
+class _StepSize:
+    """The step size, given or chosen once on first need (from the first concrete starts)."""
+
+    def __init__(self, value, choose, settings):
+        self.value = value
+        self._choose = choose
+        self._settings = settings
+
+    def resolve(self, positions):
+        if self.value is None:
+            choice = self._choose(positions)
+            self.value = choice.step_size
+            self._settings.update(
+                step_size=choice.step_size,
+                step_size_source=(
+                    f"bias model: predicted |bias| <= {choice.relative_tolerance:g} posterior sd "
+                    "of each coordinate (liesample.accuracy.default_step_size)"
+                ),
+            )
+        return self.value
 
 
 def as_top_level_api(
@@ -97,12 +153,13 @@ def as_top_level_api(
     *,
     beta=None,
     sigma=1.0,
-    step_size,
+    step_size=None,
     integrator=DEFAULT_INTEGRATOR,
     theta=None,
     hamiltonian: bool = True,
-    stability: str = "warn",
-) -> blackjax.base.SamplingAlgorithm:
+    stability: str = "raise",
+    bias_tolerance=DEFAULT_BIAS_TOLERANCE,
+) -> Sampler:
     """Lie–Poisson–Langevin sampler of ``exp(−βh)`` on the orbit of the initial state.
 
     Parameters
@@ -113,47 +170,135 @@ def as_top_level_api(
         Inverse temperature; any finite value (``β < 0`` samples a negative temperature where
         the orbit is compact). Required when ``sigma > 0``.
     sigma : float
-        Noise strength ``σ ≥ 0``: trades mixing against stiffness at fixed ``β``.
-    step_size : float
-        Time step ``dt > 0``.
+        Noise strength ``σ ≥ 0`` (default 1): trades mixing against stiffness at fixed ``β``.
+    step_size : float or None
+        Time step ``dt > 0``. ``None`` (default): chosen below the stability bound from the bias
+        model of :func:`liesample.accuracy.default_step_size` (short coupled pilot runs), so
+        that the predicted bias of every coordinate of ``μ`` is at most ``bias_tolerance``
+        posterior standard deviations. The choice is made once, from the first concrete starts
+        the sampler sees (``init`` or :func:`liesample.sample`); under
+        ``liesample.sample(..., num_warmup=N)`` it is made in the warm-up from the run's starts.
     integrator : str or Integrator
-        One of ``liesample.integrators.INTEGRATORS``; default ``"rkmk_heun"``.
+        One of ``liesample.integrators.INTEGRATORS``; default ``"splitting"``.
     theta : float, optional
         Dissipation strength for a noise-free flow (``sigma = 0``) only.
     hamiltonian : bool
         Whether the scene has the Hamiltonian drift (it does not change the invariant law).
-    stability : {"warn", "raise", "off"}
-        What ``init`` does when ``step_size`` is beyond the integrator's stable bound on the
-        orbit of the initial position, ``κ = step_size·θ·max_i |h''_i| > 2``
-        (:mod:`liesample.stability`; rigid body: ``θ·step_size·r²(1/I_min − 1/I_max) ≤ 2``): a
-        ``UserWarning`` naming the bound, a ``ValueError``, or nothing.
+    stability : {"raise", "warn", "off"}
+        What happens when ``step_size`` is beyond the integrator's stable bound on the orbit of
+        a start, ``κ = step_size·θ·max_i |h''_i| > 2`` (:mod:`liesample.stability`; rigid body:
+        ``θ·step_size·r²(1/I_min − 1/I_max) ≤ 2``): ``"raise"`` (default) a ``ValueError``
+        naming the largest allowed step; ``"warn"`` a ``UserWarning`` (the chain then samples a
+        wrong law); ``"off"`` no check. The mode is recorded in the run's attributes.
+    bias_tolerance : float
+        Relative bias tolerance of the automatic step size (default
+        :data:`DEFAULT_BIAS_TOLERANCE` = 0.05 posterior sd).
 
     Returns
     -------
-    blackjax.base.SamplingAlgorithm
-        ``init(position)`` and ``step(rng_key, state) -> (state, info)``.
+    liesample.samplers.contract.Sampler
+        ``init(position)`` and ``step(rng_key, state) -> (state, info)`` (``info``: the Info
+        contract, plus ``casimir_error``); ``rng_key`` may be ``jax.random.key`` or
+        ``jax.random.PRNGKey``.
     """
     if not isinstance(system, LiePoissonSystem):
         raise TypeError(f"system must be a LiePoissonSystem, got {type(system).__name__}")
-    step_size = finite_float("step_size", step_size, positive=True)
+    if step_size is not None:
+        step_size = finite_float("step_size", step_size, positive=True)
+    bias_tolerance = finite_float("bias_tolerance", bias_tolerance, positive=True)
     sigma, theta, scene = make_dynamics(
         system, beta=beta, sigma=sigma, theta=theta, hamiltonian=hamiltonian
     )
+    if step_size is None and sigma == 0.0:
+        raise ValueError(
+            "step_size is required when sigma = 0: the automatic choice bounds the bias of a "
+            "sampled law, and a noise-free flow samples none"
+        )
     if stability not in STABILITY_MODES:
         raise ValueError(f"stability must be one of {STABILITY_MODES}, got {stability!r}")
-    integrator_name = get_integrator(integrator).name
+    integrator = get_integrator(integrator)
     kernel = build_kernel(system, integrator, scene)
+    options = dict(
+        beta=beta,
+        sigma=sigma,
+        integrator=integrator,
+        theta=None if sigma > 0 else theta,
+        hamiltonian=hamiltonian,
+        stability=stability,
+        bias_tolerance=bias_tolerance,
+    )
+    settings = {
+        "sampler": "lie_poisson_langevin",
+        "system": system.name,
+        "beta": beta,
+        "sigma": sigma,
+        "theta": theta,
+        "integrator": integrator.name,
+        "stability": stability,
+        "step_size": step_size,
+        "step_size_source": "given" if step_size is not None else "automatic (not yet chosen)",
+    }
+
+    def choose(positions, rng_key=None):
+        return accuracy.default_step_size(
+            system,
+            beta,
+            sigma=sigma,
+            integrator=integrator,
+            initial_positions=positions,
+            rng_key=jax.random.key(0) if rng_key is None else rng_key,
+            relative_tolerance=bias_tolerance,
+        )
+
+    step = _StepSize(step_size, choose, settings)
+
+    def check_orbits(positions, representatives):
+        dt = step.resolve(positions[representatives])
+        kappas = []
+        for chain in representatives:
+            position = positions[chain]
+            if stability != "off":
+                kappa = check_step_size(system, integrator, dt, theta, position, stability)
+                if kappa is not None:
+                    kappas.append(kappa)
+            check_precision(system, beta, theta, position, jnp.asarray(position).dtype)
+        if kappas:
+            settings["stability_number"] = float(max(kappas))
+            settings["stability_limit"] = integrator.stability_limit
 
     def init_fn(position, rng_key=None):
         state = init(position, system, rng_key)
-        if stability != "off" and concrete_array(position) is not None:
-            check_step_size(system, integrator_name, step_size, theta, position, stability)
+        value = concrete_array(position)
+        if value is not None:
+            check_orbits(np.asarray(state.position)[None], [0])
         return state
 
     def step_fn(rng_key, state):
-        return kernel(rng_key, state, step_size, sigma, theta)
+        dt = step.resolve(np.asarray(system.default_position)[None])
+        return kernel(rng_key, state, dt, sigma, theta)
 
-    return blackjax.base.SamplingAlgorithm(init_fn, step_fn)
+    def check_positions(positions, *, step_size_checks=True):
+        positions = np.asarray(positions)
+        casimirs = check_orbit_starts(system, positions)
+        if step_size_checks:
+            dtype = jnp.result_type(float)
+            check_orbits(np.asarray(positions, dtype), distinct_orbits(casimirs))
+
+    def adapt(rng_key, chain_keys, states, initial_positions, num_warmup):
+        del chain_keys, states, num_warmup
+        choice = choose(np.asarray(initial_positions), jax.random.fold_in(rng_key, 1))
+        tuned = as_top_level_api(system, **options, step_size=choice.step_size)
+        tuned.settings["step_size_source"] = (
+            f"warm-up bias model: predicted |bias| <= {choice.relative_tolerance:g} posterior "
+            "sd of each coordinate (liesample.accuracy.default_step_size)"
+        )
+        return tuned, None
+
+    return Sampler(
+        init_fn, step_fn, settings=settings, check_positions=check_positions, adapt=adapt
+    )
 
 
-lie_poisson_langevin = blackjax.GenerateSamplingAPI(as_top_level_api, init, build_kernel)
+lie_poisson_langevin = sampling_api(
+    as_top_level_api, init, build_kernel, "lie_poisson_langevin", __name__
+)

@@ -24,6 +24,8 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 
 from liesample._validation import concrete_array
+from liesample.compile import jit
+from liesample.samplers.contract import first_bad_chain
 from liesample.structures import kinetic_magnetic_exponential
 
 __all__ = [
@@ -31,6 +33,7 @@ __all__ = [
     "Metric",
     "check_magnetic_field",
     "default_magnetic_field",
+    "check_starts",
     "initial_values",
     "magnetic_flow",
     "make_metric",
@@ -147,6 +150,32 @@ def initial_values(position, logdensity_fn):
             "chain where log π is finite"
         )
     return logdensity, grad, jnp.zeros_like(ravel(position), dtype=flat_grad.dtype)
+
+
+def check_starts(positions, logdensity_fn, dimension=None):
+    """Check every start (a pytree whose leaves have a leading chain axis) in one vectorised
+    call: ``log π`` and its gradient finite, ``dimension`` coordinates; the error names the
+    first bad chain."""
+
+    def finite(position):
+        logdensity, grad = jax.value_and_grad(logdensity_fn)(position)
+        return jnp.isfinite(logdensity) & jnp.all(jnp.isfinite(ravel(grad)))
+
+    first = jax.tree.map(lambda leaf: leaf[0], positions)
+    size = ravel(first).shape[0]
+    if dimension is not None and size != dimension:
+        raise ValueError(
+            f"initial_positions[0] has {size} coordinates but inverse_mass_matrix and "
+            f"magnetic_field are for {dimension}"
+        )
+    with jax.ensure_compile_time_eval():
+        ok = np.asarray(jit(jax.vmap(finite))(positions))
+    chain = first_bad_chain(ok)
+    if chain is not None:
+        raise ValueError(
+            f"initial_positions[{chain}]: logdensity_fn or its gradient is not finite there; "
+            "start the chain where log π is finite"
+        )
 
 
 # --------------------------------------------------------------------------- momentum law

@@ -34,10 +34,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from liesample._validation import concrete_array
+from liesample.samplers.contract import Sampler, sampling_api, setting
 from liesample.samplers.magnetic import (
     MagneticFlow,
     check_inverse_mass_matrix,
     check_magnetic_field,
+    check_starts,
     check_step_size,
     initial_values,
     magnetic_flow,
@@ -75,12 +77,14 @@ class MagneticHMCState(NamedTuple):
 
 
 class MagneticHMCInfo(NamedTuple):
-    """What one transition did.
+    """What one transition did (the Info contract of :mod:`liesample.samplers.contract`, in
+    BlackJAX's field order).
 
     acceptance_rate : ``min(1, e^{−ΔH})`` (0 for a non-finite proposal).
     is_accepted : whether the proposal was accepted.
-    is_divergent : ``ΔH`` above ``divergence_threshold`` or non-finite.
-    energy : ``H`` of the proposal (``-log π + kinetic``).
+    is_divergent : ``ΔH`` above ``divergence_threshold``, or a non-finite proposal (rejected).
+    energy : ``H`` of the proposal (``-log π + kinetic``; ``inf`` for a non-finite one), as in
+        BlackJAX's HMC.
     num_integration_steps : leapfrog steps (gradient evaluations) of the trajectory.
     magnetic_sign : sign of the field used for this trajectory.
     """
@@ -286,7 +290,7 @@ def as_top_level_api(
     divergence_threshold: float = 1000.0,
     momentum_persistence: float = 0.0,
     persistent: bool = True,
-) -> blackjax.base.SamplingAlgorithm:
+) -> Sampler:
     """Magnetic HMC: the arguments of ``blackjax.hmc`` plus ``magnetic_field``.
 
     Parameters
@@ -303,17 +307,19 @@ def as_top_level_api(
         Antisymmetric ``G`` (any rank, ``0`` allowed), in the order of the raveled position;
         see :func:`liesample.samplers.magnetic.default_magnetic_field`.
     divergence_threshold : float
-        ``ΔH`` above which a transition is flagged divergent.
+        ``ΔH`` above which a transition is flagged divergent (default 1000).
     momentum_persistence : float in [0, 1)
-        ``α`` of the partial momentum refreshment; 0 refreshes fully.
+        ``α`` of the partial momentum refreshment; 0 (default) refreshes fully.
     persistent : bool
-        Apply the ``(p, s) ↦ (−p, −s)`` flip after each Metropolis step (see module docstring).
+        Apply the ``(p, s) ↦ (−p, −s)`` flip after each Metropolis step (default ``True``; see
+        the module docstring).
 
     Returns
     -------
-    blackjax.base.SamplingAlgorithm
+    liesample.samplers.contract.Sampler
         ``init(position, rng_key=None)`` and ``step(rng_key, state) -> (state, info)``. The two
-        flows ``e^{±εGM⁻¹}`` are computed once here, not per step.
+        flows ``e^{±εGM⁻¹}`` are computed once here, not per step. Tune ``step_size`` and
+        ``inverse_mass_matrix`` with ``blackjax.window_adaptation(liesample.magnetic_hmc, …)``.
     """
     check_step_size(step_size)
     check_inverse_mass_matrix(inverse_mass_matrix)
@@ -342,7 +348,19 @@ def as_top_level_api(
             persistent,
         )
 
-    return blackjax.base.SamplingAlgorithm(init_fn, step_fn)
+    def check_positions(positions, **_):
+        check_starts(positions, logdensity_fn, np.shape(inverse_mass_matrix)[0])
+
+    settings = {
+        "sampler": "magnetic_hmc",
+        "step_size": setting(step_size),
+        "step_size_source": "given",
+        "num_integration_steps": setting(num_integration_steps),
+        "divergence_threshold": setting(divergence_threshold),
+        "momentum_persistence": setting(momentum_persistence),
+        "persistent": persistent,
+    }
+    return Sampler(init_fn, step_fn, settings=settings, check_positions=check_positions)
 
 
-magnetic_hmc = blackjax.GenerateSamplingAPI(as_top_level_api, init, build_kernel)
+magnetic_hmc = sampling_api(as_top_level_api, init, build_kernel, "magnetic_hmc", __name__)

@@ -17,7 +17,9 @@ stationary law differs from ``π ⊗ N(0, M)`` by ``O(ε²)``); one gradient per
 target the step is affine, and :func:`liesample.targets.gaussian.linear_step_moments` gives the
 exact stationary law of the discretisation itself (used by the tests).
 
-A step that produces a non-finite state is flagged ``is_divergent`` and the state is kept.
+A step that produces a non-finite state is flagged ``is_divergent`` (with
+``acceptance_rate = 0``; 1 for every other step: the Info contract's rule for unadjusted
+samplers, :mod:`liesample.samplers.contract`) and the state is kept.
 """
 
 from __future__ import annotations
@@ -31,9 +33,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from liesample._validation import concrete_array, finite_float
+from liesample.samplers.contract import Sampler, sampling_api, setting
 from liesample.samplers.magnetic import (
     check_inverse_mass_matrix,
     check_magnetic_field,
+    check_starts,
     check_step_size,
     initial_values,
     magnetic_flow,
@@ -62,14 +66,16 @@ class MagneticLangevinState(NamedTuple):
 
 
 class MagneticLangevinInfo(NamedTuple):
-    """What one step did.
+    """What one step did (the Info contract of :mod:`liesample.samplers.contract`).
 
-    energy : ``H = −log π(q) + ½pᵀM⁻¹p`` at the new state.
     is_divergent : the step produced NaN/inf; the previous state was kept.
+    acceptance_rate : 1.0 for a step taken, 0.0 for a divergent (rejected) one (unadjusted).
+    energy : ``H = −log π(q) + ½pᵀM⁻¹p`` at the chain's state after the step.
     """
 
-    energy: jax.Array
     is_divergent: jax.Array
+    acceptance_rate: jax.Array
+    energy: jax.Array
 
 
 def init(position, logdensity_fn: Callable, rng_key=None) -> MagneticLangevinState:
@@ -106,7 +112,8 @@ def _step(rng_key, state, logdensity_fn, step_size, metric, flow, friction):
         ),
     )
     energy = -new_state.logdensity + metric.kinetic_energy(new_state.momentum)
-    return new_state, MagneticLangevinInfo(energy, ~finite)
+    rate = jnp.where(finite, 1.0, 0.0).astype(energy.dtype)
+    return new_state, MagneticLangevinInfo(~finite, rate, energy)
 
 
 def _check_friction(friction):
@@ -146,7 +153,7 @@ def build_kernel():
 
 def as_top_level_api(
     logdensity_fn: Callable, step_size, inverse_mass_matrix, friction, magnetic_field
-) -> blackjax.base.SamplingAlgorithm:
+) -> Sampler:
     """Unadjusted magnetic Langevin sampler (weak order 2; bias ``O(ε²)``, not corrected).
 
     Parameters
@@ -164,7 +171,7 @@ def as_top_level_api(
 
     Returns
     -------
-    blackjax.base.SamplingAlgorithm
+    liesample.samplers.contract.Sampler
         ``init(position, rng_key=None)`` and ``step(rng_key, state) -> (state, info)``.
     """
     check_step_size(step_size)
@@ -189,7 +196,18 @@ def as_top_level_api(
     def step_fn(rng_key, state):
         return _step(rng_key, state, logdensity_fn, step_size, metric, flow, friction)
 
-    return blackjax.base.SamplingAlgorithm(init_fn, step_fn)
+    def check_positions(positions, **_):
+        check_starts(positions, logdensity_fn, d)
+
+    settings = {
+        "sampler": "magnetic_langevin",
+        "step_size": setting(step_size),
+        "step_size_source": "given",
+        "friction": setting(friction),
+    }
+    return Sampler(init_fn, step_fn, settings=settings, check_positions=check_positions)
 
 
-magnetic_langevin = blackjax.GenerateSamplingAPI(as_top_level_api, init, build_kernel)
+magnetic_langevin = sampling_api(
+    as_top_level_api, init, build_kernel, "magnetic_langevin", __name__
+)

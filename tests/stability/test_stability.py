@@ -178,7 +178,7 @@ def test_overflow_is_flagged_and_reported():
     with pytest.warns(RuntimeWarning, match="non-finite state"):
         result = liesample.sample_chains(algorithm, jax.random.key(1), starts, 30, thinning=10)
     assert np.all(np.isfinite(result.positions))
-    assert np.all(result.info["nonfinite"][:, -1])
+    assert np.all(result.info["is_divergent"][:, -1])
     with pytest.raises(NonFiniteStateError, match="Reduce step_size"):
         liesample.sample_chains(
             algorithm, jax.random.key(1), starts, 30, thinning=10, on_nonfinite="raise"
@@ -241,7 +241,7 @@ def stationary_run(algorithm, starts, num_steps, observables, key, num_batches=1
                 state,
                 total + observables(state.position),
                 jnp.maximum(drift, info.casimir_error),
-                bad | info.nonfinite,
+                bad | info.is_divergent,
             )
 
         def batch(carry, index):
