@@ -17,7 +17,8 @@ import pytest
 
 import liesample
 from liesample.samplers.spins import SpinInfo, finish_step
-from liesample.samplers.spins_wolff import WolffInfo, neighbour_table
+from liesample.samplers.spins_wolff import WolffInfo
+from liesample.systems.heisenberg import neighbour_table
 from liesample.systems import heisenberg, rigid_body
 from liesample.targets.spins import (
     HeisenbergRingReference,

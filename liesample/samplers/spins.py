@@ -25,6 +25,7 @@ acceptance; 1 for rejection-free moves) and ``energy`` (``h`` after the step).
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import jax
@@ -33,16 +34,22 @@ import numpy as np
 
 from liesample._validation import finite_float
 from liesample.algebras import so3
-from liesample.systems.heisenberg import SpinLatticeSystem, colouring, neighbour_sum
+from liesample.systems.heisenberg import (
+    SpinLatticeSystem,
+    colouring,
+    neighbour_sum,
+    neighbour_table,
+)
 from liesample.targets.spins import von_mises_fisher
 
 __all__ = [
     "SpinInfo",
     "SpinState",
+    "Sublattice",
     "check_beta",
     "check_spin_system",
     "check_sweeps",
-    "colour_masks",
+    "energy_change",
     "finish_step",
     "heat_bath",
     "init",
@@ -50,6 +57,8 @@ __all__ = [
     "local_field",
     "precess",
     "require_isotropic",
+    "sublattice_field",
+    "sublattices",
 ]
 
 
@@ -101,10 +110,33 @@ def init(position, system: SpinLatticeSystem, rng_key=None) -> SpinState:
     return SpinState(jnp.asarray(position, dtype=jnp.result_type(float)))
 
 
-def colour_masks(system: SpinLatticeSystem) -> list[jax.Array]:
-    """One boolean mask (lattice shape) per colour class of the lattice's proper colouring."""
-    colours, num_colours = colouring(system.params["shape"], system.params["periodic"])
-    return [jnp.asarray(colours == c) for c in range(num_colours)]
+class Sublattice(NamedTuple):
+    """One colour class: its flat site indices ``(n,)`` and their neighbours ``(n, 2·dim)``
+    (index ``N``, a zero spin, where an open boundary has none)."""
+
+    sites: jax.Array
+    neighbours: jax.Array
+
+
+def sublattices(system: SpinLatticeSystem) -> list[Sublattice]:
+    """The colour classes of the lattice's proper colouring, as gather indices (static)."""
+    params = system.params
+    colours, num_colours = colouring(params["shape"], params["periodic"])
+    table = neighbour_table(params["shape"], params["periodic"])
+    out = []
+    for c in range(num_colours):
+        sites = np.flatnonzero(colours.reshape(-1) == c)
+        out.append(Sublattice(jnp.asarray(sites, jnp.int32), jnp.asarray(table[sites], jnp.int32)))
+    return out
+
+
+def sublattice_field(system: SpinLatticeSystem, flat, sublattice: Sublattice):
+    """``F_k = J Σ_{j~k} s_j + B`` at the sites of ``sublattice`` (``flat``: spins ``(N, 3)``)."""
+    padded = jnp.concatenate([flat, jnp.zeros((1, 3), flat.dtype)])
+    params = system.params
+    return params["coupling"] * jnp.sum(padded[sublattice.neighbours], axis=1) + jnp.asarray(
+        params["field"], dtype=flat.dtype
+    )
 
 
 def local_field(system: SpinLatticeSystem, s):
@@ -115,17 +147,20 @@ def local_field(system: SpinLatticeSystem, s):
     )
 
 
-def local_energy_change(system: SpinLatticeSystem, s, new):
-    """``Δh_k = h(s with s_k → new_k) − h(s)`` for every site ``k`` at once (lattice shape).
-
-    ``−(new_k − s_k)·F_k − D((new_k·e_z)² − (s_k·e_z)²)``: exact, because ``h`` has no
-    self-interaction (every bond joins two distinct sites).
-    """
-    delta = -jnp.sum((new - s) * local_field(system, s), axis=-1)
+def energy_change(system: SpinLatticeSystem, old, new, field):
+    """``Δh`` of moving single spins ``old → new`` in their local fields ``field`` (…, 3):
+    ``−(new − old)·F − D((new·e_z)² − (old·e_z)²)``; exact, as ``h`` has no self-interaction
+    (every bond joins two distinct sites)."""
+    delta = -jnp.sum((new - old) * field, axis=-1)
     anisotropy = system.params["anisotropy"]
     if anisotropy != 0.0:
-        delta = delta - anisotropy * (new[..., 2] ** 2 - s[..., 2] ** 2)
+        delta = delta - anisotropy * (new[..., 2] ** 2 - old[..., 2] ** 2)
     return delta
+
+
+def local_energy_change(system: SpinLatticeSystem, s, new):
+    """``Δh_k = h(s with s_k → new_k) − h(s)`` for every site ``k`` at once (lattice shape)."""
+    return energy_change(system, s, new, local_field(system, s))
 
 
 def _unit(field):
@@ -135,27 +170,31 @@ def _unit(field):
     return jnp.where((norm > 0.0)[..., None], field / safe[..., None], 0.0), norm
 
 
-def precess(system: SpinLatticeSystem, s, mask, angle):
-    """Spins in ``mask`` precess about their local field by ``angle``: the exact Hamiltonian
-    flow of each (``ṡ_k = F_k × s_k``, run for time ``angle/|F_k|``); ``angle = π`` is
-    over-relaxation, ``s ↦ 2(s·F̂)F̂ − s``. ``h`` is kept to round-off; spins with ``F_k = 0``
-    do not move."""
-    direction, _ = _unit(local_field(system, s))
-    # Ad*_{exp ζ} s rotates about −ζ/|ζ| by |ζ| (so3.coadjoint_exp): ζ = −angle·F̂.
-    moved = so3.coadjoint_exp(-angle * direction, s)
-    return jnp.where(mask[..., None], moved, s)
+def precess(system: SpinLatticeSystem, flat, sublattice: Sublattice, angle):
+    """The spins of ``sublattice`` precess about their local fields by ``angle``: the exact
+    Hamiltonian flow of each (``ṡ_k = F_k × s_k``, run for time ``angle/|F_k|``), which keeps
+    ``h`` to round-off; spins with ``F_k = 0`` do not move. ``angle = π`` is over-relaxation,
+    ``s ↦ 2(s·F̂)F̂ − s`` (computed so, without trigonometry, when ``angle`` is the float π).
+    ``flat``: spins ``(N, 3)``."""
+    direction, _ = _unit(sublattice_field(system, flat, sublattice))
+    s = flat[sublattice.sites]
+    if isinstance(angle, float) and angle == math.pi:
+        moved = 2.0 * jnp.sum(s * direction, axis=-1, keepdims=True) * direction - s
+        moved = jnp.where(jnp.any(direction != 0.0, axis=-1, keepdims=True), moved, s)
+    else:
+        # Ad*_{exp ζ} s rotates about −ζ/|ζ| by |ζ| (so3.coadjoint_exp): ζ = −angle·F̂.
+        moved = so3.coadjoint_exp(-angle * direction, s)
+    return flat.at[sublattice.sites].set(moved)
 
 
-def heat_bath(system: SpinLatticeSystem, rng_key, s, mask, beta):
-    """Spins in ``mask`` are redrawn from their exact conditional law ``∝ exp(β s·F_k)``.
-
-    That law is the infinite-time limit of the spin's noise–dissipation dynamics in the frozen
-    field ``F_k`` (a von Mises–Fisher law, :func:`liesample.targets.spins.von_mises_fisher`);
-    a spin with ``F_k = 0`` is redrawn uniformly.
-    """
-    direction, norm = _unit(local_field(system, s))
-    fresh = von_mises_fisher(rng_key, direction, beta * norm)
-    return jnp.where(mask[..., None], fresh, s)
+def heat_bath(system: SpinLatticeSystem, rng_key, flat, sublattice: Sublattice, beta):
+    """The spins of ``sublattice`` are redrawn from their exact conditional law
+    ``∝ exp(β s·F_k)``: the infinite-time limit of each spin's noise–dissipation dynamics in the
+    frozen field ``F_k``, a von Mises–Fisher law
+    (:func:`liesample.targets.spins.von_mises_fisher`); ``F_k = 0`` gives a uniform draw.
+    ``flat``: spins ``(N, 3)``."""
+    direction, norm = _unit(sublattice_field(system, flat, sublattice))
+    return flat.at[sublattice.sites].set(von_mises_fisher(rng_key, direction, beta * norm))
 
 
 def finish_step(system: SpinLatticeSystem, old, new, acceptance_rate, info_class=SpinInfo, **extra):

@@ -32,12 +32,12 @@ from liesample.samplers.spins import (
     check_beta,
     check_spin_system,
     check_sweeps,
-    colour_masks,
     finish_step,
     heat_bath,
     init,
     precess,
     require_isotropic,
+    sublattices,
 )
 from liesample.systems.heisenberg import SpinLatticeSystem
 
@@ -53,18 +53,18 @@ def build_kernel(system: SpinLatticeSystem, heat_bath_sweeps: int = 1, overrelax
     require_isotropic(system, "heisenberg_heat_bath")
     heat_bath_sweeps = check_sweeps("heat_bath_sweeps", heat_bath_sweeps)
     overrelaxation = check_sweeps("overrelaxation", overrelaxation)
-    masks = colour_masks(system)
+    classes = sublattices(system)
 
     def kernel(rng_key, state: SpinState, beta, precession_angle):
-        s = state.position
-        keys = jax.random.split(rng_key, max(1, heat_bath_sweeps * len(masks)))
+        flat = state.position.reshape(-1, 3)
+        keys = jax.random.split(rng_key, max(1, heat_bath_sweeps * len(classes)))
         for sweep in range(heat_bath_sweeps):
-            for c, mask in enumerate(masks):
-                s = heat_bath(system, keys[sweep * len(masks) + c], s, mask, beta)
+            for c, sublattice in enumerate(classes):
+                flat = heat_bath(system, keys[sweep * len(classes) + c], flat, sublattice, beta)
         for _ in range(overrelaxation):
-            for mask in masks:
-                s = precess(system, s, mask, precession_angle)
-        return finish_step(system, state.position, s, 1.0)
+            for sublattice in classes:
+                flat = precess(system, flat, sublattice, precession_angle)
+        return finish_step(system, state.position, flat.reshape(state.position.shape), 1.0)
 
     return kernel
 

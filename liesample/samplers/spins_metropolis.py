@@ -12,8 +12,8 @@ Proposals (both symmetric, so the acceptance probability is ``min(1, exp(−βΔ
 - ``"rotation"``: ``s' = (s + ε g)/|s + ε g|`` with ``g ~ N(0, I₃)``, whose law depends only on
   ``s·s'`` (isotropy), with tunable size ``ε = proposal_scale``.
 
-``Δh`` at site ``k`` is :func:`liesample.samplers.spins.local_energy_change` (any coupling,
-field and anisotropy).
+``Δh`` at site ``k`` is :func:`liesample.samplers.spins.energy_change` in the local field
+``F_k = J Σ_{j~k} s_j + B`` (any coupling, field and anisotropy).
 """
 
 from __future__ import annotations
@@ -28,10 +28,11 @@ from liesample.samplers.spins import (
     SpinState,
     check_beta,
     check_spin_system,
-    colour_masks,
+    energy_change,
     finish_step,
     init,
-    local_energy_change,
+    sublattice_field,
+    sublattices,
 )
 from liesample.systems.heisenberg import SpinLatticeSystem
 
@@ -50,30 +51,32 @@ def build_kernel(system: SpinLatticeSystem, proposal: str = "uniform"):
 
     ``proposal`` is structural; ``beta`` and ``proposal_scale`` may be traced.
     """
-    shape = check_spin_system(system)["shape"]
+    check_spin_system(system)
     if proposal not in PROPOSALS:
         raise ValueError(f"proposal must be one of {PROPOSALS}, got {proposal!r}")
-    masks = colour_masks(system)
+    classes = sublattices(system)
 
     def propose(key, s, scale):
         if proposal == "uniform":
-            return _random_directions(key, shape, s.dtype)
+            return _random_directions(key, s.shape[:-1], s.dtype)
         moved = s + scale * jax.random.normal(key, s.shape, dtype=s.dtype)
         return moved / jnp.linalg.norm(moved, axis=-1, keepdims=True)
 
     def kernel(rng_key, state: SpinState, beta, proposal_scale):
-        s = state.position
-        keys = jax.random.split(rng_key, len(masks))
+        flat = state.position.reshape(-1, 3)
+        keys = jax.random.split(rng_key, len(classes))
         accepted = jnp.zeros((), jnp.int32)
-        for key, mask in zip(keys, masks):  # a handful of colour classes, unrolled
+        for key, sublattice in zip(keys, classes):  # a handful of colour classes, unrolled
             key_propose, key_accept = jax.random.split(key)
+            s = flat[sublattice.sites]
             new = propose(key_propose, s, proposal_scale)
-            delta = local_energy_change(system, s, new)
-            log_u = jnp.log(jax.random.uniform(key_accept, shape, dtype=s.dtype))
-            accept = mask & (log_u < -beta * delta)
-            s = jnp.where(accept[..., None], new, s)
+            delta = energy_change(system, s, new, sublattice_field(system, flat, sublattice))
+            log_u = jnp.log(jax.random.uniform(key_accept, s.shape[:-1], dtype=s.dtype))
+            accept = log_u < -beta * delta
+            flat = flat.at[sublattice.sites].set(jnp.where(accept[:, None], new, s))
             accepted = accepted + jnp.sum(accept)
-        return finish_step(system, state.position, s, accepted / s[..., 0].size)
+        position = flat.reshape(state.position.shape)
+        return finish_step(system, state.position, position, accepted / flat.shape[0])
 
     return kernel
 

@@ -20,16 +20,14 @@ popped per iteration, its ≤ 4 neighbours tested at once); the uniform for bond
 
 from __future__ import annotations
 
-import math
 from typing import NamedTuple
 
 import blackjax
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from liesample.samplers.spins import SpinState, check_beta, check_spin_system, finish_step, init
-from liesample.systems.heisenberg import SpinLatticeSystem
+from liesample.systems.heisenberg import SpinLatticeSystem, neighbour_table
 from liesample.targets.spins import von_mises_fisher
 
 __all__ = [
@@ -38,7 +36,6 @@ __all__ = [
     "as_top_level_api",
     "build_kernel",
     "init",
-    "neighbour_table",
 ]
 
 
@@ -50,22 +47,6 @@ class WolffInfo(NamedTuple):
     acceptance_rate: jax.Array
     energy: jax.Array
     cluster_size: jax.Array
-
-
-def neighbour_table(shape, periodic: bool) -> np.ndarray:
-    """``(N, 2·dim)`` flat indices of each site's neighbours, ``N`` where there is none."""
-    num_sites = math.prod(shape)
-    index = np.arange(num_sites).reshape(shape)
-    columns = []
-    for axis, n in enumerate(shape):
-        for shift in (1, -1):
-            rolled = np.roll(index, shift, axis=axis)
-            if not periodic:
-                edge = [slice(None)] * len(shape)
-                edge[axis] = 0 if shift == 1 else n - 1
-                rolled[tuple(edge)] = num_sites
-            columns.append(rolled.reshape(-1))
-    return np.stack(columns, axis=1)
 
 
 def check_wolff_system(system: SpinLatticeSystem) -> None:

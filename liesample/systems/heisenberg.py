@@ -46,6 +46,7 @@ __all__ = [
     "heisenberg",
     "lattice_shape",
     "neighbour_sum",
+    "neighbour_table",
     "noise_groups",
 ]
 
@@ -139,6 +140,22 @@ def neighbour_sum(s, periodic: bool):
                 + jax.lax.slice_in_dim(padded, 2, n + 2, axis=axis)
             )
     return total
+
+
+def neighbour_table(shape, periodic: bool) -> np.ndarray:
+    """``(N, 2·dim)`` flat indices of each site's neighbours, ``N`` where there is none."""
+    num_sites = math.prod(shape)
+    index = np.arange(num_sites).reshape(shape)
+    columns = []
+    for axis, n in enumerate(shape):
+        for shift in (1, -1):
+            rolled = np.roll(index, shift, axis=axis)
+            if not periodic:
+                edge = [slice(None)] * len(shape)
+                edge[axis] = 0 if shift == 1 else n - 1
+                rolled[tuple(edge)] = num_sites
+            columns.append(rolled.reshape(-1))
+    return np.stack(columns, axis=1)
 
 
 def colouring(shape, periodic: bool) -> tuple[np.ndarray, int]:
