@@ -81,8 +81,10 @@ def _shape(name, shape) -> tuple[int, ...]:
     if isinstance(shape, (int, np.integer)) and not isinstance(shape, bool):
         shape = (int(shape),)
     try:
+        if isinstance(shape, str):
+            raise TypeError
         shape = tuple(int(s) for s in shape)
-    except TypeError:
+    except (TypeError, ValueError):
         raise TypeError(f"{name} must be a tuple of non-negative ints, got {shape!r}") from None
     if any(s < 0 for s in shape):
         raise ValueError(f"{name} must be a tuple of non-negative ints, got {shape!r}")
@@ -111,6 +113,13 @@ def _versine(x):
     small = jnp.abs(x) < 1e-4
     safe = jnp.where(small, 1.0, x)
     return jnp.where(small, 0.5 - x**2 / 24.0 + x**4 / 720.0, (1.0 - jnp.cos(safe)) / safe**2)
+
+
+def _norm(x, keepdims=False):
+    """Euclidean norm over the last axis, with a zero (not NaN) gradient at 0."""
+    sq = jnp.sum(x * x, -1, keepdims=keepdims)
+    positive = sq > 0
+    return jnp.where(positive, jnp.sqrt(jnp.where(positive, sq, 1.0)), 0.0)
 
 
 def _wrap(theta):
@@ -324,7 +333,7 @@ class Sphere(Space):
         return x + self.project(x, eps)
 
     def flow(self, x, p, inverse_mass, t):
-        speed = jnp.linalg.norm(p, axis=-1, keepdims=True)  # |p|; |v| = m⁻¹|p|
+        speed = _norm(p, keepdims=True)  # |p|; |v| = m⁻¹|p|
         angle = t * inverse_mass * speed
         cos, sin = jnp.cos(angle), jnp.sin(angle)
         new_x = cos * x + (t * inverse_mass * _sinc(angle)) * p
@@ -337,7 +346,7 @@ class Sphere(Space):
         """Tangent vector at ``x`` pointing to ``y`` with length the geodesic distance."""
         c = jnp.clip(jnp.sum(x * y, -1, keepdims=True), -1.0, 1.0)
         w = y - c * x
-        angle = jnp.arctan2(jnp.linalg.norm(w, axis=-1, keepdims=True), c)
+        angle = jnp.arctan2(_norm(w, keepdims=True), c)
         return w / _sinc(angle)
 
 
@@ -466,7 +475,7 @@ class SO(_MatrixGroup):
     def exponential(self, c):
         if self.n != 3:
             return super().exponential(c)
-        theta = jnp.linalg.norm(c, axis=-1)[..., None, None]
+        theta = _norm(c)[..., None, None]
         K = self.hat(c)
         return jnp.eye(3, dtype=c.dtype) + _sinc(theta) * K + _versine(theta) * (K @ K)
 
@@ -524,7 +533,7 @@ class SU(_MatrixGroup):
     def exponential(self, c):
         if self.n != 2:
             return super().exponential(c)
-        angle = jnp.linalg.norm(c, axis=-1)[..., None, None]
+        angle = _norm(c)[..., None, None]
         return jnp.cos(angle) * jnp.eye(2) + _sinc(angle) * self.hat(c)
 
     def log(self, x, y):
