@@ -19,7 +19,7 @@ and draws no random numbers (it is *not* a zero coefficient).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import jax
 import jax.numpy as jnp
@@ -172,10 +172,17 @@ class PoissonLangevin:
         ``exp(−βh)`` invariant on its own), which is what the splitting integrator exploits.
         A system may group directions that commute and do not affect each other's
         coefficients (``LiePoissonSystem.noise_groups``); a group then moves as one piece.
+        The JVP and VJP run through ``LiePoissonSystem.group_noise_hamiltonians`` where the
+        system declares it (only the group's functions are evaluated).
         """
-        coefficients = self.noise_coefficients(mu, dt, dW)
+        sde = self.sde
+        restricted = self.system.group_noise_hamiltonians
+        if restricted is not None:
+            sde = replace(sde, noise_hamiltonians=lambda m: restricted(m, group))
+        coefficients = jnp.broadcast_to(sde.noise_coefficients(mu, dt, dW), (self.num_noises,))
         in_group = self.system.noise_group_labels == group
-        return self.noise_generator(mu, jnp.where(in_group, coefficients, 0.0))
+        _, pullback = jax.vjp(sde.noise_hamiltonians, mu)
+        return pullback(jnp.where(in_group, coefficients, 0.0))[0]
 
     def vector_field(self, mu, dt, dW=None):
         """The ambient increment ``ad*_ζ μ`` (what a non-geometric integrator adds to ``μ``)."""

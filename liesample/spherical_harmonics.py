@@ -22,6 +22,7 @@ Ordering: degree ``ℓ = ℓ_min … L``, then ``m = −ℓ … ℓ``; the index
 
 from __future__ import annotations
 
+import functools
 import math
 
 import jax.numpy as jnp
@@ -31,6 +32,7 @@ __all__ = [
     "degrees_and_orders",
     "num_harmonics",
     "real_spherical_harmonics",
+    "transport_mode",
     "transport_modes",
 ]
 
@@ -101,13 +103,9 @@ def _legendre_over_sin_power(z, max_degree):
     return jnp.stack(rows, axis=-2)
 
 
-def real_spherical_harmonics(x, max_degree: int, min_degree: int = 0):
-    """Real orthonormal ``Y_ℓ^m(x/|x|)`` for ``ℓ_min ≤ ℓ ≤ L``, shape ``(..., (L+1)² − ℓ_min²)``.
-
-    ``x`` has shape ``(..., 3)`` and must be nonzero. Orthonormal on the unit sphere:
-    ``∫ Y_ℓ^m Y_ℓ'^m' dΩ = δ δ``.
-    """
-    max_degree, min_degree = _check_degrees(max_degree, min_degree)
+def _legendre_and_angular(x, max_degree):
+    """``q[..., ℓ, m]`` (:func:`_legendre_over_sin_power`) and ``angular[..., L + m]`` (``s_{|m|}``
+    for ``m < 0``, 1 for ``m = 0``, ``c_m`` for ``m > 0``) at ``u = x/|x|``."""
     x = jnp.asarray(x)
     if x.shape[-1:] != (3,):
         raise ValueError(f"x must have shape (..., 3), got {x.shape}")
@@ -120,12 +118,37 @@ def real_spherical_harmonics(x, max_degree: int, min_degree: int = 0):
         c, s = cos_part[-1], sin_part[-1]
         cos_part.append(c * ux - s * uy)
         sin_part.append(c * uy + s * ux)
-    # angular[..., L + m]: s_{|m|} for m < 0, 1 for m = 0, c_m for m > 0
-    angular = jnp.stack(sin_part[:0:-1] + cos_part, axis=-1)
+    return q, jnp.stack(sin_part[:0:-1] + cos_part, axis=-1)
+
+
+def real_spherical_harmonics(x, max_degree: int, min_degree: int = 0):
+    """Real orthonormal ``Y_ℓ^m(x/|x|)`` for ``ℓ_min ≤ ℓ ≤ L``, shape ``(..., (L+1)² − ℓ_min²)``.
+
+    ``x`` has shape ``(..., 3)`` and must be nonzero. Orthonormal on the unit sphere:
+    ``∫ Y_ℓ^m Y_ℓ'^m' dΩ = δ δ``.
+    """
+    max_degree, min_degree = _check_degrees(max_degree, min_degree)
+    q, angular = _legendre_and_angular(x, max_degree)
     ell, m = degrees_and_orders(max_degree, min_degree)
     factor = np.where(m == 0, 1.0, math.sqrt(2.0))
     legendre = q[..., ell, np.abs(m)]
-    return jnp.asarray(factor, dtype=x.dtype) * legendre * angular[..., max_degree + m]
+    return jnp.asarray(factor, dtype=q.dtype) * legendre * angular[..., max_degree + m]
+
+
+def _check_transport_degree(max_degree):
+    if isinstance(max_degree, bool) or not isinstance(max_degree, (int, np.integer)):
+        raise TypeError(f"max_degree must be an int >= 1, got {max_degree!r}")
+    if max_degree < 1:
+        raise ValueError(
+            f"max_degree must be >= 1 (transport modes start at ℓ = 1), got {max_degree}"
+        )
+    return int(max_degree)
+
+
+def _transport_scale(max_degree):
+    """``√2^{[m≠0]} / √(ℓ(ℓ+1))`` of each transport mode, in order."""
+    ell, m = degrees_and_orders(max_degree, 1)
+    return np.where(m == 0, 1.0, math.sqrt(2.0)) / np.sqrt(ell * (ell + 1.0))
 
 
 def transport_modes(x, max_degree: int):
@@ -134,12 +157,89 @@ def transport_modes(x, max_degree: int):
     The noise potentials of the paper's ``eq:stoch-diss-point-vortex``: their velocity fields
     ``x × ∇ψ_ℓm`` are orthonormal in ``L²(S²)`` (``∫|∇ψ_ℓm|² = 1``).
     """
-    if isinstance(max_degree, bool) or not isinstance(max_degree, (int, np.integer)):
-        raise TypeError(f"max_degree must be an int >= 1, got {max_degree!r}")
-    if max_degree < 1:
-        raise ValueError(
-            f"max_degree must be >= 1 (transport modes start at ℓ = 1), got {max_degree}"
-        )
-    ell, _ = degrees_and_orders(int(max_degree), 1)
-    scale = 1.0 / np.sqrt(ell * (ell + 1.0))
-    return real_spherical_harmonics(x, int(max_degree), 1) * scale
+    max_degree = _check_transport_degree(max_degree)
+    q, angular = _legendre_and_angular(x, max_degree)
+    ell, m = degrees_and_orders(max_degree, 1)
+    scale = jnp.asarray(_transport_scale(max_degree), dtype=q.dtype)
+    return scale * q[..., ell, np.abs(m)] * angular[..., max_degree + m]
+
+
+@functools.lru_cache(maxsize=None)
+def _legendre_polynomials(max_degree):
+    """Monomial coefficients ``A[ℓ, m, k]`` of ``q_ℓm(z) = Σ_k A[ℓ, m, k] z^k`` (float64), by the
+    recurrences of :func:`_legendre_over_sin_power` run on coefficient arrays, and the condition
+    number ``max_{ℓ,m} max_{|z|≤1} Σ_k |A z^k| / |q|`` of evaluating them from monomials."""
+    a, b, c = _recurrence_coefficients(max_degree)
+    size = max_degree + 1
+    current = np.zeros((size, size + 1))
+    current[0, 0] = 1.0 / math.sqrt(4.0 * math.pi)
+    previous = np.zeros_like(current)
+    rows = [current]
+    for ell in range(1, size):
+        times_z = np.concatenate([np.zeros((size, 1)), current[:, :-1]], axis=1)
+        shifted = np.concatenate([np.zeros((1, size + 1)), current[:-1]], axis=0)
+        new = a[ell][:, None] * times_z - b[ell][:, None] * previous + c[ell][:, None] * shifted
+        previous, current = current, new
+        rows.append(current)
+    coefficients = np.stack(rows)[..., :size]
+    z = np.linspace(-1.0, 1.0, 1001)
+    powers = z[:, None] ** np.arange(size)
+    values = np.abs(np.einsum("zk,lmk->zlm", powers, coefficients))
+    bounds = np.einsum("zk,lmk->zlm", np.abs(powers), np.abs(coefficients))
+    valid = np.tril(np.ones((size, size), bool))
+    condition = float(np.max(bounds.max(0)[valid] / values.max(0)[valid]))
+    return coefficients, condition
+
+
+@functools.lru_cache(maxsize=None)
+def _angular_binomials(max_degree):
+    """``B[L + m, a]``: ``angular_m(x, y) = Σ_a B[L + m, a] x^a y^{|m|−a}``, where ``angular_m`` is
+    ``Re (x + iy)^m`` for ``m ≥ 0`` and ``Im (x + iy)^{|m|}`` for ``m < 0``."""
+    table = np.zeros((2 * max_degree + 1, max_degree + 1))
+    for order in range(max_degree + 1):
+        for j in range(order + 1):  # the term C(order, j) x^{order−j} (iy)^j
+            term = math.comb(order, j) * (-1) ** (j // 2)
+            if j % 2 == 0:
+                table[max_degree + order, order - j] = term
+            elif order > 0:
+                table[max_degree - order, order - j] = term
+    return table
+
+
+# Monomial evaluation of one mode is used while it loses at most this relative accuracy.
+_MONOMIAL_ACCURACY = 1e-10
+
+
+def transport_mode(x, max_degree: int, index):
+    """The single column ``index`` of :func:`transport_modes` (``index`` may be traced), shape
+    ``x.shape[:-1]``: one mode without evaluating all ``L(L+2)`` of them.
+
+    Where it is accurate (``L ≤ 16`` in float64, ``L ≤ 4`` in float32) the mode is evaluated
+    from monomials, ``q_ℓm(z) = Σ_k A_k z^k`` times ``Re``/``Im (x + iy)^{|m|}`` expanded in
+    ``x^a y^b``: a fixed handful of operations whatever ``L`` (the splitting integrator
+    evaluates one mode per piece, ``L(L+2)`` pieces per step). Otherwise: the stable
+    recurrences, then the one column.
+    """
+    max_degree = _check_transport_degree(max_degree)
+    x = jnp.asarray(x)
+    if x.shape[-1:] != (3,):
+        raise ValueError(f"x must have shape (..., 3), got {x.shape}")
+    ell, m = (jnp.asarray(v)[index] for v in degrees_and_orders(max_degree, 1))
+    scale = jnp.asarray(_transport_scale(max_degree), dtype=x.dtype)[index]
+    coefficients, condition = _legendre_polynomials(max_degree)
+    if condition * float(jnp.finfo(x.dtype).eps) > _MONOMIAL_ACCURACY:
+        q, angular = _legendre_and_angular(x, max_degree)
+        legendre = jnp.take(jnp.take(q, ell, axis=-2), jnp.abs(m), axis=-1)
+        return scale * legendre * jnp.take(angular, max_degree + m, axis=-1)
+    u = x / jnp.linalg.norm(x, axis=-1, keepdims=True)
+    degrees = jnp.arange(max_degree + 1)
+    columns = [jnp.ones_like(u)]
+    for _ in range(max_degree):  # elementwise: XLA fuses the chain into one kernel
+        columns.append(columns[-1] * u)
+    powers = jnp.stack(columns, axis=-1)  # (..., 3, L+1)
+    legendre = powers[..., 2, :] @ jnp.asarray(coefficients, dtype=x.dtype)[ell, jnp.abs(m)]
+    # Re / Im (x + iy)^{|m|} = Σ_a B_a x^a y^{|m|−a} (binomial expansion, :func:`_angular_binomials`)
+    binomials = jnp.asarray(_angular_binomials(max_degree), dtype=x.dtype)[max_degree + m]
+    y_powers = jnp.take(powers[..., 1, :], jnp.clip(jnp.abs(m) - degrees, 0), axis=-1)
+    angular = jnp.sum(binomials * powers[..., 0, :] * y_powers, axis=-1)
+    return scale * legendre * angular

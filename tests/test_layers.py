@@ -24,6 +24,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
         "algebras / structures / targets",
         (
             "liesample.algebras",
+            "liesample.spaces",
             "liesample.spherical_harmonics",
             "liesample.structures",
             "liesample.system_base",
@@ -42,7 +43,16 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
         ),
     ),
     ("systems", ("liesample.systems", "liesample.systems.*")),
-    ("samplers", ("liesample.samplers", "liesample.samplers.*", "liesample.drivers")),
+    (
+        "samplers",
+        (
+            "liesample.samplers",
+            "liesample.samplers.*",
+            "liesample.adaptation",
+            "liesample.drivers",
+            "liesample.accuracy",
+        ),
+    ),
     (
         "runner / diagnostics",
         (
@@ -50,7 +60,6 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "liesample.runner",
             "liesample.diagnostics",
             "liesample.plots",
-            "liesample.accuracy",
         ),
     ),
     ("cli", ("liesample.cli", "liesample.__main__", "liesample")),

@@ -55,7 +55,7 @@ from liesample._validation import concrete_array, finite_float, nonzero_circulat
 from liesample.algebras import LieAlgebra, cross, so3
 from liesample.dynamics import Scene
 from liesample.integrators import Integrator, get_integrator
-from liesample.spherical_harmonics import num_harmonics, transport_modes
+from liesample.spherical_harmonics import num_harmonics, transport_mode, transport_modes
 from liesample.substepping import adaptive_substepping
 from liesample.systems.base import LiePoissonSystem
 from liesample.targets.vortices import VortexPairLaw, check_vortex_beta
@@ -268,6 +268,7 @@ def point_vortices(circulations, max_degree: int = 2, radius: float = 1.0) -> Po
     max_degree = int(max_degree)
     radius = finite_float("radius", radius, positive=True)
     num_vortices = gamma.size
+    num_modes = num_harmonics(max_degree, 1)
 
     def hamiltonian(x):
         d2, off = _pair_geometry(x)
@@ -278,6 +279,11 @@ def point_vortices(circulations, max_degree: int = 2, radius: float = 1.0) -> Po
 
     def noise_hamiltonians(x):
         return jnp.asarray(gamma, dtype=x.dtype) @ transport_modes(x, max_degree)
+
+    def group_noise_hamiltonians(x, index):
+        # Each direction is its own group: the splitting's piece needs ĥ_index alone.
+        value = jnp.asarray(gamma, dtype=x.dtype) @ transport_mode(x, max_degree, index)
+        return jnp.zeros(num_modes, x.dtype).at[index].set(value)
 
     def check_beta(beta):
         check_vortex_beta(gamma, beta)
@@ -293,7 +299,8 @@ def point_vortices(circulations, max_degree: int = 2, radius: float = 1.0) -> Po
         algebra=ScaledSO3Product(weights=-1.0 / (radius * gamma)),
         hamiltonian=hamiltonian,
         noise_hamiltonians=noise_hamiltonians,
-        num_noises=num_harmonics(max_degree, 1),
+        num_noises=num_modes,
+        group_noise_hamiltonians=group_noise_hamiltonians,
         event_shape=(num_vortices, 3),
         default_position=fibonacci_sphere(num_vortices, radius),
         reference=reference,
