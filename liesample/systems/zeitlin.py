@@ -299,11 +299,13 @@ def su2_from_so3(mu):
 
 
 def so3_from_su2(x):
-    """The inverse of :func:`su2_from_so3` on trace-free ``x``."""
+    """The inverse of :func:`su2_from_so3` (the trace part of ``x`` is dropped); its transpose is
+    ``½ su2_from_so3``, so gradients map to the matching su(2) generators."""
     x = jnp.asarray(x)
     m1 = -0.5 * (x[..., 0, 1] + x[..., 1, 0])
     m2 = 0.5 * (x[..., 1, 0] - x[..., 0, 1])
-    return jnp.stack([m1, m2, x[..., 1, 1]], -1)
+    m3 = 0.5 * (x[..., 1, 1] - x[..., 0, 0])
+    return jnp.stack([m1, m2, m3], -1)
 
 
 class ZeitlinSystem(LiePoissonSystem):
