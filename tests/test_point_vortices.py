@@ -459,3 +459,58 @@ def test_scenes_example_runs(tmp_path):
     assert result.returncode == 0, result.stderr
     for name in ("vortex_dissipation.png", "vortex_scenes.png"):
         assert (tmp_path / name).stat().st_size > 10_000
+
+
+@pytest.mark.parametrize(
+    ("max_degree", "dtype", "tolerance"),
+    [(3, "float64", 1e-12), (12, "float64", 1e-10), (3, "float32", 1e-5)],
+)
+def test_one_transport_mode_equals_its_column_with_its_gradient(max_degree, dtype, tolerance):
+    """``transport_mode`` (one mode, what each splitting piece evaluates) equals the column of
+    ``transport_modes`` to round-off, values and gradients, poles and equator included; in
+    float32 it takes the recurrence path (monomials would lose accuracy)."""
+    from liesample.spherical_harmonics import transport_mode, transport_modes
+
+    x = jnp.concatenate(
+        [
+            jnp.array([[0.0, 0.0, 2.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, -3.0, 0.0]]),
+            jax.random.normal(jax.random.key(3), (4, 3)),
+        ]
+    ).astype(dtype)
+    weights = jnp.linspace(-1.0, 2.0, x.shape[0], dtype=dtype)
+    columns = transport_modes(x, max_degree)
+    every = liesample.jit(jax.jacrev(lambda y: weights @ transport_modes(y, max_degree)))(x)
+
+    @liesample.jit
+    def one(index):
+        value = transport_mode(x, max_degree, index)
+        return value, jax.grad(lambda y: weights @ transport_mode(y, max_degree, index))(x)
+
+    indices = np.arange(0, max_degree * (max_degree + 2), 5)
+    values, gradients = jax.vmap(one)(jnp.asarray(indices))
+    np.testing.assert_allclose(values, columns[:, indices].T, rtol=0, atol=tolerance)
+    np.testing.assert_allclose(gradients, every[indices], rtol=0, atol=tolerance)
+
+
+def test_splitting_pieces_with_one_mode_equal_the_generic_pieces():
+    """The point-vortex hook ``group_noise_hamiltonians`` changes cost, not the generator: each
+    group's generator equals the one computed from all ``L(L+2)`` noise functions."""
+    import dataclasses
+
+    system = point_vortices((1.0, -0.5, 2.0), max_degree=4)
+    generic = dataclasses.replace(system, group_noise_hamiltonians=None)
+    x = system.default_position
+    dW = 0.1 * jax.random.normal(jax.random.key(5), (system.num_noises,))
+    fast = PoissonLangevin(system, 1.0, 0.7, Scene())
+    slow = PoissonLangevin(generic, 1.0, 0.7, Scene())
+    groups = jnp.arange(system.num_noise_groups)
+
+    @liesample.jit
+    def pieces(groups):
+        return [
+            jax.vmap(lambda g: dynamics.group_generator(x, g, 0.05, dW))(groups)
+            for dynamics in (fast, slow)
+        ]
+
+    one_mode, every_mode = pieces(groups)
+    np.testing.assert_allclose(one_mode, every_mode, rtol=0, atol=1e-13)
