@@ -48,3 +48,6 @@ from liesample.samplers.geometric_hmc import geometric_hmc  # noqa: E402
 from liesample.samplers.geometric_langevin import geometric_langevin  # noqa: E402
 
 __all__ += ["geometric_hmc", "geometric_langevin", "spaces"]
+from liesample.adaptation import window_adaptation  # noqa: E402
+
+__all__ += ["window_adaptation"]
