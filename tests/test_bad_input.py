@@ -712,6 +712,36 @@ ROWS = [
         ValueError,
         "structure constants",
     ),
+    (
+        "lie_poisson_system position length",
+        lambda: systems.lie_poisson_system(algebras.so3, _norm2, _identity, [0.0, 1.0]),
+        ValueError,
+        r"position has shape \(2,\), which is not an element of the so\(3\)",
+    ),
+    (
+        "lie_poisson_system position se3 shape",
+        lambda: systems.lie_poisson_system(algebras.se3, _norm2, _identity, np.ones(3)),
+        ValueError,
+        r"position has shape \(3,\), which is not an element of the se\(3\)",
+    ),
+    (
+        "lie_poisson_system position complex",
+        lambda: systems.lie_poisson_system(algebras.so3, _norm2, _identity, [1j, 0.0, 1.0]),
+        TypeError,
+        "position must be a real",
+    ),
+    (
+        "lie_poisson_system position bool",
+        lambda: systems.lie_poisson_system(algebras.so3, _norm2, _identity, [True, False, True]),
+        TypeError,
+        "position must be a real",
+    ),
+    (
+        "lie_poisson_system position ragged",
+        lambda: systems.lie_poisson_system(algebras.so3, _norm2, _identity, [[1.0, 0.0], [1.0]]),
+        ValueError,
+        "position must be a real array",
+    ),
 ]
 
 

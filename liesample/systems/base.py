@@ -47,9 +47,8 @@ def lie_poisson_system(
         raise TypeError(f"algebra must be a liesample.algebras.LieAlgebra, got {algebra!r}")
     if not callable(hamiltonian):
         raise TypeError(f"hamiltonian must be a callable μ ↦ h(μ), got {hamiltonian!r}")
-    position = np.array(position, dtype=float)
-    if position.ndim < 1:
-        raise ValueError(f"position must be an array with at least one axis, got {position!r}")
+    position = _real_position(position)
+    _check_algebra_acts_on(algebra, position)
     energy = jax.eval_shape(hamiltonian, jnp.asarray(position))
     if energy.shape != ():
         raise ValueError(f"hamiltonian must return a scalar, got shape {energy.shape}")
@@ -65,3 +64,41 @@ def lie_poisson_system(
     )
     system.check_position(position)
     return system
+
+
+def _real_position(position) -> np.ndarray:
+    """``position`` as a float array with at least one axis; refuses booleans, complex numbers,
+    strings and ragged nests, naming what was given."""
+    try:
+        value = np.asarray(position)
+    except ValueError as error:  # a ragged nest of sequences
+        raise ValueError(f"position must be a real array, got {position!r} ({error})") from None
+    if value.dtype == bool or not (
+        np.issubdtype(value.dtype, np.integer) or np.issubdtype(value.dtype, np.floating)
+    ):
+        raise TypeError(
+            f"position must be a real (integer or float) array, got dtype {value.dtype}: "
+            f"{position!r}"
+        )
+    if value.ndim < 1:
+        raise ValueError(f"position must be an array with at least one axis, got {position!r}")
+    return np.array(value, dtype=float)
+
+
+def _check_algebra_acts_on(algebra: LieAlgebra, position: np.ndarray) -> None:
+    """The algebra's coadjoint action and Casimirs must accept an element of ``position``'s
+    shape and return one of the same shape (e.g. so(3) needs a last axis of 3, se(3) of 6)."""
+    try:
+        moved = jax.eval_shape(lambda m: algebra.coadjoint_exp(m, m), position)
+        jax.eval_shape(algebra.casimirs, position)
+    except (TypeError, ValueError, IndexError) as error:
+        raise ValueError(
+            f"position has shape {position.shape}, which is not an element of the {algebra.name} "
+            f"algebra's dual (so(3): (..., 3); se(3): (..., 6); StructureConstants: (d,)): "
+            f"{error}"
+        ) from None
+    if moved.shape != position.shape:
+        raise ValueError(
+            f"position has shape {position.shape}, but the {algebra.name} algebra's coadjoint "
+            f"action returns shape {moved.shape}: position must be one element of its dual"
+        )
