@@ -22,3 +22,31 @@ def test_demo_rejects_bad_parameters_without_traceback(tmp_path, capsys):
     status = main(["demo", "--step-size", "-1", "--output", str(tmp_path), "--no-progress"])
     assert status == 2
     assert "step_size must be > 0" in capsys.readouterr().err
+
+
+def _demo_parser():
+    import argparse
+
+    from liesample.cli import _parser
+
+    commands = next(a for a in _parser()._actions if isinstance(a, argparse._SubParsersAction))
+    return commands.choices["demo"]
+
+
+def test_every_demo_option_has_help_and_a_shown_default(capsys):
+    import pytest
+
+    from liesample.integrators import INTEGRATORS
+
+    demo = _demo_parser()
+    options = [a for a in demo._actions if a.option_strings and a.dest != "help"]
+    assert len(options) >= 10
+    assert all(a.help for a in options), [a.dest for a in options if not a.help]
+    with pytest.raises(SystemExit):
+        demo.parse_args(["--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    for action in options:
+        assert action.option_strings[0] in text
+        assert f"(default: {action.default})" in text or action.default is None
+    assert "jax_enable_x64" in text and "float64" in text
+    assert all(name in text for name in INTEGRATORS)
