@@ -302,6 +302,7 @@ def coupled_ergodic_averages(
     total_time, burn_in : float
         Physical time per chain, and the part of it (at the start) not averaged.
     """
+    rng_key = prng_key(rng_key)
     run = _CoupledRun(system, beta, observables, integrator, levels, initial_positions)
     return run(
         step_size=step_size, sigma=sigma, rng_key=rng_key, total_time=total_time, burn_in=burn_in

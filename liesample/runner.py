@@ -197,8 +197,9 @@ def sample_chains(
         raise ValueError("resume=True needs output= (the file the run was saved to)")
     initial_positions = jnp.asarray(initial_positions)
     num_chains = initial_positions.shape[0]
-    if not np.all(np.isfinite(np.asarray(initial_positions))):
-        raise ValueError("initial_positions must be finite")
+    finite = np.isfinite(np.asarray(initial_positions)).reshape(num_chains, -1).all(axis=1)
+    if not finite.all():
+        raise ValueError(f"initial_positions[{int(np.argmin(finite))}] must be finite")
     sharding = chain_sharding(devices, num_chains)
     adapting = _wants_adaptation(algorithm, adapt, num_warmup)
     # Concrete checks (shape, orbit, constraints, energy, step size) of every start.

@@ -63,6 +63,16 @@ def _jacobi_violating():
     return c
 
 
+# h = log μ_z: NaN on the lower hemisphere (a start there must be refused, not run on NaN).
+_LOG_SYSTEM = systems.lie_poisson_system(
+    algebras.so3, lambda mu: jnp.log(mu[2]), lambda mu: mu, np.array([0.0, 0.0, 1.0])
+)
+
+
+def _log_logdensity(q):
+    return jnp.log(q[0])
+
+
 def _sample(**kwargs):
     arguments = {"progress": False, **kwargs}
     positions = arguments.pop("initial_positions", STARTS)
@@ -289,6 +299,30 @@ ROWS = [
         ValueError,
         "step_size.*stable bound",
     ),
+    (
+        "langevin step beyond bound refused by default",
+        lambda: _langevin(beta=1e3, step_size=0.1).init(RIGID.default_position),
+        ValueError,
+        r"step_size must be <= .*stability='warn' or 'off'",
+    ),
+    (
+        "langevin bias_tolerance zero",
+        lambda: _langevin(step_size=None, bias_tolerance=0.0),
+        ValueError,
+        "bias_tolerance",
+    ),
+    (
+        "langevin automatic step without noise",
+        lambda: _langevin(step_size=None, beta=None, sigma=0.0, theta=1.0),
+        ValueError,
+        "step_size is required when sigma = 0",
+    ),
+    (
+        "langevin init nan energy",
+        lambda: _init(_LOG_SYSTEM, np.array([0.0, 0.0, -1.0])),
+        ValueError,
+        "energy h = nan",
+    ),
     # ---- liesample.adjusted_lie_poisson
     (
         "adjusted step_size zero",
@@ -308,17 +342,94 @@ ROWS = [
         TypeError,
         "system",
     ),
+    (
+        "adjusted target_acceptance_rate",
+        lambda: liesample.adjusted_lie_poisson(RIGID, beta=1.0, target_acceptance_rate=1.0),
+        ValueError,
+        r"target_acceptance_rate must be in \(0, 1\)",
+    ),
+    (
+        "adjusted init nan energy",
+        lambda: liesample.adjusted_lie_poisson(_LOG_SYSTEM, beta=1.0).init(
+            np.array([0.0, 0.0, -1.0])
+        ),
+        ValueError,
+        "energy h = nan",
+    ),
     # ---- liesample.sample_chains / sample
     ("sample num_draws zero", lambda: _sample(num_draws=0), ValueError, "num_draws"),
     ("sample thinning zero", lambda: _sample(thinning=0), ValueError, "thinning"),
     ("sample num_warmup negative", lambda: _sample(num_warmup=-1), ValueError, "num_warmup"),
     ("sample chunk_draws zero", lambda: _sample(chunk_draws=0), ValueError, "chunk_draws"),
     ("sample on_nonfinite", lambda: _sample(on_nonfinite="ignore"), ValueError, "on_nonfinite"),
+    ("sample adapt type", lambda: _sample(adapt="yes"), TypeError, "adapt"),
+    (
+        "accuracy rng_key int",
+        lambda: liesample.accuracy.coupled_ergodic_averages(
+            RIGID, 1.0, _identity, step_size=0.1, initial_positions=STARTS, rng_key=7,
+            total_time=1.0,
+        ),
+        TypeError,
+        r"rng_key.*PRNGKey",
+    ),  # fmt: skip
+    (
+        "accuracy tolerance and relative_tolerance",
+        lambda: liesample.accuracy.choose_step_size(
+            RIGID, 1.0, 0.01, relative_tolerance=0.05, observables=_identity,
+            initial_positions=STARTS, rng_key=KEY,
+        ),
+        ValueError,
+        "not both",
+    ),  # fmt: skip
+    ("sample adapt without warmup", lambda: _sample(adapt=True), ValueError, "num_warmup > 0"),
+    (
+        "sample adapt unsupported",
+        lambda: liesample.sample_chains(
+            liesample.magnetic_langevin(_logdensity, 0.1, np.ones(2), 1.0, _FIELD),
+            KEY, np.zeros((2, 2)), 2, num_warmup=2, adapt=True, progress=False,
+        ),
+        ValueError,
+        "no warm-up adaptation.*window_adaptation",
+    ),  # fmt: skip
+    (
+        "sample min_acceptance_rate",
+        lambda: _sample(min_acceptance_rate=-0.1),
+        ValueError,
+        "min_acceptance_rate",
+    ),
+    ("sample rng_key int", lambda: liesample.sample_chains(ALGORITHM, 7, STARTS, 2),
+     TypeError, r"rng_key.*PRNGKey"),  # fmt: skip
+    (
+        "sample start nan energy names the chain",
+        lambda: liesample.sample_chains(
+            liesample.lie_poisson_langevin(_LOG_SYSTEM, beta=1.0, step_size=0.01),
+            KEY, np.array([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]]), 2, progress=False,
+        ),
+        ValueError,
+        r"initial_positions\[1\].*energy h = nan",
+    ),  # fmt: skip
+    (
+        "sample magnetic start names the chain",
+        lambda: liesample.sample_chains(
+            liesample.magnetic_hmc(_log_logdensity, 0.1, np.ones(2), 3, _FIELD),
+            KEY, np.array([[1.0, 1.0], [-1.0, 1.0]]), 2, progress=False,
+        ),
+        ValueError,
+        r"initial_positions\[1\].*logdensity_fn",
+    ),  # fmt: skip
+    (
+        "sample beyond bound names the chain",
+        lambda: liesample.sample_chains(
+            _langevin(beta=1e3, step_size=0.1), KEY, STARTS, 2, progress=False
+        ),
+        ValueError,
+        r"initial_positions\[0\].*step_size must be <=",
+    ),
     (
         "sample positions nan",
         lambda: _sample(initial_positions=np.array([[NAN, 0.0, 1.0]])),
         ValueError,
-        "initial_positions must be finite",
+        r"initial_positions\[0\] must be finite",
     ),
     (
         "sample positions scalar",

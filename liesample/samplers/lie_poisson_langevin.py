@@ -252,13 +252,18 @@ def as_top_level_api(
 
     step = _StepSize(step_size, choose, settings)
 
-    def check_orbits(positions, representatives):
+    def check_orbits(positions, representatives, prefix=False):
         dt = step.resolve(positions[representatives])
         kappas = []
         for chain in representatives:
             position = positions[chain]
             if stability != "off":
-                kappa = check_step_size(system, integrator, dt, theta, position, stability)
+                try:
+                    kappa = check_step_size(system, integrator, dt, theta, position, stability)
+                except ValueError as error:
+                    if not prefix:
+                        raise
+                    raise ValueError(f"initial_positions[{chain}]: {error}") from None
                 if kappa is not None:
                     kappas.append(kappa)
             check_precision(system, beta, theta, position, jnp.asarray(position).dtype)
@@ -282,7 +287,7 @@ def as_top_level_api(
         casimirs = check_orbit_starts(system, positions)
         if step_size_checks:
             dtype = jnp.result_type(float)
-            check_orbits(np.asarray(positions, dtype), distinct_orbits(casimirs))
+            check_orbits(np.asarray(positions, dtype), distinct_orbits(casimirs), prefix=True)
 
     def adapt(rng_key, chain_keys, states, initial_positions, num_warmup):
         del chain_keys, states, num_warmup

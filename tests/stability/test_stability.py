@@ -14,9 +14,9 @@ For the rigid body ``max_i |h''_i| = r² (1/I_min − 1/I_max)``. Explicit Euler
 ``κ = 1.95`` and all settle on a spurious 2-cycle at ``κ = 2.05``, for ``I = (1, 2, 4)`` and for
 the stiff ``I = (0.01, 1, 100)`` (ratio 1:10⁴), with or without the Hamiltonian drift. So the
 bound is **κ ≤ 2** for every orbit-preserving integrator; the sampler estimates κ on the orbit
-of the initial state and warns (default) or refuses (``stability="raise"``) beyond it. On the
+of the initial state and refuses (default, ``stability="raise"``) or warns (``"warn"``) beyond it. On the
 compact rigid-body orbit an unstable step stays finite but samples a wrong law; on the heavy
-top's non-compact orbit ``Π`` overflows and the sampler flags every such step ``nonfinite``,
+top's non-compact orbit ``Π`` overflows and the sampler flags every such step ``is_divergent``,
 keeps the previous state, and the runner reports it (``test_overflow_is_flagged_and_reported``).
 For the heavy top the estimate (curvature at orbit points with ``|Π| ≲ 2|Γ|``) is conservative
 at low temperature: measured at β = 10, mgl = 1, ``Π`` stays thermal up to ~3× the estimated
@@ -151,8 +151,13 @@ def test_sampler_refuses_or_warns_beyond_the_bound():
     # The runner passes the refusal on, naming the chain.
     with pytest.raises(ValueError, match=r"initial_positions\[0\].*stable bound"):
         liesample.sample_chains(refusing, jax.random.key(0), position[None], 2, progress=False)
-    with pytest.warns(UserWarning, match="stable bound"):
+    # Refusing is the default; warning is an explicit choice.
+    with pytest.raises(ValueError, match="stable bound"):
         liesample.lie_poisson_langevin(system, beta=beta, step_size=0.01).init(position)
+    with pytest.warns(UserWarning, match="stable bound"):
+        liesample.lie_poisson_langevin(
+            system, beta=beta, step_size=0.01, stability="warn"
+        ).init(position)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         liesample.lie_poisson_langevin(system, beta=beta, step_size=0.01, stability="off").init(
@@ -168,7 +173,7 @@ def test_sampler_refuses_or_warns_beyond_the_bound():
 
 def test_overflow_is_flagged_and_reported():
     """Far beyond the bound on the heavy top's non-compact orbit, ``Π`` overflows: each such
-    step is flagged ``nonfinite`` and rejected (the state stays finite), and the runner warns or
+    step is flagged ``is_divergent`` and rejected (the state stays finite), and the runner warns or
     raises. Never a silent NaN chain."""
     system = liesample.systems.heavy_top(mgl=1.0)
     algorithm = liesample.lie_poisson_langevin(

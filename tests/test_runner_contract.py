@@ -1,0 +1,273 @@
+"""The Info contract, safe defaults and loud failures, end to end through ``liesample.sample``.
+
+- every sampler's ``info`` has ``is_divergent``, ``acceptance_rate`` and ``energy``, and the
+  runner writes them under ArviZ's names (a magnetic divergence reaches ``diverging``);
+- a run beyond the stability bound is refused naming the largest step; ``"warn"`` is recorded;
+- stuck chains are named; a start whose energy is NaN is refused naming the chain; many starts
+  are checked in one vectorised call;
+- both key styles work; ``help()`` shows the real docstring;
+- the von Mises–Fisher posterior of the new-user trial (κ = 800 on S², noise the coordinates):
+  as written (step 0.05) it raises naming the bound; without a step size, through the adapted
+  warm-up, both orbit samplers match its exact mean and sd within MCSE.
+"""
+
+import pydoc
+import warnings
+from collections import namedtuple
+
+import arviz_stats as azs
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import liesample
+from liesample import algebras, systems
+from liesample.samplers.contract import CONTRACT_FIELDS, check_info
+from liesample.stability import check_precision
+
+RIGID = systems.rigid_body((1.0, 2.0, 4.0))
+STARTS = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.6, 0.0, 0.8]])
+
+# The new-user trial's posterior: vMF on S² with κ = 800 about μ̂ ∝ (0.31, 0.63, 0.71).
+KAPPA = 800.0
+MU_HAT = np.array([0.31, 0.63, 0.71]) / np.linalg.norm([0.31, 0.63, 0.71])
+
+
+def _vmf_energy(m):
+    return -KAPPA * jnp.dot(jnp.asarray(MU_HAT), m)
+
+
+def _coordinates(m):
+    return m
+
+
+VMF = systems.lie_poisson_system(algebras.so3, _vmf_energy, _coordinates, MU_HAT, name="vMF")
+
+
+def vmf_moments():
+    """Exact vMF on S²: ``E[m] = A μ̂``, ``E[m mᵀ] = (A/κ) I + (1 − 3A/κ) μ̂μ̂ᵀ``,
+    ``A = coth κ − 1/κ``."""
+    a = 1.0 / np.tanh(KAPPA) - 1.0 / KAPPA
+    mean = a * MU_HAT
+    second = (a / KAPPA) * np.eye(3) + (1.0 - 3.0 * a / KAPPA) * np.outer(MU_HAT, MU_HAT)
+    return mean, np.sqrt(np.diag(second) - mean**2)
+
+
+def _logdensity(q):
+    return -0.5 * jnp.sum(q * q)
+
+
+def _magnetic_samplers():
+    field = np.array([[0.0, 1.0], [-1.0, 0.0]])
+    return {
+        "magnetic_hmc": liesample.magnetic_hmc(_logdensity, 0.3, np.ones(2), 5, field),
+        "magnetic_langevin": liesample.magnetic_langevin(_logdensity, 0.1, np.ones(2), 1.0, field),
+    }
+
+
+# --------------------------------------------------------------------------- the contract
+
+
+def test_every_sampler_reports_the_contract_fields():
+    orbit = {
+        "lie_poisson_langevin": liesample.lie_poisson_langevin(RIGID, beta=1.0, step_size=0.05),
+        "adjusted_lie_poisson": liesample.adjusted_lie_poisson(RIGID, beta=1.0, step_size=0.05),
+    }
+    cases = [(s, STARTS[0]) for s in orbit.values()]
+    cases += [(s, jnp.ones(2)) for s in _magnetic_samplers().values()]
+    for sampler, start in cases:
+        _, info = sampler.step(jax.random.key(0), sampler.init(start))
+        check_info(info)
+        assert info.is_divergent.dtype == jnp.bool_ and not bool(info.is_divergent)
+        assert 0.0 <= float(info.acceptance_rate) <= 1.0
+        assert np.isfinite(float(info.energy))
+    with pytest.raises(TypeError, match=r"lacks the Info contract's fields \['is_divergent', 'acc"):
+        check_info(namedtuple("OldInfo", ["energy", "nonfinite"]))
+    assert CONTRACT_FIELDS == ("is_divergent", "acceptance_rate", "energy")
+
+
+def test_both_key_styles_give_the_same_draws():
+    sampler = liesample.adjusted_lie_poisson(RIGID, beta=2.0, step_size=0.2)
+    state = sampler.init(STARTS[0])
+    typed, _ = sampler.step(jax.random.key(5), state)
+    raw, _ = sampler.step(jax.random.PRNGKey(5), state)
+    np.testing.assert_array_equal(typed.position, raw.position)
+    runs = [
+        liesample.sample_chains(sampler, key, STARTS, 5, progress=False).positions
+        for key in (jax.random.key(9), jax.random.PRNGKey(9))
+    ]
+    np.testing.assert_array_equal(*runs)
+    averages = [
+        liesample.accuracy.coupled_ergodic_averages(
+            RIGID, 1.0, _coordinates, step_size=0.1, initial_positions=STARTS, rng_key=key,
+            total_time=1.0,
+        ).chain_means
+        for key in (jax.random.key(7), jax.random.PRNGKey(7))
+    ]  # fmt: skip
+    np.testing.assert_array_equal(*averages)
+
+
+def test_help_shows_the_real_docstring():
+    for api in (
+        liesample.lie_poisson_langevin,
+        liesample.adjusted_lie_poisson,
+        liesample.magnetic_hmc,
+        liesample.magnetic_langevin,
+    ):
+        text = pydoc.render_doc(api, renderer=pydoc.plaintext)
+        assert api.differentiable.__doc__.strip().splitlines()[0] in text
+        assert "jax_enable_x64" in text and "GenerateSamplingAPI(differentiable" not in text
+    doc = liesample.lie_poisson_langevin.__doc__
+    assert 'default ``"splitting"``' in doc and "rkmk_heun" not in doc
+    assert '"raise"`` (default)' in doc
+
+
+# --------------------------------------------------------------------------- divergences
+
+
+def test_magnetic_divergences_reach_sample_stats_and_are_reduced_with_any():
+    """A log-density that is NaN beyond |q| = 1.5: the magnetic Langevin steps that land there
+    are divergent; over a thinning window of 5 the draw is divergent if any step was."""
+
+    def walled(q):
+        return jnp.where(jnp.sum(q * q) < 2.25, -0.5 * jnp.sum(q * q), jnp.nan)
+
+    field = np.array([[0.0, 1.0], [-1.0, 0.0]])
+    sampler = liesample.magnetic_langevin(walled, 0.3, np.ones(2), 1.0, field)
+    starts = np.zeros((2, 2))
+    key = jax.random.key(3)
+    with pytest.warns(RuntimeWarning, match=r"chains 0, 1\).*divergent"):
+        steps = liesample.sample_chains(sampler, key, starts, 100, progress=False)
+    with pytest.warns(RuntimeWarning, match="divergent"):
+        tree = liesample.sample(sampler, key, starts, 20, thinning=5, progress=False,
+                                event_dims=("coordinate",))  # fmt: skip
+    diverging = tree.sample_stats["diverging"].values
+    assert diverging.dtype == bool and diverging.any()
+    np.testing.assert_array_equal(
+        diverging, steps.info["is_divergent"].reshape(2, 20, 5).any(axis=-1)
+    )
+    np.testing.assert_allclose(
+        tree.sample_stats["acceptance_rate"].values,
+        steps.info["acceptance_rate"].reshape(2, 20, 5).mean(axis=-1),
+    )
+    with pytest.raises(liesample.runner.NonFiniteStateError, match="divergent"):
+        liesample.sample_chains(sampler, key, starts, 100, progress=False, on_nonfinite="raise")
+
+
+def test_stuck_chains_are_named():
+    sampler = liesample.adjusted_lie_poisson(VMF, beta=1.0, step_size=1.0)
+    starts = np.tile(MU_HAT, (3, 1))
+    with pytest.warns(RuntimeWarning, match=r"3 chain\(s\) are stuck.*chains 0, 1, 2.*smaller"):
+        liesample.sample_chains(sampler, jax.random.key(0), starts, 50, progress=False)
+
+
+# --------------------------------------------------------------------------- starts
+
+
+def test_many_starts_are_checked_in_one_call_naming_the_first_bad_chain(monkeypatch):
+    rng = np.random.default_rng(1)
+    starts = rng.normal(size=(4096, 3))
+    sampler = liesample.adjusted_lie_poisson(RIGID, beta=1.0, step_size=0.1)
+    calls = []
+    original = type(RIGID).check_position
+    monkeypatch.setattr(
+        type(RIGID), "check_position", lambda self, *a, **k: calls.append(1) or original(self, *a, **k)
+    )  # fmt: skip
+    sampler.check_positions(starts)
+    assert len(calls) == 0  # no per-start Python loop
+    bad = starts.copy()
+    bad[1234] = 0.0
+    bad[2000] = np.nan
+    with pytest.raises(ValueError, match=r"initial_positions\[2000\].*finite"):
+        liesample.sample_chains(sampler, jax.random.key(0), bad, 2, progress=False)
+    bad[2000] = 1.0
+    with pytest.raises(ValueError, match=r"initial_positions\[1234\].*degenerate"):
+        liesample.sample_chains(sampler, jax.random.key(0), bad, 2, progress=False)
+
+
+def test_a_start_with_nan_energy_is_refused():
+    system = systems.lie_poisson_system(
+        algebras.so3, lambda m: jnp.log(m[2]), _coordinates, np.array([0.0, 0.0, 1.0])
+    )
+    sampler = liesample.lie_poisson_langevin(system, beta=1.0, step_size=0.01, stability="off")
+    with pytest.raises(ValueError, match="energy h = nan"):
+        sampler.init(jnp.array([0.0, 0.0, -1.0]))
+    starts = np.array([[0.0, 0.0, 1.0], [0.0, 0.6, 0.8], [0.0, 0.0, -1.0]])
+    with pytest.raises(ValueError, match=r"initial_positions\[2\].*energy h = nan"):
+        liesample.sample_chains(sampler, jax.random.key(0), starts, 2, progress=False)
+
+
+# --------------------------------------------------------------------------- settings, precision
+
+
+def test_settings_and_explicit_stability_modes_are_recorded():
+    sampler = liesample.lie_poisson_langevin(RIGID, beta=1.0, step_size=10.0, stability="warn")
+    with pytest.warns(UserWarning, match=r"step_size must be <= "):
+        tree = liesample.sample(sampler, jax.random.key(0), STARTS, 4, progress=False)
+    attrs = tree.attrs
+    assert attrs["stability"] == "warn" and attrs["step_size"] == 10.0
+    assert attrs["step_size_source"] == "given" and attrs["stability_number"] > 2.0
+    assert attrs["sampler"] == "lie_poisson_langevin" and attrs["adapted"] == 0
+    assert set(tree.sample_stats.data_vars) >= {"diverging", "acceptance_rate", "energy"}
+
+
+def test_float32_warning_rule():
+    """Spread 1/√(β max|h''|) below 1e-3 of the state's size: float32 is not enough (once)."""
+    stiff = systems.lie_poisson_system(
+        algebras.so3, lambda m: -1e7 * m[2], _coordinates, np.array([0.6, 0.0, 0.8]),
+        name="stiff vMF",
+    )  # fmt: skip
+    start = np.array([0.6, 0.0, 0.8])
+    assert not check_precision(stiff, 1.0, 0.5, start, jnp.float64)
+    with pytest.warns(UserWarning, match=r"float32.*jax_enable_x64"):
+        assert check_precision(stiff, 1.0, 0.5, start, jnp.float32)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert check_precision(stiff, 1.0, 0.5, start, jnp.float32)  # warned once only
+        assert not check_precision(RIGID, 1.0, 0.5, start, jnp.float32)
+
+
+# --------------------------------------------------------------------------- the vMF case
+
+
+def test_vmf_as_written_raises_naming_the_bound():
+    sampler = liesample.lie_poisson_langevin(VMF, beta=1.0, sigma=1.0, step_size=0.05)
+    with pytest.raises(ValueError, match=r"κ = .* > 2 .*step_size must be <= 0\.00"):
+        liesample.sample(sampler, jax.random.key(0), np.tile(MU_HAT, (2, 1)), 10, progress=False)
+
+
+def _check_vmf(tree):
+    mean, sd = vmf_moments()
+    draws = tree.posterior["mu"].values
+    for i in range(3):
+        x = draws[..., i]
+        mcse_mean = float(azs.mcse(x, method="mean"))
+        mcse_sd = float(azs.mcse(x, method="sd"))
+        assert abs(x.mean() - mean[i]) < 5 * mcse_mean, (i, x.mean(), mean[i], mcse_mean)
+        assert abs(x.std() - sd[i]) < 5 * mcse_sd, (i, x.std(), sd[i], mcse_sd)
+    assert not tree.sample_stats["diverging"].values.any()
+
+
+STARTS_S2 = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [-0.6, 0.0, 0.8]])
+
+
+def test_vmf_unadjusted_without_step_size_matches_the_exact_law():
+    sampler = liesample.lie_poisson_langevin(VMF, beta=1.0)
+    tree = liesample.sample(
+        sampler, jax.random.key(1), STARTS_S2, 1000, num_warmup=200, thinning=2, progress=False
+    )
+    assert tree.attrs["adapted"] == 1 and tree.attrs["stability_number"] <= 1.0
+    assert tree.attrs["step_size_source"].startswith("warm-up bias model")
+    _check_vmf(tree)
+
+
+def test_vmf_adjusted_with_dual_averaging_matches_the_exact_law():
+    sampler = liesample.adjusted_lie_poisson(VMF, beta=1.0)
+    tree = liesample.sample(
+        sampler, jax.random.key(2), STARTS_S2, 1000, num_warmup=400, thinning=2, progress=False
+    )
+    assert tree.attrs["step_size_source"].startswith("warm-up dual averaging")
+    rate = float(tree.sample_stats["acceptance_rate"].values.mean())
+    assert abs(rate - 0.574) < 0.1, rate
+    _check_vmf(tree)
