@@ -1,0 +1,248 @@
+"""NumPyro distributions on spheres and SO(3): ``VonMisesFisher`` and ``MatrixFisher``.
+
+An optional integration module (NumPyro is not a dependency of the core: install it with
+``pip install numpyro``). Use these distributions' ``log_prob`` inside a ``logdensity_fn`` for
+:func:`liesample.geometric_hmc` (NumPyro's own samplers move in unconstrained ``Rᵈ`` and cannot
+stay on a sphere or a group), or their exact ``sample`` to simulate data.
+
+- ``VonMisesFisher(mean_direction, concentration)`` on ``S^{d−1}``: density
+  ``C_d(κ) exp(κ μ·x)`` with respect to the surface measure, ``C_d(κ) = κ^{d/2−1} /
+  ((2π)^{d/2} I_{d/2−1}(κ))`` (as ``scipy.stats.vonmises_fisher``); differentiable in ``μ``
+  and ``κ`` (``log I_ν`` through SciPy's ``ive`` with its exact derivative). ``sample``: Wood's
+  (1994) rejection algorithm, exact.
+- ``MatrixFisher(F)`` on SO(3): density ``exp(tr(FᵀR)) / c(F)`` with respect to the Haar
+  probability measure; ``c(F)`` by the 1-D Bessel integral of
+  :class:`liesample.targets.groups.MatrixFisher`, so ``F`` must be concrete (not a traced model
+  parameter). ``sample``: exact, by rejection from the uniform law on ``S³`` in quaternions
+  with the bound ``tr(FᵀR) ≤ s₁ + s₂ + s₃`` (efficient for moderate ``F`` only).
+
+Both samplers are rejection loops vmapped over draws, compiled with :func:`liesample.jit`
+(XLA:CPU miscompiles small vmapped while loops otherwise; see ``liesample.compile``).
+"""
+
+from __future__ import annotations
+
+try:
+    import numpyro  # noqa: F401
+    from numpyro.distributions import Distribution, constraints
+except ImportError as error:  # an optional integration module
+    raise ImportError(
+        "liesample.numpyro needs NumPyro: pip install numpyro (or the 'test' extras of "
+        "liesample)"
+    ) from error
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from scipy import special
+
+from liesample.compile import jit
+from liesample.spaces import SO
+from liesample.targets import groups
+
+__all__ = ["MatrixFisher", "VonMisesFisher", "log_bessel_iv"]
+
+
+# --------------------------------------------------------------------------- log I_ν(κ)
+
+
+def _log_ive_host(order, kappa):
+    return np.log(special.ive(order, kappa)).astype(kappa.dtype)
+
+
+def _ratio_host(order, kappa):
+    return (special.ive(order + 1.0, kappa) / special.ive(order, kappa)).astype(kappa.dtype)
+
+
+def _callback(fn, order, kappa):
+    kappa = jnp.asarray(kappa)
+    shape = jax.ShapeDtypeStruct(kappa.shape, kappa.dtype)
+    return jax.pure_callback(
+        lambda k: fn(order, np.asarray(k)), shape, kappa, vmap_method="broadcast_all"
+    )
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
+def _log_iv(order, kappa):
+    return _callback(_log_ive_host, order, kappa) + kappa
+
+
+@_log_iv.defjvp
+def _log_iv_jvp(order, primals, tangents):
+    (kappa,) = primals
+    (dkappa,) = tangents
+    # d/dκ log I_ν(κ) = I_{ν+1}(κ)/I_ν(κ) + ν/κ.
+    slope = _callback(_ratio_host, order, kappa) + order / kappa
+    return _log_iv(order, kappa), slope * dkappa
+
+
+def log_bessel_iv(order: float, kappa):
+    """``log I_ν(κ)`` for a fixed order ``ν ≥ 0`` and ``κ > 0``, differentiable in ``κ``."""
+    return _log_iv(float(order), kappa)
+
+
+# --------------------------------------------------------------------------- vMF
+
+
+def _householder_to(mean_direction, x):
+    """Apply the reflection that maps the last basis vector to ``mean_direction``."""
+    d = mean_direction.shape[-1]
+    e = jnp.zeros(d).at[-1].set(1.0)
+    u = e - mean_direction
+    norm2 = jnp.sum(u * u, -1, keepdims=True)
+    safe = jnp.where(norm2 > 1e-30, norm2, 1.0)
+    reflected = x - 2.0 * u * jnp.sum(u * x, -1, keepdims=True) / safe
+    return jnp.where(norm2 > 1e-30, reflected, x)
+
+
+def _wood_cosine(key, kappa, d):
+    """One draw of ``w = μ·x`` (Wood 1994): Beta proposal, exact rejection."""
+    m = d - 1.0
+    b = m / (2.0 * kappa + jnp.sqrt(4.0 * kappa**2 + m**2))  # stable form of Wood's b
+    x0 = (1.0 - b) / (1.0 + b)
+    c = kappa * x0 + m * jnp.log(1.0 - x0**2)
+
+    def body(state):
+        key, _, _ = state
+        key, k1, k2 = jax.random.split(key, 3)
+        z = jax.random.beta(k1, m / 2.0, m / 2.0, dtype=kappa.dtype)
+        w = (1.0 - (1.0 + b) * z) / (1.0 - (1.0 - b) * z)
+        u = jax.random.uniform(k2, (), kappa.dtype)
+        accept = kappa * w + m * jnp.log(1.0 - x0 * w) - c >= jnp.log(u)
+        return key, w, accept
+
+    _, w, _ = jax.lax.while_loop(lambda s: ~s[2], body, (key, jnp.zeros_like(kappa), False))
+    return w
+
+
+class VonMisesFisher(Distribution):
+    """von Mises–Fisher law on the unit sphere ``S^{d−1}`` (module docstring)."""
+
+    arg_constraints = {"mean_direction": constraints.sphere, "concentration": constraints.positive}
+    support = constraints.sphere
+
+    def __init__(self, mean_direction, concentration, *, validate_args=None):
+        mean_direction = jnp.asarray(mean_direction)
+        concentration = jnp.asarray(concentration, dtype=jnp.result_type(mean_direction, float))
+        if mean_direction.ndim < 1 or mean_direction.shape[-1] < 2:
+            raise ValueError(
+                f"mean_direction must be a unit vector of length d >= 2, got shape "
+                f"{mean_direction.shape}"
+            )
+        batch_shape = jax.lax.broadcast_shapes(mean_direction.shape[:-1], concentration.shape)
+        self.mean_direction = jnp.broadcast_to(mean_direction, batch_shape + mean_direction.shape[-1:])
+        self.concentration = jnp.broadcast_to(concentration, batch_shape)
+        super().__init__(batch_shape, mean_direction.shape[-1:], validate_args=validate_args)
+
+    @property
+    def d(self) -> int:
+        return self.event_shape[0]
+
+    def log_normalizer(self):
+        """``log C_d(κ)`` (surface measure)."""
+        nu = self.d / 2.0 - 1.0
+        kappa = self.concentration
+        return nu * jnp.log(kappa) - (self.d / 2.0) * jnp.log(2 * jnp.pi) - log_bessel_iv(nu, kappa)
+
+    def log_prob(self, value):
+        return self.log_normalizer() + self.concentration * jnp.sum(
+            self.mean_direction * value, -1
+        )
+
+    @property
+    def mean(self):
+        nu = self.d / 2.0 - 1.0
+        ratio = jnp.exp(log_bessel_iv(nu + 1.0, self.concentration)
+                        - log_bessel_iv(nu, self.concentration))
+        return ratio[..., None] * self.mean_direction
+
+    def sample(self, key, sample_shape=()):
+        shape = tuple(sample_shape) + self.batch_shape
+        k_w, k_v = jax.random.split(key)
+        kappa = jnp.broadcast_to(self.concentration, shape)
+        keys = jax.random.split(k_w, max(int(np.prod(shape)), 1))[: int(np.prod(shape))]
+        w = jit(jax.vmap(lambda k, c: _wood_cosine(k, c, float(self.d))))(
+            keys, kappa.reshape(-1)
+        ).reshape(shape)
+        v = jax.random.normal(k_v, shape + (self.d - 1,), kappa.dtype)
+        v = v / jnp.linalg.norm(v, axis=-1, keepdims=True)
+        x = jnp.concatenate([jnp.sqrt(jnp.clip(1.0 - w**2, 0.0))[..., None] * v, w[..., None]], -1)
+        return _householder_to(jnp.broadcast_to(self.mean_direction, shape + (self.d,)), x)
+
+
+# --------------------------------------------------------------------------- matrix Fisher
+
+
+def _quaternion_to_rotation(q):
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    return jnp.stack(
+        [
+            jnp.stack([w * w + x * x - y * y - z * z, 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            jnp.stack([2 * (x * y + w * z), w * w - x * x + y * y - z * z, 2 * (y * z - w * x)], -1),
+            jnp.stack([2 * (x * z - w * y), 2 * (y * z + w * x), w * w - x * x - y * y + z * z], -1),
+        ],
+        -2,
+    )
+
+
+class _RotationConstraint(constraints.Constraint):
+    event_dim = 2
+
+    def __call__(self, x):
+        gram = jnp.swapaxes(x, -1, -2) @ x
+        ok = jnp.all(jnp.abs(gram - jnp.eye(3)) < 1e-6, axis=(-2, -1))
+        return ok & (jnp.abs(jnp.linalg.det(x) - 1.0) < 1e-6)
+
+    def feasible_like(self, prototype):
+        return jnp.broadcast_to(jnp.eye(3), prototype.shape)
+
+
+rotation = _RotationConstraint()
+
+
+class MatrixFisher(Distribution):
+    """Matrix Fisher law on SO(3), ``∝ exp(tr(FᵀR))`` w.r.t. Haar (module docstring)."""
+
+    arg_constraints = {}
+    support = rotation
+
+    def __init__(self, F, *, validate_args=None):
+        F = np.asarray(F, dtype=float)
+        self._reference = groups.MatrixFisher(F)  # validates: a finite 3x3 matrix
+        self.F = jnp.asarray(F)
+        self._log_c = self._reference.log_normalizer()
+        super().__init__((), (3, 3), validate_args=validate_args)
+
+    def log_prob(self, value):
+        return jnp.sum(self.F * value, axis=(-2, -1)) - self._log_c
+
+    @property
+    def mean(self):
+        return jnp.asarray(self._reference.mean())
+
+    def sample(self, key, sample_shape=()):
+        shape = tuple(sample_shape)
+        bound = float(np.sum(self._reference.proper_svd()[1]))
+        n = max(int(np.prod(shape)), 1)
+
+        def one(key):
+            def body(state):
+                key, _, _ = state
+                key, kq, ku = jax.random.split(key, 3)
+                q = jax.random.normal(kq, (4,), self.F.dtype)
+                rotation_ = _quaternion_to_rotation(q / jnp.linalg.norm(q))
+                accept = jnp.log(jax.random.uniform(ku, (), self.F.dtype)) <= (
+                    jnp.sum(self.F * rotation_) - bound
+                )
+                return key, rotation_, accept
+
+            init = (key, jnp.eye(3, dtype=self.F.dtype), False)
+            return jax.lax.while_loop(lambda s: ~s[2], body, init)[1]
+
+        draws = jit(jax.vmap(one))(jax.random.split(key, n))
+        return draws[: int(np.prod(shape))].reshape(shape + (3, 3))
+
+
+SO3 = SO(3)  # the space MatrixFisher lives on, for liesample.geometric_hmc
