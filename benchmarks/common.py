@@ -21,9 +21,10 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 import numpy as np
+from matplotlib.figure import Figure
 
 import liesample
-from liesample.samplers.lie_poisson_langevin import make_dynamics
+from liesample.dynamics import make_dynamics
 from liesample.systems import rigid_body
 from liesample.targets import RestrictedGaussian
 
@@ -227,3 +228,106 @@ def write_json(path: Path, data) -> Path:
 
 def read_json(path: Path):
     return _from_json(json.loads(path.read_text()))
+
+
+# --------------------------------------------------------------------------- report sections
+#
+# Each suite writes its own Markdown section from its JSON; ``benchmarks/report.py`` only
+# assembles them. These are the shared formatting helpers and the core sections' inputs.
+
+DPI = 130
+COLORS = {"splitting": "C0", "rkmk_heun": "C1", "lie_euler": "C2", "euler_heun": "C3"}
+MARKERS = {"splitting": "o", "rkmk_heun": "s", "lie_euler": "D", "euler_heun": "^"}
+SUP = str.maketrans("0123456789-", "⁰¹²³⁴⁵⁶⁷⁸⁹⁻")
+
+
+def chains_label(n: int) -> str:
+    if n == 1:
+        return "1 chain"
+    e = math.log10(n)
+    if abs(e - round(e)) < 1e-9 and n >= 100:
+        return f"10{str(round(e)).translate(SUP)} chains"
+    return f"{n} chains"
+
+
+def format_rate(x) -> str:
+    if x is None or not np.isfinite(x):
+        return "–"
+    for scale, unit in ((1e9, "G"), (1e6, "M"), (1e3, "k")):
+        if x >= scale:
+            return f"{x / scale:.3g} {unit}"
+    return f"{x:.3g}"
+
+
+def format_g(x, digits=3) -> str:
+    if x is None:
+        return "–"
+    x = float(x)
+    if math.isnan(x):
+        return "NaN"
+    if math.isinf(x):
+        return "inf" if x > 0 else "−inf"
+    return f"{x:.{digits}g}".replace("-", "−")
+
+
+def format_signed(x, se) -> str:
+    return f"{x:+.4f} ± {se:.4f}".replace("-", "−")
+
+
+def format_seconds(x) -> str:
+    if x is None or not np.isfinite(x):
+        return "–"
+    if x < 1e-3:
+        return f"{x * 1e6:.3g} µs"
+    if x < 1:
+        return f"{x * 1e3:.3g} ms"
+    if x < 120:
+        return f"{x:.3g} s"
+    if x < 7200:
+        return f"{x / 60:.3g} min"
+    return f"{x / 3600:.3g} h"
+
+
+def save_figure(fig: Figure, path: Path) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=DPI)
+    fig.clear()
+    return path
+
+
+@dataclass
+class CoreResults:
+    """The rigid-body core's JSON (``meta``, ``throughput``, ``iid``, ``accuracy``,
+    ``order_check``) and where the report goes; sections append the files they write to
+    ``written``, and may cache derived numbers in ``derived``."""
+
+    out_dir: Path
+    md_dir: Path
+    meta: dict
+    throughput_rows: list
+    iid: dict
+    accuracy_rows: list
+    order_rows: list
+    written: list = field(default_factory=list)
+    derived: dict = field(default_factory=dict)
+
+    @classmethod
+    def load(cls, out_dir: Path, md_dir: Path) -> CoreResults:
+        order_path = out_dir / "order_check.json"
+        return cls(
+            out_dir=out_dir,
+            md_dir=md_dir,
+            meta=read_json(out_dir / "meta.json"),
+            throughput_rows=read_json(out_dir / "throughput.json")["rows"],
+            iid=read_json(out_dir / "iid.json"),
+            accuracy_rows=read_json(out_dir / "accuracy.json")["rows"],
+            order_rows=read_json(order_path)["rows"] if order_path.exists() else [],
+        )
+
+    @property
+    def config(self) -> dict:
+        return self.meta["config"]
+
+    def link(self, path: Path) -> str:
+        """``path`` relative to the report's folder."""
+        return os.path.relpath(path, self.md_dir)

@@ -10,7 +10,10 @@ A suite is a module ``benchmarks/<name>.py`` that defines
   when its JSON is missing.
 
 ``benchmarks/run.py`` runs every suite after the core sections and ``benchmarks/report.py``
-appends their sections, so a new system adds a benchmark without touching either file.
+appends their sections, so a new system adds a benchmark without touching either file. The
+rigid-body core follows the same rule: ``benchmarks/throughput.py`` and
+``benchmarks/accuracy.py`` write their own sections (``report_section(results)``, from
+``common.CoreResults``), and ``report.py`` only assembles.
 """
 
 from __future__ import annotations

@@ -13,9 +13,11 @@ cost of drawing the noise is included (and is absent where the scene has no nois
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import jax
 import numpy as np
+from matplotlib.figure import Figure
 
 from benchmarks import common
 
@@ -162,4 +164,177 @@ def sanity_check_iid(n=200_000, seed=0) -> dict:
     }
 
 
-__all__ = ["RNG_ONLY", "run_iid_throughput", "run_sampler_throughput", "sanity_check_iid"]
+# --------------------------------------------------------------------------- plots and tables
+
+
+def plot_throughput(rows, iid_rows, path: Path) -> Path:
+    chains = sorted({r["chains"] for r in rows})
+    integrators = [n for n in common.INTEGRATOR_NAMES if any(r["integrator"] == n for r in rows)]
+    scenes = [s for s in common.SCENES if any(r["scene"] == s for r in rows)]
+    lookup = {(r["integrator"], r["scene"], r["chains"]): r for r in rows}
+    fig = Figure(figsize=(4.6 * len(chains), 5.0), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(1, len(chains), sharey=True))
+    width = 0.8 / max(len(scenes), 1)
+    hatches = ["", "//", ".."]
+    for ax, n in zip(axes, chains, strict=True):
+        for k, scene in enumerate(scenes):
+            xs, ys = [], []
+            for i, name in enumerate(integrators):
+                r = lookup.get((name, scene, n))
+                if r is not None:
+                    xs.append(i + (k - (len(scenes) - 1) / 2) * width)
+                    ys.append(r["chain_steps_per_second"])
+            ax.bar(
+                xs,
+                ys,
+                width,
+                label=scene,
+                color=f"C{k}",
+                hatch=hatches[k % 3],
+                edgecolor="k",
+                lw=0.4,
+            )
+        rng = lookup.get((RNG_ONLY, "-", n))
+        if rng is not None:
+            ax.axhline(
+                rng["chain_steps_per_second"],
+                color="0.3",
+                ls="--",
+                lw=1.2,
+                label="RNG only (fold_in + 3 normals)",
+            )
+        if iid_rows:
+            best = max(r["samples_per_second"] for r in iid_rows)
+            ax.axhline(best, color="C3", ls=":", lw=1.6, label="exact iid sampler (samples/s)")
+        ax.set_xticks(range(len(integrators)), integrators, rotation=20)
+        ax.set_yscale("log")
+        ax.set_title(common.chains_label(n) + " (vmapped)")
+        ax.grid(axis="y", which="both", alpha=0.3)
+    axes[0].set_ylabel("chain-steps per second (best of 3)")
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncols=3, fontsize="small")
+    fig.suptitle("Throughput of the rigid-body sampler (float64, CPU)")
+    return common.save_figure(fig, path)
+
+
+def _throughput_tables(rows, iid_rows):
+    chains = sorted({r["chains"] for r in rows})
+    lookup = {(r["integrator"], r["scene"], r["chains"]): r for r in rows}
+    head = "| integrator | scene | " + " | ".join(common.chains_label(n) for n in chains) + " |"
+    lines = [head, "|" + "---|" * (2 + len(chains))]
+    for name in common.INTEGRATOR_NAMES:
+        for scene in common.SCENES:
+            cells = [lookup.get((name, scene, n)) for n in chains]
+            if all(c is None for c in cells):
+                continue
+            vals = []
+            for c in cells:
+                if c is None:
+                    vals.append("–")
+                    continue
+                v = common.format_rate(c["chain_steps_per_second"])
+                if c.get("off_orbit_fraction"):
+                    v += f" ({c['off_orbit_fraction']:.0%} off orbit)"
+                vals.append(v)
+            lines.append(f"| {name} | {scene} | " + " | ".join(vals) + " |")
+    vals = [
+        common.format_rate(lookup[(RNG_ONLY, "-", n)]["chain_steps_per_second"])
+        if (RNG_ONLY, "-", n) in lookup
+        else "–"
+        for n in chains
+    ]
+    lines.append(f"| *reference* | {RNG_ONLY}, draws/s | " + " | ".join(vals) + " |")
+    table = "\n".join(lines)
+
+    ratio_lines = [
+        "| integrator | "
+        + " | ".join(f"H-only ÷ all, {common.chains_label(n)}" for n in chains)
+        + " | "
+        + " | ".join(f"no-H ÷ all, {common.chains_label(n)}" for n in chains)
+        + " |",
+        "|" + "---|" * (1 + 2 * len(chains)),
+    ]
+    for name in common.INTEGRATOR_NAMES:
+        base = [lookup.get((name, "all effects", n)) for n in chains]
+        if any(b is None for b in base):
+            continue
+        cells = []
+        for scene in ("Hamiltonian only", "noise+dissipation, no Hamiltonian"):
+            for b, n in zip(base, chains, strict=True):
+                r = lookup.get((name, scene, n))
+                cells.append(
+                    "–"
+                    if r is None
+                    else f"{r['chain_steps_per_second'] / b['chain_steps_per_second']:.2f}×"
+                )
+        if any(c != "–" for c in cells):
+            ratio_lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    ratios = "\n".join(ratio_lines) if len(ratio_lines) > 2 else "_(not measured in this mode)_"
+
+    iid_lines = ["| draws per call | samples/s (best of 3) | time per call |", "|---|---|---|"]
+    for r in iid_rows:
+        iid_lines.append(
+            f"| {r['samples']:,} | {common.format_rate(r['samples_per_second'])} | {common.format_seconds(r['seconds_best'])} |"
+        )
+    return table, ratios, "\n".join(iid_lines)
+
+
+# --------------------------------------------------------------------------- report sections
+
+
+def report_section(results: common.CoreResults) -> str:
+    """Section 1 of ``RESULTS.md`` (throughput of the vmapped sampler), with its plot."""
+    cfg = results.config
+    plot = plot_throughput(
+        results.throughput_rows, results.iid["rows"], results.out_dir / "throughput.png"
+    )
+    results.written.append(plot)
+    tp_table, ratio_table, _ = _throughput_tables(results.throughput_rows, results.iid["rows"])
+    return f"""## 1. Throughput
+
+Chain-steps per second of `liesample.lie_poisson_langevin(system, …, step_size=
+{cfg["throughput_step_size"]:g})`, `jax.jit(jax.vmap(chain))` where each chain is a
+`jax.lax.fori_loop` of `n` calls to `algorithm.step` carrying only the state (the same XLA
+While loop `lax.scan` lowers to, without stacked outputs; a traced trip count lets one
+compilation serve every `n`). Step `k` of chain `c` uses `fold_in(key_c, k)` as
+`liesample.runner` does. Chains start from exact Gibbs draws. Compilation is excluded; calls
+are warmed up, `n` is chosen so that one call lasts ≈ {cfg["throughput_target_seconds"]:g} s,
+and the time is the best of {cfg["throughput_repeats"]}. Per-step `info` is not kept, so XLA
+drops the energy and Casimir diagnostics (the non-finite guard stays: it decides the state).
+
+Scenes: **all effects** (β = 3, σ = 1); **Hamiltonian only** (`sigma=0, theta=0`: noise and
+dissipation are not traced at all and no random numbers are drawn); **noise+dissipation, no
+Hamiltonian** (`hamiltonian=False`). "off orbit" marks chains whose final |μ|² is more than
+10% from r² (or non-finite).
+
+{tp_table}
+
+Speed-up relative to all effects (> 1 = faster):
+
+{ratio_table}
+
+![throughput]({results.link(plot)})
+"""
+
+
+def iid_report_section(results: common.CoreResults) -> str:
+    """Section 3 of ``RESULTS.md``: the exact i.i.d. sampler (the physical limit)."""
+    _, _, iid_table = _throughput_tables(results.throughput_rows, results.iid["rows"])
+    return f"""## 3. Exact iid sampler (the physical limit)
+
+`RestrictedGaussian.sample(key, n)` (rejection from an angular central Gaussian envelope), jitted,
+warmed up, best of {results.config["throughput_repeats"]}:
+
+{iid_table}
+"""
+
+
+__all__ = [
+    "RNG_ONLY",
+    "iid_report_section",
+    "plot_throughput",
+    "report_section",
+    "run_iid_throughput",
+    "run_sampler_throughput",
+    "sanity_check_iid",
+]
