@@ -8,7 +8,8 @@
 - both key styles work; ``help()`` shows the real docstring;
 - the von Mises–Fisher posterior of the new-user trial (κ = 800 on S², noise the coordinates):
   as written (step 0.05) it raises naming the bound; without a step size, through the adapted
-  warm-up, both orbit samplers match its exact mean and sd within MCSE.
+  warm-up, both orbit samplers match its exact mean and sd within MCSE (the unadjusted one
+  within MCSE plus the bias tolerance it was given).
 """
 
 import pydoc
@@ -24,6 +25,7 @@ import pytest
 import liesample
 from liesample import algebras, systems
 from liesample.samplers.contract import CONTRACT_FIELDS, check_info
+from liesample.samplers.lie_poisson_langevin import DEFAULT_BIAS_TOLERANCE
 from liesample.stability import check_precision
 
 RIGID = systems.rigid_body((1.0, 2.0, 4.0))
@@ -237,15 +239,19 @@ def test_vmf_as_written_raises_naming_the_bound():
         liesample.sample(sampler, jax.random.key(0), np.tile(MU_HAT, (2, 1)), 10, progress=False)
 
 
-def _check_vmf(tree):
+def _check_vmf(tree, bias_tolerance=0.0):
+    """Mean and sd of each coordinate within 5 MCSE (ArviZ) of the exact vMF values, plus the
+    bias the sampler was asked to allow (``bias_tolerance`` sd on the mean, ``bias_tolerance``
+    relative on the sd; 0 for the exact adjusted sampler)."""
     mean, sd = vmf_moments()
     draws = tree.posterior["mu"].values
     for i in range(3):
         x = draws[..., i]
         mcse_mean = float(azs.mcse(x, method="mean"))
         mcse_sd = float(azs.mcse(x, method="sd"))
-        assert abs(x.mean() - mean[i]) < 5 * mcse_mean, (i, x.mean(), mean[i], mcse_mean)
-        assert abs(x.std() - sd[i]) < 5 * mcse_sd, (i, x.std(), sd[i], mcse_sd)
+        allowed = bias_tolerance * sd[i]
+        assert abs(x.mean() - mean[i]) < 5 * mcse_mean + allowed, (i, x.mean(), mean[i], mcse_mean)
+        assert abs(x.std() - sd[i]) < 5 * mcse_sd + allowed, (i, x.std(), sd[i], mcse_sd)
     assert not tree.sample_stats["diverging"].values.any()
 
 
@@ -259,7 +265,8 @@ def test_vmf_unadjusted_without_step_size_matches_the_exact_law():
     )
     assert tree.attrs["adapted"] == 1 and tree.attrs["stability_number"] <= 1.0
     assert tree.attrs["step_size_source"].startswith("warm-up bias model")
-    _check_vmf(tree)
+    # Unadjusted: exact up to the default bias tolerance (0.05 sd; κ = 1 missed it by 2×).
+    _check_vmf(tree, bias_tolerance=DEFAULT_BIAS_TOLERANCE)
 
 
 def test_vmf_adjusted_with_dual_averaging_matches_the_exact_law():

@@ -29,7 +29,6 @@ from liesample.stability import (
     STABILITY_MODES,
     check_precision,
     check_step_size,
-    stability_number,
 )
 from liesample.systems.base import LiePoissonSystem
 
@@ -126,6 +125,14 @@ def build_kernel(
     return kernel
 
 
+def _source(choice) -> str:
+    return (
+        f"predicted |bias| <= {choice.relative_tolerance:g} posterior sd for the mean of each "
+        f"coordinate, and its sd within {choice.relative_tolerance:g} of itself "
+        "(liesample.accuracy.default_step_size)"
+    )
+
+
 class _StepSize:
     """The step size, given or chosen once on first need (from the first concrete starts)."""
 
@@ -140,10 +147,7 @@ class _StepSize:
             self.value = choice.step_size
             self._settings.update(
                 step_size=choice.step_size,
-                step_size_source=(
-                    f"bias model: predicted |bias| <= {choice.relative_tolerance:g} posterior sd "
-                    "of each coordinate (liesample.accuracy.default_step_size)"
-                ),
+                step_size_source="bias model: " + _source(choice),
             )
         return self.value
 
@@ -174,8 +178,9 @@ def as_top_level_api(
     step_size : float or None
         Time step ``dt > 0``. ``None`` (default): chosen below the stability bound from the bias
         model of :func:`liesample.accuracy.default_step_size` (short coupled pilot runs), so
-        that the predicted bias of every coordinate of ``μ`` is at most ``bias_tolerance``
-        posterior standard deviations. The choice is made once, from the first concrete starts
+        that the predicted bias of the mean of every coordinate of ``μ`` is at most
+        ``bias_tolerance`` posterior standard deviations, and of its sd at most
+        ``bias_tolerance`` of itself. The choice is made once, from the first concrete starts
         the sampler sees (``init`` or :func:`liesample.sample`); under
         ``liesample.sample(..., num_warmup=N)`` it is made in the warm-up from the run's starts.
     integrator : str or Integrator
@@ -293,10 +298,7 @@ def as_top_level_api(
         del chain_keys, states, num_warmup
         choice = choose(np.asarray(initial_positions), jax.random.fold_in(rng_key, 1))
         tuned = as_top_level_api(system, **options, step_size=choice.step_size)
-        tuned.settings["step_size_source"] = (
-            f"warm-up bias model: predicted |bias| <= {choice.relative_tolerance:g} posterior "
-            "sd of each coordinate (liesample.accuracy.default_step_size)"
-        )
+        tuned.settings["step_size_source"] = "warm-up bias model: " + _source(choice)
         return tuned, None
 
     return Sampler(
