@@ -17,7 +17,7 @@ import pytest
 
 import liesample
 from liesample.samplers.spins import SpinInfo, finish_step
-from liesample.samplers.spins_wolff import WolffInfo
+from liesample.samplers.spins_wolff import WolffInfo, bond_table
 from liesample.systems.heisenberg import neighbour_table
 from liesample.systems import heisenberg, rigid_body
 from liesample.targets.spins import (
@@ -301,6 +301,17 @@ def test_neighbour_table():
     assert sorted(table[0]) == sorted([4, 8, 1, 3])  # (0,0): (1,0), (2,0), (0,1), (0,3)
     open_table = neighbour_table((3,), periodic=False)
     np.testing.assert_array_equal(open_table, [[3, 1], [0, 2], [1, 3]])
+    # every bond once, both ends see the same id, missing bonds get the id B
+    for shape, periodic, count in (((3, 4), True, 24), ((3, 4), False, 17), ((3,), False, 2)):
+        neighbours, bonds, ends = bond_table(shape, periodic)
+        assert ends.shape == (count, 2)
+        n = neighbours.shape[0]
+        for i, d in np.ndindex(*neighbours.shape):
+            j = neighbours[i, d]
+            if j == n:
+                assert bonds[i, d] == count
+            else:
+                assert sorted(ends[bonds[i, d]]) == sorted((i, j))
 
 
 @pytest.mark.parametrize(

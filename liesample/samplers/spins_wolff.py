@@ -13,9 +13,10 @@ bond probabilities make the move satisfy detailed balance for ``exp(−βh)`` wi
 That holds for the isotropic nearest-neighbour model with ``J > 0``, no field, no anisotropy
 and ``β ≥ 0``; other systems are refused.
 
-The growth is a ``lax.while_loop`` over a breadth-first queue of fixed size ``N`` (one site
-popped per iteration, its ≤ 4 neighbours tested at once); the uniform for bond ``(i, d)`` is
-``fold_in(key, deg·i + d)``, so the draws do not depend on the visiting order.
+The coins of all bonds are drawn at once, vectorised (the growth looks at each bond at most
+once, so this is Wolff's law exactly); the growth is then a ``lax.while_loop`` over a
+breadth-first queue of fixed size ``N``, one site popped per iteration and its ≤ 4 neighbours
+joined at once.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from typing import NamedTuple
 import blackjax
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from liesample.samplers.spins import SpinState, check_beta, check_spin_system, finish_step, init
 from liesample.systems.heisenberg import SpinLatticeSystem, neighbour_table
@@ -34,6 +36,7 @@ __all__ = [
     "SpinState",
     "WolffInfo",
     "as_top_level_api",
+    "bond_table",
     "build_kernel",
     "init",
 ]
@@ -66,37 +69,65 @@ def check_wolff_system(system: SpinLatticeSystem) -> None:
         )
 
 
+def bond_table(shape, periodic: bool):
+    """``(neighbours (N, 2·dim), bond ids (N, 2·dim), bond ends (B, 2))`` of the lattice.
+
+    ``neighbours`` is :func:`~liesample.systems.heisenberg.neighbour_table` (``N`` where an open
+    edge has none); ``bond ids[i, d]`` numbers the undirected bond from ``i`` to its ``d``-th
+    neighbour (``B`` where there is none), ``ends[b]`` its two sites.
+    """
+    table = neighbour_table(shape, periodic)
+    num_sites = table.shape[0]
+    ids, ends = {}, []
+    bonds = np.empty_like(table)
+    for i, row in enumerate(table):
+        for d, j in enumerate(row):
+            if j == num_sites:
+                bonds[i, d] = -1
+                continue
+            key = (min(i, j), max(i, j))
+            if key not in ids:
+                ids[key] = len(ends)
+                ends.append(key)
+            bonds[i, d] = ids[key]
+    bonds[bonds < 0] = len(ends)
+    return table, bonds, np.array(ends, dtype=np.int64).reshape(-1, 2)
+
+
 def build_kernel(system: SpinLatticeSystem):
     """``kernel(rng_key, state, beta) -> (state, WolffInfo)``: one cluster reflection."""
     check_wolff_system(system)
     params = system.params
     shape, coupling = params["shape"], params["coupling"]
-    table = jnp.asarray(neighbour_table(shape, params["periodic"]), dtype=jnp.int32)
-    num_sites, degree = table.shape
+    table, bonds, ends = bond_table(shape, params["periodic"])
+    table, bonds, ends = (jnp.asarray(a, jnp.int32) for a in (table, bonds, ends))
+    num_sites = table.shape[0]
 
     def kernel(rng_key, state: SpinState, beta):
         s = state.position.reshape(num_sites, 3)
         key_r, key_seed, key_bonds = jax.random.split(rng_key, 3)
         r = von_mises_fisher(key_r, jnp.array([0.0, 0.0, 1.0], s.dtype), 0.0)  # uniform on S²
-        # projections; the sentinel site N (no neighbour) never joins
-        projection = jnp.append(s @ r, 0.0)
+        projection = s @ r
+        # One coin per bond, drawn at once: the growth below looks at a bond at most once (from
+        # the first of its ends to be popped, if the other is outside), so the cluster has
+        # exactly Wolff's law. The last entry is the missing bond of an open edge: never open.
+        product = projection[ends[:, 0]] * projection[ends[:, 1]]
+        p_bond = -jnp.expm1(jnp.minimum(0.0, -2.0 * beta * coupling * product))
+        bond_open = jax.random.uniform(key_bonds, p_bond.shape, dtype=s.dtype) < p_bond
+        bond_open = jnp.append(bond_open, False)
         seed = jax.random.randint(key_seed, (), 0, num_sites, dtype=jnp.int32)
         in_cluster = jnp.zeros(num_sites + 1, bool).at[seed].set(True).at[num_sites].set(True)
-        queue = jnp.zeros(num_sites + 1, jnp.int32).at[0].set(seed)
-        factor = -2.0 * beta * coupling
+        queue = jnp.zeros(num_sites, jnp.int32).at[0].set(seed)
 
         def grow(carry):
             in_cluster, queue, head, tail = carry
             i = queue[head]
-            for d in range(degree):  # ≤ 4 neighbours, unrolled
-                j = table[i, d]
-                p = -jnp.expm1(jnp.minimum(0.0, factor * projection[i] * projection[j]))
-                u = jax.random.uniform(jax.random.fold_in(key_bonds, degree * i + d), dtype=s.dtype)
-                join = (~in_cluster[j]) & (u < p)
-                in_cluster = in_cluster.at[j].set(in_cluster[j] | join)
-                queue = queue.at[tail].set(jnp.where(join, j, queue[tail]))
-                tail = tail + join.astype(tail.dtype)
-            return in_cluster, queue, head + 1, tail
+            j = table[i]  # (degree,) distinct sites or the sentinel, which is always "in"
+            join = bond_open[bonds[i]] & ~in_cluster[j]
+            in_cluster = in_cluster.at[j].max(join)
+            slot = tail + jnp.cumsum(join) - 1
+            queue = queue.at[jnp.where(join, slot, num_sites)].set(j, mode="drop")
+            return in_cluster, queue, head + 1, tail + jnp.sum(join, dtype=jnp.int32)
 
         in_cluster, _, _, size = jax.lax.while_loop(
             lambda carry: carry[2] < carry[3],
@@ -104,7 +135,7 @@ def build_kernel(system: SpinLatticeSystem):
             (in_cluster, queue, jnp.int32(0), jnp.int32(1)),
         )
         flip = in_cluster[:num_sites, None]
-        new = jnp.where(flip, s - 2.0 * projection[:num_sites, None] * r, s)
+        new = jnp.where(flip, s - 2.0 * projection[:, None] * r, s)
         return finish_step(
             system,
             state.position,
