@@ -36,7 +36,7 @@ def test_vmf_log_prob_matches_scipy_and_is_differentiable(d, kappa):
     )
 
 
-@pytest.mark.parametrize("d, kappa", [(3, 4.0), (6, 10.0)])
+@pytest.mark.parametrize("d, kappa", [(3, 4.0), pytest.param(6, 10.0, marks=pytest.mark.slow)])
 def test_vmf_draws_are_exact(d, kappa):
     mu = np.zeros(d)
     mu[1], mu[2] = 0.8, -0.6
