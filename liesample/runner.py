@@ -207,6 +207,19 @@ def sample_chains(
     states = jax.vmap(algorithm.init)(initial_positions)
     chain_keys = jax.random.split(rng_key, num_chains)
 
+    states, chain_keys = shard_chains((states, chain_keys), sharding)
+    run_warmup = num_warmup > 0
+    if adapting:
+        # From the initial states and deterministic given rng_key: a resumed run re-derives
+        # the same parameters.
+        algorithm, adapted = algorithm.adapt(
+            rng_key, chain_keys, states, initial_positions, num_warmup
+        )
+        _check_starts(algorithm, initial_positions, num_chains)
+        if adapted is not None:
+            run_warmup = False
+            states = adapted
+
     store = None
     done = 0
     previous = None
@@ -222,20 +235,8 @@ def sample_chains(
                 )
             done, saved_states, previous = store.load(states, num_draws)
             if done:
-                states = saved_states
-
-    states, chain_keys = shard_chains((states, chain_keys), sharding)
-    run_warmup = num_warmup > 0 and done == 0
-    if adapting:
-        # Deterministic given rng_key: a resumed run re-derives the same parameters.
-        algorithm, adapted = algorithm.adapt(
-            rng_key, chain_keys, states, initial_positions, num_warmup
-        )
-        _check_starts(algorithm, initial_positions, num_chains)
-        if adapted is not None:
-            run_warmup = False
-            if done == 0:
-                states = adapted
+                states = shard_chains(saved_states, sharding)
+                run_warmup = False
 
     def advance(state, key, first_step, num_steps):
         def one(state, step):

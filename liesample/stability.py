@@ -44,6 +44,7 @@ a chain whose ``Π`` wanders much further (high temperature) may be stiffer than
 
 from __future__ import annotations
 
+import math
 import warnings
 
 import jax
@@ -63,6 +64,7 @@ __all__ = [
     "noise_curvatures",
     "stability_number",
     "stiffness",
+    "stiffness_on_orbits",
 ]
 
 STABILITY_LIMITS = {name: i.stability_limit for name, i in INTEGRATORS.items()}
@@ -139,6 +141,42 @@ def stiffness(system, theta, position) -> float:
             curvatures = curvatures_on(jnp.asarray(position))
         cache[cache_key] = float(np.max(np.abs(np.asarray(curvatures))))
     return theta * cache[cache_key]
+
+
+def stiffness_on_orbits(system, theta, positions) -> np.ndarray:
+    """:func:`stiffness` of the orbits through each of ``positions`` (shape ``(n, *event)``),
+    the orbits not yet cached computed in one compiled call (a ``lax.map`` over them: bounded
+    memory) and cached as :func:`stiffness` does."""
+    positions = np.asarray(positions, dtype=float)
+    if theta == 0.0:
+        return np.zeros(len(positions))
+    with jax.ensure_compile_time_eval():
+        casimirs = np.asarray(jax.vmap(system.casimirs)(jnp.asarray(positions)))
+    keys = [
+        (positions.shape[1:], tuple(np.round(c, 12).reshape(-1))) for c in casimirs
+    ]
+    cache = system.__dict__.setdefault("_stiffness_cache", {})
+    missing = sorted({i for i, key in enumerate(keys) if key not in cache})
+    if missing:
+        batched = system.__dict__.get("_curvatures_on_orbits")
+        if batched is None:
+            chosen = _chosen_directions(system.num_noises)
+
+            def worst(position):
+                curvatures = jax.lax.map(
+                    lambda m: noise_curvatures(system, m, chosen), _orbit_points(system, position)
+                )
+                return jnp.max(jnp.abs(curvatures))
+
+            batched = jit(lambda p: jax.lax.map(worst, p))
+            system.__dict__["_curvatures_on_orbits"] = batched
+        # Padded to a power of two: a few compiled shapes serve every number of orbits.
+        padded = missing + [missing[-1]] * (2 ** math.ceil(math.log2(len(missing))) - len(missing))
+        with jax.ensure_compile_time_eval():
+            values = np.asarray(batched(jnp.asarray(positions[padded])))[: len(missing)]
+        for i, value in zip(missing, values, strict=True):
+            cache[keys[i]] = float(value)
+    return theta * np.array([cache[key] for key in keys])
 
 
 def stability_number(system, step_size, theta, position) -> float:

@@ -169,3 +169,18 @@ def test_sample_writes_and_resumes(tmp_path, uninterrupted):
     liesample.sample(ALGORITHM, jax.random.key(KEY_SEED), STARTS, 8, **kwargs)
     tree = liesample.sample(ALGORITHM, jax.random.key(KEY_SEED), STARTS, NUM_DRAWS, **kwargs)
     np.testing.assert_array_equal(np.asarray(tree.posterior["mu"]), uninterrupted.positions)
+
+
+def test_an_adapted_run_resumes_to_the_same_draws(tmp_path):
+    """Warm-up adaptation is deterministic given the key: a resumed run re-derives the same step
+    size (dual averaging of the adjusted sampler) and continues to the uninterrupted draws."""
+    algorithm = liesample.adjusted_lie_poisson(SYSTEM, beta=3.0)
+    kwargs = {"num_warmup": 30, "thinning": 2, "chunk_draws": 4, "progress": False}
+    key = jax.random.key(KEY_SEED)
+    whole = sample_chains(algorithm, key, STARTS, 12, **kwargs)
+    assert whole.settings["step_size_source"].startswith("warm-up dual averaging")
+    path = tmp_path / "adapted.nc"
+    sample_chains(algorithm, key, STARTS, 4, output=path, **kwargs)
+    resumed = sample_chains(algorithm, key, STARTS, 12, output=path, resume=True, **kwargs)
+    assert resumed.settings["step_size"] == whole.settings["step_size"]
+    np.testing.assert_array_equal(resumed.positions, whole.positions)

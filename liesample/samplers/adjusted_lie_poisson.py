@@ -339,9 +339,11 @@ def as_top_level_api(
 
     def init_fn(position, rng_key=None):
         state = init(position, system, rng_key)
-        if concrete_array(position) is not None:
-            resolve(np.asarray(state.position))
-            check_orbits(np.asarray(state.position)[None], [0])
+        value = concrete_array(position)
+        if value is not None:
+            value = np.asarray(value, dtype=jnp.result_type(float))
+            resolve(value)
+            check_orbits(value[None], [0])
         return state
 
     def step_fn(rng_key, state):

@@ -29,6 +29,7 @@ from liesample.stability import (
     STABILITY_MODES,
     check_precision,
     check_step_size,
+    stiffness_on_orbits,
 )
 from liesample.systems.base import LiePoissonSystem
 
@@ -86,11 +87,13 @@ def init(position, system: LiePoissonSystem, rng_key=None) -> LiePoissonState:
     """
     del rng_key
     system.check_position(position)
-    position = jnp.asarray(position, dtype=jnp.result_type(float))
     value = concrete_array(position)
     if value is not None:
         with jax.ensure_compile_time_eval():
-            check_start_energy(system, value, np.asarray(system.hamiltonian(position)))
+            energy = concrete_array(system.hamiltonian(jnp.asarray(value, jnp.result_type(float))))
+        if energy is not None:  # None when staged out: the runner checks every start itself
+            check_start_energy(system, value, energy)
+    position = jnp.asarray(position, dtype=jnp.result_type(float))
     return LiePoissonState(position, system.casimirs(position))
 
 
@@ -258,29 +261,31 @@ def as_top_level_api(
     step = _StepSize(step_size, choose, settings)
 
     def check_orbits(positions, representatives, prefix=False):
+        """Stability (one vectorised stiffness call for all orbits) and precision checks."""
+        representatives = np.asarray(representatives)
         dt = step.resolve(positions[representatives])
-        kappas = []
-        for chain in representatives:
-            position = positions[chain]
-            if stability != "off":
+        limit = integrator.stability_limit
+        if stability != "off" and limit is not None and theta != 0.0 and system.curvature_bound:
+            kappas = dt * stiffness_on_orbits(system, theta, positions[representatives])
+            beyond = np.flatnonzero(kappas > limit)
+            if beyond.size:  # the first such chain: its message (raise or warn) from the check
+                chain = int(representatives[beyond[0]])
                 try:
-                    kappa = check_step_size(system, integrator, dt, theta, position, stability)
+                    check_step_size(system, integrator, dt, theta, positions[chain], stability)
                 except ValueError as error:
                     if not prefix:
                         raise
                     raise ValueError(f"initial_positions[{chain}]: {error}") from None
-                if kappa is not None:
-                    kappas.append(kappa)
-            check_precision(system, beta, theta, position, jnp.asarray(position).dtype)
-        if kappas:
-            settings["stability_number"] = float(max(kappas))
-            settings["stability_limit"] = integrator.stability_limit
+            settings["stability_number"] = float(np.max(kappas))
+            settings["stability_limit"] = limit
+        for chain in representatives:
+            check_precision(system, beta, theta, positions[chain], positions.dtype)
 
     def init_fn(position, rng_key=None):
         state = init(position, system, rng_key)
         value = concrete_array(position)
         if value is not None:
-            check_orbits(np.asarray(state.position)[None], [0])
+            check_orbits(np.asarray(value, dtype=jnp.result_type(float))[None], [0])
         return state
 
     def step_fn(rng_key, state):
