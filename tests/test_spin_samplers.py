@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 import liesample
+from liesample.samplers.contract import check_info
 from liesample.samplers.spins import SpinInfo, finish_step
 from liesample.samplers.spins_wolff import WolffInfo, bond_table
 from liesample.systems.heisenberg import neighbour_table
@@ -268,7 +269,8 @@ def test_info_contract_and_cluster_size():
     ):
         state, info = liesample.jit(algorithm.step)(jax.random.key(0), algorithm.init(start))
         assert isinstance(info, info_class)
-        assert {"is_divergent", "acceptance_rate", "energy"} <= set(info._fields)
+        check_info(info)  # the package's Info contract
+        assert algorithm.settings["beta"] == 1.0
         assert not bool(info.is_divergent)
         assert 0.0 <= float(info.acceptance_rate) <= 1.0
         assert float(info.energy) == pytest.approx(float(system.hamiltonian(state.position)))
@@ -320,7 +322,8 @@ def test_neighbour_table():
         (lambda: liesample.heisenberg_heat_bath(heisenberg((4,), anisotropy=0.5), beta=1.0),
          ValueError, "anisotropy"),
         (lambda: liesample.heisenberg_heat_bath(rigid_body(), beta=1.0), TypeError, "system"),
-        (lambda: liesample.heisenberg_heat_bath(heisenberg((4,)), beta=math.inf), ValueError, "beta"),
+        (lambda: liesample.heisenberg_heat_bath(heisenberg((4,)), beta=math.inf),
+         ValueError, "beta"),
         (lambda: liesample.heisenberg_heat_bath(heisenberg((4,)), beta=1.0, overrelaxation=-1),
          ValueError, "overrelaxation"),
         (lambda: liesample.heisenberg_heat_bath(heisenberg((4,)), beta=1.0, overrelaxation=1.5),

@@ -22,10 +22,10 @@ from __future__ import annotations
 
 import math
 
-import blackjax
 import jax
 
 from liesample._validation import finite_float
+from liesample.samplers.contract import Sampler, sampling_api
 from liesample.samplers.spins import (
     SpinInfo,
     SpinState,
@@ -76,7 +76,7 @@ def as_top_level_api(
     overrelaxation: int = 1,
     heat_bath_sweeps: int = 1,
     precession_angle=math.pi,
-) -> blackjax.base.SamplingAlgorithm:
+) -> Sampler:
     """Heat-bath + over-relaxation sampler of ``exp(−βh)`` for an isotropic :func:`heisenberg`.
 
     Parameters
@@ -97,7 +97,7 @@ def as_top_level_api(
 
     Returns
     -------
-    blackjax.base.SamplingAlgorithm
+    Sampler
         ``init(position) -> SpinState`` and ``step(rng_key, state) -> (state, SpinInfo)``; one
         step is the sweeps above; jit- and vmap-able, usable with :mod:`liesample.runner`.
     """
@@ -115,7 +115,17 @@ def as_top_level_api(
     def step_fn(rng_key, state):
         return kernel(rng_key, state, beta, precession_angle)
 
-    return blackjax.base.SamplingAlgorithm(init_fn, step_fn)
+    settings = {
+        "sampler": "heisenberg_heat_bath",
+        "system": system.name,
+        "beta": beta,
+        "heat_bath_sweeps": heat_bath_sweeps,
+        "overrelaxation": overrelaxation,
+        "precession_angle": precession_angle,
+    }
+    return Sampler(init_fn, step_fn, settings=settings)
 
 
-heisenberg_heat_bath = blackjax.GenerateSamplingAPI(as_top_level_api, init, build_kernel)
+heisenberg_heat_bath = sampling_api(
+    as_top_level_api, init, build_kernel, "heisenberg_heat_bath", __name__
+)

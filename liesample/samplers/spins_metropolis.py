@@ -18,11 +18,11 @@ Proposals (both symmetric, so the acceptance probability is ``min(1, exp(−βΔ
 
 from __future__ import annotations
 
-import blackjax
 import jax
 import jax.numpy as jnp
 
 from liesample._validation import finite_float
+from liesample.samplers.contract import Sampler, sampling_api
 from liesample.samplers.spins import (
     SpinInfo,
     SpinState,
@@ -87,7 +87,7 @@ def as_top_level_api(
     beta,
     proposal: str = "uniform",
     proposal_scale=0.5,
-) -> blackjax.base.SamplingAlgorithm:
+) -> Sampler:
     """Checkerboard single-spin Metropolis sampler of ``exp(−βh)`` for a :func:`heisenberg` system.
 
     Parameters
@@ -103,7 +103,7 @@ def as_top_level_api(
 
     Returns
     -------
-    blackjax.base.SamplingAlgorithm
+    Sampler
         ``init(position) -> SpinState`` and ``step(rng_key, state) -> (state, SpinInfo)``, one
         step being one full sweep; jit- and vmap-able, usable with :mod:`liesample.runner`.
     """
@@ -120,7 +120,16 @@ def as_top_level_api(
     def step_fn(rng_key, state):
         return kernel(rng_key, state, beta, proposal_scale)
 
-    return blackjax.base.SamplingAlgorithm(init_fn, step_fn)
+    settings = {
+        "sampler": "heisenberg_metropolis",
+        "system": system.name,
+        "beta": beta,
+        "proposal": proposal,
+        "proposal_scale": proposal_scale,
+    }
+    return Sampler(init_fn, step_fn, settings=settings)
 
 
-heisenberg_metropolis = blackjax.GenerateSamplingAPI(as_top_level_api, init, build_kernel)
+heisenberg_metropolis = sampling_api(
+    as_top_level_api, init, build_kernel, "heisenberg_metropolis", __name__
+)

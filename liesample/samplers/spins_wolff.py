@@ -23,11 +23,11 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import blackjax
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from liesample.samplers.contract import Sampler, sampling_api
 from liesample.samplers.spins import SpinState, check_beta, check_spin_system, finish_step, init
 from liesample.systems.heisenberg import SpinLatticeSystem, neighbour_table
 from liesample.targets.spins import von_mises_fisher
@@ -148,7 +148,7 @@ def build_kernel(system: SpinLatticeSystem):
     return kernel
 
 
-def as_top_level_api(system: SpinLatticeSystem, *, beta) -> blackjax.base.SamplingAlgorithm:
+def as_top_level_api(system: SpinLatticeSystem, *, beta) -> Sampler:
     """Wolff single-cluster sampler of ``exp(−βh)`` for the isotropic ferromagnet, no field.
 
     Parameters
@@ -161,7 +161,7 @@ def as_top_level_api(system: SpinLatticeSystem, *, beta) -> blackjax.base.Sampli
 
     Returns
     -------
-    blackjax.base.SamplingAlgorithm
+    Sampler
         ``init(position) -> SpinState`` and ``step(rng_key, state) -> (state, WolffInfo)``, one
         step being one cluster reflection (``info.cluster_size`` sites); jit- and vmap-able.
     """
@@ -180,7 +180,10 @@ def as_top_level_api(system: SpinLatticeSystem, *, beta) -> blackjax.base.Sampli
     def step_fn(rng_key, state):
         return kernel(rng_key, state, beta)
 
-    return blackjax.base.SamplingAlgorithm(init_fn, step_fn)
+    settings = {"sampler": "heisenberg_wolff", "system": system.name, "beta": beta}
+    return Sampler(init_fn, step_fn, settings=settings)
 
 
-heisenberg_wolff = blackjax.GenerateSamplingAPI(as_top_level_api, init, build_kernel)
+heisenberg_wolff = sampling_api(
+    as_top_level_api, init, build_kernel, "heisenberg_wolff", __name__
+)
