@@ -12,7 +12,9 @@ A *space* says how one block of the position moves. Every space has
   never silently projected;
 - ``uniform(key)``: a draw from the uniform (Haar) law;
 - ``flow(x, p, inverse_mass, t)``: the exact flow of the kinetic energy ``½ m⁻¹|p|²`` over a
-  time ``t`` (the exp-map drift of the leapfrog);
+  time ``t`` (the exp-map drift of the leapfrog; the group exponential is Rodrigues' formula
+  on SO(3), closed form on SU(2), an eigendecomposition of the anti-Hermitian generator
+  otherwise);
 - ``perturb(x, ε)``: a curve through ``x`` with velocity ``ε`` (algebra coordinates); the
   trivialised gradient of ``log π`` is the autodiff gradient of ``ε ↦ log π(perturb(x, ε))``
   at ``ε = 0``, i.e. ``d/dε log π(g exp(εX))`` for a group (left trivialisation) and the
@@ -425,8 +427,16 @@ class _MatrixGroup(Space):
         return x + x @ self.hat(eps).astype(x.dtype)
 
     def exponential(self, c):
-        """``exp(ĉ)`` of algebra coordinates ``c`` (``expm``; closed forms in subclasses)."""
-        return jax.scipy.linalg.expm(self.hat(c))
+        """``exp(ĉ)`` of algebra coordinates ``c``; closed forms in subclasses for n = 2, 3.
+
+        ``ĉ`` is anti-Hermitian, so ``H = −iĉ`` is Hermitian: with ``H = V diag(λ) V†``
+        (``eigh``), ``exp(ĉ) = V diag(e^{iλ}) V†``, unitary to round-off. One LAPACK call,
+        where ``expm``'s Padé branches would all run under ``vmap``.
+        """
+        X = self.hat(c)
+        lam, V = jnp.linalg.eigh(-1j * X.astype(jnp.result_type(X, jnp.complex64)))
+        out = (V * jnp.exp(1j * lam)[..., None, :]) @ jnp.conj(jnp.swapaxes(V, -1, -2))
+        return out if jnp.iscomplexobj(X) else jnp.real(out)
 
     def flow(self, x, p, inverse_mass, t):
         # Bi-invariant metric (M ∝ I per copy): ġ = g v̂, ṗ = ad*_v p = 0, so g ← g exp(t v̂).
@@ -446,7 +456,7 @@ class SO(_MatrixGroup):
 
     Algebra coordinates: ``n(n−1)/2`` numbers in an orthonormal basis of antisymmetric
     matrices; for n = 3 they are the angular velocity (``hat(ω) v = ω × v``). ``exp`` is
-    Rodrigues' formula for n = 3 and ``expm`` otherwise.
+    Rodrigues' formula for n = 3 and a Hermitian eigendecomposition otherwise.
     """
 
     def __post_init__(self):
@@ -495,7 +505,8 @@ class SU(_MatrixGroup):
 
     Algebra coordinates: ``n² − 1`` numbers in the basis ``i λ_a`` (generalised Gell-Mann
     matrices; for n = 2, ``iσ_x, iσ_y, iσ_z``), orthonormal for ``½ Re tr(X†Y)``. ``exp`` is
-    closed-form for n = 2 (``cos|c| I + i sin|c| ĉ·σ``) and ``expm`` otherwise.
+    closed-form for n = 2 (``cos|c| I + i sin|c| ĉ·σ``) and a Hermitian eigendecomposition
+    otherwise.
     """
 
     def __post_init__(self):

@@ -61,78 +61,101 @@ MU5 = np.array([0.5, -0.5, 0.5, 0.5, 0.0, 0.0])
 KAPPA2, KAPPA5, KAPPA_E3 = 4.0, 10.0, 3.0
 F = np.diag([2.0, 1.0, -0.5])
 M_E3 = np.array([0.6, 0.0, 0.8])
+M4 = np.array([0.0, 0.8, 0.0, 0.6])  # on SO(4), a potential of R e₄ only
+M3 = np.array([0.6j, 0.0, 0.8])  # on SU(3), a potential of the first column U e₁ ∈ S⁵ ⊂ C³
+KAPPA4, KAPPA_SU3 = 2.0, 3.0
 PRODUCT = {
     "s2": S.Sphere(2),
     "s5": S.Sphere(5),
     "fisher": S.SO(3),
     "top": S.SO(3),
+    "so4": S.SO(4),
+    "su3": S.SU(3),
     "x": S.Euclidean((2,)),
 }
 
 
-def product_logdensity(p):
-    """Independent blocks: vMF on S² and S⁵, matrix Fisher on SO(3), a potential of R e₃
-    only on SO(3), and a Gaussian on R² (sd 0.5 and 2)."""
-    return (
-        KAPPA2 * jnp.dot(MU2, p["s2"])
-        + KAPPA5 * jnp.dot(MU5, p["s5"])
-        + jnp.sum(F * p["fisher"])
-        + KAPPA_E3 * jnp.dot(M_E3, p["top"][:, 2])
-        - 0.5 * jnp.sum((p["x"] / jnp.array([0.5, 2.0])) ** 2)
-    )
+# Per block: its log-density, its observables and their exact means (the blocks are
+# independent). Haar pushes a column of a group element forward to the uniform law on its
+# sphere, so under exp(κ m·R e_k) dHaar the column R e_k is vMF(m, κ) on S² (SO(3)), S³ (SO(4))
+# or S⁵ (SU(3), C³ = R⁶).
+BLOCKS = {
+    "s2": (
+        lambda x: KAPPA2 * jnp.dot(MU2, x),
+        lambda x: jnp.dot(MU2, x)[None],
+        lambda: [vmf_mean_resultant_length(KAPPA2, 3)],
+    ),
+    "s5": (
+        lambda x: KAPPA5 * jnp.dot(MU5, x),
+        lambda x: jnp.dot(MU5, x)[None],
+        lambda: [vmf_mean_resultant_length(KAPPA5, 6)],
+    ),
+    "fisher": (
+        lambda R: jnp.sum(F * R),
+        jnp.diagonal,
+        lambda: np.diag(MatrixFisher(F).mean()),
+    ),
+    "top": (
+        lambda R: KAPPA_E3 * jnp.dot(M_E3, R[:, 2]),
+        lambda R: jnp.dot(M_E3, R[:, 2])[None],
+        lambda: [vmf_mean_resultant_length(KAPPA_E3, 3)],
+    ),
+    "so4": (
+        lambda R: KAPPA4 * jnp.dot(M4, R[:, 3]),
+        lambda R: jnp.dot(M4, R[:, 3])[None],
+        lambda: [vmf_mean_resultant_length(KAPPA4, 4)],
+    ),
+    "su3": (
+        lambda U: KAPPA_SU3 * jnp.real(jnp.vdot(M3, U[:, 0])),
+        lambda U: jnp.real(jnp.vdot(M3, U[:, 0]))[None],
+        lambda: [vmf_mean_resultant_length(KAPPA_SU3, 6)],
+    ),
+    "x": (  # a Gaussian on R², sd 0.5 and 2
+        lambda x: -0.5 * jnp.sum((x / jnp.array([0.5, 2.0])) ** 2),
+        lambda x: x**2,
+        lambda: [0.25, 4.0],
+    ),
+}
 
 
-def product_observables(p):
-    return jnp.concatenate(
-        [
-            jnp.array([jnp.dot(MU2, p["s2"]), jnp.dot(MU5, p["s5"])]),
-            jnp.diagonal(p["fisher"]),
-            jnp.array([jnp.dot(M_E3, p["top"][:, 2])]),
-            p["x"] ** 2,
-        ]
-    )
+def product_target(names):
+    """``(space, logdensity, observables, exact)`` of the product of the named blocks."""
+    space = {k: PRODUCT[k] for k in names}
+
+    def logdensity(p):
+        return sum(BLOCKS[k][0](p[k]) for k in names)
+
+    def observables(p):
+        return jnp.concatenate([BLOCKS[k][1](p[k]) for k in names])
+
+    return space, logdensity, observables, np.concatenate([BLOCKS[k][2]() for k in names])
 
 
-def product_exact():
-    return np.concatenate(
-        [
-            [vmf_mean_resultant_length(KAPPA2, 3), vmf_mean_resultant_length(KAPPA5, 6)],
-            np.diag(MatrixFisher(F).mean()),
-            # The marginal of R e₃ under exp(κ m·R e₃) dHaar is vMF(m, κ) on S².
-            [vmf_mean_resultant_length(KAPPA_E3, 3)],
-            [0.25, 4.0],
-        ]
-    )
-
-
-def _dispersed_starts(key):
-    spaces = {k: v for k, v in PRODUCT.items() if k != "x"}
-    batched = {k: type(v)(v.n, shape=(NUM_CHAINS,)) for k, v in spaces.items()}
+def _dispersed_starts(space, key):
+    batched = {k: type(v)(v.n, shape=(NUM_CHAINS,)) for k, v in space.items() if k != "x"}
     starts = S.uniform(batched, key)
     starts["x"] = jnp.zeros((NUM_CHAINS, 2))
     return starts
 
 
 def test_hmc_on_spheres_rotations_and_r2_matches_exact_moments():
-    sampler = liesample.geometric_hmc(product_logdensity, PRODUCT, step_size=0.25,
-                                      num_integration_steps=6)
-    means, acceptance = chain_means(
-        sampler, jax.random.key(0), _dispersed_starts(jax.random.key(1)), 1000,
-        product_observables,
-    )
+    space, logdensity, observables, exact = product_target(list(PRODUCT))
+    sampler = liesample.geometric_hmc(logdensity, space, step_size=0.25, num_integration_steps=6)
+    starts = _dispersed_starts(space, jax.random.key(1))
+    means, acceptance = chain_means(sampler, jax.random.key(0), starts, 1000, observables)
     assert 0.6 < acceptance.mean() < 1.0
-    assert_within_mcse(means, product_exact())
+    assert_within_mcse(means, exact)
 
 
-def test_adjusted_langevin_matches_exact_moments_and_unadjusted_is_close():
-    adjusted = liesample.geometric_langevin(product_logdensity, PRODUCT, step_size=0.25,
-                                            friction=1.0, adjusted=True)
-    means, acceptance = chain_means(
-        adjusted, jax.random.key(2), _dispersed_starts(jax.random.key(3)), 3000,
-        product_observables,
+def test_adjusted_langevin_matches_exact_moments():
+    space, logdensity, observables, exact = product_target(["s2", "fisher", "x"])
+    sampler = liesample.geometric_langevin(
+        logdensity, space, step_size=0.25, friction=1.0, adjusted=True
     )
+    starts = _dispersed_starts(space, jax.random.key(3))
+    means, acceptance = chain_means(sampler, jax.random.key(2), starts, 3000, observables)
     assert 0.8 < acceptance.mean() < 1.0
-    assert_within_mcse(means, product_exact())
+    assert_within_mcse(means, exact)
 
 
 # --------------------------------------------------------------------------- lattice gauge
