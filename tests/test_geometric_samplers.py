@@ -50,6 +50,7 @@ def assert_within_mcse(means, exact, factor=5.0):
     estimate = means.mean(0)
     mcse = means.std(0, ddof=1) / np.sqrt(means.shape[0])
     z = (estimate - np.asarray(exact)) / mcse
+    print("z-scores:", np.round(z, 2))  # shown with pytest -s
     assert np.all(np.abs(z) < factor), (estimate, exact, mcse, z)
     return z
 
@@ -285,3 +286,24 @@ def test_unadjusted_langevin_bias_is_second_order_in_the_step():
     (e1, s1), (e2, s2) = errors
     assert abs(e1) > 5 * s1  # the bias at h = 0.4 is resolved
     assert abs(e2 - e1 / 4) < 5 * np.hypot(s2, s1 / 4)
+
+
+@pytest.mark.slow
+def test_window_adaptation_on_an_8x8_su2_lattice_matches_the_bessel_ratio():
+    """112 SU(2) links (336 dimensions), tuned by window adaptation from a Haar start."""
+    size, beta = 8, 2.5
+    space = {"h": S.SU(2, shape=(size - 1, size)), "v": S.SU(2, shape=(size, size - 1))}
+
+    def logdensity(links):
+        return beta * jnp.sum(su2_plaquettes(links))
+
+    start = S.uniform(space, jax.random.key(12))
+    warmup = window_adaptation(liesample.geometric_hmc, logdensity, space)
+    (state, parameters), _ = warmup.run(jax.random.key(13), start, num_steps=500)
+    sampler = liesample.geometric_hmc(logdensity, space, **parameters)
+    starts = jax.tree.map(lambda a: jnp.broadcast_to(a, (NUM_CHAINS, *a.shape)), state.position)
+    means, acceptance = chain_means(
+        sampler, jax.random.key(14), starts, 1000, lambda p: jnp.mean(su2_plaquettes(p))[None]
+    )
+    assert 0.6 < acceptance.mean() <= 1.0
+    assert_within_mcse(means, [su2_plaquette_mean(beta)])
