@@ -177,12 +177,31 @@ class PoissonLangevin:
         """
         sde = self.sde
         restricted = self.system.group_noise_hamiltonians
+        if restricted is not None and self.system.noise_groups is None:
+            return self._one_direction_generator(mu, group, dt, dW)
         if restricted is not None:
             sde = replace(sde, noise_hamiltonians=lambda m: restricted(m, group))
         coefficients = jnp.broadcast_to(sde.noise_coefficients(mu, dt, dW), (self.num_noises,))
         in_group = self.system.noise_group_labels == group
         _, pullback = jax.vjp(sde.noise_hamiltonians, mu)
         return pullback(jnp.where(in_group, coefficients, 0.0))[0]
+
+    def _one_direction_generator(self, mu, i, dt, dW):
+        """:meth:`group_generator` for the group ``{i}`` of a system that evaluates its noise
+        functions one group at a time: one gradient ``∇ĥ_i`` (a VJP of ``ĥ_i`` alone), and
+        ``{h, ĥ_i} = ⟨∇h, ad*_{∇ĥ_i} μ⟩`` from it, so no JVP of the noise is needed."""
+        scene = self.scene
+        if scene.noise != (dW is not None):
+            raise ValueError("dW must be given exactly when the scene has noise")
+        gradient = jax.grad(lambda m: self.system.group_noise_hamiltonians(m, i)[i])(mu)
+        coefficient = jnp.zeros((), mu.dtype)
+        if scene.dissipation:
+            grad_h = jax.grad(self.system.hamiltonian)(mu)
+            bracket = self.algebra.pairing(self.algebra.ad_star(gradient, mu), grad_h)
+            coefficient = coefficient - (self.theta * dt) * bracket
+        if scene.noise:
+            coefficient = coefficient + self.sigma * dW[i]
+        return coefficient * gradient
 
     def vector_field(self, mu, dt, dW=None):
         """The ambient increment ``ad*_ζ μ`` (what a non-geometric integrator adds to ``μ``)."""
