@@ -81,17 +81,18 @@ def draw_map(fig, spec, harmonics, x, title, limit):
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--size", type=int, default=None, help="N (default 24; 10 with --quick)")
+    parser.add_argument("--size", type=int, default=None, help="N (default 24; 6 with --quick)")
     parser.add_argument("--quick", action="store_true", help="small sizes (a smoke run)")
     parser.add_argument("--out", type=Path, default=Path("salt-euler-output"))
     args = parser.parse_args(argv)
-    size = args.size or (10 if args.quick else 24)
-    steps = 100 if args.quick else 1000
+    size = args.size or (6 if args.quick else 24)
+    steps = 40 if args.quick else 1000
     gibbs_chains = 2 if args.quick else 4
-    gibbs_steps = 100 if args.quick else 2000
+    gibbs_steps = 40 if args.quick else 2000
+    noise_degree = min(2 if args.quick else NOISE_DEGREE, size - 1)
     args.out.mkdir(parents=True, exist_ok=True)
 
-    system = zeitlin_euler(size, noise_degree=min(NOISE_DEGREE, size - 1))
+    system = zeitlin_euler(size, noise_degree=noise_degree)
     harmonics = system.params["harmonics"]
     start = random_vorticity(size, seed=1, slope=1.0, enstrophy=ENSTROPHY)
     record = steps // 2
