@@ -132,7 +132,8 @@ class VonMisesFisher(Distribution):
                 f"{mean_direction.shape}"
             )
         batch_shape = jax.lax.broadcast_shapes(mean_direction.shape[:-1], concentration.shape)
-        self.mean_direction = jnp.broadcast_to(mean_direction, batch_shape + mean_direction.shape[-1:])
+        event_shape = mean_direction.shape[-1:]
+        self.mean_direction = jnp.broadcast_to(mean_direction, batch_shape + event_shape)
         self.concentration = jnp.broadcast_to(concentration, batch_shape)
         super().__init__(batch_shape, mean_direction.shape[-1:], validate_args=validate_args)
 
@@ -176,15 +177,14 @@ class VonMisesFisher(Distribution):
 
 
 def _quaternion_to_rotation(q):
+    """The rotation of a unit quaternion ``(w, x, y, z)`` (both ``±q`` give the same one)."""
     w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    return jnp.stack(
-        [
-            jnp.stack([w * w + x * x - y * y - z * z, 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-            jnp.stack([2 * (x * y + w * z), w * w - x * x + y * y - z * z, 2 * (y * z - w * x)], -1),
-            jnp.stack([2 * (x * z - w * y), 2 * (y * z + w * x), w * w - x * x - y * y + z * z], -1),
-        ],
-        -2,
-    )
+    rows = [
+        [w * w + x * x - y * y - z * z, 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), w * w - x * x + y * y - z * z, 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), w * w - x * x - y * y + z * z],
+    ]
+    return jnp.stack([jnp.stack(row, -1) for row in rows], -2)
 
 
 class _RotationConstraint(constraints.Constraint):

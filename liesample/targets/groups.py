@@ -206,27 +206,33 @@ class VonMisesFisherPosterior:
         return self.data.shape[0] * _log_vmf_normalizer_s2(kappa) + log_sinhc + prior
 
     def expectations(self) -> dict:
-        """``E[η]``, ``Var[η]``, ``E[μ]`` (vector) by quadrature over ``η``."""
-        grid = np.linspace(self.prior_mean - 12 * self.prior_sd, self.prior_mean + 12 * self.prior_sd,
-                           20001)
-        grid = grid[grid > -30.0]
+        """``E[η]``, ``Var[η]``, ``E[μ]`` (vector) by adaptive quadrature over ``η``."""
+        # Locate the bulk of the η-marginal (much narrower than the prior) on a fine grid.
+        half_width = 12.0 * self.prior_sd
+        grid = np.linspace(self.prior_mean - half_width, self.prior_mean + half_width, 20001)
         logp = self._log_marginal(grid)
-        weights = np.exp(logp - logp.max())
-        weights /= integrate.trapezoid(weights, grid)
-        # Refine around the bulk (the posterior is much narrower than the prior).
-        bulk = grid[weights > weights.max() * 1e-18]
+        shift = logp.max()
+        bulk = grid[logp > shift - 40.0]
         lo, hi = bulk.min(), bulk.max()
 
-        def moment(f):
-            shift = logp.max()
-            val = integrate.quad(lambda e: f(e) * np.exp(self._log_marginal(e) - shift), lo, hi,
-                                 epsabs=0.0, epsrel=1e-12, limit=400, points=None)[0]
-            return val
+        def integral(f):
+            return integrate.quad(
+                lambda e: f(e) * np.exp(self._log_marginal(e) - shift),
+                lo,
+                hi,
+                epsabs=0.0,
+                epsrel=1e-12,
+                limit=400,
+            )[0]
 
-        z = moment(lambda e: 1.0)
-        mean_eta = moment(lambda e: e) / z
-        var_eta = moment(lambda e: (e - mean_eta) ** 2) / z
+        z = integral(lambda e: 1.0)
+        mean_eta = integral(lambda e: e) / z
+        var_eta = integral(lambda e: (e - mean_eta) ** 2) / z
         r = np.linalg.norm(self.resultant)
-        a = moment(lambda e: vmf_mean_resultant_length(np.exp(e) * r, 3)) / z
-        return {"log_kappa": mean_eta, "log_kappa_var": var_eta,
-                "direction": a * self.resultant / r}
+        # Given κ, μ is vMF(S/R, κR): E[μ | κ] = A_3(κR) S/R.
+        a = integral(lambda e: vmf_mean_resultant_length(np.exp(e) * r, 3)) / z
+        return {
+            "log_kappa": mean_eta,
+            "log_kappa_var": var_eta,
+            "direction": a * self.resultant / r,
+        }
