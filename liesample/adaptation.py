@@ -162,6 +162,8 @@ def window_adaptation(
     target = finite_float("target_acceptance_rate", target_acceptance_rate)
     if not 0.0 < target < 1.0:
         raise ValueError(f"target_acceptance_rate must be in (0, 1), got {target}")
+    if "step_size" in parameters:
+        raise TypeError("step_size is what window_adaptation tunes: give initial_step_size")
     unknown = set(parameters) - (set(arguments) - {"rng_key", "state", "logdensity_fn", "space"})
     if unknown:
         raise TypeError(f"unknown parameters for {algorithm}: {sorted(unknown)}")

@@ -307,3 +307,49 @@ def test_window_adaptation_on_an_8x8_su2_lattice_matches_the_bessel_ratio():
     )
     assert 0.6 < acceptance.mean() <= 1.0
     assert_within_mcse(means, [su2_plaquette_mean(beta)])
+
+
+def test_window_adaptation_refuses_bad_parameters():
+    space = S.Sphere(2)
+
+    def logdensity(x):
+        return x[2]
+
+    with pytest.raises(TypeError, match="initial_step_size"):
+        window_adaptation(liesample.geometric_hmc, logdensity, space, step_size=0.1)
+    with pytest.raises(ValueError, match="not both"):
+        window_adaptation(liesample.geometric_hmc, logdensity, space, num_integration_steps=3,
+                          integration_time=1.0)
+    with pytest.raises(ValueError, match="HMC parameters"):
+        window_adaptation(liesample.geometric_langevin, logdensity, space, integration_time=1.0)
+    with pytest.raises(TypeError, match="unknown parameters"):
+        window_adaptation(liesample.geometric_hmc, logdensity, space, friction=1.0)
+    with pytest.raises(ValueError, match="target_acceptance_rate"):
+        window_adaptation(liesample.geometric_hmc, logdensity, space, target_acceptance_rate=1.5)
+    with pytest.raises(ValueError, match="num_steps"):
+        window_adaptation(liesample.geometric_hmc, logdensity, space).run(
+            jax.random.key(0), jnp.array([0.0, 0.0, 1.0]), num_steps=5
+        )
+
+
+@pytest.mark.slow
+def test_window_adaptation_of_adjusted_langevin_on_the_vmf_posterior():
+    data = vonmises_fisher(MU2, 5.0).rvs(20, random_state=np.random.default_rng(1))
+    posterior = VonMisesFisherPosterior(data, prior_mean=1.0, prior_sd=1.0)
+    exact = posterior.expectations()
+    space = {"direction": S.Sphere(2), "log_kappa": S.Euclidean(())}
+    start = {"direction": jnp.array([1.0, 0.0, 0.0]), "log_kappa": jnp.asarray(0.0)}
+    warmup = window_adaptation(
+        liesample.geometric_langevin, posterior.logdensity, space, adjusted=True, friction=0.5
+    )
+    (state, parameters), _ = warmup.run(jax.random.key(15), start, num_steps=600)
+    assert parameters["adjusted"] is True and parameters["friction"] == 0.5
+    sampler = liesample.geometric_langevin(posterior.logdensity, space, **parameters)
+    starts = jax.tree.map(lambda a: jnp.broadcast_to(a, (NUM_CHAINS, *a.shape)), state.position)
+
+    def observables(p):
+        return jnp.concatenate([p["direction"], p["log_kappa"][None]])
+
+    means, acceptance = chain_means(sampler, jax.random.key(16), starts, 4000, observables)
+    assert 0.8 < acceptance.mean() <= 1.0
+    assert_within_mcse(means, np.append(exact["direction"], exact["log_kappa"]))
