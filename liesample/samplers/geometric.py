@@ -33,6 +33,7 @@ from liesample._validation import concrete_array
 __all__ = [
     "GeometricInfo",
     "GeometricState",
+    "check_starts",
     "energy",
     "init",
     "leapfrog",
@@ -95,6 +96,20 @@ def init(position, logdensity_fn: Callable, space) -> GeometricState:
             "chain where log π is finite"
         )
     return GeometricState(position, logdensity, grad, spaces.zero_momentum(space, position))
+
+
+def check_starts(space):
+    """The runner's ``check_positions`` hook: every chain's start (leading axis) on the space,
+    the first bad one named ``initial_positions[c]``."""
+
+    def check_positions(positions, **_):
+        leaves = jax.tree.leaves(positions)
+        num_chains = np.shape(leaves[0])[0] if leaves and np.ndim(leaves[0]) else 0
+        for chain in range(num_chains):
+            start = jax.tree.map(lambda a: a[chain], positions)
+            spaces.check_position(space, start, f"initial_positions[{chain}]")
+
+    return check_positions
 
 
 def check_divergence_threshold(divergence_threshold):

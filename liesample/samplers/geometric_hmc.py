@@ -20,15 +20,16 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-import blackjax
 import jax
 import jax.numpy as jnp
 
 from liesample import spaces
+from liesample.samplers.contract import Sampler, sampling_api, setting
 from liesample.samplers.geometric import (
     GeometricInfo,
     GeometricState,
     check_divergence_threshold,
+    check_starts,
     init,
     metropolis,
     select,
@@ -117,8 +118,8 @@ def as_top_level_api(
     inverse_mass_matrix=None,
     *,
     divergence_threshold: float = 1000.0,
-) -> blackjax.base.SamplingAlgorithm:
-    """Geometric HMC.
+) -> Sampler:
+    """Geometric HMC on Lie groups, spheres and products with ``Rᵈ`` (Metropolis-adjusted).
 
     Parameters
     ----------
@@ -146,6 +147,15 @@ def as_top_level_api(
     check_divergence_threshold(divergence_threshold)
     inverse_mass = spaces.check_inverse_mass(space, inverse_mass_matrix)
 
+    settings = {
+        "sampler": "geometric_hmc",
+        "space": repr(space),
+        "step_size": setting(step_size),
+        "step_size_source": "given",
+        "num_integration_steps": setting(num_integration_steps),
+        "divergence_threshold": setting(divergence_threshold),
+    }
+
     def init_fn(position, rng_key=None):
         del rng_key
         return init(position, logdensity_fn, space)
@@ -162,7 +172,7 @@ def as_top_level_api(
             divergence_threshold,
         )
 
-    return blackjax.base.SamplingAlgorithm(init_fn, step_fn)
+    return Sampler(init_fn, step_fn, settings=settings, check_positions=check_starts(space))
 
 
-geometric_hmc = blackjax.GenerateSamplingAPI(as_top_level_api, init, build_kernel)
+geometric_hmc = sampling_api(as_top_level_api, init, build_kernel, "geometric_hmc", __name__)

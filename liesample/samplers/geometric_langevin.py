@@ -24,16 +24,17 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-import blackjax
 import jax
 import jax.numpy as jnp
 
 from liesample import spaces
 from liesample._validation import concrete_array, finite_float
+from liesample.samplers.contract import Sampler, sampling_api, setting
 from liesample.samplers.geometric import (
     GeometricInfo,
     GeometricState,
     check_divergence_threshold,
+    check_starts,
     init,
     metropolis,
     select,
@@ -143,8 +144,8 @@ def as_top_level_api(
     *,
     adjusted: bool = False,
     divergence_threshold: float = 1000.0,
-) -> blackjax.base.SamplingAlgorithm:
-    """Geometric kinetic Langevin.
+) -> Sampler:
+    """Geometric kinetic Langevin on Lie groups, spheres and products with ``Rᵈ``.
 
     Parameters
     ----------
@@ -167,6 +168,16 @@ def as_top_level_api(
     check_divergence_threshold(divergence_threshold)
     inverse_mass = spaces.check_inverse_mass(space, inverse_mass_matrix)
 
+    settings = {
+        "sampler": "geometric_langevin",
+        "space": repr(space),
+        "step_size": setting(step_size),
+        "step_size_source": "given",
+        "friction": setting(friction),
+        "adjusted": adjusted,
+        "divergence_threshold": setting(divergence_threshold),
+    }
+
     def init_fn(position, rng_key=None):
         del rng_key
         return init(position, logdensity_fn, space)
@@ -184,7 +195,9 @@ def as_top_level_api(
             divergence_threshold,
         )
 
-    return blackjax.base.SamplingAlgorithm(init_fn, step_fn)
+    return Sampler(init_fn, step_fn, settings=settings, check_positions=check_starts(space))
 
 
-geometric_langevin = blackjax.GenerateSamplingAPI(as_top_level_api, init, build_kernel)
+geometric_langevin = sampling_api(
+    as_top_level_api, init, build_kernel, "geometric_langevin", __name__
+)
