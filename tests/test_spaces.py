@@ -205,6 +205,10 @@ def test_sampler_init_refuses_bad_starts():
     sampler = liesample.geometric_hmc(lambda x: x[2], space, 0.1, 3)
     with pytest.raises(ValueError, match="off Sphere"):
         sampler.init(jnp.array([1.0, 0.1, 0.0]))
+    starts = jnp.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [0.0, 1.0, 0.1]])
+    with pytest.raises(ValueError, match=r"initial_positions\[2\] is off Sphere"):
+        sampler.check_positions(starts)  # the runner's hook
+    assert sampler.settings["sampler"] == "geometric_hmc"
     bad = liesample.geometric_hmc(lambda x: jnp.log(x[2]), space, 0.1, 3)
     with pytest.raises(ValueError, match="not finite"):
         bad.init(jnp.array([1.0, 0.0, 0.0]))
