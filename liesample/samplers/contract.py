@@ -39,6 +39,7 @@ enough and warns once.
 from __future__ import annotations
 
 import functools
+import inspect
 from typing import NamedTuple, Protocol, runtime_checkable
 
 import blackjax
@@ -171,7 +172,7 @@ def sampling_api(as_top_level_api, init, build_kernel, name: str, module: str):
     """``blackjax.GenerateSamplingAPI(as_top_level_api, init, build_kernel)`` whose ``help()``
     and ``__doc__`` are ``as_top_level_api``'s docstring (plus the precision rule) and whose
     call signature is that of ``as_top_level_api``."""
-    doc = (as_top_level_api.__doc__ or "").rstrip() + "\n" + _PRECISION_NOTE.format(name=name)
+    doc = inspect.cleandoc(as_top_level_api.__doc__ or "") + "\n" + _PRECISION_NOTE.format(name=name)
 
     @functools.wraps(as_top_level_api)
     def __call__(self, *args, **kwargs):
@@ -181,7 +182,14 @@ def sampling_api(as_top_level_api, init, build_kernel, name: str, module: str):
     cls = type(
         name,
         (blackjax.GenerateSamplingAPI,),
-        {"__doc__": doc, "__module__": module, "__qualname__": name, "__call__": __call__},
+        {
+            "__doc__": doc,
+            "__module__": module,
+            "__qualname__": name,
+            "__call__": __call__,
+            # help() shows how the sampler is called, not the dataclass fields.
+            "__signature__": inspect.signature(as_top_level_api),
+        },
     )
     return cls(as_top_level_api, init, build_kernel)
 
