@@ -229,7 +229,8 @@ def ess_per_second(quick, log):
         states, _ = warm(starts, keys)
         run = liesample.jit(jax.vmap(lambda s, k: chain(s, k, num_steps)))
         compiled = run.lower(states, keys).compile()
-        (_, energies), seconds = common.timed(compiled, states, jax.random.split(keys[0], num_chains))
+        timed_keys = jax.random.split(keys[0], num_chains)
+        (_, energies), seconds = common.timed(compiled, states, timed_keys)
         energies = np.asarray(energies)
         ess = float(arviz.ess(energies))
         rows.append({"N": size, "chains": num_chains, "steps": num_steps, "seconds": seconds,
@@ -305,8 +306,9 @@ def report_section(results, plot_link: str | None = "zeitlin.png") -> str:
     if gaps:
         lines += ["", f"The NumPy and JAX midpoint trajectories agree to {max(gaps):.1e} "
                   "(largest entry difference after the timed steps)."]
-    lines += ["", "ESS per second of h: `lie_poisson_langevin(zeitlin_euler(N, noise_degree=2), beta=1, "
-              f"sigma=1, step_size={results.get('ess_step', 0.1)})`, 4 vmapped chains from one start after "
+    lines += ["", "ESS per second of h: `lie_poisson_langevin(zeitlin_euler(N, noise_degree=2), "
+              f"beta=1, sigma=1, step_size={results.get('ess_step', 0.1)})`, 4 vmapped chains "
+              "from one start after "
               "a warm-up; bulk ESS by ArviZ over the wall time of the timed run. Only the 8 modes "
               "ℓ ≤ 2 are forced, so h decorrelates slowly.",
               "", "| N | chains × steps | ESS(h) | seconds | ESS/s | mean h |",

@@ -111,7 +111,8 @@ def main(argv=None) -> int:
         )
         starts = np.repeat(start[None], gibbs_chains, axis=0)
         every = gibbs_steps // 10
-        gibbs[beta] = run_chains(sampler, starts, gibbs_steps, jax.random.key(int(abs(beta))), every)
+        chain_key = jax.random.key(int(abs(beta)))
+        gibbs[beta] = run_chains(sampler, starts, gibbs_steps, chain_key, every)
         print(f"β = {beta:+g}: mean h over the second half = "
               f"{gibbs[beta][1][:, gibbs_steps // 2 :].mean():.4f}")
     print(f"h: start {float(system.hamiltonian(jnp.asarray(start))):.4f}, Euler end "

@@ -394,15 +394,15 @@ def _transpose(x):
 class Unitary(LieAlgebra):
     """``u(N)`` and its dual on real ``(..., N, N)`` arrays; coadjoint action by conjugation.
 
-    An element of ``u(N)`` is a skew-Hermitian matrix ``W = A + iS`` (``A`` real antisymmetric, ``S``
-    real symmetric). liesample stores it as the **real** matrix ``x = A + S`` (shape ``(..., N, N)``):
-    ``A`` and ``S`` are the antisymmetric and symmetric parts of ``x``, so the map is a linear
-    bijection ``R^{N×N} → u(N)`` and every engine piece (real Brownian increments, ``jax.grad``,
-    ``jnp.where`` guards) works unchanged.
+    An element of ``u(N)`` is a skew-Hermitian matrix ``W = A + iS`` (``A`` real antisymmetric,
+    ``S`` real symmetric). liesample stores it as the **real** matrix ``x = A + S`` (shape
+    ``(..., N, N)``): ``A`` and ``S`` are the antisymmetric and symmetric parts of ``x``, so
+    the map is a linear bijection ``R^{N×N} → u(N)`` and every engine piece (real Brownian
+    increments, ``jax.grad``, ``jnp.where`` guards) works unchanged.
 
     **Pairing.** ``⟨W, Ξ⟩ = −tr(WΞ) = Re tr(W*Ξ)`` (the Frobenius inner product). In the real
-    coordinates it is the plain sum ``Σ_ij x_ij y_ij`` (the cross terms ``A·T`` and ``S·B`` vanish), so
-    it is :meth:`LieAlgebra.pairing` and ``jax.grad`` of a real function of ``x`` *is* the Riesz
+    coordinates it is the plain sum ``Σ_ij x_ij y_ij`` (the cross terms ``A·T`` and ``S·B``
+    vanish), so it is :meth:`LieAlgebra.pairing` and ``jax.grad`` of a real function of ``x`` *is* the Riesz
     representative of its differential: no conjugation convention enters. ``g*`` is identified with
     ``g`` by this pairing.
 

@@ -48,7 +48,8 @@ def rng():
 @pytest.mark.parametrize("size", [3])
 def test_unitary_algebra_identities(rng, size):
     algebra = Unitary(size)
-    ops = {op: liesample.jit(getattr(algebra, op)) for op in ("bracket", "ad_star", "coadjoint_exp")}
+    ops = {op: liesample.jit(getattr(algebra, op)) for op in ("bracket", "ad_star",
+                                                              "coadjoint_exp")}
     mu, xi, eta = rng.normal(size=(3, size, size))
     scale = np.linalg.norm(mu) * np.linalg.norm(xi) * np.linalg.norm(eta)
     # ⟨ad*_ξ μ, η⟩ = ⟨μ, [ξ, η]⟩, and the real-coordinate sum is −tr(WΞ)
@@ -68,7 +69,8 @@ def test_unitary_algebra_identities(rng, size):
     assert np.max(np.abs(jacobi)) <= REL * scale * 10
     # coadjoint_exp: derivative at 0 is ad*, a one-parameter group, isospectral
     eps = 1e-6
-    derivative = (ops["coadjoint_exp"](eps * xi, mu) - ops["coadjoint_exp"](-eps * xi, mu)) / (2 * eps)
+    move = ops["coadjoint_exp"]
+    derivative = (move(eps * xi, mu) - move(-eps * xi, mu)) / (2 * eps)
     assert np.max(np.abs(derivative - ops["ad_star"](xi, mu))) <= 1e-8 * scale
     twice = ops["coadjoint_exp"](0.3 * xi, ops["coadjoint_exp"](0.4 * xi, mu))
     assert np.max(np.abs(twice - ops["coadjoint_exp"](0.7 * xi, mu))) <= REL * np.linalg.norm(mu)
@@ -217,7 +219,8 @@ def test_noise_hamiltonians_are_the_normalised_streamfunctions():
     x = random_vorticity(6, seed=5)
     c = np.asarray(basis.coefficients(x))[1:16]
     ell = basis.degrees[1:16]
-    assert np.allclose(system.noise_hamiltonians(jnp.asarray(x)), c / (ell * (ell + 1.0)), atol=1e-14)
+    expected = c / (ell * (ell + 1.0))
+    assert np.allclose(system.noise_hamiltonians(jnp.asarray(x)), expected, atol=1e-14)
     assert system.num_noises == 15
     assert float(system.hamiltonian(jnp.asarray(x))) > 0
 
@@ -237,7 +240,9 @@ def test_su2_is_the_isotropic_rigid_body_pathwise():
     # Hamiltonian drift is a Casimir's: add a non-trivial one to both through the same map.
     extra = lambda mu: 0.7 * mu[0] * mu[1] + 0.2 * mu[2] ** 2  # noqa: E731
     body = replace(body, hamiltonian=lambda mu, h=body.hamiltonian: h(mu) + extra(mu))
-    zeitlin = replace(zeitlin, hamiltonian=lambda x, h=zeitlin.hamiltonian: h(x) + extra(so3_from_su2(x)))
+    zeitlin = replace(
+        zeitlin, hamiltonian=lambda x, h=zeitlin.hamiltonian: h(x) + extra(so3_from_su2(x))
+    )
     for name in ("splitting",):
         integrator = get_integrator(name)
         dyn_body = PoissonLangevin(body, sigma=0.8, theta=0.6, scene=Scene())
@@ -277,7 +282,8 @@ def _trajectories(system, scene, runs, sigma=0.0, theta=0.0, seed=0):
     def run(x, key):
         def body(states, k):
             new = []
-            for (step, dt, repeats), state, kk in zip(steps, states, jax.random.split(k, len(steps))):
+            keys = jax.random.split(k, len(steps))
+            for (step, dt, repeats), state, kk in zip(steps, states, keys):
                 for r in range(repeats):
                     dw = dynamics.brownian_increments(jax.random.fold_in(kk, r), dt, x.dtype)
                     state = step(dynamics, state, dt, dw)
@@ -305,7 +311,8 @@ def test_pure_euler_keeps_casimirs_and_energy_and_integrators_agree():
         assert np.max(np.abs(final - EULER_START)) > 0.1  # the flow moved
     # Short time: the explicit schemes converge to the isospectral-midpoint trajectory at
     # second order (the gap shrinks ~4× when dt halves).
-    runs = [(i, dt, 100, r) for dt, r in ((0.01, 1), (0.005, 2)) for i in ("splitting", isospectral_midpoint)]
+    pair = ("splitting", isospectral_midpoint)
+    runs = [(i, dt, 100, r) for dt, r in ((0.01, 1), (0.005, 2)) for i in pair]
     finals, _ = _trajectories(system, scene, runs)
     gaps = [float(np.max(np.abs(finals[k] - finals[k + 1]))) for k in (0, 2)]
     assert gaps[1] < 1e-3 and 3.0 < gaps[0] / gaps[1] < 5.0, gaps
@@ -320,7 +327,9 @@ def test_isospectral_midpoint_is_modin_viviani():
     algebra = system.algebra
     h = 0.05
     w0 = np.asarray(algebra.to_matrix(jnp.asarray(EULER_START)))
-    p_of = lambda w: np.asarray(algebra.to_matrix(basis.inverse_laplacian(algebra.from_matrix(w))))  # noqa: E731
+    def p_of(w):
+        return np.asarray(algebra.to_matrix(basis.inverse_laplacian(algebra.from_matrix(w))))
+
     w_mid = w0
     for _ in range(200):
         p = p_of(w_mid)
@@ -337,7 +346,8 @@ def test_isospectral_midpoint_is_modin_viviani():
     assert np.max(np.abs(spectrum(w1) - spectrum(w0))) < 1e-12
     # and the step is Zeitlin's flow Ẇ = [P, W] to first order
     p0 = p_of(w0)
-    assert np.max(np.abs((w1 - w0) / h - (p0 @ w0 - w0 @ p0))) < 0.1 * np.max(np.abs(p0 @ w0 - w0 @ p0))
+    flow = p0 @ w0 - w0 @ p0
+    assert np.max(np.abs((w1 - w0) / h - flow)) < 0.1 * np.max(np.abs(flow))
 
 
 def test_relaxation_decreases_energy_monotonically():
@@ -346,7 +356,8 @@ def test_relaxation_decreases_energy_monotonically():
     c0 = system.casimirs(jnp.asarray(EULER_START))
     h0 = float(system.hamiltonian(jnp.asarray(EULER_START)))
     integrators = ("splitting", isospectral_midpoint)
-    finals, energies = _trajectories(system, scene, [(i, 0.01, 400) for i in integrators], theta=1.0)
+    runs = [(i, 0.01, 400) for i in integrators]
+    finals, energies = _trajectories(system, scene, runs, theta=1.0)
     for name, final, energy in zip(integrators, finals, np.asarray(energies).T):
         name = getattr(name, "name", name)
         assert np.all(np.diff(np.concatenate([[h0], energy])) < 0), name

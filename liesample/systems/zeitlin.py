@@ -223,7 +223,9 @@ class QuantisedHarmonics:
         coefficients = jnp.asarray(coefficients)
         n = self.size
         if coefficients.shape[-1:] != (n * n,):
-            raise ValueError(f"coefficients must have shape (..., {n * n}), got {coefficients.shape}")
+            raise ValueError(
+                f"coefficients must have shape (..., {n * n}), got {coefficients.shape}"
+            )
         batch = coefficients.shape[:-1]
         upper = jnp.zeros(batch + (n * n,), coefficients.dtype)
         lower = jnp.zeros(batch + (n * n,), coefficients.dtype)
@@ -247,7 +249,8 @@ class QuantisedHarmonics:
         return np.asarray(_compiled_from_coefficients(self)(jnp.asarray(unit)))
 
     def energy_spectrum(self, x):
-        """Energy per degree ``ε_ℓ = ½ Σ_m ω_ℓm²/(ℓ(ℓ+1))``, ``ℓ = 1 … N−1`` (shape ``(..., N−1)``)."""
+        """Energy per degree ``ε_ℓ = ½ Σ_m ω_ℓm²/(ℓ(ℓ+1))``, ``ℓ = 1 … N−1``; shape
+        ``(..., N−1)``."""
         c = self.coefficients(x)
         ell = self.degrees
         weights = np.where(ell > 0, 0.5 / np.maximum(ell * (ell + 1), 1), 0.0)
@@ -298,7 +301,8 @@ def random_vorticity(size: int, seed: int = 0, slope: float = 1.0, enstrophy: fl
     basis = quantised_harmonics(size)
     rng = np.random.default_rng(seed)
     ell = basis.degrees
-    c = rng.standard_normal(ell.shape) * np.where(ell > 0, np.maximum(ell, 1.0) ** (-slope / 2), 0.0)
+    amplitude = np.where(ell > 0, np.maximum(ell, 1.0) ** (-slope / 2), 0.0)
+    c = rng.standard_normal(ell.shape) * amplitude
     c *= math.sqrt(enstrophy / np.sum(c**2))
     return np.asarray(_compiled_from_coefficients(basis)(jnp.asarray(c)))
 
