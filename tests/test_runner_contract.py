@@ -73,7 +73,9 @@ def _magnetic_samplers():
 
 def test_every_sampler_reports_the_contract_fields():
     orbit = {
-        "lie_poisson_langevin": liesample.lie_poisson_langevin(RIGID, beta=1.0, step_size=0.05),
+        "lie_poisson_langevin": liesample.lie_poisson_langevin(
+            RIGID, beta=1.0, step_size=0.05, integrator="lie_euler"
+        ),
         "adjusted_lie_poisson": liesample.adjusted_lie_poisson(RIGID, beta=1.0, step_size=0.05),
     }
     cases = [(s, STARTS[0]) for s in orbit.values()]
@@ -102,8 +104,8 @@ def test_both_key_styles_give_the_same_draws():
     np.testing.assert_array_equal(*runs)
     averages = [
         liesample.accuracy.coupled_ergodic_averages(
-            RIGID, 1.0, _coordinates, step_size=0.1, initial_positions=STARTS, rng_key=key,
-            total_time=1.0,
+            RIGID, 1.0, _coordinates, step_size=0.1, levels=1, integrator="lie_euler",
+            initial_positions=STARTS, rng_key=key, total_time=1.0,
         ).chain_means
         for key in (jax.random.key(7), jax.random.PRNGKey(7))
     ]  # fmt: skip
@@ -153,15 +155,13 @@ def test_magnetic_divergences_reach_sample_stats_and_are_reduced_with_any():
         tree.sample_stats["acceptance_rate"].values,
         steps.info["acceptance_rate"].reshape(2, 20, 5).mean(axis=-1),
     )
-    with pytest.raises(liesample.runner.NonFiniteStateError, match="divergent"):
-        liesample.sample_chains(sampler, key, starts, 100, progress=False, on_nonfinite="raise")
 
 
 def test_stuck_chains_are_named():
     sampler = liesample.adjusted_lie_poisson(VMF, beta=1.0, step_size=1.0)
     starts = np.tile(MU_HAT, (3, 1))
     with pytest.warns(RuntimeWarning, match=r"3 chain\(s\) are stuck.*chains 0, 1, 2.*smaller"):
-        liesample.sample_chains(sampler, jax.random.key(0), starts, 50, progress=False)
+        liesample.sample_chains(sampler, jax.random.key(0), starts, 20, progress=False)
 
 
 # --------------------------------------------------------------------------- starts

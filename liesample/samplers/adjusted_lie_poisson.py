@@ -322,6 +322,7 @@ def as_top_level_api(
         "target_acceptance_rate": target,
     }
     chosen = [step_size]
+    warmup = dual_averaging_warmup(kernel, target)  # one compilation per sampler and shape
 
     def resolve(position):
         if chosen[0] is None:
@@ -361,9 +362,8 @@ def as_top_level_api(
         initial = chosen[0]
         if initial is None:
             initial = _default_step_size(system, beta, sigma, np.asarray(initial_positions[0]))
-        run = dual_averaging_warmup(kernel, target)
         dtype = states.position.dtype
-        states, tuned_step, rate = run(
+        states, tuned_step, rate = warmup(
             chain_keys,
             states,
             jnp.asarray(initial, dtype),
