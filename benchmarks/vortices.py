@@ -279,7 +279,7 @@ def _plots(data, out_dir):
 def run(out_dir: Path, quick: bool, log) -> None:
     start = time.perf_counter()
     # Since the splitting's pieces evaluate only their own transport mode
-    # (LiePoissonSystem.group_noise_hamiltonians); older results lack this key.
+    # (LiePoissonSystem.single_noise_hamiltonian); older results lack this key.
     data = {"machine": common.machine_info(), "quick": quick, "splitting_evaluates_one_mode": True}
     log("vortices: cost per step vs N and L")
     data["throughput"] = throughput(quick, log)

@@ -19,7 +19,7 @@ and draws no random numbers (it is *not* a zero coefficient).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import jax
 import jax.numpy as jnp
@@ -172,28 +172,23 @@ class PoissonLangevin:
         ``exp(−βh)`` invariant on its own), which is what the splitting integrator exploits.
         A system may group directions that commute and do not affect each other's
         coefficients (``LiePoissonSystem.noise_groups``); a group then moves as one piece.
-        The JVP and VJP run through ``LiePoissonSystem.group_noise_hamiltonians`` where the
-        system declares it (only the group's functions are evaluated).
+        A system that declares ``LiePoissonSystem.single_noise_hamiltonian`` has each direction
+        evaluated alone (:meth:`_one_direction_generator`).
         """
-        sde = self.sde
-        restricted = self.system.group_noise_hamiltonians
-        if restricted is not None and self.system.noise_groups is None:
+        if self.system.single_noise_hamiltonian is not None:
             return self._one_direction_generator(mu, group, dt, dW)
-        if restricted is not None:
-            sde = replace(sde, noise_hamiltonians=lambda m: restricted(m, group))
-        coefficients = jnp.broadcast_to(sde.noise_coefficients(mu, dt, dW), (self.num_noises,))
+        coefficients = self.noise_coefficients(mu, dt, dW)
         in_group = self.system.noise_group_labels == group
-        _, pullback = jax.vjp(sde.noise_hamiltonians, mu)
-        return pullback(jnp.where(in_group, coefficients, 0.0))[0]
+        return self.noise_generator(mu, jnp.where(in_group, coefficients, 0.0))
 
     def _one_direction_generator(self, mu, i, dt, dW):
-        """:meth:`group_generator` for the group ``{i}`` of a system that evaluates its noise
-        functions one group at a time: one gradient ``∇ĥ_i`` (a VJP of ``ĥ_i`` alone), and
-        ``{h, ĥ_i} = ⟨∇h, ad*_{∇ĥ_i} μ⟩`` from it, so no JVP of the noise is needed."""
+        """:meth:`group_generator` for the direction ``i`` alone, from
+        ``single_noise_hamiltonian``: one gradient ``∇ĥ_i``, and ``{h, ĥ_i} = ⟨∇h, ad*_{∇ĥ_i} μ⟩``
+        from it, so no JVP of the noise is needed."""
         scene = self.scene
         if scene.noise != (dW is not None):
             raise ValueError("dW must be given exactly when the scene has noise")
-        gradient = jax.grad(lambda m: self.system.group_noise_hamiltonians(m, i)[i])(mu)
+        gradient = jax.grad(lambda m: self.system.single_noise_hamiltonian(m, i))(mu)
         coefficient = jnp.zeros((), mu.dtype)
         if scene.dissipation:
             grad_h = jax.grad(self.system.hamiltonian)(mu)

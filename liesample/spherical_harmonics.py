@@ -240,6 +240,9 @@ def transport_mode(x, max_degree: int, index):
     legendre = powers[..., 2, :] @ jnp.asarray(coefficients, dtype=x.dtype)[ell, jnp.abs(m)]
     # Re / Im (x + iy)^{|m|} = Σ_a B_a x^a y^{|m|−a} (binomial expansion, :func:`_angular_binomials`)
     binomials = jnp.asarray(_angular_binomials(max_degree), dtype=x.dtype)[max_degree + m]
-    y_powers = jnp.take(powers[..., 1, :], jnp.clip(jnp.abs(m) - degrees, 0), axis=-1)
+    # y^{|m|−a} for each a, by a 0/1 matrix rather than a gather (batched gathers and their
+    # scatter-add transposes are slow on CPU)
+    select = (jnp.abs(m) - degrees)[:, None] == degrees[None, :]
+    y_powers = powers[..., 1, :] @ select.T.astype(x.dtype)
     angular = jnp.sum(binomials * powers[..., 0, :] * y_powers, axis=-1)
     return scale * legendre * angular

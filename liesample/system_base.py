@@ -81,13 +81,13 @@ class LiePoissonSystem:
         under a symmetry keep its momentum map exactly (stochastic Noether, paper
         ``prop:stoch-noether``); see :func:`liesample.systems.heavy_top`. ``None`` (default):
         one piece, ``h``.
-    group_noise_hamiltonians : callable or None
-        ``(μ, g) ↦`` an array of shape ``(m,)`` whose entries ``i`` in noise group ``g`` equal
-        ``ĥ_i(μ)`` (the others may be anything finite, e.g. 0). The ``splitting`` integrator
-        moves one group at a time and needs only that group's functions; a system whose
+    single_noise_hamiltonian : callable or None
+        ``(μ, i) ↦ ĥ_i(μ)``, one noise Hamiltonian (``i`` may be traced), for systems whose
         ``noise_hamiltonians`` are costly to evaluate all at once (point vortices: ``L(L+2)``
-        spherical harmonics at every vortex) supplies this so each piece costs ``O(1)`` noise
-        functions instead of ``O(m)``. ``None`` (default): ``noise_hamiltonians``.
+        spherical harmonics at every vortex). The ``splitting`` integrator moves one direction
+        at a time and then evaluates only that direction, so a piece costs one noise function
+        instead of ``m``. Only with the default grouping (``noise_groups=None``). ``None``
+        (default): every piece goes through ``noise_hamiltonians``.
     """
 
     name: str
@@ -106,9 +106,14 @@ class LiePoissonSystem:
     check_beta: Callable | None = None
     hamiltonian_pieces: tuple[Callable, ...] | None = None
     curvature_bound: bool = True
-    group_noise_hamiltonians: Callable | None = None
+    single_noise_hamiltonian: Callable | None = None
 
     def __post_init__(self):
+        if self.single_noise_hamiltonian is not None and self.noise_groups is not None:
+            raise ValueError(
+                "single_noise_hamiltonian applies when each noise direction is its own group: "
+                "pass noise_groups=None, or leave single_noise_hamiltonian out"
+            )
         if self.noise_groups is not None:
             labels = np.asarray(self.noise_groups)
             if labels.shape != (self.num_noises,) or not np.issubdtype(labels.dtype, np.integer):
@@ -132,7 +137,7 @@ class LiePoissonSystem:
             noise_hamiltonians=noise_hamiltonians,
             num_noises=num_noises,
             noise_groups=noise_groups,
-            group_noise_hamiltonians=None,  # it evaluated the old functions
+            single_noise_hamiltonian=None,  # it evaluated the old functions
         )
 
     @property

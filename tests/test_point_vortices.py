@@ -493,12 +493,12 @@ def test_one_transport_mode_equals_its_column_with_its_gradient(max_degree, dtyp
 
 
 def test_splitting_pieces_with_one_mode_equal_the_generic_pieces():
-    """The point-vortex hook ``group_noise_hamiltonians`` changes cost, not the generator: each
+    """The point-vortex hook ``single_noise_hamiltonian`` changes cost, not the generator: each
     group's generator equals the one computed from all ``L(L+2)`` noise functions."""
     import dataclasses
 
     system = point_vortices((1.0, -0.5, 2.0), max_degree=4)
-    generic = dataclasses.replace(system, group_noise_hamiltonians=None)
+    generic = dataclasses.replace(system, single_noise_hamiltonian=None)
     x = system.default_position
     dW = 0.1 * jax.random.normal(jax.random.key(5), (system.num_noises,))
     fast = PoissonLangevin(system, 1.0, 0.7, Scene())
@@ -514,3 +514,12 @@ def test_splitting_pieces_with_one_mode_equal_the_generic_pieces():
 
     one_mode, every_mode = pieces(groups)
     np.testing.assert_allclose(one_mode, every_mode, rtol=0, atol=1e-13)
+
+
+def test_one_direction_hook_needs_one_direction_per_group():
+    import dataclasses
+
+    system = point_vortices((1.0, 2.0), max_degree=2)
+    with pytest.raises(ValueError, match="single_noise_hamiltonian applies when each noise"):
+        dataclasses.replace(system, noise_groups=np.zeros(system.num_noises, int))
+    assert system.with_noise(system.noise_hamiltonians).single_noise_hamiltonian is None

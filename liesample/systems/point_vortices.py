@@ -280,10 +280,8 @@ def point_vortices(circulations, max_degree: int = 2, radius: float = 1.0) -> Po
     def noise_hamiltonians(x):
         return jnp.asarray(gamma, dtype=x.dtype) @ transport_modes(x, max_degree)
 
-    def group_noise_hamiltonians(x, index):
-        # Each direction is its own group: the splitting's piece needs ĥ_index alone.
-        value = jnp.asarray(gamma, dtype=x.dtype) @ transport_mode(x, max_degree, index)
-        return jnp.zeros(num_modes, x.dtype).at[index].set(value)
+    def single_noise_hamiltonian(x, index):  # what one splitting piece needs
+        return jnp.asarray(gamma, dtype=x.dtype) @ transport_mode(x, max_degree, index)
 
     def check_beta(beta):
         check_vortex_beta(gamma, beta)
@@ -300,7 +298,7 @@ def point_vortices(circulations, max_degree: int = 2, radius: float = 1.0) -> Po
         hamiltonian=hamiltonian,
         noise_hamiltonians=noise_hamiltonians,
         num_noises=num_modes,
-        group_noise_hamiltonians=group_noise_hamiltonians,
+        single_noise_hamiltonian=single_noise_hamiltonian,
         event_shape=(num_vortices, 3),
         default_position=fibonacci_sphere(num_vortices, radius),
         reference=reference,
