@@ -13,6 +13,7 @@ import math
 from collections.abc import Mapping, Sequence
 
 import arviz_stats as azs
+import jax
 import numpy as np
 import pandas as pd
 import scipy.fft
@@ -27,6 +28,7 @@ __all__ = [
     "count_nonfinite",
     "expectation_table",
     "format_table",
+    "pytree_variables",
     "to_datatree",
 ]
 
@@ -110,12 +112,69 @@ def _netcdf_attr(value):
 # --------------------------------------------------------------------------- DataTree
 
 
+def _leaf_name(path) -> str:
+    """A posterior variable's name from a pytree key path: dict keys as given, sequence
+    entries ``x0``, ``x1``…, named-tuple fields by name; nested keys joined with ``.``."""
+    parts = []
+    for key in path:
+        if isinstance(key, jax.tree_util.DictKey):
+            parts.append(str(key.key))
+        elif isinstance(key, jax.tree_util.SequenceKey):
+            parts.append(f"x{key.idx}")
+        elif isinstance(key, jax.tree_util.GetAttrKey):
+            parts.append(key.name)
+        elif isinstance(key, jax.tree_util.FlattenedIndexKey):
+            parts.append(f"x{key.key}")
+        else:
+            parts.append(str(key))
+    return ".".join(parts)
+
+
+def pytree_variables(positions) -> dict[str, tuple[np.ndarray, str]]:
+    """``{variable name: (real array, leaf name)}`` for the leaves of a pytree of draws.
+
+    Each leaf ``(chains, draws, *event)`` is named from its key path (:func:`_leaf_name`); a
+    complex leaf ``U`` gives two real variables ``U.real`` and ``U.imag`` (ArviZ's ESS and R-hat
+    need real arrays), both with the event dims of ``U``.
+    """
+    paths, _ = jax.tree_util.tree_flatten_with_path(positions)
+    if not paths:
+        raise ValueError("positions is an empty pytree: it has no arrays")
+    variables: dict[str, tuple[np.ndarray, str]] = {}
+    for path, leaf in paths:
+        name = _leaf_name(path)
+        leaf = np.asarray(leaf)
+        if leaf.ndim < 2:
+            raise ValueError(
+                f"positions leaf {name!r} must have shape (chains, draws, *event_shape), got "
+                f"shape {leaf.shape}"
+            )
+        parts = (
+            {f"{name}.real": leaf.real, f"{name}.imag": leaf.imag}
+            if np.iscomplexobj(leaf)
+            else {name: leaf}
+        )
+        for part, value in parts.items():
+            if part in variables:
+                raise ValueError(
+                    f"two leaves of positions are both named {part!r}: rename the pytree's keys"
+                )
+            variables[part] = (value, name)
+    shapes = {value.shape[:2] for value, _ in variables.values()}
+    if len(shapes) > 1:
+        raise ValueError(
+            "every leaf of positions must have the same (chains, draws) sizes, got "
+            f"{sorted(shapes)}"
+        )
+    return variables
+
+
 def to_datatree(
     positions,
     info=None,
     *,
-    var_name: str = "mu",
-    event_dims: Sequence[str] = ("component",),
+    var_name: str | None = None,
+    event_dims: Sequence[str] | Mapping[str, Sequence[str]] | None = None,
     coords: Mapping[str, Sequence] | None = None,
     step_size: float | None = None,
     thinning: int = 1,
@@ -125,8 +184,16 @@ def to_datatree(
 
     Parameters
     ----------
-    positions : array_like, shape (chains, draws, \\*event_shape)
-        Sampled states.
+    positions : array_like ``(chains, draws, *event_shape)``, or a pytree of such arrays
+        Sampled states. A pytree (dict, tuple, named tuple: the positions of the geometric
+        samplers on product spaces) gives one posterior variable per leaf, named from its key
+        path: dict keys and named-tuple fields as given (``mu``, ``log_kappa``), tuple entries
+        ``x0``, ``x1``…, nested keys joined with ``.`` (``{"a": {"b": …}}`` -> ``a.b``). Its
+        event dims are ``<name>_dim_0``, ``<name>_dim_1``…. A complex leaf ``U`` (``SU(n)``
+        matrices) is stored as the two real variables ``U.real`` and ``U.imag``, sharing the
+        dims of ``U``. ESS, R-hat and MCSE computed from the tree are those of these ambient
+        coordinates (vector components, matrix entries), not of intrinsic coordinates on the
+        group or sphere. A list is read as one array.
     info : mapping, NamedTuple or dataclass, optional
         Per-draw arrays shaped ``(chains, draws)`` (the Info contract of
         :mod:`liesample.samplers.contract`). Recognised keys are renamed to ArviZ's
@@ -135,9 +202,12 @@ def to_datatree(
         Other keys are stored under their own names. ``None`` gives a tree without
         ``sample_stats``.
     var_name : str, default "mu"
-        Name of the sampled variable in the ``posterior`` group.
+        Name of the sampled variable in the ``posterior`` group (single-array positions; a
+        pytree's variables are named from its key paths).
     event_dims : sequence of str, default ("component",)
-        Dimension names for the event axes; one per axis after (chain, draw).
+        Dimension names for the event axes; one per axis after (chain, draw). For pytree
+        positions, optionally a mapping from a leaf's name to its dims (the others keep
+        ``<name>_dim_k``).
     coords : mapping, optional
         Coordinate values by dimension name. Event dimensions without coordinates get
         ``["x", "y", "z"]`` for a single axis of length 3, otherwise ``0, 1, ...``.
@@ -154,39 +224,74 @@ def to_datatree(
     xarray.DataTree
         Groups ``posterior`` and (if ``info`` is given) ``sample_stats``.
     """
-    pos = np.asarray(positions)
-    if pos.ndim < 2:
-        raise ValueError(
-            f"positions must have shape (chains, draws, *event_shape), got shape {pos.shape}"
-        )
-    pos = _chain_draw_array(pos, "positions", ndims=(pos.ndim,))
-    n_chains, n_draws = pos.shape[:2]
-    event_shape = pos.shape[2:]
-    event_dims = tuple(event_dims)
-    if len(event_dims) != len(event_shape):
-        raise ValueError(
-            f"event_dims must name each event axis of positions: got {event_dims} for "
-            f"event shape {event_shape}"
-        )
-    if not isinstance(var_name, str) or not var_name:
-        raise ValueError(f"var_name must be a non-empty string, got {var_name!r}")
+    # One array (the runner's rule: an array, a number or a nested list) or a pytree of them.
+    single = isinstance(positions, list) or jax.tree_util.treedef_is_leaf(
+        jax.tree.structure(positions)
+    )
+    if single:
+        var_name = "mu" if var_name is None else var_name
+        if not isinstance(var_name, str) or not var_name:
+            raise ValueError(f"var_name must be a non-empty string, got {var_name!r}")
+        event_dims = ("component",) if event_dims is None else event_dims
+        if isinstance(event_dims, Mapping):
+            raise TypeError("event_dims must be a sequence of dim names for array positions")
+        pos = np.asarray(positions)
+        if pos.ndim < 2:
+            raise ValueError(
+                f"positions must have shape (chains, draws, *event_shape), got shape {pos.shape}"
+            )
+        variables = {var_name: (pos, var_name)}
+        leaf_dims = {var_name: tuple(event_dims)}
+    else:
+        if var_name is not None:
+            raise ValueError(
+                "var_name names a single array of positions; the variables of pytree positions "
+                "are named from their key paths"
+            )
+        variables = pytree_variables(positions)
+        given = {} if event_dims is None else event_dims
+        if not isinstance(given, Mapping):
+            raise TypeError(
+                "event_dims for pytree positions must be a mapping {leaf name: dims}, got "
+                f"{event_dims!r}"
+            )
+        leaf_names = {leaf for _, leaf in variables.values()}
+        unknown = sorted(set(given) - leaf_names)
+        if unknown:
+            raise ValueError(f"event_dims names no leaf of positions: {unknown}")
+        leaf_dims = {leaf: tuple(dims) for leaf, dims in given.items()}
+        for value, leaf in variables.values():
+            leaf_dims.setdefault(leaf, tuple(f"{leaf}_dim_{k}" for k in range(value.ndim - 2)))
     if isinstance(thinning, bool) or int(thinning) != thinning or thinning < 1:
         raise ValueError(f"thinning must be a positive integer, got {thinning!r}")
 
     all_coords: dict[str, Sequence] = {}
-    for dim, size in zip(event_dims, event_shape, strict=True):
-        if len(event_shape) == 1 and size == 3:
-            all_coords[dim] = ["x", "y", "z"]
-        else:
-            all_coords[dim] = list(range(size))
+    dims: dict[str, list[str]] = {}
+    for name, (value, leaf) in variables.items():
+        label = "positions" if single else f"positions {name!r}"
+        value = _chain_draw_array(value, label, ndims=(value.ndim,))
+        event_shape, event = value.shape[2:], leaf_dims[leaf]
+        if len(event) != len(event_shape):
+            raise ValueError(
+                f"event_dims must name each event axis of positions: got {event} for "
+                f"event shape {event_shape}"
+            )
+        dims[name] = list(event)
+        for dim, size in zip(event, event_shape, strict=True):
+            if len(event_shape) == 1 and size == 3:
+                all_coords.setdefault(dim, ["x", "y", "z"])
+            else:
+                all_coords.setdefault(dim, list(range(size)))
     if coords is not None:
         all_coords.update(coords)
-    for dim, size in zip(event_dims, event_shape, strict=True):
-        if len(all_coords[dim]) != size:
-            raise ValueError(
-                f"coords[{dim!r}] has {len(all_coords[dim])} values but positions has "
-                f"{size} along that axis"
-            )
+    for name, (value, leaf) in variables.items():
+        for dim, size in zip(dims[name], value.shape[2:], strict=True):
+            if len(all_coords[dim]) != size:
+                raise ValueError(
+                    f"coords[{dim!r}] has {len(all_coords[dim])} values but positions "
+                    f"{name!r} has {size} along that axis"
+                )
+    n_chains, n_draws = next(iter(variables.values()))[0].shape[:2]
 
     sample_stats: dict[str, np.ndarray] = {}
     for key, value in _info_dict(info).items():
@@ -204,14 +309,14 @@ def to_datatree(
     run_attrs = {str(k): _netcdf_attr(v) for k, v in run_attrs.items()}
     run_attrs = {k: v for k, v in run_attrs.items() if v is not None}
 
-    data = {"posterior": {var_name: pos}}
+    data = {"posterior": {name: value for name, (value, _) in variables.items()}}
     group_attrs = {"/": run_attrs, "posterior": run_attrs}
     if sample_stats:
         data["sample_stats"] = sample_stats
         group_attrs["sample_stats"] = run_attrs
     return from_dict(
         data,
-        dims={var_name: list(event_dims)},
+        dims=dims,
         coords=all_coords,
         attrs=group_attrs,
     )

@@ -5,6 +5,10 @@ the chunk size and a run can be split or resumed without changing them.
 
 - **Devices.** ``devices=`` splits the chain axis over several devices with JAX's own sharding
   (:mod:`liesample.sharding`); the draws are those of the unsharded run.
+- **Pytree positions.** ``initial_positions`` may be a pytree (a dict or tuple of arrays, e.g.
+  ``{"mu": (chains, 3), "log_kappa": (chains,)}`` for the geometric samplers) whose leaves share
+  the leading chain axis; the draws are then a pytree of arrays ``(chains, draws, *event)``.
+  A list is read as one array, as before.
 - **Long runs lose nothing.** ``output=`` writes every chunk of draws, and the chain states after
   it, to a NetCDF-4 file (h5netcdf, growing ``draw`` dimension) as soon as the chunk is done;
   ``resume=True`` continues a run from the last chunk saved there, after an interruption or to
@@ -47,7 +51,8 @@ class NonFiniteStateError(FloatingPointError):
 
 @dataclass(frozen=True)
 class ChainsResult:
-    """Draws of ``positions`` with shape ``(chains, draws, *event_shape)``, per-draw ``info``
+    """Draws of ``positions`` with shape ``(chains, draws, *event_shape)`` (a pytree of such
+    arrays for pytree positions), per-draw ``info``
     arrays with shape ``(chains, draws)``, the sampling wall time in seconds (compilation
     excluded; on a resumed run, the time of this session only), and the sampler's ``settings``
     after warm-up (step size and how it was chosen, stability mode, …)."""
@@ -59,14 +64,50 @@ class ChainsResult:
     settings: dict = None
 
 
-def _check_run_arguments(
-    initial_positions, num_draws, num_warmup, thinning, on_nonfinite, chunk_draws, adapt
-):
-    if np.ndim(initial_positions) < 1 or np.shape(initial_positions)[0] < 1:
-        raise ValueError(
-            "initial_positions must have a leading chain axis with at least one chain, "
-            f"shape (chains, ...); got shape {np.shape(initial_positions)}"
-        )
+def is_single_array(positions) -> bool:
+    """Whether ``positions`` is one array (an array, a number or a nested list), not a pytree
+    of several leaves (dict, tuple, named tuple, …)."""
+    return isinstance(positions, list) or jax.tree_util.treedef_is_leaf(
+        jax.tree.structure(positions)
+    )
+
+
+def _as_positions(initial_positions):
+    """``initial_positions`` as a JAX array, or a pytree of JAX arrays, with a leading chain axis
+    shared by every leaf (checked); returns ``(positions, num_chains)``."""
+    if is_single_array(initial_positions):
+        positions = jnp.asarray(initial_positions)
+        if positions.ndim < 1 or positions.shape[0] < 1:
+            raise ValueError(
+                "initial_positions must have a leading chain axis with at least one chain, "
+                f"shape (chains, ...); got shape {positions.shape}"
+            )
+        return positions, positions.shape[0]
+    paths, treedef = jax.tree_util.tree_flatten_with_path(initial_positions)
+    if not paths:
+        raise ValueError("initial_positions is an empty pytree: it has no arrays")
+    leaves = [jnp.asarray(leaf) for _, leaf in paths]
+    names = [f"initial_positions{jax.tree_util.keystr(path)}" for path, _ in paths]
+    for name, leaf in zip(names, leaves, strict=True):
+        if leaf.ndim < 1 or leaf.shape[0] < 1:
+            raise ValueError(
+                f"{name} must have a leading chain axis with at least one chain, shape "
+                f"(chains, ...); got shape {leaf.shape}"
+            )
+        if leaf.shape[0] != leaves[0].shape[0]:
+            raise ValueError(
+                "every leaf of initial_positions must have the same leading chain axis: "
+                f"{names[0]} has {leaves[0].shape[0]} chains (shape {leaves[0].shape}), {name} "
+                f"has {leaf.shape[0]} (shape {leaf.shape})"
+            )
+    return jax.tree.unflatten(treedef, leaves), leaves[0].shape[0]
+
+
+def _take_chain(positions, chain):
+    return jax.tree.map(lambda leaf: leaf[chain], positions)
+
+
+def _check_run_arguments(num_draws, num_warmup, thinning, on_nonfinite, chunk_draws, adapt):
     for name, value, low in (
         ("num_draws", num_draws, 1),
         ("num_warmup", num_warmup, 0),
@@ -112,13 +153,19 @@ def _check_starts(algorithm, initial_positions, num_chains, step_size_checks=Tru
     else its ``init`` on each distinct start; errors name the first bad chain."""
     hook = getattr(algorithm, "check_positions", None)
     if hook is not None:
-        hook(np.asarray(initial_positions), step_size_checks=step_size_checks)
+        hook(jax.tree.map(np.asarray, initial_positions), step_size_checks=step_size_checks)
         return
-    flat = np.asarray(initial_positions).reshape(num_chains, -1)
+    flat = np.concatenate(
+        [
+            np.ascontiguousarray(np.asarray(leaf).reshape(num_chains, -1)).view(np.uint8)
+            for leaf in jax.tree.leaves(initial_positions)
+        ],
+        axis=1,
+    )  # bytes: one row per chain, whatever the leaves' dtypes
     _, first_chains = np.unique(flat, axis=0, return_index=True)
     for chain in np.sort(first_chains):
         try:
-            algorithm.init(initial_positions[chain])
+            algorithm.init(_take_chain(initial_positions, chain))
         except (ValueError, TypeError) as error:
             raise type(error)(f"initial_positions[{chain}]: {error}") from None
 
@@ -149,7 +196,10 @@ def sample_chains(
         is recorded. liesample's samplers (:class:`liesample.samplers.contract.Sampler`) also
         check every start in one vectorised call, record their settings, and adapt.
     rng_key : jax.random.key or jax.random.PRNGKey
-    initial_positions : array, shape ``(chains, *event_shape)``
+    initial_positions : array ``(chains, *event_shape)``, or a pytree of such arrays
+        A pytree (dict, tuple, named tuple; e.g. the positions of ``liesample.geometric_hmc``
+        on a product space) gives draws with the same structure; every leaf has the chain axis
+        first, with the same number of chains. A (nested) list is read as one array.
     num_draws : int
         Draws kept per chain, each ``thinning`` steps apart, after ``num_warmup`` steps.
     num_warmup : int
@@ -176,7 +226,8 @@ def sample_chains(
     output : str or path, optional
         NetCDF file to which each chunk of draws and info, and the chain states after it, are
         written as soon as the chunk is done (:func:`load_chains` reads it back, so does
-        ``xarray.open_dataset``). Refuses an existing file unless ``resume=True``.
+        ``xarray.open_dataset``). Refuses an existing file unless ``resume=True``. Single-array
+        positions only: pytree positions raise ``NotImplementedError``.
     resume : bool
         Continue the run saved in ``output``: same ``algorithm``, ``rng_key``,
         ``initial_positions``, ``num_warmup`` and ``thinning`` (checked, except the algorithm);
@@ -184,9 +235,8 @@ def sample_chains(
         exist yet. The returned draws include the saved ones and equal those of one
         uninterrupted run.
     """
-    _check_run_arguments(
-        initial_positions, num_draws, num_warmup, thinning, on_nonfinite, chunk_draws, adapt
-    )
+    initial_positions, num_chains = _as_positions(initial_positions)
+    _check_run_arguments(num_draws, num_warmup, thinning, on_nonfinite, chunk_draws, adapt)
     rng_key = prng_key(rng_key)
     min_acceptance_rate = finite_float(
         "min_acceptance_rate", min_acceptance_rate, nonnegative=True
@@ -195,9 +245,19 @@ def sample_chains(
         raise TypeError(f"resume must be a bool, got {resume!r}")
     if resume and output is None:
         raise ValueError("resume=True needs output= (the file the run was saved to)")
-    initial_positions = jnp.asarray(initial_positions)
-    num_chains = initial_positions.shape[0]
-    finite = np.isfinite(np.asarray(initial_positions)).reshape(num_chains, -1).all(axis=1)
+    if output is not None and not is_single_array(initial_positions):
+        raise NotImplementedError(
+            "output= saves runs whose initial_positions are one array (chains, *event_shape); "
+            "pytree positions (dicts, tuples) are not saved yet: run without output= (and "
+            "resume=), or flatten the positions into one array"
+        )
+    finite = np.all(
+        [
+            np.isfinite(np.asarray(leaf)).reshape(num_chains, -1).all(axis=1)
+            for leaf in jax.tree.leaves(initial_positions)
+        ],
+        axis=0,
+    )
     if not finite.all():
         raise ValueError(f"initial_positions[{int(np.argmin(finite))}] must be finite")
     sharding = chain_sharding(devices, num_chains)
@@ -307,7 +367,7 @@ def sample_chains(
 
     info = {name: np.concatenate([i[name] for i in infos], axis=1) for name in infos[0]}
     result = ChainsResult(
-        np.concatenate(positions, axis=1),
+        jax.tree.map(lambda *chunks: np.concatenate(chunks, axis=1), *positions),
         info,
         wall_time,
         num_warmup + num_draws * thinning,
@@ -543,20 +603,27 @@ def sample(
     resume: bool = False,
     adapt: bool | None = None,
     min_acceptance_rate: float = DEFAULT_MIN_ACCEPTANCE_RATE,
-    var_name: str = "mu",
-    event_dims=("component",),
+    var_name: str | None = None,
+    event_dims=None,
     coords=None,
     attrs=None,
 ):
     """Run chains with :func:`sample_chains` and return an ArviZ ``DataTree``.
 
-    The tree has ``posterior/<var_name>`` with dims ``(chain, draw, *event_dims)`` and
-    ``sample_stats`` under ArviZ's names (``diverging``, ``acceptance_rate``, ``energy``, and the
+    The tree has ``posterior/<var_name>`` with dims ``(chain, draw, *event_dims)`` (defaults
+    ``mu`` and ``("component",)``) and ``sample_stats`` under ArviZ's names (``diverging``, ``acceptance_rate``, ``energy``, and the
     sampler's own fields such as ``casimir_error``); its attributes record the wall time, the
     number of steps, the sampler's settings (``sampler``, ``step_size`` and
     ``step_size_source``, ``stability`` mode and ``stability_number``, …), whether the warm-up
     adapted, and ``attrs``. The other arguments are those of :func:`sample_chains` (warm-up
     adaptation, divergence and stuck-chain reports, sharded chains, incremental saving, resume).
+
+    Pytree positions (dicts, tuples) give one posterior variable per leaf, named from its key
+    path (``mu``, ``log_kappa``; tuple entries ``x0``, ``x1``…; nested keys joined with ``.``),
+    with dims ``<name>_dim_k`` (``event_dims`` may map a leaf's name to other dims); a complex
+    leaf ``U`` is split into ``U.real`` and ``U.imag`` (:func:`liesample.diagnostics.to_datatree`).
+    ArviZ's ESS and R-hat of these variables are those of the ambient coordinates (vector
+    components, matrix entries), not of intrinsic coordinates on the group or sphere.
 
     Example: ``sample(liesample.adjusted_lie_poisson(system, beta=1.0), key, starts, 1000,
     num_warmup=500)`` tunes the step size by dual averaging in the warm-up, then samples.
