@@ -17,7 +17,7 @@ import pytest
 
 import liesample
 from liesample.samplers.contract import check_info
-from liesample.samplers.spins import SpinInfo, finish_step
+from liesample.samplers.spins import SpinInfo, SpinState, finish_step
 from liesample.samplers.spins_wolff import WolffInfo, bond_table
 from liesample.systems.heisenberg import neighbour_table
 from liesample.systems import heisenberg, rigid_body
@@ -123,6 +123,14 @@ def apply_steps(algorithm, starts, num_steps, seed):
     return np.asarray(final.position), infos
 
 
+@pytest.fixture(scope="module")
+def exact_chain_draws():
+    """4000 exact i.i.d. open chains (N = 8, βJ = 2), and their correlations match ``uⁿ``."""
+    draws = sample_heisenberg_chain(jax.random.key(11), 4000, LENGTH, BETA)
+    assert_close(np.asarray(bond_correlations(draws)), heisenberg_chain_correlation(LAGS, BETA))
+    return draws
+
+
 MOVES = {
     "heat bath": lambda: liesample.heisenberg_heat_bath(CHAIN, beta=BETA, overrelaxation=0),
     "over-relaxation": lambda: liesample.heisenberg_heat_bath(
@@ -136,15 +144,22 @@ MOVES = {
 }
 
 
-@pytest.mark.parametrize("move", list(MOVES))
-def test_each_move_keeps_the_exact_chain_law(move):
+# Metropolis is also checked against Fisher's law in test_heisenberg.py, and a precession by any
+# angle keeps h (test_precession_keeps_the_energy_to_round_off) and area: both in the slow suite.
+SLOW_MOVES = {"metropolis", "precession 1 rad"}
+
+
+@pytest.mark.parametrize(
+    "move", [pytest.param(m, marks=pytest.mark.slow) if m in SLOW_MOVES else m for m in MOVES]
+)
+def test_each_move_keeps_the_exact_chain_law(move, exact_chain_draws):
     """4000 exact draws, 3 steps of one move: bond correlations still ``u, u²``.
 
     Power: the microcanonical moves keep E[s_k·s_{k+1}] by construction but must keep
     E[s_k·s_{k+2}] too, which a wrong reflection (e.g. about the bond partner only) changes;
     the heat bath and Metropolis at the wrong β would drift towards another u within 3 sweeps.
     """
-    starts = sample_heisenberg_chain(jax.random.key(11), 4000, LENGTH, BETA)
+    starts = exact_chain_draws
     final, infos = apply_steps(MOVES[move](), starts, 3, seed=12)
     assert np.max(np.abs(np.linalg.norm(final, axis=-1) - 1.0)) < 1e-13
     assert not np.any(np.asarray(infos.is_divergent))
@@ -154,9 +169,9 @@ def test_each_move_keeps_the_exact_chain_law(move):
     assert_close(np.asarray(bond_correlations(jnp.asarray(final))), exact)
 
 
-def test_wrong_beta_heat_bath_is_detected_from_exact_draws():
+def test_wrong_beta_heat_bath_is_detected_from_exact_draws(exact_chain_draws):
     """The invariance test has power: a heat bath at β/2 leaves the law within 3 sweeps."""
-    starts = sample_heisenberg_chain(jax.random.key(11), 4000, LENGTH, BETA)
+    starts = exact_chain_draws
     wrong = liesample.heisenberg_heat_bath(CHAIN, beta=BETA / 2, overrelaxation=0)
     final, _ = apply_steps(wrong, starts, 3, seed=12)
     samples = np.asarray(bond_correlations(jnp.asarray(final)))
@@ -169,14 +184,27 @@ def test_precession_keeps_the_energy_to_round_off():
     system = heisenberg((4, 5), periodic=True, coupling=0.7, field=(0.3, -0.2, 0.9))
     starts = jnp.asarray(random_spins((4, 5), 3, chains=8))
     energies = np.asarray(jax.vmap(system.hamiltonian)(starts))
-    for angle in (math.pi, -2.0):
-        algorithm = liesample.heisenberg_heat_bath(
-            system, beta=1.0, heat_bath_sweeps=0, overrelaxation=5, precession_angle=angle
-        )
-        final, infos = apply_steps(algorithm, starts, 20, seed=1)
+    kernel = liesample.heisenberg_heat_bath.build_kernel(system, 0, 5)  # 5 precession sweeps
+
+    @liesample.jit
+    def run(starts, angle):
+        def chain(s):
+            def body(state, _):
+                state, info = kernel(jax.random.key(0), state, 1.0, angle)
+                return state, info
+
+            return jax.lax.scan(body, SpinState(s), None, length=20)
+
+        return jax.vmap(chain)(starts)
+
+    for angle in (-2.0, 0.3):  # the Rodrigues path (π, the reflection, is in test_each_move)
+        final, infos = run(starts, angle)
         np.testing.assert_allclose(np.asarray(infos.energy)[:, -1], energies, rtol=0, atol=1e-12)
-        assert np.max(np.abs(final - np.asarray(starts))) > 0.5
+        assert np.max(np.abs(np.asarray(final.position) - np.asarray(starts))) > 0.5
         np.testing.assert_array_equal(np.asarray(infos.acceptance_rate), 1.0)
+    reflect = liesample.heisenberg_heat_bath(system, beta=1.0, heat_bath_sweeps=0)
+    state, info = reflect.step(jax.random.key(0), reflect.init(starts[0]))
+    assert float(info.energy) == pytest.approx(float(energies[0]), abs=1e-12)
 
 
 def test_heat_bath_in_a_field_is_the_exact_von_mises_fisher_law():
@@ -184,7 +212,7 @@ def test_heat_bath_in_a_field_is_the_exact_von_mises_fisher_law():
     ``E[s·B̂] = L(β|B|)``; Metropolis keeps that law (from exact draws)."""
     field = np.array([0.0, 1.2, -1.6])  # |B| = 2
     system = heisenberg((1,), field=tuple(field))
-    beta, n = 0.8, 20_000
+    beta, n = 0.8, 10_000
     b = field / 2.0
     exact = float(langevin_function(beta * 2.0))
     starts = jnp.tile(jnp.array([[0.0, 0.0, 1.0]]), (n, 1, 1))
@@ -265,23 +293,24 @@ def test_info_contract_and_cluster_size():
     for algorithm, info_class in (
         (liesample.heisenberg_heat_bath(system, beta=1.0), SpinInfo),
         (liesample.heisenberg_metropolis(system, beta=1.0), SpinInfo),
-        (liesample.heisenberg_wolff(system, beta=1.0), WolffInfo),
     ):
-        state, info = liesample.jit(algorithm.step)(jax.random.key(0), algorithm.init(start))
+        state, info = algorithm.step(jax.random.key(0), algorithm.init(start))  # eager
         assert isinstance(info, info_class)
         check_info(info)  # the package's Info contract
         assert algorithm.settings["beta"] == 1.0
         assert not bool(info.is_divergent)
         assert 0.0 <= float(info.acceptance_rate) <= 1.0
         assert float(info.energy) == pytest.approx(float(system.hamiltonian(state.position)))
+    check_info(WolffInfo)
+    kernel = liesample.jit(liesample.heisenberg_wolff.build_kernel(system))  # β traced
     # the reflected sites are exactly the cluster: a hot lattice (β = 0) flips one site only
-    wolff = liesample.heisenberg_wolff(system, beta=0.0)
-    state, info = liesample.jit(wolff.step)(jax.random.key(1), wolff.init(start))
+    state, info = kernel(jax.random.key(1), SpinState(start), 0.0)
+    assert isinstance(info, WolffInfo) and float(info.acceptance_rate) == 1.0
     assert int(info.cluster_size) == 1
     assert int(np.sum(np.any(np.asarray(state.position) != np.asarray(start), axis=-1))) == 1
+    assert float(info.energy) == pytest.approx(float(system.hamiltonian(state.position)))
     # a cold aligned lattice (huge β) is one cluster
-    wolff = liesample.heisenberg_wolff(system, beta=1e6)
-    state, info = liesample.jit(wolff.step)(jax.random.key(2), wolff.init(system.default_position))
+    state, info = kernel(jax.random.key(2), SpinState(jnp.asarray(system.default_position)), 1e6)
     assert int(info.cluster_size) == 20
 
 

@@ -7,6 +7,7 @@ spin in a fixed local field, which the heat-bath samplers use).
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -15,6 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from liesample._validation import finite_float
+from liesample.compile import jit
 
 __all__ = [
     "HeisenbergChainReference",
@@ -206,6 +208,11 @@ def sample_heisenberg_chain(rng_key, num_samples, length, beta, coupling=1.0):
     ``s_{k+1}`` is a von Mises–Fisher draw about ``s_k`` with ``κ = βJ``.
     """
     kappa = finite_float("beta", beta) * finite_float("coupling", coupling)
+    return _chain_draws(rng_key, int(num_samples), int(length), kappa)
+
+
+@functools.partial(jit, static_argnums=(1, 2))
+def _chain_draws(rng_key, num_samples, length, kappa):
     keys = jax.random.split(rng_key, length)
     first = von_mises_fisher(keys[0], jnp.tile(jnp.array([0.0, 0.0, 1.0]), (num_samples, 1)), 0.0)
 
