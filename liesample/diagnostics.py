@@ -225,9 +225,8 @@ def to_datatree(
         Groups ``posterior`` and (if ``info`` is given) ``sample_stats``.
     """
     # One array (the runner's rule: an array, a number or a nested list) or a pytree of them.
-    single = isinstance(positions, list) or jax.tree_util.treedef_is_leaf(
-        jax.tree.structure(positions)
-    )
+    structure = jax.tree.structure(positions)
+    single = isinstance(positions, list) or structure.num_nodes == structure.num_leaves == 1
     if single:
         var_name = "mu" if var_name is None else var_name
         if not isinstance(var_name, str) or not var_name:

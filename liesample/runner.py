@@ -67,9 +67,8 @@ class ChainsResult:
 def is_single_array(positions) -> bool:
     """Whether ``positions`` is one array (an array, a number or a nested list), not a pytree
     of several leaves (dict, tuple, named tuple, …)."""
-    return isinstance(positions, list) or jax.tree_util.treedef_is_leaf(
-        jax.tree.structure(positions)
-    )
+    structure = jax.tree.structure(positions)
+    return isinstance(positions, list) or structure.num_nodes == structure.num_leaves == 1
 
 
 def _as_positions(initial_positions):
