@@ -159,6 +159,21 @@ def _git(*args) -> str | None:
         return None
 
 
+# The first commit whose loops compile through liesample.jit (XLA:CPU's miscompiling pass off).
+_SAFE_COMPILE_COMMIT = "25f23bc"
+
+
+def compiled_safely(machine: dict) -> bool:
+    """Whether a suite's JSON was measured free of the jax 0.12 XLA:CPU miscompile: on jax
+    before 0.12, or with the library's compile path (recorded, or implied by its commit)."""
+    if not str(machine.get("jax", "")).startswith("0.12"):
+        return True
+    if machine.get("compile_path") == "liesample.jit":
+        return True
+    commit = machine.get("git_commit")
+    return bool(commit) and _git("merge-base", "--is-ancestor", _SAFE_COMPILE_COMMIT, commit) == ""
+
+
 def machine_info() -> dict:
     import jaxlib
 
@@ -173,6 +188,7 @@ def machine_info() -> dict:
         "usable_cpus": usable,
         "jax": jax.__version__,
         "jaxlib": jaxlib.__version__,
+        "compile_path": "liesample.jit",
         "numpy": np.__version__,
         "python": platform.python_version(),
         "backend": jax.default_backend(),
