@@ -610,12 +610,13 @@ def sample(
     """Run chains with :func:`sample_chains` and return an ArviZ ``DataTree``.
 
     The tree has ``posterior/<var_name>`` with dims ``(chain, draw, *event_dims)`` (defaults
-    ``mu`` and ``("component",)``) and ``sample_stats`` under ArviZ's names (``diverging``, ``acceptance_rate``, ``energy``, and the
-    sampler's own fields such as ``casimir_error``); its attributes record the wall time, the
-    number of steps, the sampler's settings (``sampler``, ``step_size`` and
-    ``step_size_source``, ``stability`` mode and ``stability_number``, …), whether the warm-up
-    adapted, and ``attrs``. The other arguments are those of :func:`sample_chains` (warm-up
-    adaptation, divergence and stuck-chain reports, sharded chains, incremental saving, resume).
+    ``mu`` and ``("component",)``) and ``sample_stats`` under ArviZ's names (``diverging``,
+    ``acceptance_rate``, ``energy``, and the sampler's own fields such as ``casimir_error``);
+    its attributes record the wall time, the number of steps, the sampler's settings
+    (``sampler``, ``step_size`` and ``step_size_source``, ``stability`` mode and
+    ``stability_number``, …), whether the warm-up adapted, and ``attrs``. The other arguments
+    are those of :func:`sample_chains` (warm-up adaptation, divergence and stuck-chain
+    reports, sharded chains, incremental saving, resume).
 
     Pytree positions (dicts, tuples) give one posterior variable per leaf, named from its key
     path (``mu``, ``log_kappa``; tuple entries ``x0``, ``x1``…; nested keys joined with ``.``),
