@@ -100,3 +100,10 @@ def prng_key(rng_key, name: str = "rng_key"):
         f"{name} must be a JAX random key, jax.random.key(seed) or jax.random.PRNGKey(seed); "
         f"got {rng_key!r}"
     )
+
+
+def is_single_array(positions) -> bool:
+    """Whether ``positions`` is one array (an array, a number or a nested list), not a pytree
+    of several leaves (dict, tuple, named tuple, …)."""
+    structure = jax.tree.structure(positions)
+    return isinstance(positions, list) or structure.num_nodes == structure.num_leaves == 1

@@ -20,6 +20,7 @@ import scipy.fft
 import xarray as xr
 from arviz_base import from_dict
 
+from liesample._validation import is_single_array
 from liesample.samplers.contract import SAMPLE_STATS_NAMES
 
 __all__ = [
@@ -224,9 +225,7 @@ def to_datatree(
     xarray.DataTree
         Groups ``posterior`` and (if ``info`` is given) ``sample_stats``.
     """
-    # One array (the runner's rule: an array, a number or a nested list) or a pytree of them.
-    structure = jax.tree.structure(positions)
-    single = isinstance(positions, list) or structure.num_nodes == structure.num_leaves == 1
+    single = is_single_array(positions)
     if single:
         var_name = "mu" if var_name is None else var_name
         if not isinstance(var_name, str) or not var_name:

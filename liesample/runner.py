@@ -29,7 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm.auto import tqdm
 
-from liesample._validation import finite_float, prng_key
+from liesample._validation import finite_float, is_single_array, prng_key
 from liesample.compile import jit
 from liesample.samplers.contract import reduce_over_thinning
 from liesample.sharding import chain_sharding, shard_chains, to_host
@@ -62,13 +62,6 @@ class ChainsResult:
     wall_time: float
     num_steps: int
     settings: dict = None
-
-
-def is_single_array(positions) -> bool:
-    """Whether ``positions`` is one array (an array, a number or a nested list), not a pytree
-    of several leaves (dict, tuple, named tuple, …)."""
-    structure = jax.tree.structure(positions)
-    return isinstance(positions, list) or structure.num_nodes == structure.num_leaves == 1
 
 
 def _as_positions(initial_positions):
