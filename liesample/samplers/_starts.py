@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from liesample.compile import jit
-from liesample.samplers.contract import PositionCheck, raise_first_bad
+from liesample.samplers.contract import PositionCheck, first_bad_chain, raise_first_bad
 from liesample.systems.base import LiePoissonSystem
 
 __all__ = ["check_orbit_starts", "check_start_energy", "distinct_orbits"]
@@ -74,8 +74,7 @@ def check_orbit_starts(system: LiePoissonSystem, positions):
             _, first = np.unique(flat, axis=0, return_index=True)
             for chain in np.sort(first):
                 system.check_position(positions[chain], f"initial_positions[{chain}]")
-    energy_ok = np.isfinite(energies)
-    chain = None if energy_ok.all() else int(np.flatnonzero(~energy_ok)[0])
+    chain = first_bad_chain(np.isfinite(energies))
     if chain is not None:
         try:
             check_start_energy(system, positions[chain], energies[chain])
