@@ -18,6 +18,7 @@ the chunk size and a run can be split or resumed without changing them.
 from __future__ import annotations
 
 import hashlib
+import json
 import math
 import os
 import time
@@ -218,8 +219,8 @@ def sample_chains(
     output : str or path, optional
         NetCDF file to which each chunk of draws and info, and the chain states after it, are
         written as soon as the chunk is done (:func:`load_chains` reads it back, so does
-        ``xarray.open_dataset``). Refuses an existing file unless ``resume=True``. Single-array
-        positions only: pytree positions raise ``NotImplementedError``.
+        ``xarray.open_dataset``). Refuses an existing file unless ``resume=True``. Pytree
+        positions made of dicts (string keys), tuples and lists are saved leaf by leaf.
     resume : bool
         Continue the run saved in ``output``: same ``algorithm``, ``rng_key``,
         ``initial_positions``, ``num_warmup`` and ``thinning`` (checked, except the algorithm);
@@ -237,12 +238,6 @@ def sample_chains(
         raise TypeError(f"resume must be a bool, got {resume!r}")
     if resume and output is None:
         raise ValueError("resume=True needs output= (the file the run was saved to)")
-    if output is not None and not is_single_array(initial_positions):
-        raise NotImplementedError(
-            "output= saves runs whose initial_positions are one array (chains, *event_shape); "
-            "pytree positions (dicts, tuples) are not saved yet: run without output= (and "
-            "resume=), or flatten the positions into one array"
-        )
     finite = np.all(
         [
             np.isfinite(np.asarray(leaf)).reshape(num_chains, -1).all(axis=1)
@@ -419,30 +414,107 @@ def _key_data(rng_key) -> np.ndarray:
     return np.asarray(rng_key)
 
 
-def _fingerprint(array) -> str:
-    array = np.ascontiguousarray(np.asarray(array))
-    digest = hashlib.sha256(array.tobytes())
-    digest.update(f"{array.dtype.str}{array.shape}".encode())
+def _fingerprint(positions, layout) -> str:
+    digest = hashlib.sha256(b"" if layout == "null" else layout.encode())
+    for leaf in jax.tree.leaves(positions):
+        array = np.ascontiguousarray(np.asarray(leaf))
+        digest.update(array.tobytes())
+        digest.update(f"{array.dtype.str}{array.shape}".encode())
     return digest.hexdigest()
+
+
+def _layout(positions):
+    """The pytree structure of ``positions`` as JSON-able nested lists (``None`` for one array):
+    ``["dict", [[key, sub], …]]``, ``["tuple", [sub, …]]``, ``["list", [sub, …]]`` or
+    ``["leaf", i]``, leaves numbered in ``jax.tree.leaves`` order. Named tuples are recorded as
+    dicts of their fields."""
+    if is_single_array(positions):
+        return None
+    count = [0]
+
+    def walk(node):
+        if isinstance(node, dict):
+            if not all(isinstance(key, str) for key in node):
+                raise TypeError(
+                    "output= saves dict positions with string keys only; got keys "
+                    f"{sorted(map(repr, node))}"
+                )
+            return ["dict", [[key, walk(node[key])] for key in sorted(node)]]
+        if isinstance(node, tuple) and hasattr(node, "_fields"):
+            return ["dict", [[name, walk(getattr(node, name))] for name in node._fields]]
+        if isinstance(node, (tuple, list)):
+            return [type(node).__name__, [walk(item) for item in node]]
+        count[0] += 1
+        return ["leaf", count[0] - 1]
+
+    layout = walk(positions)
+    if count[0] != len(jax.tree.leaves(positions)):
+        raise TypeError(
+            "output= saves positions made of arrays in dicts, tuples and lists; this pytree has "
+            f"other nodes ({jax.tree.structure(positions)})"
+        )
+    return layout
+
+
+def _rebuild(layout, leaves):
+    """The pytree that :func:`_layout` described, with ``leaves``."""
+    kind, content = layout
+    if kind == "leaf":
+        return leaves[content]
+    if kind == "dict":
+        return {key: _rebuild(sub, leaves) for key, sub in content}
+    items = [_rebuild(sub, leaves) for sub in content]
+    return tuple(items) if kind == "tuple" else items
+
+
+def _position_names(layout, num_leaves):
+    return ["position"] if layout is None else [f"position_{i}" for i in range(num_leaves)]
+
+
+def _to_stored(leaf):
+    """Complex draws are stored as a trailing (real, imag) axis (NetCDF has no complex type)."""
+    leaf = np.asarray(leaf)
+    return np.stack([leaf.real, leaf.imag], axis=-1) if np.iscomplexobj(leaf) else leaf
+
+
+def _from_stored(variable, value):
+    dtype = np.dtype(variable.attrs.get("dtype", value.dtype.str))
+    if dtype.kind == "c":
+        return (value[..., 0] + 1j * value[..., 1]).astype(dtype)
+    return value.astype(dtype)
+
+
+def _read_positions(f, layout, done):
+    names = sorted(
+        (name for name in f.variables if name == "position" or name.startswith("position_")),
+        key=lambda name: int(name[9:] or 0),
+    )
+    leaves = [_from_stored(f.variables[n], np.asarray(f.variables[n][:, :done])) for n in names]
+    return leaves[0] if layout is None else _rebuild(layout, leaves)
 
 
 class _ChainStore:
     """A run saved in one NetCDF-4 file (h5netcdf), grown chunk by chunk.
 
-    Layout: dims ``chain``, ``draw`` (unlimited), ``event_<j>``; variables ``position``
-    ``(chain, draw, *event)``, ``info_<name>`` ``(chain, draw)``, and the states after the last
-    saved chunk, ``state_<i>`` (leaf ``i`` of the state pytree, ``(chain, ...)``). Attributes:
-    ``draws_done`` (written last, so a chunk interrupted while being written is ignored),
-    ``num_warmup``, ``thinning``, ``key_data`` and a fingerprint of the initial positions.
-    Each chunk opens and closes the file, so a run killed between chunks leaves a valid file.
+    Layout: dims ``chain``, ``draw`` (unlimited); the draws as ``position``
+    ``(chain, draw, *event)`` (dims ``event_<j>``), or for pytree positions one variable
+    ``position_<i>`` per leaf (dims ``position_<i>_dim_<j>``; complex leaves with a trailing
+    ``(real, imag)`` axis) and the structure as the JSON attribute ``position_layout``;
+    ``info_<name>`` ``(chain, draw)``, and the states after the last saved chunk, ``state_<i>``
+    (leaf ``i`` of the state pytree, ``(chain, ...)``). Attributes: ``draws_done`` (written
+    last, so a chunk interrupted while being written is ignored), ``num_warmup``,
+    ``thinning``, ``key_data`` and a fingerprint of the initial positions. Each chunk opens and
+    closes the file, so a run killed between chunks leaves a valid file.
     """
 
     def __init__(self, path, rng_key, initial_positions, *, num_warmup, thinning):
         self.path = os.fspath(path)
         self.key_data = _key_data(rng_key)
-        self.fingerprint = _fingerprint(initial_positions)
-        self.num_chains = int(initial_positions.shape[0])
-        self.event_shape = tuple(initial_positions.shape[1:])
+        self.layout = _layout(initial_positions)
+        self.layout_json = json.dumps(self.layout)
+        self.fingerprint = _fingerprint(initial_positions, self.layout_json)
+        self.treedef = jax.tree.structure(initial_positions)
+        self.num_chains = int(jax.tree.leaves(initial_positions)[0].shape[0])
         self.num_warmup = int(num_warmup)
         self.thinning = int(thinning)
         self.created = False
@@ -486,7 +558,9 @@ class _ChainStore:
             self.created = True
             if done == 0:
                 return 0, None, None
-            positions = np.asarray(f.variables["position"][:, :done])
+            positions = _read_positions(f, self.layout, done)
+            if self.layout is not None:  # the caller's own node types (named tuples, …)
+                positions = jax.tree.unflatten(self.treedef, jax.tree.leaves(positions))
             info = {}
             for name, variable in f.variables.items():
                 if name.startswith("info_"):
@@ -499,6 +573,7 @@ class _ChainStore:
                 if jnp.issubdtype(leaf.dtype, jax.dtypes.prng_key):
                     saved.append(jax.random.wrap_key_data(value, impl=jax.random.key_impl(leaf)))
                 else:
+                    value = _from_stored(f.variables[f"state_{i}"], value)
                     saved.append(jnp.asarray(value.astype(leaf.dtype)))
                 if saved[-1].shape != leaf.shape:
                     raise ValueError(
@@ -511,21 +586,30 @@ class _ChainStore:
         import h5netcdf
 
         with h5netcdf.File(self.path, "w") as f:
-            event_dims = tuple(f"event_{j}" for j in range(len(self.event_shape)))
-            dimensions = {"chain": self.num_chains, "draw": None}
-            dimensions.update(zip(event_dims, self.event_shape, strict=True))
-            f.dimensions = dimensions
-            f.create_variable("position", ("chain", "draw", *event_dims), positions.dtype)
+            f.dimensions = {"chain": self.num_chains, "draw": None}
+            leaves = jax.tree.leaves(positions)
+            for name, leaf in zip(_position_names(self.layout, len(leaves)), leaves, strict=True):
+                stored = _to_stored(leaf)
+                prefix = "event" if self.layout is None else f"{name}_dim"
+                dims = tuple(f"{prefix}_{j}" for j in range(stored.ndim - 2))
+                for dim, size in zip(dims, stored.shape[2:], strict=True):
+                    f.dimensions[dim] = size
+                variable = f.create_variable(name, ("chain", "draw", *dims), stored.dtype)
+                variable.attrs["dtype"] = np.asarray(leaf).dtype.str
             for name, value in info.items():
                 stored = np.uint8 if value.dtype == bool else value.dtype
                 variable = f.create_variable(f"info_{name}", ("chain", "draw"), stored)
                 variable.attrs["dtype"] = value.dtype.str
             for i, leaf in enumerate(jax.tree.leaves(states)):
-                dims = tuple(f"state_{i}_dim_{j}" for j in range(1, leaf.ndim))
-                for dim, size in zip(dims, leaf.shape[1:], strict=True):
+                stored = _to_stored(leaf)
+                dims = tuple(f"state_{i}_dim_{j}" for j in range(1, stored.ndim))
+                for dim, size in zip(dims, stored.shape[1:], strict=True):
                     f.dimensions[dim] = size
-                f.create_variable(f"state_{i}", ("chain", *dims), leaf.dtype)
+                variable = f.create_variable(f"state_{i}", ("chain", *dims), stored.dtype)
+                variable.attrs["dtype"] = leaf.dtype.str
             f.attrs["format"] = _FORMAT
+            if self.layout is not None:
+                f.attrs["position_layout"] = self.layout_json
             f.attrs["initial_positions_sha256"] = self.fingerprint
             f.attrs["num_warmup"] = self.num_warmup
             f.attrs["thinning"] = self.thinning
@@ -547,14 +631,16 @@ class _ChainStore:
         )
         if not self.created:
             self._create(positions, info, states)
-        end = first_draw + positions.shape[1]
+        leaves = jax.tree.leaves(positions)
+        end = first_draw + leaves[0].shape[1]
         with h5netcdf.File(self.path, "a") as f:
             f.resize_dimension("draw", end)
-            f.variables["position"][:, first_draw:end] = positions
+            for name, leaf in zip(_position_names(self.layout, len(leaves)), leaves, strict=True):
+                f.variables[name][:, first_draw:end] = _to_stored(leaf)
             for name, value in info.items():
                 f.variables[f"info_{name}"][:, first_draw:end] = value
             for i, leaf in enumerate(jax.tree.leaves(states)):
-                f.variables[f"state_{i}"][...] = leaf
+                f.variables[f"state_{i}"][...] = _to_stored(leaf)
             f.attrs["draws_done"] = end
 
 
@@ -562,6 +648,8 @@ def load_chains(path) -> ChainsResult:
     """The draws saved by ``sample_chains(..., output=path)`` (complete or interrupted).
 
     ``wall_time`` is ``nan`` (not recorded) and ``num_steps`` counts warm-up and saved draws.
+    Pytree positions come back as dicts, tuples and lists (named tuples as dicts of their
+    fields).
     """
     import h5netcdf
 
@@ -569,7 +657,8 @@ def load_chains(path) -> ChainsResult:
         if f.attrs.get("format") != _FORMAT:
             raise ValueError(f"{os.fspath(path)!r} is not a file written by sample_chains")
         done = int(f.attrs["draws_done"])
-        positions = np.asarray(f.variables["position"][:, :done])
+        layout = f.attrs.get("position_layout")
+        positions = _read_positions(f, None if layout is None else json.loads(layout), done)
         info = {
             name[5:]: np.asarray(v[:, :done]).astype(v.attrs["dtype"])
             for name, v in f.variables.items()

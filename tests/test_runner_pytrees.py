@@ -9,7 +9,8 @@ import xarray as xr
 
 import liesample
 from liesample.diagnostics import to_datatree
-from liesample.runner import sample_chains
+from liesample import runner
+from liesample.runner import load_chains, sample_chains
 from liesample.spaces import SU, Euclidean, Sphere
 
 jax.config.update("jax_enable_x64", True)
@@ -102,9 +103,59 @@ def test_bad_pytree_positions(positions, error, match):
         sample_chains(PRODUCT, KEY, positions, 2, progress=False)
 
 
-def test_output_refuses_pytree_positions(tmp_path):
-    with pytest.raises(NotImplementedError, match="one array"):
-        sample_chains(PRODUCT, KEY, product_starts(), 2, progress=False,
+class _Interrupt(Exception):
+    pass
+
+
+def _interrupt_after(draws):
+    def hook(done):
+        if done >= draws:
+            raise _Interrupt
+
+    return hook
+
+
+def test_output_and_resume_with_pytree_positions(tmp_path, monkeypatch, product_run):
+    path = tmp_path / "run.nc"
+    monkeypatch.setattr(runner, "_after_chunk_hook", _interrupt_after(4))
+    with pytest.raises(_Interrupt):  # stopped after 2 of 5 chunks were saved
+        sample_chains(PRODUCT, KEY, product_starts(), 10, thinning=2, chunk_draws=2,
+                      progress=False, output=path)  # fmt: skip
+    saved = load_chains(path)
+    assert set(saved.positions) == {"mu", "log_kappa"}
+    assert saved.positions["mu"].shape == (3, 4, 3)
+    monkeypatch.setattr(runner, "_after_chunk_hook", None)
+    resumed = sample_chains(PRODUCT, KEY, product_starts(), 10, thinning=2, chunk_draws=2,
+                            progress=False, output=path, resume=True)  # fmt: skip
+    for name in ("mu", "log_kappa"):  # bitwise the uninterrupted run
+        np.testing.assert_array_equal(resumed.positions[name], product_run.positions[name])
+        np.testing.assert_array_equal(load_chains(path).positions[name], resumed.positions[name])
+    for name in product_run.info:
+        np.testing.assert_array_equal(resumed.info[name], product_run.info[name])
+    other = product_starts()
+    other["log_kappa"] = other["log_kappa"] + 0.1
+    with pytest.raises(ValueError, match="initial_positions_sha256"):
+        sample_chains(PRODUCT, KEY, other, 12, progress=False, output=path, resume=True)
+
+
+def test_output_keeps_tuples_and_complex_leaves(tmp_path):
+    def logdensity(p):
+        return 2.0 * jnp.real(jnp.trace(p[0])) - 0.5 * p[1]["x"] ** 2
+
+    sampler = liesample.geometric_hmc(logdensity, (SU(2), {"x": Euclidean(())}), 0.3, 3)
+    starts = (np.tile(np.eye(2, dtype=complex), (2, 1, 1)), {"x": np.zeros(2)})
+    run = sample_chains(sampler, KEY, starts, 4, progress=False, output=tmp_path / "su2.nc")
+    saved = load_chains(tmp_path / "su2.nc")
+    assert isinstance(saved.positions, tuple) and set(saved.positions[1]) == {"x"}
+    assert saved.positions[0].dtype == np.complex128
+    np.testing.assert_array_equal(saved.positions[0], run.positions[0])
+    np.testing.assert_array_equal(saved.positions[1]["x"], run.positions[1]["x"])
+
+
+def test_output_refuses_unsaveable_pytrees(tmp_path):
+    sampler = liesample.geometric_hmc(lambda p: -0.5 * p[1] ** 2, {1: Euclidean(())}, 0.3, 2)
+    with pytest.raises(TypeError, match="string keys"):
+        sample_chains(sampler, KEY, {1: np.zeros(2)}, 2, progress=False,
                       output=tmp_path / "run.nc")  # fmt: skip
     assert not (tmp_path / "run.nc").exists()
 
