@@ -32,7 +32,10 @@ when the metric is bi-invariant, i.e. ``M ∝ I`` on each copy (otherwise ``p`` 
 Euler–Arnold equation ``ṗ = ad*_{M⁻¹p} p`` of a free rigid body). Likewise the geodesic
 formula of a sphere needs the round metric. So the inverse mass is one scalar per copy of a
 group or sphere (shape ``shape + (1,)``) and one per coordinate of ``Euclidean`` and ``U1``
-(shape ``shape``), where the flow is a translation for any diagonal mass.
+(shape ``shape``), where the flow is a translation for any diagonal mass; a ``Euclidean``
+block of ``n`` coordinates may also take a dense ``(n, n)`` inverse mass. The momentum law,
+the kinetic flow of a whole product (with an optional magnetic field on its ``Euclidean``
+coordinates) and the one-effect steps built on them are in :mod:`liesample.cotangent`.
 
 The sphere is a homogeneous space ``SO(n+1)/SO(n)``, not a group: its position is the unit
 vector ``x ∈ Rⁿ⁺¹``, its momentum the tangent vector ``p ⟂ x`` in ambient coordinates, and its
@@ -65,12 +68,9 @@ __all__ = [
     "Sphere",
     "check_inverse_mass",
     "check_position",
+    "check_inverse_mass_matrix",
     "dimension",
-    "flow",
     "is_space",
-    "kinetic_energy",
-    "ornstein_uhlenbeck",
-    "sample_momentum",
     "trivialised_value_and_grad",
     "uniform",
     "zero_momentum",
@@ -606,9 +606,59 @@ def uniform(space, rng_key, dtype=None):
     return _map(lambda s: s.uniform(next(keys), dtype), space)
 
 
+def real_finite_array(name, value, ndims):
+    """Rank check always; dtype and finiteness only when ``value`` is concrete (not a tracer).
+    Returns the concrete numpy array, or ``None`` for a traced value."""
+    shape = np.shape(value)
+    if len(shape) not in ndims:
+        want = " or ".join(f"{n}-D" for n in ndims)
+        raise ValueError(f"{name} must be a {want} array, got shape {shape}")
+    array = concrete_array(value)
+    if array is not None:
+        if array.dtype.kind not in "biuf":
+            raise TypeError(f"{name} must be a real array, got dtype {array.dtype}")
+        if not np.all(np.isfinite(array)):
+            raise ValueError(f"{name} must be finite, got non-finite entries")
+    return array
+
+
+def check_inverse_mass_matrix(inverse_mass_matrix, dimension=None, name="inverse_mass_matrix"):
+    """A flat ``M⁻¹``: diagonal (``(d,)``, entries > 0) or dense (``(d, d)``, symmetric positive
+    definite); value checks only when concrete."""
+    imm = real_finite_array(name, inverse_mass_matrix, (1, 2))
+    shape = np.shape(inverse_mass_matrix)
+    if len(shape) == 2 and shape[0] != shape[1]:
+        raise ValueError(f"{name} must be (d,) or square (d, d), got shape {shape}")
+    if dimension is not None and shape[0] != dimension:
+        raise ValueError(
+            f"{name} must have leading size {dimension} to match the {dimension} position "
+            f"coordinates, got shape {shape}"
+        )
+    if imm is None:
+        return
+    if imm.ndim == 1 and not np.all(imm > 0):
+        raise ValueError(f"{name} (diagonal) must have all entries > 0")
+    if imm.ndim == 2:
+        if not np.allclose(imm, imm.T, rtol=1e-10, atol=0.0):
+            raise ValueError(f"{name} (dense) must be symmetric")
+        if imm.size and not np.all(np.linalg.eigvalsh(imm) > 0):
+            raise ValueError(f"{name} (dense) must be positive definite")
+
+
+def is_dense_inverse_mass(space: Space, inverse_mass) -> bool:
+    """Whether ``inverse_mass`` is a dense ``(n, n)`` matrix for a ``Euclidean`` block of ``n``
+    coordinates (raveled order), rather than a diagonal broadcast to its shape."""
+    n = math.prod(space.shape)
+    shape = np.shape(inverse_mass)
+    return isinstance(space, Euclidean) and shape == (n, n) and shape != space.shape
+
+
 def check_inverse_mass(space, inverse_mass, dtype=None):
     """``None`` (unit mass), a positive scalar, or a pytree like ``space`` of arrays that
-    broadcast to each block's ``mass_array_shape`` → a pytree of arrays of those shapes."""
+    broadcast to each block's ``mass_array_shape`` → a pytree of arrays of those shapes.
+
+    A ``Euclidean`` block of ``n`` coordinates may instead take a dense symmetric positive
+    definite ``(n, n)`` matrix (its coordinates in raveled order), kept as it is."""
     leaves = _spaces(space)
     dtype = dtype or jnp.zeros(()).dtype
     if inverse_mass is None:
@@ -627,13 +677,17 @@ def check_inverse_mass(space, inverse_mass, dtype=None):
             given = _map(lambda s: jax.tree.leaves(inverse_mass)[0], space)
 
     def one(s, m):
+        if is_dense_inverse_mass(s, m):
+            check_inverse_mass_matrix(m, name=f"inverse mass for {s!r}")
+            return jnp.asarray(m, dtype)
         try:
             out = jnp.broadcast_to(jnp.asarray(m, dtype), s.mass_array_shape)
         except ValueError:
+            dense = " or a dense (n, n) matrix" if isinstance(s, Euclidean) else ""
             raise ValueError(
                 f"inverse mass for {s!r} must broadcast to shape {s.mass_array_shape} (one "
-                f"value per copy{'' if s.mass_shape == () else ' of the group or sphere'}), "
-                f"got shape {np.shape(m)}"
+                f"value per copy{'' if s.mass_shape == () else ' of the group or sphere'})"
+                f"{dense}, got shape {np.shape(m)}"
             ) from None
         value = concrete_array(out)
         if value is not None and not (np.all(np.isfinite(value)) and np.all(value > 0)):
@@ -643,7 +697,7 @@ def check_inverse_mass(space, inverse_mass, dtype=None):
     return _map(one, space, given)
 
 
-# ---------------------------------------------------------------------- dynamics pieces
+# ---------------------------------------------------------------------- gradients and momenta
 
 
 def trivialised_value_and_grad(logdensity_fn: Callable, space):
@@ -663,45 +717,4 @@ def trivialised_value_and_grad(logdensity_fn: Callable, space):
 def zero_momentum(space, position):
     return _map(
         lambda s, x: jnp.zeros(s.momentum_array_shape, s.momentum_dtype(x)), space, position
-    )
-
-
-def sample_momentum(rng_key, space, position, inverse_mass):
-    """A draw of ``N(0, M)`` in each tangent space (``p = ξ/√m⁻¹``, tangent part on spheres)."""
-    leaves = _spaces(space)
-    keys = iter(jax.random.split(rng_key, len(leaves)))
-
-    def one(s, x, m):
-        z = jax.random.normal(next(keys), s.momentum_array_shape, s.momentum_dtype(x))
-        return s.project(x, z / jnp.sqrt(m))
-
-    return _map(one, space, position, inverse_mass)
-
-
-def ornstein_uhlenbeck(rng_key, space, position, momentum, inverse_mass, friction, time):
-    """Exact OU step of ``dp = −γ M⁻¹p dt + √(2γ) dW`` (law ``N(0, M)`` kept) over ``time``:
-    ``p ← e^{−γm⁻¹t} p + √(1 − e^{−2γm⁻¹t}) ξ``, ``ξ ~ N(0, M)`` in the tangent space."""
-    noise = sample_momentum(rng_key, space, position, inverse_mass)
-
-    def one(p, m, xi):
-        decay = jnp.exp(-friction * time * m)
-        return decay * p + jnp.sqrt(-jnp.expm1(-2.0 * friction * time * m)) * xi
-
-    return jax.tree.map(one, momentum, inverse_mass, noise)
-
-
-def kinetic_energy(space, momentum, inverse_mass):
-    """``½ Σ m⁻¹|p|²`` over every block."""
-    terms = jax.tree.map(lambda p, m: 0.5 * jnp.sum(m * p**2), momentum, inverse_mass)
-    return sum(jax.tree.leaves(terms))
-
-
-def flow(space, position, momentum, inverse_mass, time):
-    """The exact kinetic flow of every block over ``time``."""
-    pairs = _map(lambda s, x, p, m: s.flow(x, p, m, time), space, position, momentum, inverse_mass)
-    structure = jax.tree.structure(space, is_leaf=is_space)
-    flat = structure.flatten_up_to(pairs)
-    return (
-        structure.unflatten([a for a, _ in flat]),
-        structure.unflatten([b for _, b in flat]),
     )

@@ -392,15 +392,3 @@ def kinetic_magnetic_exponential(generator, time):
     zeros = jnp.zeros_like(generator)
     exponential = jax.scipy.linalg.expm(jnp.block([[time * generator, time * eye], [zeros, zeros]]))
     return exponential[:n, :n], exponential[:n, n:]
-
-
-def magnetic_flow(magnetic_term, mass, step_size):
-    """The exact flow of ``q̇ = p/m``, ``ṗ = G p/m`` for a constant antisymmetric ``G``.
-
-    Returns ``(rotation, displacement)`` with ``p' = rotation @ p`` and
-    ``q' = q + displacement @ p``: ``rotation = e^{εG/m}`` (orthogonal) and
-    ``displacement = (1/m) ∫₀^ε e^{sG/m} ds = (ε/m) φ₁(εG/m)``
-    (:func:`kinetic_magnetic_exponential` with ``M = m I``).
-    """
-    rotation, integral = kinetic_magnetic_exponential(jnp.asarray(magnetic_term) / mass, step_size)
-    return rotation, integral / mass

@@ -24,6 +24,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
         "algebras / structures / targets",
         (
             "liesample.algebras",
+            "liesample.cotangent",
             "liesample.numpyro",
             "liesample.spaces",
             "liesample.spherical_harmonics",

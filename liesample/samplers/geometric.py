@@ -1,21 +1,22 @@
-"""Shared pieces of the geometric samplers on ``T*G`` (left-trivialised, ``G × g*``).
+"""The geometric samplers' core on ``T*G`` (left-trivialised, ``G × g*``): chain state, Info
+contract, ``init``, the Metropolis test and the two transitions every sampler is built from.
 
 The Hamiltonian is ``H(g, p) = −log π(g) + ½ pᵀM⁻¹p`` on a space (or product of spaces) from
 :mod:`liesample.spaces`; ``log π`` is a log-density with respect to the product of Haar
-(groups), uniform (spheres) and Lebesgue (``Euclidean``) measures. This module holds the chain
-state, the ``Info`` contract, ``init`` and the geometric leapfrog shared by
-:mod:`liesample.samplers.geometric_hmc` and :mod:`liesample.samplers.geometric_langevin`.
+(groups), uniform (spheres) and Lebesgue (``Euclidean``) measures. An optional constant
+antisymmetric magnetic field ``G`` acts on the ``Euclidean`` coordinates. The moves are the
+one-effect steps of :mod:`liesample.cotangent` (kick ``B``, exact kinetic–magnetic drift
+``A``, exact OU refresh ``O``) composed by coefficient lists:
 
-The leapfrog is a Strang splitting of ``H = U + K`` into two exactly solvable pieces:
-
-- the potential ``U``: ``ġ = 0``, ``ṗ = ∇log π(g)`` (left-trivialised gradient; the
-  Lie–Poisson term ``ad*_{∂U/∂p} p`` vanishes since ``U`` does not depend on ``p``);
-- the kinetic ``K``: the exp-map drift of each space (``g ← g exp(t M⁻¹p)``, the geodesic flow
-  on spheres, translations on ``Rᵈ``).
-
-Both are exact Hamiltonian flows on ``T*G`` with its canonical symplectic form, so their
-symmetric composition is symplectic (it preserves Haar × Lebesgue, the Liouville measure) and
-reversible under ``p ↦ −p``: the ingredients of an exact Metropolis test.
+- :func:`hamiltonian_transition`: a momentum (fresh, partially refreshed or OU-refreshed),
+  ``L`` leapfrog steps ``B A B``, the Metropolis test and the flip. With a field the proposal
+  ``(g, p, s) ↦ (g', −p', −s)`` (``s = ±1`` the sign of ``G``) is an involution that preserves
+  the Liouville measure (running the flow of ``−sG`` from ``(g', −p')`` retraces the path), so
+  the test keeps ``exp(−H)`` exactly at any step size; the flip ``(p, s) ↦ (−p, −s)`` after it
+  (Horowitz 1991) keeps the direction of motion on acceptance. Without a field ``s`` is inert.
+  Geometric HMC, adjusted geometric Langevin and magnetic HMC are this transition.
+- :func:`unadjusted_transition`: one step of a scheme containing ``O`` (``OBAB`` for geometric
+  Langevin, ``BAOAB`` for magnetic Langevin), every finite step taken.
 """
 
 from __future__ import annotations
@@ -29,17 +30,29 @@ import numpy as np
 
 from liesample import spaces
 from liesample._validation import concrete_array
+from liesample.cotangent import (
+    LEAPFROG,
+    CotangentBundle,
+    PhasePoint,
+    compose,
+    drift,
+    evaluated,
+    fractions,
+    kick,
+    refresh,
+)
 
 __all__ = [
     "GeometricInfo",
     "GeometricState",
     "check_starts",
+    "drift_flows",
     "energy",
+    "hamiltonian_transition",
     "init",
-    "leapfrog",
     "metropolis",
     "select",
-    "trajectory",
+    "unadjusted_transition",
 ]
 
 
@@ -49,13 +62,17 @@ class GeometricState(NamedTuple):
     position : a point of the space (pytree like the space).
     logdensity : ``log π(position)``.
     logdensity_grad : the trivialised gradient (algebra coordinates, pytree like the space).
-    momentum : the momentum carried between transitions (Langevin; HMC redraws it).
+    momentum : the momentum carried between transitions (Langevin, and HMC with partial
+        refreshment; full-refresh HMC redraws it).
+    magnetic_sign : ``s = ±1``, the sign of the magnetic field for the next move (inert
+        without a field).
     """
 
     position: object
     logdensity: jax.Array
     logdensity_grad: object
     momentum: object
+    magnetic_sign: jax.Array = 1.0
 
 
 class GeometricInfo(NamedTuple):
@@ -95,7 +112,8 @@ def init(position, logdensity_fn: Callable, space) -> GeometricState:
             "logdensity_fn or its gradient is not finite at the initial position; start the "
             "chain where log π is finite"
         )
-    return GeometricState(position, logdensity, grad, spaces.zero_momentum(space, position))
+    momentum = spaces.zero_momentum(space, position)
+    return GeometricState(position, logdensity, grad, momentum, jnp.ones((), logdensity.dtype))
 
 
 def check_starts(space):
@@ -117,64 +135,33 @@ def check_divergence_threshold(divergence_threshold):
         raise ValueError(f"divergence_threshold must be > 0, got {divergence_threshold!r}")
 
 
-def energy(space, logdensity, momentum, inverse_mass):
+def energy(bundle: CotangentBundle, logdensity, momentum):
     """``H = −log π + ½ pᵀM⁻¹p``."""
-    return -logdensity + spaces.kinetic_energy(space, momentum, inverse_mass)
-
-
-def _axpy(a, x, y):
-    return jax.tree.map(lambda u, v: u + a * v, x, y)
-
-
-def leapfrog(value_and_grad, space, inverse_mass, step_size):
-    """One step ``(g, p, ∇log π) -> (g, p, log π, ∇log π)``: half kick, exp-map drift, half
-    kick (kicks are tangent on spheres: the gradient is Riemannian)."""
-
-    def step(position, momentum, grad):
-        momentum = _axpy(0.5 * step_size, momentum, grad)
-        position, momentum = spaces.flow(space, position, momentum, inverse_mass, step_size)
-        logdensity, grad = value_and_grad(position)
-        momentum = _axpy(0.5 * step_size, momentum, grad)
-        return position, momentum, logdensity, grad
-
-    return step
-
-
-def trajectory(value_and_grad, space, inverse_mass, step_size, num_steps, state, momentum):
-    """``num_steps`` leapfrog steps from ``(state.position, momentum)``."""
-    step = leapfrog(value_and_grad, space, inverse_mass, step_size)
-
-    def body(_, carry):
-        return step(carry[0], carry[1], carry[3])
-
-    return jax.lax.fori_loop(
-        0, num_steps, body, (state.position, momentum, state.logdensity, state.logdensity_grad)
-    )
+    return -logdensity + bundle.kinetic_energy(momentum)
 
 
 def _all_finite(tree):
     return jnp.all(jnp.array([jnp.all(jnp.isfinite(x)) for x in jax.tree.leaves(tree)]))
 
 
-def metropolis(
-    rng_key, space, inverse_mass, state, momentum, proposal, divergence_threshold, accept=True
-):
-    """Accept/reject the proposal ``(g', p', log π', ∇')`` from ``(state, momentum)``.
+def metropolis(rng_key, bundle, initial: PhasePoint, proposal: PhasePoint, divergence_threshold,
+               accept=True, heat=0.0):  # fmt: skip
+    """Accept/reject ``proposal`` from ``initial`` (both evaluated).
 
     Returns ``(is_accepted, acceptance_rate, is_divergent, initial energy, proposal energy)``
-    (``acceptance_rate = min(1, e^{−ΔH})``, 0 when non-finite). With
+    with ``acceptance_rate = min(1, e^{−(ΔH − heat)})`` (0 when non-finite; ``heat`` is what the
+    OU steps put in, so the rate measures the error of the Hamiltonian pieces only). With
     ``accept=False`` (unadjusted chains) every finite proposal is taken. A non-finite proposal
     (state or energy) is always rejected and flagged divergent.
     """
-    position, new_momentum, logdensity, grad = proposal
-    initial = energy(space, state.logdensity, momentum, inverse_mass)
-    final = energy(space, logdensity, new_momentum, inverse_mass)
-    delta = final - initial
+    start = energy(bundle, initial.logdensity, initial.momentum)
+    final = energy(bundle, proposal.logdensity, proposal.momentum)
+    delta = final - start - heat
     finite = (
         jnp.isfinite(delta)
-        & _all_finite(position)
-        & _all_finite(new_momentum)
-        & _all_finite(grad)
+        & _all_finite(proposal.position)
+        & _all_finite(proposal.momentum)
+        & _all_finite(proposal.logdensity_grad)
     )
     delta = jnp.where(finite, delta, jnp.inf)
     acceptance_rate = jnp.where(finite, jnp.minimum(1.0, jnp.exp(-delta)), 0.0)
@@ -185,9 +172,125 @@ def metropolis(
     else:
         is_accepted = finite
     final = jnp.where(finite, final, jnp.inf)
-    return is_accepted, acceptance_rate, is_divergent, initial, final
+    return is_accepted, acceptance_rate, is_divergent, start, final
 
 
 def select(condition, new, old):
     """``new`` where ``condition`` else ``old``, leaf by leaf."""
     return jax.tree.map(lambda a, b: jnp.where(condition, a, b), new, old)
+
+
+def drift_flows(bundle: CotangentBundle, step_size, scheme, precompute: bool = True):
+    """``sign ↦ {fraction: kinetic flow}`` for the drifts of ``scheme``.
+
+    With a field and ``precompute`` (fixed parameters) the flows of ``+G`` and ``−G`` are
+    computed here, once, and each move selects one; otherwise (traced parameters, as in
+    adaptation) one ``expm`` per move, for the sign it uses. Without a field the sign is inert.
+    """
+    times = fractions(scheme, "A")
+
+    def flows(sign):
+        return {f: bundle.kinetic_flow(f * step_size, sign) for f in times}
+
+    if bundle.magnetic_field is None:
+        fixed = flows(1.0)
+        return lambda sign: fixed
+    if not precompute:
+        return flows
+    plus, minus = flows(1.0), flows(-1.0)
+    return lambda sign: select(sign > 0, plus, minus)
+
+
+def _point(state: GeometricState, momentum) -> PhasePoint:
+    return PhasePoint(state.position, momentum, state.logdensity, state.logdensity_grad)
+
+
+def hamiltonian_transition(
+    rng_key,
+    state: GeometricState,
+    momentum,
+    value_and_grad,
+    bundle: CotangentBundle,
+    flows,
+    step_size,
+    num_integration_steps,
+    divergence_threshold,
+    persistent: bool = True,
+):
+    """``L`` leapfrog steps from ``(state.position, momentum)``, the Metropolis test and the
+    flip; ``flows`` from :func:`drift_flows`. Returns ``(state, (is_accepted, acceptance_rate,
+    is_divergent, initial energy, proposal energy))``.
+
+    The involution ``(g, p, s) ↦ (g', −p', −s)`` then, if ``persistent``, the flip
+    ``(p, s) ↦ (−p, −s)``: accepted ``(g', p', s)``, rejected ``(g, −p, −s)``. With
+    ``persistent=False``: accepted ``(g', −p', −s)``, rejected ``(g, p, s)``.
+    """
+    sign = state.magnetic_sign
+    effects = {"B": kick(value_and_grad, step_size), "A": drift(bundle, flows(sign))}
+    step = compose(LEAPFROG, effects)
+    initial = _point(state, momentum)
+
+    def body(_, point):
+        return step(point)
+
+    proposal = jax.lax.fori_loop(0, num_integration_steps, body, initial)
+    outcome = metropolis(rng_key, bundle, initial, proposal, divergence_threshold)
+    is_accepted = outcome[0]
+    after = -1.0 if persistent else 1.0
+    negate = lambda tree: jax.tree.map(jnp.negative, tree)  # noqa: E731
+    new_momentum = select(is_accepted, proposal.momentum, negate(momentum))
+    if not persistent:
+        new_momentum = negate(new_momentum)
+    new_sign = after * jnp.where(is_accepted, -sign, sign)
+    new_state = GeometricState(
+        select(is_accepted, proposal.position, state.position),
+        jnp.where(is_accepted, proposal.logdensity, state.logdensity),
+        select(is_accepted, proposal.logdensity_grad, state.logdensity_grad),
+        new_momentum,
+        jnp.asarray(new_sign).astype(jnp.result_type(sign)),
+    )
+    return new_state, outcome
+
+
+def unadjusted_transition(
+    rng_key,
+    state: GeometricState,
+    value_and_grad,
+    bundle: CotangentBundle,
+    flows,
+    step_size,
+    friction,
+    scheme,
+    divergence_threshold,
+):
+    """One step of ``scheme`` (``B``, ``A`` and ``O`` pieces), taken when finite; a non-finite
+    step keeps the state. Returns ``(state, (is_accepted, metropolis_rate, is_divergent,
+    energy of the new state))``; ``metropolis_rate`` is ``min(1, e^{−(ΔH − heat)})``, the rate
+    the step's Hamiltonian pieces would be accepted at (what step-size adaptation targets)."""
+    effects = {
+        "B": kick(value_and_grad, step_size),
+        "A": drift(bundle, flows(state.magnetic_sign)),
+        "O": refresh(bundle, step_size, friction),
+    }
+    initial = _point(state, state.momentum)._replace(heat=jnp.zeros_like(state.logdensity))
+    proposal = evaluated(compose(scheme, effects)(initial, rng_key), value_and_grad)
+    is_accepted, rate, is_divergent, start, final = metropolis(
+        None, bundle, initial, proposal, divergence_threshold, accept=False, heat=proposal.heat
+    )
+    new_state = GeometricState(
+        select(is_accepted, proposal.position, state.position),
+        jnp.where(is_accepted, proposal.logdensity, state.logdensity),
+        select(is_accepted, proposal.logdensity_grad, state.logdensity_grad),
+        select(is_accepted, proposal.momentum, state.momentum),
+        state.magnetic_sign,
+    )
+    return new_state, (is_accepted, rate, is_divergent, jnp.where(is_accepted, final, start))
+
+
+def partial_refresh(fresh, momentum, momentum_persistence):
+    """``α p + √(1 − α²) ξ`` (``α = 0``: the fresh draw ``ξ ~ N(0, M)`` itself)."""
+    if isinstance(momentum_persistence, (int, float)) and momentum_persistence == 0:
+        return fresh
+    alpha = jnp.asarray(momentum_persistence, jnp.result_type(*jax.tree.leaves(fresh)))
+    scale = jnp.sqrt(1.0 - alpha**2)
+    return jax.tree.map(lambda p, xi: alpha * p + scale * xi, momentum, fresh)

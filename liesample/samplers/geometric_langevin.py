@@ -1,22 +1,25 @@
 """Kinetic Langevin on Lie groups, spheres and products with ``Rᵈ``: the dissipative
 symplectic diffusion on ``T*G`` (paper, ``sec:dissipation``) before reduction.
 
-The SDE is ``dg = g (M⁻¹p)^ dt``, ``dp = ∇log π(g) dt − γ M⁻¹p dt + √(2γ) dW`` in the
-left trivialisation (on a non-abelian group with ``M ∝ I`` per copy the Lie–Poisson term
-``ad*_{M⁻¹p} p`` vanishes). Its invariant law is ``exp(−H)``, whose ``G``-marginal is
-``π dHaar``. One transition (BlackJAX-shaped: ``init``, ``build_kernel``,
-``as_top_level_api``):
+The SDE is ``dg = g (M⁻¹p)^ dt``, ``dp = ∇log π(g) dt + G M⁻¹p dt − γ M⁻¹p dt + √(2γ) dW`` in
+the left trivialisation (on a non-abelian group with ``M ∝ I`` per copy the Lie–Poisson term
+``ad*_{M⁻¹p} p`` vanishes; the magnetic term ``G M⁻¹p``, optional, acts on the ``Euclidean``
+coordinates). Its invariant law is ``exp(−H)`` for every antisymmetric ``G``, and its
+``G``-marginal is ``π dHaar``. One transition (BlackJAX-shaped: ``init``, ``build_kernel``,
+``as_top_level_api``), from the one-effect steps of :mod:`liesample.cotangent`:
 
-1. the exact Ornstein–Uhlenbeck step of the friction and noise over ``h``:
-   ``p ← e^{−γm⁻¹h} p + √(1 − e^{−2γm⁻¹h}) ξ``, ``ξ ~ N(0, M)`` (partial refreshment);
-2. one geometric leapfrog step of size ``h`` (:func:`liesample.samplers.geometric.leapfrog`).
+- ``adjusted=False`` (default): one step of the scheme ``O B A B`` (``O`` the exact
+  Ornstein–Uhlenbeck step ``p ← e^{−γm⁻¹h} p + √(1 − e^{−2γm⁻¹h}) ξ``, ``ξ ~ N(0, M)``;
+  ``B A B`` a geometric leapfrog step), every finite step taken: the irreversible kinetic
+  Langevin chain, biased by ``O(h²)`` in the position law (the sequence ``O B A B O B A B …``
+  has the position marginal of ``O_{h/2} BAB O_{h/2}``, which is second order).
+  (:func:`liesample.magnetic_langevin` runs the scheme ``B A O A B`` instead.)
+- ``adjusted=True``: the ``O`` step, then one-step HMC with the momentum (and the field's
+  sign) flipped on rejection (Horowitz's generalised HMC): the proposal
+  ``(g, p, s) ↦ (g', −p', −s)`` is an involution preserving the Liouville measure, so the
+  Metropolis test followed by the flip ``(p, s) ↦ (−p, −s)`` keeps ``exp(−H)`` exactly, at any
+  step size.
 
-``adjusted=False`` (default) takes every finite step: the irreversible kinetic Langevin chain,
-biased by ``O(h²)`` in the position law (the sequence ``O B A B O B A B …`` has the position
-marginal of ``O_{h/2} BAB O_{h/2}``, which is second order). ``adjusted=True`` replaces 2. by
-one-step HMC with the momentum flipped on rejection (Horowitz's generalised HMC): the proposal
-``(g, p) ↦ (g', −p')`` is an involution preserving the Liouville measure, so the Metropolis
-test followed by the flip ``p ↦ −p`` keeps ``exp(−H)`` exactly, at any step size.
 A non-finite step is rejected (state kept) and flagged ``is_divergent`` in both variants.
 """
 
@@ -29,71 +32,83 @@ import jax.numpy as jnp
 
 from liesample import spaces
 from liesample._validation import concrete_array, finite_float
+from liesample.cotangent import LEAPFROG, OBAB, cotangent_bundle
 from liesample.samplers.contract import Sampler, sampling_api, setting
 from liesample.samplers.geometric import (
     GeometricInfo,
     GeometricState,
     check_divergence_threshold,
     check_starts,
+    drift_flows,
+    hamiltonian_transition,
     init,
-    metropolis,
-    select,
-    trajectory,
+    unadjusted_transition,
 )
 from liesample.samplers.magnetic import check_step_size
 
 __all__ = ["as_top_level_api", "build_kernel", "geometric_langevin", "init"]
 
 
-def _check_friction(friction):
+def check_friction(friction):
     if jnp.ndim(friction) != 0:
         raise ValueError(f"friction must be a scalar, got shape {jnp.shape(friction)}")
     if concrete_array(friction) is not None:  # traced values are checked where concrete
         finite_float("friction", friction, positive=True)
 
 
-def _transition(
+def transition(
     rng_key,
     state: GeometricState,
-    logdensity_fn,
-    space,
+    value_and_grad,
+    bundle,
+    flows,
     step_size,
     friction,
-    inverse_mass,
     adjusted,
     divergence_threshold,
+    scheme=OBAB,
 ):
-    key_noise, key_accept = jax.random.split(rng_key)
-    momentum = spaces.ornstein_uhlenbeck(
-        key_noise, space, state.position, state.momentum, inverse_mass, friction, step_size
-    )
-    value_and_grad = spaces.trivialised_value_and_grad(logdensity_fn, space)
-    proposal = trajectory(value_and_grad, space, inverse_mass, step_size, 1, state, momentum)
-    is_accepted, metropolis_rate, is_divergent, initial_energy, proposal_energy = metropolis(
-        key_accept,
-        space,
-        inverse_mass,
-        state,
-        momentum,
-        proposal,
-        divergence_threshold,
-        accept=adjusted,
-    )
-    position, new_momentum, logdensity, grad = proposal
-    # Accepted: (g', p'). Rejected: (g, −p) when adjusted (the flip after the involution).
-    kept_momentum = jax.tree.map(jnp.negative, momentum) if adjusted else momentum
-    new_state = GeometricState(
-        select(is_accepted, position, state.position),
-        jnp.where(is_accepted, logdensity, state.logdensity),
-        select(is_accepted, grad, state.logdensity_grad),
-        select(is_accepted, new_momentum, kept_momentum),
-    )
-    acceptance_rate = metropolis_rate if adjusted else is_accepted.astype(metropolis_rate.dtype)
+    """One geometric Langevin transition (``flows`` from
+    :func:`liesample.samplers.geometric.drift_flows` for ``scheme``, or for the leapfrog when
+    ``adjusted``)."""
+    if not adjusted:
+        new_state, outcome = unadjusted_transition(
+            rng_key,
+            state,
+            value_and_grad,
+            bundle,
+            flows,
+            step_size,
+            friction,
+            scheme,
+            divergence_threshold,
+        )
+        is_accepted, metropolis_rate, is_divergent, new_energy = outcome
+        acceptance_rate = is_accepted.astype(metropolis_rate.dtype)
+    else:
+        key_noise, key_accept = jax.random.split(rng_key)
+        momentum = bundle.ornstein_uhlenbeck(
+            key_noise, state.position, state.momentum, friction, step_size
+        )
+        new_state, outcome = hamiltonian_transition(
+            key_accept,
+            state,
+            momentum,
+            value_and_grad,
+            bundle,
+            flows,
+            step_size,
+            1,
+            divergence_threshold,
+        )
+        is_accepted, metropolis_rate, is_divergent, initial_energy, proposal_energy = outcome
+        acceptance_rate = metropolis_rate
+        new_energy = jnp.where(is_accepted, proposal_energy, initial_energy)
     info = GeometricInfo(
         acceptance_rate,
         is_accepted,
         is_divergent,
-        jnp.where(is_accepted, proposal_energy, initial_energy),  # the new state's H
+        new_energy,
         jnp.asarray(1),
         metropolis_rate,
     )
@@ -102,10 +117,12 @@ def _transition(
 
 def build_kernel(adjusted: bool = False, divergence_threshold: float = 1000.0):
     """``kernel(rng_key, state, logdensity_fn, space, step_size, friction,
-    inverse_mass_matrix=None) -> (state, info)``; parameters may be traced (adaptation)."""
+    inverse_mass_matrix=None, magnetic_field=None) -> (state, info)``; parameters may be traced
+    (adaptation)."""
     if not isinstance(adjusted, bool):
         raise TypeError(f"adjusted must be a bool, got {adjusted!r}")
     check_divergence_threshold(divergence_threshold)
+    scheme = LEAPFROG if adjusted else OBAB
 
     def kernel(
         rng_key,
@@ -115,19 +132,20 @@ def build_kernel(adjusted: bool = False, divergence_threshold: float = 1000.0):
         step_size,
         friction,
         inverse_mass_matrix=None,
+        magnetic_field=None,
     ):
         check_step_size(step_size)
-        _check_friction(friction)
+        check_friction(friction)
         dtype = jnp.asarray(state.logdensity).dtype
-        inverse_mass = spaces.check_inverse_mass(space, inverse_mass_matrix, dtype)
-        return _transition(
+        bundle = cotangent_bundle(space, inverse_mass_matrix, magnetic_field, dtype)
+        return transition(
             rng_key,
             state,
-            logdensity_fn,
-            space,
+            spaces.trivialised_value_and_grad(logdensity_fn, space),
+            bundle,
+            drift_flows(bundle, step_size, scheme, precompute=False),
             step_size,
             friction,
-            inverse_mass,
             adjusted,
             divergence_threshold,
         )
@@ -141,6 +159,7 @@ def as_top_level_api(
     step_size,
     friction,
     inverse_mass_matrix=None,
+    magnetic_field=None,
     *,
     adjusted: bool = False,
     divergence_threshold: float = 1000.0,
@@ -149,9 +168,9 @@ def as_top_level_api(
 
     Parameters
     ----------
-    logdensity_fn, space, inverse_mass_matrix
+    logdensity_fn, space, inverse_mass_matrix, magnetic_field
         As for :func:`liesample.geometric_hmc` (``log π`` with respect to Haar / uniform /
-        Lebesgue measure).
+        Lebesgue measure; the field acts on the Euclidean coordinates).
     step_size : float
         ``h > 0``, the time step of the OU step and of the leapfrog step.
     friction : float
@@ -162,11 +181,13 @@ def as_top_level_api(
         ``ΔH`` above which a step is flagged divergent.
     """
     check_step_size(step_size)
-    _check_friction(friction)
+    check_friction(friction)
     if not isinstance(adjusted, bool):
         raise TypeError(f"adjusted must be a bool, got {adjusted!r}")
     check_divergence_threshold(divergence_threshold)
-    inverse_mass = spaces.check_inverse_mass(space, inverse_mass_matrix)
+    bundle = cotangent_bundle(space, inverse_mass_matrix, magnetic_field)
+    flows = drift_flows(bundle, step_size, LEAPFROG if adjusted else OBAB)
+    value_and_grad = spaces.trivialised_value_and_grad(logdensity_fn, space)
 
     settings = {
         "sampler": "geometric_langevin",
@@ -177,20 +198,22 @@ def as_top_level_api(
         "adjusted": adjusted,
         "divergence_threshold": setting(divergence_threshold),
     }
+    if magnetic_field is not None:
+        settings["magnetic"] = True
 
     def init_fn(position, rng_key=None):
         del rng_key
         return init(position, logdensity_fn, space)
 
     def step_fn(rng_key, state):
-        return _transition(
+        return transition(
             rng_key,
             state,
-            logdensity_fn,
-            space,
+            value_and_grad,
+            bundle,
+            flows,
             step_size,
             friction,
-            inverse_mass,
             adjusted,
             divergence_threshold,
         )

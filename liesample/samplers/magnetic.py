@@ -1,22 +1,17 @@
 """Shared pieces of the magnetic samplers on T*Rⁿ (MATH.md §3).
 
 The chain state is ``z = (q, p)`` with the Poisson tensor ``J = [[0, I], [−I, G]]``, ``G`` a
-constant antisymmetric matrix (the *magnetic field*), and ``h = −log π(q) + ½ pᵀM⁻¹p``. This
-module holds what :mod:`liesample.samplers.magnetic_hmc` and
-:mod:`liesample.samplers.magnetic_langevin` share:
-
-- :func:`magnetic_flow`: the exact flow of the kinetic + magnetic part
-  ``q̇ = M⁻¹p, ṗ = G M⁻¹ p`` over a time ``ε``, from ONE ``expm`` of an augmented block matrix
-  (valid for singular ``G``; no eigendecomposition of a skew matrix);
-- :class:`Metric`: the Gaussian momentum law ``N(0, M)`` for a diagonal or dense ``M⁻¹``, and the
-  exact Ornstein–Uhlenbeck step of the friction + noise part;
-- parameter validation and :func:`default_magnetic_field`, the default field and its tuning
-  rule.
+constant antisymmetric matrix (the *magnetic field*), and ``h = −log π(q) + ½ pᵀM⁻¹p``.
+:mod:`liesample.samplers.magnetic_hmc` and :mod:`liesample.samplers.magnetic_langevin` are the
+geometric samplers on ``spaces.Euclidean((d,))`` (the raveled position) with that field: the
+exact kinetic–magnetic flow, the momentum law ``N(0, M)`` (:class:`Metric`, diagonal or dense
+``M⁻¹``) and its exact Ornstein–Uhlenbeck step are those of :mod:`liesample.cotangent`
+(re-exported here as :func:`magnetic_flow`, :func:`make_metric`). This module holds what the
+two wrappers share: parameter validation, pytree raveling, start checks, and
+:func:`default_magnetic_field`, the default field and its tuning rule.
 """
 
 from __future__ import annotations
-
-from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -25,88 +20,35 @@ from jax.flatten_util import ravel_pytree
 
 from liesample._validation import concrete_array
 from liesample.compile import jit
+from liesample.cotangent import (
+    KineticMagneticFlow,
+    Metric,
+    check_magnetic_field,
+    cotangent_bundle,
+    kinetic_magnetic_flow,
+    make_metric,
+)
 from liesample.samplers.contract import first_bad_chain
-from liesample.structures import kinetic_magnetic_exponential
+from liesample.spaces import Euclidean, check_inverse_mass_matrix
 
 __all__ = [
     "MagneticFlow",
     "Metric",
+    "check_inverse_mass_matrix",
     "check_magnetic_field",
     "default_magnetic_field",
     "check_starts",
+    "euclidean_bundle",
     "initial_values",
     "magnetic_flow",
     "make_metric",
     "ravel_logdensity",
 ]
 
-ANTISYMMETRY_TOLERANCE = 1e-10  # relative to max|G|: round-off of a user-built field
-
-
-# --------------------------------------------------------------------------- validation
-
-
-def _check_real_finite(name, value, ndims):
-    """Shape/rank check always; value checks only when ``value`` is concrete (not a tracer)."""
-    shape = np.shape(value)
-    if len(shape) not in ndims:
-        want = " or ".join(f"{n}-D" for n in ndims)
-        raise ValueError(f"{name} must be a {want} array, got shape {shape}")
-    array = concrete_array(value)
-    if array is not None:
-        if array.dtype.kind not in "biuf":
-            raise TypeError(f"{name} must be a real array, got dtype {array.dtype}")
-        if not np.all(np.isfinite(array)):
-            raise ValueError(f"{name} must be finite, got non-finite entries")
-    return array
-
-
-def check_magnetic_field(magnetic_field, dimension: int | None = None):
-    """Validate an antisymmetric ``(d, d)`` field; raise a ``ValueError`` that says what is wrong.
-
-    ``dimension`` is the number of position coordinates (after raveling a pytree), if known.
-    Value checks (finite, ``G + Gᵀ = 0`` to ``1e-10·max|G|``) are skipped for traced values.
-    """
-    field = _check_real_finite("magnetic_field", magnetic_field, (2,))
-    shape = np.shape(magnetic_field)
-    if shape[0] != shape[1]:
-        raise ValueError(f"magnetic_field must be a square (d, d) matrix, got shape {shape}")
-    if dimension is not None and shape[0] != dimension:
-        raise ValueError(
-            f"magnetic_field must have shape ({dimension}, {dimension}) to match the "
-            f"{dimension} position coordinates, got shape {shape}"
-        )
-    if field is not None:
-        scale = max(float(np.max(np.abs(field))), np.finfo(float).tiny) if field.size else 1.0
-        asym = float(np.max(np.abs(field + field.T))) if field.size else 0.0
-        if asym > ANTISYMMETRY_TOLERANCE * scale:
-            raise ValueError(
-                "magnetic_field must be antisymmetric (G = -G^T); "
-                f"max|G + G^T| = {asym:.3g} relative to max|G| = {scale:.3g}. "
-                "Use G - G.T (or default_magnetic_field) to build one."
-            )
-
-
-def check_inverse_mass_matrix(inverse_mass_matrix, dimension: int | None = None):
-    """Diagonal (``(d,)``, entries > 0) or dense (``(d, d)``, symmetric positive definite)."""
-    imm = _check_real_finite("inverse_mass_matrix", inverse_mass_matrix, (1, 2))
-    shape = np.shape(inverse_mass_matrix)
-    if len(shape) == 2 and shape[0] != shape[1]:
-        raise ValueError(f"inverse_mass_matrix must be (d,) or square (d, d), got shape {shape}")
-    if dimension is not None and shape[0] != dimension:
-        raise ValueError(
-            f"inverse_mass_matrix must have leading size {dimension} to match the "
-            f"{dimension} position coordinates, got shape {shape}"
-        )
-    if imm is None:
-        return
-    if imm.ndim == 1 and not np.all(imm > 0):
-        raise ValueError("inverse_mass_matrix (diagonal) must have all entries > 0")
-    if imm.ndim == 2:
-        if not np.allclose(imm, imm.T, rtol=1e-10, atol=0.0):
-            raise ValueError("inverse_mass_matrix (dense) must be symmetric")
-        if imm.size and not np.all(np.linalg.eigvalsh(imm) > 0):
-            raise ValueError("inverse_mass_matrix (dense) must be positive definite")
+MagneticFlow = KineticMagneticFlow
+magnetic_flow = kinetic_magnetic_flow
+"""``magnetic_flow(G, metric, ε)``: the exact flow of ``q̇ = M⁻¹p, ṗ = G M⁻¹p`` over ``ε``
+(:func:`liesample.cotangent.kinetic_magnetic_flow`)."""
 
 
 def check_step_size(step_size):
@@ -116,6 +58,12 @@ def check_step_size(step_size):
     value = concrete_array(step_size)
     if value is not None and not (np.isfinite(value) and value > 0):
         raise ValueError(f"step_size must be finite and > 0, got {float(value)}")
+
+
+def euclidean_bundle(inverse_mass_matrix, magnetic_field, dtype=None):
+    """The cotangent bundle of ``Rᵈ`` (one ``Euclidean((d,))`` block) with ``M⁻¹`` and ``G``."""
+    d = np.shape(inverse_mass_matrix)[0]
+    return cotangent_bundle(Euclidean((d,)), inverse_mass_matrix, magnetic_field, dtype)
 
 
 # --------------------------------------------------------------------------- pytrees
@@ -176,99 +124,6 @@ def check_starts(positions, logdensity_fn, dimension=None):
             f"initial_positions[{chain}]: logdensity_fn or its gradient is not finite there; "
             "start the chain where log π is finite"
         )
-
-
-# --------------------------------------------------------------------------- momentum law
-
-
-class Metric(NamedTuple):
-    """The momentum law ``N(0, M)`` and the OU step, for a diagonal or dense ``M⁻¹``.
-
-    Dense matrices are handled through the symmetric eigendecomposition of ``M⁻¹`` (symmetric
-    positive definite, so ``eigh`` is the right tool; only the skew ``G`` must never go
-    through it).
-    """
-
-    inverse_mass_matrix: jax.Array  # (d,) or (d, d)
-    eigenvalues: jax.Array  # of M⁻¹, (d,)
-    eigenvectors: jax.Array | None  # None when diagonal
-
-    def velocity(self, momentum):
-        """``M⁻¹ p``."""
-        if self.eigenvectors is None:
-            return self.inverse_mass_matrix * momentum
-        return self.inverse_mass_matrix @ momentum
-
-    def kinetic_energy(self, momentum):
-        """``½ pᵀ M⁻¹ p``."""
-        return 0.5 * jnp.dot(momentum, self.velocity(momentum))
-
-    def _from_eigenbasis(self, x):
-        return x if self.eigenvectors is None else self.eigenvectors @ x
-
-    def _to_eigenbasis(self, x):
-        return x if self.eigenvectors is None else self.eigenvectors.T @ x
-
-    def sample_momentum(self, rng_key, dtype):
-        """A draw of ``N(0, M)``: ``U (ξ / √λ)`` with ``M⁻¹ = U diag(λ) Uᵀ``."""
-        z = jax.random.normal(rng_key, self.eigenvalues.shape, dtype)
-        return self._from_eigenbasis(z / jnp.sqrt(self.eigenvalues))
-
-    def ornstein_uhlenbeck(self, rng_key, momentum, friction, time):
-        """Exact solution of ``dp = −θ M⁻¹ p dt + √(2θ) dW`` over ``time`` (law ``N(0, M)`` kept).
-
-        In the eigenbasis of ``M⁻¹`` each coordinate is a scalar OU process with rate ``θλ``:
-        ``p ← e^{−θλt} p + √((1 − e^{−2θλt})/λ) ξ``.
-        """
-        decay = jnp.exp(-friction * time * self.eigenvalues)
-        scale = jnp.sqrt(-jnp.expm1(-2.0 * friction * time * self.eigenvalues) / self.eigenvalues)
-        z = jax.random.normal(rng_key, self.eigenvalues.shape, momentum.dtype)
-        return self._from_eigenbasis(decay * self._to_eigenbasis(momentum) + scale * z)
-
-
-def make_metric(inverse_mass_matrix, dtype=None) -> Metric:
-    """:class:`Metric` from a diagonal ``(d,)`` or dense ``(d, d)`` inverse mass matrix."""
-    imm = jnp.asarray(inverse_mass_matrix, dtype=dtype)
-    if imm.ndim == 1:
-        return Metric(imm, imm, None)
-    eigenvalues, eigenvectors = jnp.linalg.eigh(0.5 * (imm + imm.T))
-    return Metric(imm, eigenvalues, eigenvectors)
-
-
-# --------------------------------------------------------------------------- exact flow
-
-
-class MagneticFlow(NamedTuple):
-    """The exact flow of ``q̇ = M⁻¹p, ṗ = G M⁻¹ p`` over one time step ``ε``.
-
-    ``p ← E p`` and ``q ← q + M⁻¹ (Φ p)`` with ``E = e^{εGM⁻¹}``, ``Φ = ε φ₁(εGM⁻¹)``,
-    ``φ₁(X) = Σ_k X^k/(k+1)!``. For ``M = I``: ``p ← e^{εG}p``, ``q ← q + (∫₀^ε e^{sG} ds) p``.
-    """
-
-    propagator: jax.Array  # E = e^{εGM⁻¹}, (d, d)
-    displacement: jax.Array  # Φ = ε φ₁(εGM⁻¹), (d, d)
-
-    def __call__(self, metric: Metric, position, momentum):
-        new_position = position + metric.velocity(self.displacement @ momentum)
-        return new_position, self.propagator @ momentum
-
-
-def magnetic_flow(magnetic_field, metric: Metric, time) -> MagneticFlow:
-    """Exact kinetic + magnetic flow over ``time`` from one ``expm`` of a ``2d × 2d`` matrix.
-
-    With ``B = GM⁻¹``: ``expm([[tB, tI], [0, 0]]) = [[e^{tB}, t φ₁(tB)], [0, I]]``. Derivation
-    (MATH.md §3 with a mass matrix): ``ṗ = GM⁻¹p`` gives ``p(t) = e^{tB} p``, and
-    ``q̇ = M⁻¹p(t)`` integrates to ``q(t) = q + M⁻¹ ∫₀^t e^{sB} ds p = q + M⁻¹ t φ₁(tB) p``.
-    The kinetic energy is conserved: ``d/dt ½pᵀM⁻¹p = pᵀM⁻¹GM⁻¹p = 0`` (``G`` antisymmetric),
-    and ``E`` is orthogonal when ``M = I``. Valid for singular ``G`` (``G = 0`` gives
-    ``E = I``, ``Φ = tI``, the drift of velocity Verlet).
-    """
-    field = jnp.asarray(magnetic_field)
-    if metric.eigenvectors is None:
-        b = field * metric.inverse_mass_matrix[None, :]  # G diag(m⁻¹)
-    else:
-        b = field @ metric.inverse_mass_matrix
-    return MagneticFlow(*kinetic_magnetic_exponential(b, time))
 
 
 # --------------------------------------------------------------------------- default field

@@ -1,14 +1,16 @@
 """Metropolis-adjusted magnetic HMC (Tripuraneni et al. 2017) for any ``logdensity_fn``.
 
 A BlackJAX-shaped module (``MagneticHMCState``/``MagneticHMCInfo``, ``init``, ``build_kernel``,
-``as_top_level_api``). The extended target is ``π(q) · N(p; 0, M) · ½`` over ``(q, p, s)``,
-``s = ±1`` the sign of the field. One transition (MATH.md §3):
+``as_top_level_api``): geometric HMC (:mod:`liesample.samplers.geometric_hmc`) on
+``spaces.Euclidean((d,))``, the position raveled with ``ravel_pytree``, with the magnetic field.
+The extended target is ``π(q) · N(p; 0, M) · ½`` over ``(q, p, s)``, ``s = ±1`` the sign of the
+field. One transition (MATH.md §3):
 
 1. momentum refreshment ``p ← α p + √(1 − α²) ξ``, ``ξ ~ N(0, M)`` (``α`` =
    ``momentum_persistence``; ``α = 0``, the default, is full refreshment as in ``blackjax.hmc``);
 2. ``L`` magnetic leapfrog steps: half kick ``p += ε/2 ∇log π(q)``, the *exact* kinetic+magnetic
-   flow of ``q̇ = M⁻¹p, ṗ = sG M⁻¹p`` over ``ε`` (:func:`liesample.samplers.magnetic.magnetic_flow`,
-   one ``expm`` per transition, valid for singular ``G``), half kick. Each piece preserves
+   flow of ``q̇ = M⁻¹p, ṗ = sG M⁻¹p`` over ``ε`` (:func:`liesample.cotangent.kinetic_magnetic_flow`,
+   computed once per sign, valid for singular ``G``), half kick. Each piece preserves
    volume (``tr(GM⁻¹) = 0``), the composition is symmetric;
 3. the proposal ``(q, p, s) ↦ (q', −p', −s)`` is an involution (running the flow of ``−sG`` from
    ``(q', −p')`` retraces the path), so it is accepted with probability ``min(1, e^{−ΔH})``,
@@ -33,17 +35,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from liesample._validation import concrete_array
+from liesample.cotangent import LEAPFROG, PhasePoint, compose, drift, kick
 from liesample.samplers.contract import Sampler, sampling_api, setting
+from liesample.samplers.geometric import GeometricState, drift_flows
+from liesample.samplers.geometric_hmc import check_integer, check_options, transition
 from liesample.samplers.magnetic import (
     MagneticFlow,
     check_inverse_mass_matrix,
     check_magnetic_field,
     check_starts,
     check_step_size,
+    euclidean_bundle,
     initial_values,
-    magnetic_flow,
-    make_metric,
     ravel,
     ravel_logdensity,
 )
@@ -105,32 +108,22 @@ def init(position, logdensity_fn: Callable, rng_key=None) -> MagneticHMCState:
 
 
 def magnetic_leapfrog(flat_logdensity_fn, metric, flow: MagneticFlow, step_size):
-    """One magnetic leapfrog step ``(q, p, ∇log π) -> (q, p, log π, ∇log π)``.
+    """One magnetic leapfrog step ``(q, p, ∇log π) -> (q, p, log π, ∇log π)`` on flat ``q``.
 
-    Kick ``ε/2``, exact kinetic+magnetic flow ``ε``, kick ``ε/2`` (the flow replaces the drift
-    of velocity Verlet; with ``G = 0`` this *is* velocity Verlet).
+    The scheme ``B A B`` of :mod:`liesample.cotangent` with the exact kinetic+magnetic ``flow``
+    as the drift (with ``G = 0`` this *is* velocity Verlet).
     """
     value_and_grad = jax.value_and_grad(flat_logdensity_fn)
+    bundle = euclidean_bundle(metric.inverse_mass_matrix, None)
+    drift_flow = bundle.kinetic_flow(step_size)._replace(euclidean=flow)
+    effects = {"B": kick(value_and_grad, step_size), "A": drift(bundle, {1.0: drift_flow})}
+    step = compose(LEAPFROG, effects)
 
-    def step(position, momentum, grad):
-        momentum = momentum + 0.5 * step_size * grad
-        position, momentum = flow(metric, position, momentum)
-        logdensity, grad = value_and_grad(position)
-        momentum = momentum + 0.5 * step_size * grad
-        return position, momentum, logdensity, grad
+    def one(position, momentum, grad):
+        point = step(PhasePoint(position, momentum, None, grad))
+        return point.position, point.momentum, point.logdensity, point.logdensity_grad
 
-    return step
-
-
-def _check_integer(name, value):
-    array = concrete_array(value)
-    if np.ndim(value) != 0:
-        raise ValueError(f"{name} must be a scalar integer, got shape {np.shape(value)}")
-    if array is None:
-        return
-    integral = array.dtype.kind in "iu" or (array.dtype.kind == "f" and float(array).is_integer())
-    if array.dtype.kind == "b" or not integral or array < 1:
-        raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+    return one
 
 
 def _transition(
@@ -138,73 +131,47 @@ def _transition(
     state: MagneticHMCState,
     logdensity_fn,
     step_size,
-    metric,
+    bundle,
     flows,
     num_integration_steps,
     momentum_persistence,
     divergence_threshold,
     persistent,
 ):
-    """The transition given the flows ``(flow(+G), flow(−G))`` already computed."""
+    """Geometric HMC on the raveled position; ``flows`` from
+    :func:`liesample.samplers.geometric.drift_flows`."""
     flat_q, flat_logdensity_fn, unravel = ravel_logdensity(state.position, logdensity_fn)
-    flat_grad = ravel(state.logdensity_grad)
-    dtype = flat_q.dtype
-    sign = state.magnetic_sign
-    positive = sign > 0
-    flow = jax.tree.map(lambda a, b: jnp.where(positive, a, b), *flows)
-
-    key_momentum, key_accept = jax.random.split(rng_key)
-    xi = metric.sample_momentum(key_momentum, dtype)
-    alpha = jnp.asarray(momentum_persistence, dtype)
-    momentum = alpha * state.momentum + jnp.sqrt(1.0 - alpha**2) * xi
-
-    step = magnetic_leapfrog(flat_logdensity_fn, metric, flow, step_size)
-
-    def body(_, carry):
-        return step(*carry[:2], carry[3])
-
-    q, p, logdensity, grad = jax.lax.fori_loop(
-        0, num_integration_steps, body, (flat_q, momentum, state.logdensity, flat_grad)
+    flat_state = GeometricState(
+        flat_q, state.logdensity, ravel(state.logdensity_grad), state.momentum, state.magnetic_sign
     )
-    initial_energy = -state.logdensity + metric.kinetic_energy(momentum)
-    new_energy = -logdensity + metric.kinetic_energy(p)
-    delta = new_energy - initial_energy
-    finite = jnp.isfinite(delta) & jnp.all(jnp.isfinite(q)) & jnp.all(jnp.isfinite(grad))
-    delta = jnp.where(finite, delta, jnp.inf)
-    acceptance_rate = jnp.where(finite, jnp.minimum(1.0, jnp.exp(-delta)), 0.0)
-    is_divergent = ~finite | (delta > divergence_threshold)
-    is_accepted = jax.random.uniform(key_accept, (), dtype) < acceptance_rate
-
-    # Involution (q, p, s) -> (q', -p', -s); then, if persistent, the flip (p, s) -> (-p, -s).
-    after = -1.0 if persistent else 1.0
-    new_momentum = after * jnp.where(is_accepted, -p, momentum)
-    new_sign = after * jnp.where(is_accepted, -sign, sign)
+    new, info = transition(
+        rng_key,
+        flat_state,
+        jax.value_and_grad(flat_logdensity_fn),
+        bundle,
+        flows,
+        step_size,
+        num_integration_steps,
+        divergence_threshold,
+        momentum_persistence,
+        persistent,
+    )
     new_state = MagneticHMCState(
-        jax.tree.map(lambda new, old: jnp.where(is_accepted, new, old), unravel(q), state.position),
-        jnp.where(is_accepted, logdensity, state.logdensity),
-        jax.tree.map(
-            lambda new, old: jnp.where(is_accepted, new, old),
-            unravel(grad),
-            state.logdensity_grad,
-        ),
-        new_momentum.astype(dtype),
-        new_sign.astype(sign.dtype),
+        unravel(new.position),
+        new.logdensity,
+        unravel(new.logdensity_grad),
+        new.momentum,
+        new.magnetic_sign,
     )
     info = MagneticHMCInfo(
-        acceptance_rate,
-        is_accepted,
-        is_divergent,
-        jnp.where(finite, new_energy, jnp.inf),
-        jnp.asarray(num_integration_steps),
-        sign,
+        info.acceptance_rate,
+        info.is_accepted,
+        info.is_divergent,
+        info.energy,
+        info.num_integration_steps,
+        state.magnetic_sign,
     )
     return new_state, info
-
-
-def _flows(magnetic_field, metric, step_size):
-    return magnetic_flow(magnetic_field, metric, step_size), magnetic_flow(
-        -jnp.asarray(magnetic_field), metric, step_size
-    )
 
 
 def _check_parameters(state_or_position, step_size, inverse_mass_matrix, magnetic_field):
@@ -212,18 +179,6 @@ def _check_parameters(state_or_position, step_size, inverse_mass_matrix, magneti
     check_step_size(step_size)
     check_inverse_mass_matrix(inverse_mass_matrix, d)
     check_magnetic_field(magnetic_field, d)
-
-
-def _check_options(momentum_persistence, divergence_threshold, persistent):
-    value = concrete_array(momentum_persistence)
-    if np.ndim(momentum_persistence) != 0 or (value is not None and not 0.0 <= value < 1.0):
-        raise ValueError(
-            f"momentum_persistence must be a scalar in [0, 1), got {momentum_persistence!r}"
-        )
-    if not (np.ndim(divergence_threshold) == 0 and float(divergence_threshold) > 0):
-        raise ValueError(f"divergence_threshold must be > 0, got {divergence_threshold!r}")
-    if not isinstance(persistent, bool):
-        raise TypeError(f"persistent must be a bool, got {persistent!r}")
 
 
 def build_kernel(
@@ -246,7 +201,7 @@ def build_kernel(
             "magnetic_hmc integrates with the magnetic leapfrog only; integrator must be None "
             f"(or blackjax's velocity_verlet, which it generalises), got {integrator!r}"
         )
-    _check_options(momentum_persistence, divergence_threshold, persistent)
+    check_options(momentum_persistence, divergence_threshold, persistent)
 
     def kernel(
         rng_key,
@@ -258,19 +213,18 @@ def build_kernel(
         magnetic_field,
     ):
         _check_parameters(state.position, step_size, inverse_mass_matrix, magnetic_field)
-        _check_integer("num_integration_steps", num_integration_steps)
+        check_integer("num_integration_steps", num_integration_steps)
         dtype = ravel(state.logdensity_grad).dtype
-        metric = make_metric(inverse_mass_matrix, dtype)
-        field = jnp.asarray(magnetic_field, dtype)
+        bundle = euclidean_bundle(inverse_mass_matrix, magnetic_field, dtype)
         # One expm per transition, for the sign this trajectory uses.
-        flow = magnetic_flow(state.magnetic_sign * field, metric, step_size)
+        flows = drift_flows(bundle, step_size, LEAPFROG, precompute=False)
         return _transition(
             rng_key,
             state,
             logdensity_fn,
             step_size,
-            metric,
-            (flow, flow),
+            bundle,
+            flows,
             num_integration_steps,
             momentum_persistence,
             divergence_threshold,
@@ -324,10 +278,10 @@ def as_top_level_api(
     check_step_size(step_size)
     check_inverse_mass_matrix(inverse_mass_matrix)
     check_magnetic_field(magnetic_field, np.shape(inverse_mass_matrix)[0])
-    _check_integer("num_integration_steps", num_integration_steps)
-    _check_options(momentum_persistence, divergence_threshold, persistent)
-    metric = make_metric(inverse_mass_matrix)
-    flows = _flows(jnp.asarray(magnetic_field, metric.eigenvalues.dtype), metric, step_size)
+    check_integer("num_integration_steps", num_integration_steps)
+    check_options(momentum_persistence, divergence_threshold, persistent)
+    bundle = euclidean_bundle(inverse_mass_matrix, magnetic_field)
+    flows = drift_flows(bundle, step_size, LEAPFROG)
 
     def init_fn(position, rng_key=None):
         state = init(position, logdensity_fn, rng_key)
@@ -340,7 +294,7 @@ def as_top_level_api(
             state,
             logdensity_fn,
             step_size,
-            metric,
+            bundle,
             flows,
             num_integration_steps,
             momentum_persistence,

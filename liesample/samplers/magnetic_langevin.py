@@ -8,10 +8,12 @@ A BlackJAX-shaped module (``MagneticLangevinState``/``MagneticLangevinInfo``, ``
 
 whose invariant law is ``π(q) · N(p; 0, M)`` for every antisymmetric ``G``.
 
-**Integrator.** The symmetric Strang splitting ``B A O A B`` (BAOAB of Leimkuhler & Matthews
+**Integrator.** Unadjusted geometric Langevin (:mod:`liesample.samplers.geometric_langevin`)
+on ``spaces.Euclidean((d,))`` (the raveled position) with the field, run with the symmetric
+Strang splitting ``B A O A B`` of :mod:`liesample.cotangent` (BAOAB of Leimkuhler & Matthews
 with the drift ``A`` replaced by the exact kinetic+magnetic flow): ``B`` = half kick
 ``p += ε/2 ∇log π``, ``A`` = exact flow of ``q̇ = M⁻¹p, ṗ = GM⁻¹p`` over ``ε/2``
-(:func:`liesample.samplers.magnetic.magnetic_flow`), ``O`` = exact OU step of the friction and
+(:func:`liesample.cotangent.kinetic_magnetic_flow`), ``O`` = exact OU step of the friction and
 noise over ``ε``. Every piece is solved exactly, so the scheme is weak order 2 (its
 stationary law differs from ``π ⊗ N(0, M)`` by ``O(ε²)``); one gradient per step. On a Gaussian
 target the step is affine, and :func:`liesample.targets.gaussian.linear_step_moments` gives the
@@ -31,16 +33,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from liesample._validation import concrete_array, finite_float
+from liesample.cotangent import BAOAB
 from liesample.samplers.contract import Sampler, sampling_api, setting
+from liesample.samplers.geometric import GeometricState, drift_flows
+from liesample.samplers.geometric_langevin import check_friction, transition
 from liesample.samplers.magnetic import (
     check_inverse_mass_matrix,
     check_magnetic_field,
     check_starts,
     check_step_size,
+    euclidean_bundle,
     initial_values,
-    magnetic_flow,
-    make_metric,
     ravel,
     ravel_logdensity,
 )
@@ -87,40 +90,28 @@ def init(position, logdensity_fn: Callable, rng_key=None) -> MagneticLangevinSta
     return MagneticLangevinState(position, momentum, logdensity, grad)
 
 
-def _step(rng_key, state, logdensity_fn, step_size, metric, flow, friction):
-    """One ``B A O A B`` step given the half-step flow."""
+def _step(rng_key, state, logdensity_fn, step_size, bundle, flows, friction):
+    """One ``B A O A B`` step: unadjusted geometric Langevin on the raveled position."""
     flat_q, flat_logdensity_fn, unravel = ravel_logdensity(state.position, logdensity_fn)
-    p = state.momentum + 0.5 * step_size * ravel(state.logdensity_grad)
-    q, p = flow(metric, flat_q, p)
-    p = metric.ornstein_uhlenbeck(rng_key, p, friction, step_size)
-    q, p = flow(metric, q, p)
-    logdensity, grad = jax.value_and_grad(flat_logdensity_fn)(q)
-    p = p + 0.5 * step_size * grad
-    finite = (
-        jnp.isfinite(logdensity)
-        & jnp.all(jnp.isfinite(q))
-        & jnp.all(jnp.isfinite(p))
-        & jnp.all(jnp.isfinite(grad))
+    flat_state = GeometricState(
+        flat_q, state.logdensity, ravel(state.logdensity_grad), state.momentum
+    )
+    new, info = transition(
+        rng_key,
+        flat_state,
+        jax.value_and_grad(flat_logdensity_fn),
+        bundle,
+        flows,
+        step_size,
+        friction,
+        False,
+        jnp.inf,
+        BAOAB,
     )
     new_state = MagneticLangevinState(
-        jax.tree.map(lambda new, old: jnp.where(finite, new, old), unravel(q), state.position),
-        jnp.where(finite, p, state.momentum),
-        jnp.where(finite, logdensity, state.logdensity),
-        jax.tree.map(
-            lambda new, old: jnp.where(finite, new, old), unravel(grad), state.logdensity_grad
-        ),
+        unravel(new.position), new.momentum, new.logdensity, unravel(new.logdensity_grad)
     )
-    energy = -new_state.logdensity + metric.kinetic_energy(new_state.momentum)
-    rate = jnp.where(finite, 1.0, 0.0).astype(energy.dtype)
-    return new_state, MagneticLangevinInfo(~finite, rate, energy)
-
-
-def _check_friction(friction):
-    if np.ndim(friction) != 0:
-        raise ValueError(f"friction must be a scalar, got shape {np.shape(friction)}")
-    value = concrete_array(friction)
-    if value is not None:
-        finite_float("friction", value, positive=True)
+    return new_state, MagneticLangevinInfo(info.is_divergent, info.acceptance_rate, info.energy)
 
 
 def build_kernel():
@@ -140,12 +131,10 @@ def build_kernel():
         check_step_size(step_size)
         check_inverse_mass_matrix(inverse_mass_matrix, d)
         check_magnetic_field(magnetic_field, d)
-        _check_friction(friction)
-        metric = make_metric(inverse_mass_matrix, state.momentum.dtype)
-        flow = magnetic_flow(
-            jnp.asarray(magnetic_field, state.momentum.dtype), metric, 0.5 * step_size
-        )
-        return _step(rng_key, state, logdensity_fn, step_size, metric, flow, friction)
+        check_friction(friction)
+        bundle = euclidean_bundle(inverse_mass_matrix, magnetic_field, state.momentum.dtype)
+        flows = drift_flows(bundle, step_size, BAOAB, precompute=False)
+        return _step(rng_key, state, logdensity_fn, step_size, bundle, flows, friction)
 
     return kernel
 
@@ -177,11 +166,9 @@ def as_top_level_api(
     check_inverse_mass_matrix(inverse_mass_matrix)
     d = np.shape(inverse_mass_matrix)[0]
     check_magnetic_field(magnetic_field, d)
-    _check_friction(friction)
-    metric = make_metric(inverse_mass_matrix)
-    flow = magnetic_flow(
-        jnp.asarray(magnetic_field, metric.eigenvalues.dtype), metric, 0.5 * step_size
-    )
+    check_friction(friction)
+    bundle = euclidean_bundle(inverse_mass_matrix, magnetic_field)
+    flows = drift_flows(bundle, step_size, BAOAB)
 
     def init_fn(position, rng_key=None):
         dimension = ravel(position).shape[0]
@@ -193,7 +180,7 @@ def as_top_level_api(
         return init(position, logdensity_fn, rng_key)
 
     def step_fn(rng_key, state):
-        return _step(rng_key, state, logdensity_fn, step_size, metric, flow, friction)
+        return _step(rng_key, state, logdensity_fn, step_size, bundle, flows, friction)
 
     def check_positions(positions, **_):
         check_starts(positions, logdensity_fn, d)

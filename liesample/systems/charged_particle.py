@@ -13,7 +13,8 @@ is ``π``.
 The system runs as a simulation (:func:`charged_particle_path`, or
 :func:`charged_particle_dynamics` for a pure, vmappable step). Integrators:
 
-- ``"baoab"`` (default): Strang splitting ``B(ε/2) A(ε/2) O(ε) A(ε/2) B(ε/2)``: ``B`` the potential
+- ``"baoab"`` (default): Strang splitting ``B(ε/2) A(ε/2) O(ε) A(ε/2) B(ε/2)``, the scheme
+  :data:`liesample.cotangent.BAOAB` of the one-effect steps the samplers use: ``B`` the potential
   kick, ``A`` the kinetic + magnetic flow (exact ``e^{εG/m}`` rotation and ``φ₁`` displacement
   for a constant field; implicit midpoint, solved by fixed-point iteration, for ``G(q)``, which
   conserves ``|p|`` to the solver tolerance), ``O`` the exact Ornstein–Uhlenbeck flow of the
@@ -37,12 +38,22 @@ import numpy as np
 
 from liesample.compile import jit
 from liesample._validation import concrete_array, finite_float
+from liesample.cotangent import (
+    BAOAB,
+    PhasePoint,
+    compose,
+    cotangent_bundle,
+    drift,
+    fractions,
+    kick,
+    ornstein_uhlenbeck,
+)
 from liesample.dynamics import make_dynamics
+from liesample.spaces import Euclidean
 from liesample.structures import (
     CanonicalStructure,
     PoissonLangevinSDE,
     canonical_structure,
-    magnetic_flow,
     magnetic_structure,
     stratonovich_heun_step,
 )
@@ -296,52 +307,40 @@ class ChargedParticleDynamics:
         return step
 
     def _baoab_step(self, step_size):
-        system, scene = self.system, self.scene
-        half = 0.5 * step_size
-        structure = self.structure
-        stochastic = scene.noise or scene.dissipation
+        """``B A O A B`` from the one-effect steps of :mod:`liesample.cotangent`; the carry is
+        ``(point, converged)`` (``converged`` tracks the implicit midpoint of a ``G(q)``)."""
+        system, scene, structure = self.system, self.scene, self.structure
+        effects = {}
         if scene.hamiltonian:
-            force = jax.grad(lambda q: -system.potential(q, self.beta))
-            kinetic_flow = self._kinetic_flow(half)
-        if stochastic:
-            ornstein_uhlenbeck = self._ornstein_uhlenbeck(step_size)
+            value_and_grad = jax.value_and_grad(lambda q: -system.potential(q, self.beta))
+            effects["B"] = _carrying(kick(value_and_grad, step_size))
+            effects["A"] = self._kinetic_flow(step_size)
+        if scene.noise or scene.dissipation:
+            effects["O"] = _carrying(self._ornstein_uhlenbeck(step_size))
+        baoab = compose(BAOAB, effects)
 
         def step(rng_key, z):
             q, p = structure.split(z)
-            converged = jnp.array(True)
-            if scene.hamiltonian:
-                p = p + half * force(q)
-                q, p, ok = kinetic_flow(q, p)
-                converged = converged & ok
-            if stochastic:
-                p = ornstein_uhlenbeck(rng_key, p)
-            if scene.hamiltonian:
-                q, p, ok = kinetic_flow(q, p)
-                p = p + half * force(q)
-                converged = converged & ok
-            return jnp.concatenate([q, p]), converged
+            point, converged = baoab((PhasePoint(q, p), jnp.array(True)), rng_key)
+            return jnp.concatenate([point.position, point.momentum]), converged
 
         return step
 
-    def _kinetic_flow(self, dt):
-        """``A``: the flow of ``q̇ = p/m``, ``ṗ = G(q) p/m`` over ``dt``."""
+    def _kinetic_flow(self, step_size):
+        """``A``: the flow of ``q̇ = p/m``, ``ṗ = G(q) p/m`` (exact for a constant ``G``)."""
         structure, mass = self.structure, self.system.mass
-        if not structure.magnetic:
+        if not callable(structure.magnetic_term):
+            field = structure.magnetic_term if structure.magnetic else None
+            bundle = cotangent_bundle(
+                Euclidean((self.system.dimension,)), 1.0 / mass, field
+            )
+            flows = {f: bundle.kinetic_flow(f * step_size) for f in fractions(BAOAB, "A")}
+            return _carrying(drift(bundle, flows))
 
-            def free(q, p):
-                return q + (dt / mass) * p, p, jnp.array(True)
-
-            return free
-        if structure.constant_magnetic_term:
-            rotation, displacement = magnetic_flow(structure.magnetic_term, mass, dt)
-
-            def exact(q, p):
-                rotation_ = rotation.astype(p.dtype)
-                return q + displacement.astype(p.dtype) @ p, rotation_ @ p, jnp.array(True)
-
-            return exact
-
-        def implicit_midpoint(q, p):
+        def implicit_midpoint(carry, fraction, key):
+            del key
+            point, converged = carry
+            q, p, dt = point.position, point.momentum, fraction * step_size
             scale = 1.0 + jnp.max(jnp.abs(jnp.concatenate([q, p])))
 
             def update(q_new, p_new):
@@ -366,28 +365,34 @@ class ChargedParticleDynamics:
 
             start = (q + (dt / mass) * p, p, jnp.asarray(jnp.inf, p.dtype), 0)
             q_new, p_new, change, _ = jax.lax.while_loop(keep_going, body, start)
-            return q_new, p_new, change <= _MIDPOINT_TOLERANCE * scale
+            ok = change <= _MIDPOINT_TOLERANCE * scale
+            return PhasePoint(q_new, p_new), converged & ok
 
         return implicit_midpoint
 
-    def _ornstein_uhlenbeck(self, dt):
+    def _ornstein_uhlenbeck(self, step_size):
         """``O``: the exact flow of ``dp = −γ p dt + σ dW`` (derived dissipation + noise)."""
-        scene, sigma, gamma = self.scene, self.sde.sigma, self.friction_rate
-        n = self.system.dimension
+        scene, n = self.scene, self.system.dimension
+        rate = self.friction_rate if scene.dissipation else 0.0
+        diffusion = self.sde.sigma**2 if scene.noise else 0.0
 
-        def flow(rng_key, p):
-            if scene.dissipation:
-                decay = jnp.exp(-gamma * dt)
-                p = decay * p
-                if scene.noise:
-                    spread = sigma * jnp.sqrt(-jnp.expm1(-2.0 * gamma * dt) / (2.0 * gamma))
-            elif scene.noise:
-                spread = sigma * jnp.sqrt(dt)
-            if scene.noise:
-                p = p + spread * jax.random.normal(rng_key, (n,), p.dtype)
-            return p
+        def effect(point, fraction, key):
+            p = point.momentum
+            noise = jax.random.normal(key, (n,), p.dtype) if scene.noise else None
+            p = ornstein_uhlenbeck(p, noise, rate, diffusion, fraction * step_size)
+            return point._replace(momentum=p)
 
-        return flow
+        return effect
+
+
+def _carrying(effect):
+    """An effect on a :class:`~liesample.cotangent.PhasePoint` lifted to ``(point, converged)``."""
+
+    def lifted(carry, fraction, key):
+        point, converged = carry
+        return effect(point, fraction, key), converged
+
+    return lifted
 
 
 def _derived_friction_rate(system: ChargedParticleSystem, sde: PoissonLangevinSDE) -> float:
