@@ -41,11 +41,23 @@ import numpy as np
 from blackjax.adaptation.step_size import dual_averaging_adaptation
 from blackjax.adaptation.window_adaptation import build_schedule
 
+from jax.flatten_util import ravel_pytree
+
 from liesample import spaces
 from liesample._validation import finite_float
 from liesample.compile import jit
+from liesample.samplers.contract import Sampler, first_bad_chain
+from liesample.samplers.magnetic import default_magnetic_field
+from liesample.samplers.magnetic_hmc import magnetic_hmc
 
-__all__ = ["DEFAULT_INTEGRATION_TIME", "window_adaptation"]
+__all__ = [
+    "DEFAULT_ANGLE",
+    "DEFAULT_INTEGRATION_TIME",
+    "MagneticAdaptationInfo",
+    "jittered_magnetic_hmc",
+    "magnetic_window_adaptation",
+    "window_adaptation",
+]
 
 DEFAULT_INTEGRATION_TIME = 0.5 * math.pi
 MAX_NUM_INTEGRATION_STEPS = 1024
@@ -78,6 +90,11 @@ def _statistic(space, state):
     return jnp.concatenate(jax.tree.leaves(leaves))
 
 
+def _regularised_variance(variance, count):
+    """Stan's diagonal inverse mass from ``count`` draws: shrunk towards ``1e-3``."""
+    return (count / (count + 5.0)) * variance + 1e-3 * (5.0 / (count + 5.0))
+
+
 def _inverse_mass(space, mean, m2, count, dtype):
     """Inverse mass (pytree like ``space``) from Welford moments of :func:`_statistic`."""
     variance = m2 / jnp.maximum(count - 1, 1)
@@ -88,8 +105,8 @@ def _inverse_mass(space, mean, m2, count, dtype):
         var = variance[offset : offset + size].reshape(s.momentum_array_shape)
         mu = mean[offset : offset + size].reshape(s.momentum_array_shape)
         offset += size
-        if not s.compact:  # Stan's regularised variance
-            out.append((n / (n + 5.0)) * var + 1e-3 * (5.0 / (n + 5.0)))
+        if not s.compact:
+            out.append(_regularised_variance(var, n))
             continue
         squared = var + mu**2
         if s.mass_shape == (1,):
@@ -99,10 +116,86 @@ def _inverse_mass(space, mean, m2, count, dtype):
     return structure.unflatten(out)
 
 
+def integration_steps(step_size, integration_time):
+    """``L = ceil(T / ε)``, clipped to ``[1, MAX_NUM_INTEGRATION_STEPS]`` (traceable)."""
+    steps = jnp.ceil(integration_time / step_size)
+    return jnp.clip(steps, 1, MAX_NUM_INTEGRATION_STEPS).astype(int)
+
+
+class WarmupState(NamedTuple):
+    """Adaptation carry: dual-averaging state, current step size and inverse mass, Welford
+    moments ``(mean, m2, count)`` of :func:`_statistic` in the current slow window."""
+
+    da_state: object
+    step_size: jax.Array
+    inverse_mass: object
+    welford: tuple
+
+
+class WarmupPieces(NamedTuple):
+    """One warm-up step's bookkeeping, shared by :func:`window_adaptation` and samplers that
+    adapt inside another driver's loop (``liesample.numpyro_mcmc``)."""
+
+    init: Callable  # (sampler state, initial step size, inverse mass) -> WarmupState
+    update: Callable  # (WarmupState, new state, info, stage, window_end) -> WarmupState
+    final_step_size: Callable  # WarmupState -> the averaged step size of dual averaging
+
+
+def warmup_pieces(space, target_acceptance_rate: float, adapt_mass: bool = True) -> WarmupPieces:
+    """Dual averaging of the step size towards ``target_acceptance_rate`` and the Welford mass
+    of :func:`_inverse_mass`, one transition at a time, on Stan's schedule: ``stage`` 1 (slow
+    window) accumulates the mass statistic, ``window_end`` sets the mass and restarts dual
+    averaging from its averaged step size."""
+    da_init, da_update, da_final = dual_averaging_adaptation(target_acceptance_rate)
+
+    def init(state, initial_step_size, inverse_mass):
+        dtype = jnp.asarray(state.logdensity).dtype
+        size = _statistic(space, state).shape[0]
+        welford = (jnp.zeros(size, dtype), jnp.zeros(size, dtype), jnp.asarray(0))
+        step_size = jnp.asarray(initial_step_size, dtype)
+        return WarmupState(da_init(step_size), step_size, inverse_mass, welford)
+
+    def update(warm, state, info, stage, window_end):
+        da_state, _, inverse_mass, welford = warm
+        rate = jnp.where(jnp.isfinite(info.metropolis_rate), info.metropolis_rate, 0.0)
+        da_state = da_update(da_state, rate)
+        mean, m2, count = welford
+        slow = (stage == 1) & adapt_mass
+        x = _statistic(space, state)
+        new_count = count + 1
+        delta = x - mean
+        new_mean = mean + delta / new_count
+        new_m2 = m2 + delta * (x - new_mean)
+        welford = jax.tree.map(
+            lambda a, b: jnp.where(slow, a, b), (new_mean, new_m2, new_count), welford
+        )
+
+        def end_window(operands):
+            da_state, inverse_mass, welford = operands
+            mean, m2, count = welford
+            dtype = mean.dtype
+            inverse_mass = _inverse_mass(space, mean, m2, count, dtype)
+            da_state = da_init(da_final(da_state))
+            return da_state, inverse_mass, (jnp.zeros_like(mean), jnp.zeros_like(m2), 0 * count)
+
+        da_state, inverse_mass, welford = jax.lax.cond(
+            window_end & adapt_mass,
+            end_window,
+            lambda operands: operands,
+            (da_state, inverse_mass, welford),
+        )
+        return WarmupState(da_state, jnp.exp(da_state.log_step_size), inverse_mass, welford)
+
+    def final_step_size(warm):
+        return da_final(warm.da_state)
+
+    return WarmupPieces(init, update, final_step_size)
+
+
 def window_adaptation(
     algorithm,
     logdensity_fn: Callable,
-    space,
+    space=None,
     *,
     initial_step_size: float = 0.1,
     target_acceptance_rate: float | None = None,
@@ -135,6 +228,23 @@ def window_adaptation(
         ``friction`` (Langevin, default 1), ``inverse_mass_matrix`` (the starting mass),
         and ``build_kernel`` options (``adjusted``, ``divergence_threshold``).
     """
+    if algorithm is magnetic_hmc:
+        if space is not None:
+            raise TypeError(
+                "magnetic_hmc samples on R^d and takes no space; call "
+                "window_adaptation(liesample.magnetic_hmc, logdensity_fn, **options)"
+            )
+        if target_acceptance_rate is not None:
+            parameters["target_acceptance_rate"] = target_acceptance_rate
+        return magnetic_window_adaptation(
+            logdensity_fn,
+            initial_step_size=initial_step_size,
+            integration_time=integration_time,
+            adapt_mass=adapt_mass,
+            **parameters,
+        )
+    if space is None:
+        raise TypeError(f"window_adaptation({algorithm}, logdensity_fn, space): give the space")
     del progress_bar  # accepted for BlackJAX compatibility; the warm-up runs in one compiled loop
     spaces._spaces(space)
     finite_float("initial_step_size", initial_step_size, positive=True)
@@ -168,61 +278,33 @@ def window_adaptation(
     if unknown:
         raise TypeError(f"unknown parameters for {algorithm}: {sorted(unknown)}")
     initial_mass = parameters.pop("inverse_mass_matrix", None)
-    da_init, da_update, da_final = dual_averaging_adaptation(target)
+    pieces = warmup_pieces(space, target, adapt_mass)
 
     def num_steps_for(step_size):
         if not is_hmc:
             return jnp.asarray(1)
         if fixed_steps is not None:
             return jnp.asarray(int(fixed_steps))
-        steps = jnp.ceil(integration_time / step_size)
-        return jnp.clip(steps, 1, MAX_NUM_INTEGRATION_STEPS).astype(int)
+        return integration_steps(step_size, integration_time)
 
     def one_step(carry, xs):
-        state, da_state, step_size, inverse_mass, welford = carry
+        state, warm = carry
         key, (stage, window_end) = xs
-        steps = num_steps_for(step_size)
+        steps = num_steps_for(warm.step_size)
         extra = {"num_integration_steps": steps} if is_hmc else {}
         state, info = kernel(
             key,
             state,
             logdensity_fn,
             space,
-            step_size=step_size,
-            inverse_mass_matrix=inverse_mass,
+            step_size=warm.step_size,
+            inverse_mass_matrix=warm.inverse_mass,
             **extra,
             **parameters,
         )
-        rate = jnp.where(jnp.isfinite(info.metropolis_rate), info.metropolis_rate, 0.0)
-        da_state = da_update(da_state, rate)
-        mean, m2, count = welford
-        slow = (stage == 1) & adapt_mass
-        x = _statistic(space, state)
-        new_count = count + 1
-        delta = x - mean
-        new_mean = mean + delta / new_count
-        new_m2 = m2 + delta * (x - new_mean)
-        welford = jax.tree.map(
-            lambda a, b: jnp.where(slow, a, b), (new_mean, new_m2, new_count), welford
-        )
-
-        def end_window(operands):
-            da_state, inverse_mass, welford = operands
-            mean, m2, count = welford
-            dtype = mean.dtype
-            inverse_mass = _inverse_mass(space, mean, m2, count, dtype)
-            da_state = da_init(da_final(da_state))
-            return da_state, inverse_mass, (jnp.zeros_like(mean), jnp.zeros_like(m2), 0 * count)
-
-        da_state, inverse_mass, welford = jax.lax.cond(
-            window_end & adapt_mass,
-            end_window,
-            lambda operands: operands,
-            (da_state, inverse_mass, welford),
-        )
-        step_size = jnp.exp(da_state.log_step_size)
-        record = AdaptationInfo(state, info, step_size, steps)
-        return (state, da_state, step_size, inverse_mass, welford), record
+        warm = pieces.update(warm, state, info, stage, window_end)
+        record = AdaptationInfo(state, info, warm.step_size, steps)
+        return (state, warm), record
 
     def run(rng_key, initial_position, num_steps: int = 1000):
         """Warm up for ``num_steps`` transitions; ``((state, parameters), info)``."""
@@ -234,18 +316,16 @@ def window_adaptation(
         schedule = np.asarray(build_schedule(int(num_steps)))
         stages = jnp.asarray(schedule[:, 0])
         ends = jnp.asarray(schedule[:, 1].astype(bool))
-        size = _statistic(space, state).shape[0]
-        welford = (jnp.zeros(size, dtype), jnp.zeros(size, dtype), jnp.asarray(0))
-        da_state = da_init(jnp.asarray(initial_step_size, dtype))
-        carry = (state, da_state, jnp.asarray(initial_step_size, dtype), inverse_mass, welford)
+        carry = (state, pieces.init(state, initial_step_size, inverse_mass))
         keys = jax.random.split(rng_key, int(num_steps))
 
         @jit
         def warmup(carry, keys, stages, ends):
             return jax.lax.scan(one_step, carry, (keys, (stages, ends)))
 
-        (state, da_state, _, inverse_mass, _), info = warmup(carry, keys, stages, ends)
-        step_size = float(da_final(da_state))
+        (state, warm), info = warmup(carry, keys, stages, ends)
+        step_size = float(pieces.final_step_size(warm))
+        inverse_mass = warm.inverse_mass
         tuned = dict(parameters)
         tuned["step_size"] = step_size
         tuned["inverse_mass_matrix"] = inverse_mass
@@ -255,3 +335,379 @@ def window_adaptation(
         return (state, tuned), info
 
     return GeometricAdaptation(run)
+
+
+# --------------------------------------------------------------------------- magnetic HMC
+
+DEFAULT_ANGLE = 0.25
+CHEES_TARGET_ACCEPTANCE_RATE = 0.651
+CHEES_LEARNING_RATE = 0.025
+CHEES_BETA2 = 0.95
+
+
+class MagneticAdaptationInfo(NamedTuple):
+    """Per warm-up step, every chain: state and info after the step; the shared step size,
+    leapfrog steps (jittered), trajectory length ``T`` (before jitter) and field strength."""
+
+    state: object
+    info: object
+    step_size: jax.Array
+    num_integration_steps: jax.Array
+    trajectory_length: jax.Array
+    strength: jax.Array
+
+
+def _van_der_corput(num: int) -> np.ndarray:
+    """The base-2 Halton sequence ``1/2, 1/4, 3/4, 1/8, …`` (``num`` points in ``(0, 1)``)."""
+    index = np.arange(1, num + 1)
+    out = np.zeros(num)
+    scale = 0.5
+    while np.any(index):
+        out += scale * (index & 1)
+        index >>= 1
+        scale *= 0.5
+    return out
+
+
+def _rotation(dimension: int) -> np.ndarray:
+    """``J̃`` of :func:`default_magnetic_field`: its field for unit mass and unit strength."""
+    return np.asarray(default_magnetic_field(np.ones(dimension), 1.0))
+
+
+def _field(rotation, inverse_mass, strength):
+    """``default_magnetic_field(M⁻¹, strength)`` for a diagonal ``M⁻¹``, traceable:
+    ``G = strength · M^{1/2} J̃ M^{1/2}``, i.e. ``G_ij = strength · J̃_ij / √(m⁻¹_i m⁻¹_j)``."""
+    scale = jax.lax.rsqrt(inverse_mass)
+    return strength * rotation * scale[:, None] * scale[None, :]
+
+
+def _chees_gradient(before, after, momentum, accepted, acceptance, inverse_mass, time):
+    """Estimate of ``∂ ChEES / ∂ log T`` from a batch of chains (Hoffman, Radul & Sountsov 2021).
+
+    ``ChEES = ¼ E[(‖x' − E x‖² − ‖x − E x‖²)²]`` in the coordinates whitened by the mass
+    (``x = M^{1/2} q``), the centre estimated by the mean over chains. Its derivative along a
+    trajectory of length ``t = u T`` is ``Δ · (x' − x̄')·ẋ' · t`` with ``Δ`` the change of squared
+    distance; ``(x' − x̄')·ẋ' = (q' − q̄')·p'`` (the mass cancels, and the field does not enter:
+    ``q̇ = M⁻¹p`` with or without it). The paper weights each chain's proposal by its
+    acceptance probability; here the chain's accepted move stands in for it (a rejected move
+    contributes 0, which is the same in expectation), normalised by the summed probabilities.
+    """
+    centred_before = before - jnp.mean(before, 0)
+    centred_after = after - jnp.mean(after, 0)
+    change = jnp.sum(centred_after**2 / inverse_mass, -1) - jnp.sum(
+        centred_before**2 / inverse_mass, -1
+    )
+    rate = jnp.sum(centred_after * momentum, -1)
+    terms = jnp.where(accepted, time * change * rate, 0.0)
+    total = jnp.sum(acceptance)
+    return jnp.where(total > 0, jnp.sum(terms) / jnp.maximum(total, 1e-30), 0.0)
+
+
+def _harmonic_mean(rates):
+    """Harmonic mean of the chains' acceptance rates (0 if any is 0): one stuck chain is enough
+    to lower the step size, as in ChEES-HMC."""
+    rates = jnp.where(jnp.isfinite(rates), rates, 0.0)
+    return jnp.where(jnp.all(rates > 0), 1.0 / jnp.mean(1.0 / jnp.maximum(rates, 1e-30)), 0.0)
+
+
+def _welford_batch(welford, x):
+    """Chan et al.'s update of ``(mean, m2, count)`` with a batch ``x`` of shape ``(n, d)``."""
+    mean, m2, count = welford
+    n = x.shape[0]
+    batch_mean = jnp.mean(x, 0)
+    batch_m2 = jnp.sum((x - batch_mean) ** 2, 0)
+    total = count + n
+    delta = batch_mean - mean
+    new_mean = mean + delta * (n / total)
+    new_m2 = m2 + batch_m2 + delta**2 * (count * n / total)
+    return new_mean, new_m2, total
+
+
+def magnetic_window_adaptation(
+    logdensity_fn: Callable,
+    *,
+    angle: float = DEFAULT_ANGLE,
+    initial_step_size: float = 0.1,
+    target_acceptance_rate: float = CHEES_TARGET_ACCEPTANCE_RATE,
+    integration_time: float | None = None,
+    initial_integration_time: float = DEFAULT_INTEGRATION_TIME,
+    learning_rate: float = CHEES_LEARNING_RATE,
+    adapt_mass: bool = True,
+    divergence_threshold: float = 1000.0,
+    max_num_integration_steps: int = MAX_NUM_INTEGRATION_STEPS,
+    progress_bar: bool = False,
+) -> GeometricAdaptation:
+    """Tune ``liesample.magnetic_hmc`` on several chains at once: step size, diagonal mass, the
+    field (jointly with both) and the trajectory length (ChEES).
+
+    Also reached as ``liesample.window_adaptation(liesample.magnetic_hmc, logdensity_fn, ...)``.
+    ``.run(rng_key, initial_positions, num_steps=1000)`` takes positions with a leading chain
+    axis (``C >= 2`` chains; ChEES estimates the target's mean across them, 4 or more are
+    better) and returns ``((states, parameters), info)``: the chains' last states (leading
+    chain axis), ``parameters`` for ``liesample.magnetic_hmc(logdensity_fn, **parameters)``
+    (``step_size``, diagonal ``inverse_mass_matrix``, ``magnetic_field``,
+    ``num_integration_steps``) and :class:`MagneticAdaptationInfo` per step. The adapted
+    trajectory length ``T`` is ``info.trajectory_length[-1]``; ``num_integration_steps`` is the
+    mean of the jittered lengths, ``round(T / (2ε))``.
+
+    **Schedule.** Stan's windows (as :func:`window_adaptation`), all chains sharing one set of
+    parameters: the step size is dual-averaged towards ``target_acceptance_rate`` of the
+    harmonic mean of the chains' acceptance probabilities *with the field on*; the inverse mass
+    is the regularised variance of every chain's draws in a slow window; at every step the
+    field is ``default_magnetic_field(M⁻¹, angle / ε)`` for the current ``M⁻¹`` and ``ε``, so the
+    whitened velocity turns by ``angle`` rad per leapfrog step throughout the warm-up.
+
+    **Trajectory length (ChEES).** Each transition integrates for ``t = u T`` with ``u`` from the
+    base-2 Halton sequence (the same for every chain), ``L = ceil(t / ε)`` steps; ``log T`` is
+    moved by Adam (``β₁ = 0``, ``β₂ = 0.95``, ``learning_rate``) up the estimated gradient of
+    ChEES (:func:`_chees_gradient`). The returned ``T`` is ``exp`` of the mean of ``log T`` over
+    the last slow window and the final fast window. ``integration_time=T`` fixes ``T`` instead.
+
+    Parameters
+    ----------
+    logdensity_fn : callable
+        ``log π`` of a position (a pytree; flattened as the sampler flattens it).
+    angle : float
+        Rotation (rad) of the whitened velocity per leapfrog step; 0 is plain (ChEES-)HMC.
+    initial_step_size, target_acceptance_rate
+        Dual averaging's start and target (0.651, ChEES-HMC's, by default).
+    integration_time, initial_integration_time, learning_rate
+        Fixed ``T`` (no ChEES), or ChEES's starting ``T`` (``π/2``) and Adam's learning rate.
+    adapt_mass : bool
+        Adapt the diagonal inverse mass (else unit mass).
+    divergence_threshold : float
+        As for the sampler.
+    max_num_integration_steps : int
+        Cap on ``L`` per transition (and on ``T / ε``).
+    """
+    del progress_bar  # accepted for BlackJAX compatibility; the warm-up is one compiled loop
+    angle = finite_float("angle", angle, nonnegative=True)
+    finite_float("initial_step_size", initial_step_size, positive=True)
+    target = finite_float("target_acceptance_rate", target_acceptance_rate)
+    if not 0.0 < target < 1.0:
+        raise ValueError(f"target_acceptance_rate must be in (0, 1), got {target}")
+    if integration_time is not None:
+        integration_time = finite_float("integration_time", integration_time, positive=True)
+    initial_time = finite_float("initial_integration_time", initial_integration_time, positive=True)
+    learning_rate = finite_float("learning_rate", learning_rate, positive=True)
+    if not isinstance(adapt_mass, bool):
+        raise TypeError(f"adapt_mass must be a bool, got {adapt_mass!r}")
+    max_steps = max_num_integration_steps
+    if isinstance(max_steps, bool) or int(max_steps) != max_steps or max_steps < 1:
+        raise ValueError(f"max_num_integration_steps must be an integer >= 1, got {max_steps!r}")
+    max_steps = int(max_steps)
+    divergence_threshold = finite_float("divergence_threshold", divergence_threshold, positive=True)
+    learn = integration_time is None
+    da_init, da_update, da_final = dual_averaging_adaptation(target)
+
+    def run(rng_key, initial_positions, num_steps: int = 1000):
+        """Warm up ``C`` chains for ``num_steps`` transitions; ``((states, parameters), info)``."""
+        if isinstance(num_steps, bool) or int(num_steps) != num_steps or num_steps < 20:
+            raise ValueError(f"num_steps must be an integer >= 20, got {num_steps!r}")
+        num_steps = int(num_steps)
+        flat = _flat_starts(initial_positions, logdensity_fn)
+        num_chains, dimension = flat.shape
+        dtype = flat.dtype
+        states = jax.vmap(lambda x: magnetic_hmc.init(x, logdensity_fn))(initial_positions)
+        rotation = jnp.asarray(_rotation(dimension), dtype)
+        schedule = np.asarray(build_schedule(num_steps))
+        stages = schedule[:, 0].astype(int)
+        ends = schedule[:, 1].astype(bool)
+        slow = np.flatnonzero(stages == 1)
+        last_window = np.flatnonzero(ends[: slow[-1]])  # ends before the last slow window's
+        average_from = int(last_window[-1]) + 1 if slow.size and last_window.size else 0
+        if not slow.size:
+            average_from = num_steps // 2
+        jitter = _van_der_corput(num_steps)
+        time0 = integration_time if integration_time is not None else initial_time
+
+        def one_step(carry, xs):
+            states, da_state, log_time, adam, inverse_mass, welford = carry
+            key, u, stage, window_end, index = xs
+            step_size = jnp.exp(da_state.log_step_size)
+            strength = angle / step_size
+            field = _field(rotation, inverse_mass, strength)
+            trajectory = jnp.exp(log_time)
+            steps = jnp.clip(jnp.ceil(u * trajectory / step_size), 1, max_steps).astype(int)
+
+            # The top-level API: the flows e^{±εGM⁻¹} are computed once per step for all chains.
+            sampler = magnetic_hmc(
+                logdensity_fn,
+                step_size,
+                inverse_mass,
+                steps,
+                field,
+                divergence_threshold=divergence_threshold,
+            )
+            new_states, info = jax.vmap(sampler.step)(jax.random.split(key, num_chains), states)
+            da_state = da_update(da_state, _harmonic_mean(info.acceptance_rate))
+            before = jax.vmap(_ravel)(states.position)
+            after = jax.vmap(_ravel)(new_states.position)
+            if learn:
+                gradient = _chees_gradient(
+                    before,
+                    after,
+                    new_states.momentum,
+                    info.is_accepted,
+                    info.acceptance_rate,
+                    inverse_mass,
+                    steps * step_size,
+                )
+                t = index + 1
+                second = CHEES_BETA2 * adam + (1.0 - CHEES_BETA2) * gradient**2
+                corrected = second / (1.0 - CHEES_BETA2**t)
+                update = learning_rate * gradient / (jnp.sqrt(corrected) + 1e-8)
+                ok = jnp.isfinite(update)
+                log_time = jnp.where(ok, log_time + update, log_time)
+                adam = jnp.where(ok, second, adam)
+                cap = jnp.log(max_steps * step_size)
+                log_time = jnp.minimum(log_time, cap)
+            in_slow = (stage == 1) & adapt_mass
+            welford = jax.tree.map(
+                lambda a, b: jnp.where(in_slow, a, b), _welford_batch(welford, after), welford
+            )
+
+            def end_window(operands):
+                da_state, inverse_mass, welford = operands
+                mean, m2, count = welford
+                variance = m2 / jnp.maximum(count - 1, 1)
+                inverse_mass = _regularised_variance(variance, count.astype(dtype))
+                da_state = da_init(da_final(da_state))
+                return da_state, inverse_mass, (jnp.zeros_like(mean), jnp.zeros_like(m2), 0 * count)
+
+            da_state, inverse_mass, welford = jax.lax.cond(
+                window_end & adapt_mass,
+                end_window,
+                lambda operands: operands,
+                (da_state, inverse_mass, welford),
+            )
+            record = MagneticAdaptationInfo(
+                new_states, info, step_size, steps, trajectory, strength
+            )
+            return (new_states, da_state, log_time, adam, inverse_mass, welford), record
+
+        welford = (jnp.zeros(dimension, dtype), jnp.zeros(dimension, dtype), jnp.asarray(0))
+        carry = (
+            states,
+            da_init(jnp.asarray(initial_step_size, dtype)),
+            jnp.log(jnp.asarray(time0, dtype)),
+            jnp.zeros((), dtype),
+            jnp.ones(dimension, dtype),
+            welford,
+        )
+        xs = (
+            jax.random.split(rng_key, num_steps),
+            jnp.asarray(jitter, dtype),
+            jnp.asarray(stages),
+            jnp.asarray(ends),
+            jnp.arange(num_steps),
+        )
+
+        @jit
+        def warmup(carry, xs):
+            return jax.lax.scan(one_step, carry, xs)
+
+        (states, da_state, _, _, inverse_mass, _), info = warmup(carry, xs)
+        step_size = float(da_final(da_state))
+        times = np.asarray(info.trajectory_length)
+        trajectory = float(np.exp(np.mean(np.log(times[average_from:]))))
+        inverse_mass = np.asarray(inverse_mass)
+        if not (np.isfinite(step_size) and np.all(np.isfinite(inverse_mass))):
+            raise FloatingPointError(
+                "magnetic_window_adaptation ended with a non-finite step size or mass: the "
+                "chains diverged (check logdensity_fn and the starts)"
+            )
+        parameters = {
+            "step_size": step_size,
+            "inverse_mass_matrix": inverse_mass,
+            "num_integration_steps": int(np.clip(math.ceil(trajectory / step_size), 1, max_steps)),
+            "magnetic_field": default_magnetic_field(inverse_mass, angle / step_size),
+        }
+        info = info._replace(
+            trajectory_length=info.trajectory_length.at[-1].set(trajectory)
+        )
+        return (states, parameters), info
+
+    return GeometricAdaptation(run)
+
+
+def _ravel(tree):
+    return ravel_pytree(tree)[0]
+
+
+def _flat_starts(positions, logdensity_fn):
+    """``(C, d)`` flat starts; refuses fewer than 2 chains and non-finite ``log π`` there."""
+    leaves = jax.tree.leaves(positions)
+    if not leaves:
+        raise ValueError("initial_positions is an empty pytree")
+    sizes = {np.shape(leaf)[0] if np.ndim(leaf) else None for leaf in leaves}
+    if len(sizes) != 1 or None in sizes:
+        raise ValueError(
+            "initial_positions must have a leading chain axis of the same size on every leaf, "
+            f"got leaf shapes {[np.shape(leaf) for leaf in leaves]}"
+        )
+    (num_chains,) = sizes
+    if num_chains < 2:
+        raise ValueError(
+            f"magnetic_window_adaptation needs >= 2 chains (leading axis), got {num_chains}: "
+            "ChEES estimates the target's mean across chains"
+        )
+    flat = jax.vmap(_ravel)(positions)
+    if not jnp.issubdtype(flat.dtype, jnp.floating):
+        raise TypeError(f"initial_positions must be real floating point, got {flat.dtype}")
+    values = jax.vmap(jax.value_and_grad(logdensity_fn))(positions)
+    ok = np.asarray(jnp.isfinite(values[0]) & jnp.all(jnp.isfinite(jax.vmap(_ravel)(values[1])), -1))
+    chain = first_bad_chain(ok)
+    if chain is not None:
+        raise ValueError(
+            f"initial_positions[{chain}]: logdensity_fn or its gradient is not finite there; "
+            "start every chain where log π is finite"
+        )
+    return flat
+
+
+def jittered_magnetic_hmc(
+    logdensity_fn: Callable,
+    step_size,
+    inverse_mass_matrix,
+    num_integration_steps: int,
+    magnetic_field,
+    **options,
+) -> Sampler:
+    """``liesample.magnetic_hmc`` whose trajectory has ``L ~ Uniform{1, …, num_integration_steps}``
+    leapfrog steps, drawn afresh at every transition (the jitter ChEES tunes ``T`` for:
+    ``num_integration_steps = ceil(T / ε)`` from :func:`magnetic_window_adaptation`).
+
+    Jittering the length keeps the chain from locking onto a period of the target (a Gaussian
+    direction whose half-period divides ``Lε`` does not move under a fixed ``L``); each
+    transition is a ``magnetic_hmc`` transition, so the law is kept for every ``L``. Same
+    arguments and ``options`` as ``liesample.magnetic_hmc``; the flows ``e^{±εGM⁻¹}`` do not
+    depend on ``L`` and are computed once per compiled run.
+    """
+    base = magnetic_hmc(
+        logdensity_fn,
+        step_size,
+        inverse_mass_matrix,
+        num_integration_steps,
+        magnetic_field,
+        **options,
+    )
+
+    def step_fn(rng_key, state):
+        key_length, key_step = jax.random.split(rng_key)
+        u = jax.random.uniform(key_length, (), jnp.asarray(step_size).dtype)
+        steps = jnp.clip(jnp.ceil(u * num_integration_steps), 1, num_integration_steps)
+        sampler = magnetic_hmc(
+            logdensity_fn,
+            step_size,
+            inverse_mass_matrix,
+            steps.astype(int),
+            magnetic_field,
+            **options,
+        )
+        return sampler.step(key_step, state)
+
+    settings = dict(base.settings)
+    settings["sampler"] = "jittered_magnetic_hmc"
+    settings["max_num_integration_steps"] = settings.pop("num_integration_steps")
+    return Sampler(base.init, step_fn, settings=settings, check_positions=base.check_positions)

@@ -1,22 +1,32 @@
-"""NumPyro distributions on spheres and SO(3): ``VonMisesFisher`` and ``MatrixFisher``.
+"""NumPyro distributions on spheres and SO(3): ``VonMisesFisher``, ``Bingham``, ``MatrixFisher``.
 
 An optional integration module (NumPyro is not a dependency of the core: install it with
-``pip install numpyro``). Use these distributions' ``log_prob`` inside a ``logdensity_fn`` for
-:func:`liesample.geometric_hmc` (NumPyro's own samplers move in unconstrained ``Rᵈ`` and cannot
-stay on a sphere or a group), or their exact ``sample`` to simulate data.
+``pip install numpyro``). Use these distributions in a NumPyro model sampled by
+:class:`liesample.numpyro_mcmc.GeometricHMC` (NumPyro's own samplers move in unconstrained
+``Rᵈ`` and cannot stay on a sphere or a group), or their ``log_prob`` inside a ``logdensity_fn``
+for :func:`liesample.geometric_hmc`, or their exact ``sample`` to simulate data. Their supports
+are NumPyro's ``constraints.sphere`` (shared with ``ProjectedNormal``) and :data:`rotation`.
 
-- ``VonMisesFisher(mean_direction, concentration)`` on ``S^{d−1}``: density
+- ``VonMisesFisher(mean_direction, concentration)`` on ``S^{d−1}`` (``κ = 0``: uniform): density
   ``C_d(κ) exp(κ μ·x)`` with respect to the surface measure, ``C_d(κ) = κ^{d/2−1} /
   ((2π)^{d/2} I_{d/2−1}(κ))`` (as ``scipy.stats.vonmises_fisher``); differentiable in ``μ``
-  and ``κ`` (``log I_ν`` through SciPy's ``ive`` with its exact derivative). ``sample``: Wood's
-  (1994) rejection algorithm, exact.
+  and ``κ`` (``log I_ν`` through SciPy's ``ive`` with its exact derivative). ``sample``: exact;
+  on ``S²`` the closed-form inverse of the cosine's distribution function
+  (:func:`liesample.targets.spins.von_mises_fisher`), on other spheres Wood's (1994) rejection
+  algorithm.
+- ``Bingham(concentration, orientation=None)`` on ``S²``: density
+  ``exp(−Σ_i λ_i (v_i·x)²) / Z(λ)`` with respect to the surface measure, ``v_i`` the columns of
+  the rotation ``orientation`` (identity by default); ``Z(λ)`` is the exact 1-D quadrature of
+  :func:`liesample.targets.orbits.bingham_log_normalizer`, differentiable in ``λ`` (which may
+  be a model parameter). ``sample``: exact, by rejection from an angular central Gaussian
+  envelope (:func:`liesample.targets.orbits.sample_bingham`).
 - ``MatrixFisher(F)`` on SO(3): density ``exp(tr(FᵀR)) / c(F)`` with respect to the Haar
   probability measure; ``c(F)`` by the 1-D Bessel integral of
   :class:`liesample.targets.groups.MatrixFisher`, so ``F`` must be concrete (not a traced model
   parameter). ``sample``: exact, by rejection from the uniform law on ``S³`` in quaternions
   with the bound ``tr(FᵀR) ≤ s₁ + s₂ + s₃`` (efficient for moderate ``F`` only).
 
-Both samplers are rejection loops vmapped over draws, compiled with :func:`liesample.jit`
+The rejection samplers are loops vmapped over draws, compiled with :func:`liesample.jit`
 (XLA:CPU miscompiles small vmapped while loops otherwise; see ``liesample.compile``).
 """
 
@@ -40,9 +50,10 @@ from scipy import special
 
 from liesample.compile import jit
 from liesample.spaces import SO
-from liesample.targets import groups
+from liesample.targets import groups, orbits
+from liesample.targets.spins import von_mises_fisher
 
-__all__ = ["MatrixFisher", "VonMisesFisher", "log_bessel_iv"]
+__all__ = ["Bingham", "MatrixFisher", "VonMisesFisher", "log_bessel_iv", "rotation"]
 
 
 # --------------------------------------------------------------------------- log I_ν(κ)
@@ -120,7 +131,10 @@ def _wood_cosine(key, kappa, d):
 class VonMisesFisher(Distribution):
     """von Mises–Fisher law on the unit sphere ``S^{d−1}`` (module docstring)."""
 
-    arg_constraints = {"mean_direction": constraints.sphere, "concentration": constraints.positive}
+    arg_constraints = {
+        "mean_direction": constraints.sphere,
+        "concentration": constraints.nonnegative,
+    }
     support = constraints.sphere
 
     def __init__(self, mean_direction, concentration, *, validate_args=None):
@@ -142,10 +156,15 @@ class VonMisesFisher(Distribution):
         return self.event_shape[0]
 
     def log_normalizer(self):
-        """``log C_d(κ)`` (surface measure)."""
+        """``log C_d(κ)`` (surface measure); at ``κ = 0`` the uniform law's ``−log |S^{d−1}|``."""
         nu = self.d / 2.0 - 1.0
         kappa = self.concentration
-        return nu * jnp.log(kappa) - (self.d / 2.0) * jnp.log(2 * jnp.pi) - log_bessel_iv(nu, kappa)
+        # Below 1e-8 the series C_d(κ) = C_d(0) (1 − A κ² + …) is C_d(0) to round-off.
+        small = kappa < 1e-8
+        safe = jnp.where(small, 1.0, kappa)
+        general = nu * jnp.log(safe) - (self.d / 2.0) * jnp.log(2 * jnp.pi) - log_bessel_iv(nu, safe)
+        uniform = special.gammaln(self.d / 2.0) - np.log(2.0) - (self.d / 2.0) * np.log(np.pi)
+        return jnp.where(small, uniform, general)
 
     def log_prob(self, value):
         return self.log_normalizer() + self.concentration * jnp.sum(
@@ -161,8 +180,11 @@ class VonMisesFisher(Distribution):
 
     def sample(self, key, sample_shape=()):
         shape = tuple(sample_shape) + self.batch_shape
-        k_w, k_v = jax.random.split(key)
         kappa = jnp.broadcast_to(self.concentration, shape)
+        mean = jnp.broadcast_to(self.mean_direction, shape + (self.d,))
+        if self.d == 3:  # closed form on S²
+            return von_mises_fisher(key, mean, kappa)
+        k_w, k_v = jax.random.split(key)
         keys = jax.random.split(k_w, max(int(np.prod(shape)), 1))[: int(np.prod(shape))]
         w = jit(jax.vmap(lambda k, c: _wood_cosine(k, c, float(self.d))))(
             keys, kappa.reshape(-1)
@@ -170,7 +192,7 @@ class VonMisesFisher(Distribution):
         v = jax.random.normal(k_v, shape + (self.d - 1,), kappa.dtype)
         v = v / jnp.linalg.norm(v, axis=-1, keepdims=True)
         x = jnp.concatenate([jnp.sqrt(jnp.clip(1.0 - w**2, 0.0))[..., None] * v, w[..., None]], -1)
-        return _householder_to(jnp.broadcast_to(self.mean_direction, shape + (self.d,)), x)
+        return _householder_to(mean, x)
 
 
 # --------------------------------------------------------------------------- matrix Fisher
@@ -200,6 +222,69 @@ class _RotationConstraint(constraints.Constraint):
 
 
 rotation = _RotationConstraint()
+
+
+class Bingham(Distribution):
+    """Bingham law on ``S²``, ``∝ exp(−Σ_i λ_i (v_i·x)²)`` w.r.t. area (module docstring).
+
+    ``concentration`` (``..., 3``): ``λ``, any finite reals (only differences matter);
+    ``orientation`` (``..., 3, 3``): a rotation whose columns are the axes ``v_i`` (identity by
+    default). Antipodally symmetric: the mean is 0; :meth:`second_moment` is ``E[x xᵀ]``.
+    """
+
+    arg_constraints = {"concentration": constraints.real_vector, "orientation": rotation}
+    support = constraints.sphere
+
+    def __init__(self, concentration, orientation=None, *, validate_args=None):
+        concentration = jnp.asarray(concentration, dtype=jnp.result_type(concentration, float))
+        if concentration.ndim < 1 or concentration.shape[-1] != 3:
+            raise ValueError(
+                "concentration must have shape (..., 3) (the three λ_i of a Bingham law on "
+                f"S²), got shape {concentration.shape}"
+            )
+        if orientation is None:
+            orientation = jnp.eye(3, dtype=concentration.dtype)
+        orientation = jnp.asarray(orientation, dtype=concentration.dtype)
+        if orientation.ndim < 2 or orientation.shape[-2:] != (3, 3):
+            raise ValueError(
+                f"orientation must be a rotation matrix of shape (..., 3, 3), got shape "
+                f"{orientation.shape}"
+            )
+        batch_shape = jax.lax.broadcast_shapes(concentration.shape[:-1], orientation.shape[:-2])
+        self.concentration = jnp.broadcast_to(concentration, batch_shape + (3,))
+        self.orientation = jnp.broadcast_to(orientation, batch_shape + (3, 3))
+        super().__init__(batch_shape, (3,), validate_args=validate_args)
+
+    def log_normalizer(self):
+        """``log Z(λ)``, ``Z = ∫_{S²} exp(−Σ λ_i x_i²) dA`` (exact quadrature)."""
+        return jnp.vectorize(orbits.bingham_log_normalizer, signature="(3)->()")(
+            self.concentration
+        )
+
+    def log_prob(self, value):
+        y = jnp.einsum("...j,...ji->...i", value, self.orientation)  # y_i = v_i·x
+        return -jnp.sum(self.concentration * y * y, -1) - self.log_normalizer()
+
+    @property
+    def mean(self):
+        return jnp.zeros(self.batch_shape + (3,), self.concentration.dtype)
+
+    def second_moment(self):
+        """``E[x xᵀ] = V diag(E[y_i²]) Vᵀ`` with ``E[y_i²] = −∂ log Z/∂λ_i`` (exact)."""
+        moments = jnp.vectorize(orbits.bingham_second_moments, signature="(3)->(3)")(
+            self.concentration
+        )
+        return jnp.einsum("...ik,...k,...jk->...ij", self.orientation, moments, self.orientation)
+
+    def sample(self, key, sample_shape=()):
+        shape = tuple(sample_shape)
+        n = max(int(np.prod(shape)), 1)
+        lam = self.concentration.reshape(-1, 3)
+        keys = jax.random.split(key, lam.shape[0])
+        y = jax.vmap(lambda k, c: orbits.sample_bingham(k, c, n)[0])(keys, lam)  # (batch, n, 3)
+        y = jnp.swapaxes(y, 0, 1)[: int(np.prod(shape))]
+        y = y.reshape(shape + self.batch_shape + (3,))
+        return jnp.einsum("...ij,...j->...i", self.orientation, y)
 
 
 class MatrixFisher(Distribution):

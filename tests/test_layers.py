@@ -59,6 +59,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
         "runner / diagnostics",
         (
             "liesample.sharding",
+            "liesample.numpyro_mcmc",
             "liesample.runner",
             "liesample.diagnostics",
             "liesample.plots",

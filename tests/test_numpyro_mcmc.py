@@ -1,0 +1,183 @@
+"""liesample.numpyro_mcmc.GeometricHMC: a NumPyro MCMC kernel against exact references.
+
+(a) vMF data with a mean direction on S² and a LogNormal concentration (an Euclidean site in
+unconstrained coordinates, so the log-Jacobian matters): the exact posterior by quadrature over
+log κ; (b) a matrix Fisher prior on SO(3): exact E[R]; (c) a Bingham prior on S²: exact E[x xᵀ].
+Tolerances: 5 MCSE (ArviZ, from the chains); fixed keys. Then the refusals.
+"""
+
+import io
+from contextlib import redirect_stdout
+
+import arviz_stats
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.stats import vonmises_fisher
+
+numpyro = pytest.importorskip("numpyro")
+import numpyro.distributions as dist  # noqa: E402
+from numpyro.distributions import constraints  # noqa: E402
+from numpyro.infer import MCMC  # noqa: E402
+
+from liesample.numpyro import Bingham, MatrixFisher, VonMisesFisher  # noqa: E402
+from liesample.numpyro_mcmc import GeometricHMC  # noqa: E402
+from liesample.spaces import SO  # noqa: E402
+from liesample.targets.groups import MatrixFisher as MatrixFisherReference  # noqa: E402
+from liesample.targets.groups import VonMisesFisherPosterior  # noqa: E402
+
+PRIOR_MEAN, PRIOR_SD = 1.0, 1.5
+
+
+def _within(draws, exact, name, z=5.0):
+    """``draws`` (chain, draw): the mean within ``z`` MCSE of ``exact``, chains mixed."""
+    mcse = float(arviz_stats.mcse(np.asarray(draws), method="mean"))
+    assert float(arviz_stats.rhat(np.asarray(draws))) < 1.05, name
+    assert abs(float(np.mean(draws)) - exact) < z * mcse, (name, float(np.mean(draws)), exact, mcse)
+
+
+def vmf_model(x):
+    mu = numpyro.sample("mu", VonMisesFisher(jnp.array([0.0, 0.0, 1.0]), 0.0))  # uniform
+    kappa = numpyro.sample("kappa", dist.LogNormal(PRIOR_MEAN, PRIOR_SD))
+    numpyro.deterministic("log_kappa", jnp.log(kappa))
+    with numpyro.plate("data", x.shape[0]):
+        numpyro.sample("x", VonMisesFisher(mu, kappa), obs=x)
+
+
+def test_vmf_posterior_matches_quadrature_and_arviz_reads_the_run():
+    data = vonmises_fisher([1 / 3, 2 / 3, 2 / 3], 8.0).rvs(40, random_state=np.random.default_rng(0))
+    exact = VonMisesFisherPosterior(data, prior_mean=PRIOR_MEAN, prior_sd=PRIOR_SD).expectations()
+    mcmc = MCMC(
+        GeometricHMC(vmf_model),
+        num_warmup=200,
+        num_samples=300,
+        num_chains=4,
+        chain_method="vectorized",
+        progress_bar=False,
+    )
+    mcmc.run(jax.random.key(0), jnp.asarray(data), extra_fields=("accept_prob", "step_size"))
+    samples = mcmc.get_samples(group_by_chain=True)
+    assert samples["mu"].shape == (4, 300, 3) and samples["kappa"].shape == (4, 300)
+    assert np.allclose(np.linalg.norm(samples["mu"], axis=-1), 1.0, atol=1e-12)
+    assert np.allclose(samples["log_kappa"], np.log(samples["kappa"]))
+    for i in range(3):
+        _within(samples["mu"][..., i], exact["direction"][i], f"mu[{i}]")
+    _within(samples["log_kappa"], exact["log_kappa"], "log_kappa")
+
+    extra = mcmc.get_extra_fields(group_by_chain=True)
+    assert not np.any(extra["diverging"])
+    assert 0.6 < float(np.mean(extra["accept_prob"])) < 0.97
+    assert np.all(np.ptp(np.asarray(extra["step_size"]), axis=1) == 0.0)  # fixed after warm-up
+    out = io.StringIO()
+    with redirect_stdout(out):
+        mcmc.print_summary()
+    assert "mu[0]" in out.getvalue() and "Number of divergences: 0" in out.getvalue()
+
+    import arviz
+
+    tree = arviz.from_numpyro(mcmc)
+    assert tree.posterior["mu"].shape == (4, 300, 3)
+    assert {"diverging", "acceptance_rate", "step_size"} <= set(tree.sample_stats.data_vars)
+    assert tree.log_likelihood["x"].shape == (4, 300, 40)
+    assert tree.observed_data["x"].shape == (40, 3)
+
+
+def rotation_and_axis_model():
+    numpyro.sample("R", MatrixFisher(F))
+    numpyro.sample("axis", Bingham(LAM, ORIENTATION))
+
+
+F = np.diag([2.0, 1.0, -0.5]) @ np.asarray(SO(3).uniform(jax.random.key(7)))
+LAM = np.array([0.0, 2.0, 6.0])
+ORIENTATION = np.asarray(SO(3).uniform(jax.random.key(8)))
+
+
+def test_prior_only_matrix_fisher_and_bingham_match_exact_moments():
+    mcmc = MCMC(
+        GeometricHMC(rotation_and_axis_model),
+        num_warmup=200,
+        num_samples=400,
+        num_chains=4,
+        chain_method="vectorized",
+        progress_bar=False,
+    )
+    mcmc.run(jax.random.key(1))
+    samples = mcmc.get_samples(group_by_chain=True)
+    R, x = np.asarray(samples["R"]), np.asarray(samples["axis"])
+    assert np.allclose(np.swapaxes(R, -1, -2) @ R, np.eye(3), atol=1e-10)
+    mean = MatrixFisherReference(F).mean()  # exact E[R]
+    for i in range(3):
+        for j in range(3):
+            _within(R[..., i, j], mean[i, j], f"R[{i},{j}]")
+    second = np.asarray(Bingham(LAM, ORIENTATION).second_moment())  # exact E[x xᵀ]
+    for i in range(3):
+        for j in range(i, 3):
+            _within(x[..., i] * x[..., j], second[i, j], f"xx[{i},{j}]")
+
+
+# ------------------------------------------------------------------ refusals
+
+
+def _init(model, *args, **kwargs):
+    GeometricHMC(model, **kwargs).init(jax.random.key(0), 10, None, args, {})
+
+
+def test_a_discrete_site_is_refused_by_name():
+    def model():
+        numpyro.sample("mu", VonMisesFisher(jnp.array([0.0, 0.0, 1.0]), 1.0))
+        numpyro.sample("count", dist.Poisson(3.0))
+
+    with pytest.raises(ValueError, match="site 'count' has the discrete support"):
+        _init(model)
+
+
+class _Stiefel(constraints.Constraint):
+    """Orthonormal 3×2 frames: a manifold support with no space and no bijection to Rᵈ."""
+
+    event_dim = 2
+
+    def __call__(self, x):
+        return jnp.all(jnp.abs(jnp.swapaxes(x, -1, -2) @ x - jnp.eye(2)) < 1e-6, (-2, -1))
+
+
+class _Frame(dist.Distribution):
+    support = _Stiefel()
+
+    def __init__(self):
+        super().__init__((), (3, 2))
+
+    def sample(self, key, sample_shape=()):
+        return jnp.broadcast_to(jnp.eye(3)[:, :2], tuple(sample_shape) + (3, 2))
+
+    def log_prob(self, value):
+        return jnp.zeros(jnp.shape(value)[:-2])
+
+
+def test_an_unknown_support_is_refused_with_what_is_supported():
+    def model():
+        numpyro.sample("frame", _Frame())
+
+    with pytest.raises(ValueError, match=r"site 'frame' has the support .*cannot handle; suppo"):
+        _init(model)
+
+
+def test_bad_settings_and_starts_are_refused():
+    def model():
+        numpyro.sample("mu", VonMisesFisher(jnp.array([0.0, 0.0, 1.0]), 1.0))
+
+    with pytest.raises(TypeError, match="model must be a NumPyro model"):
+        GeometricHMC(None)
+    with pytest.raises(ValueError, match="step_size"):
+        GeometricHMC(model, step_size=-1.0)
+    with pytest.raises(ValueError, match="not both"):
+        GeometricHMC(model, num_integration_steps=4, integration_time=1.0)
+    with pytest.raises(ValueError, match=r"target_accept_prob must be in \(0, 1\)"):
+        GeometricHMC(model, target_accept_prob=1.5)
+    kernel = GeometricHMC(model)
+    with pytest.raises(ValueError, match=r"init_params\['mu'\] is off Sphere"):
+        kernel.init(jax.random.key(0), 10, {"mu": jnp.array([0.0, 0.0, 2.0])}, (), {})
+    with pytest.raises(ValueError, match="init_params must be a dict with the latent sites"):
+        kernel.init(jax.random.key(0), 10, {"nu": jnp.array([0.0, 0.0, 1.0])}, (), {})
+    with pytest.raises(ValueError, match="no latent sample sites"):
+        _init(lambda: numpyro.sample("y", dist.Normal(), obs=1.0))
