@@ -70,6 +70,7 @@ from liesample.adaptation import (
     integration_steps,
     warmup_pieces,
 )
+from liesample.compile import jit
 from liesample.numpyro import rotation
 from liesample.samplers.geometric_hmc import geometric_hmc
 
@@ -136,6 +137,18 @@ def _site_space(name, site):
         ) from None
     shape = jnp.shape(transform.inv(value))
     return _Site(spaces.Euclidean(shape), transform)
+
+
+def _feasible_value(site):
+    """A point of a latent site's support of the right shape, or ``None`` (then it is drawn)."""
+    if site["type"] != "sample" or site["is_observed"] or site["value"] is not None:
+        return None
+    fn = site["fn"]
+    shape = fn.shape(site["kwargs"].get("sample_shape", ()))
+    try:
+        return fn.support.feasible_like(jnp.zeros(shape))
+    except (NotImplementedError, AttributeError):
+        return None
 
 
 def _is_manifold(support) -> bool:
@@ -276,8 +289,11 @@ class GeometricHMC(MCMCKernel):
 
     # ------------------------------------------------------------------ the model
     def _setup(self, rng_key, model_args, model_kwargs):
-        seeded = numpyro.handlers.seed(self._model, rng_key)
-        trace = numpyro.handlers.trace(seeded).get_trace(*model_args, **model_kwargs)
+        # A feasible value per latent site (no sampling, so nothing is compiled for it).
+        model = numpyro.handlers.substitute(
+            numpyro.handlers.seed(self._model, rng_key), substitute_fn=_feasible_value
+        )
+        trace = numpyro.handlers.trace(model).get_trace(*model_args, **model_kwargs)
         sites = {}
         for name, site in trace.items():
             if site["type"] == "sample" and not site["is_observed"]:
@@ -342,10 +358,10 @@ class GeometricHMC(MCMCKernel):
             return self._state(jnp.asarray(0), inner, key, dtype=inner.logdensity.dtype)
 
         if batched:
-            state = jax.vmap(init_one)(rng_key, init_params)
+            state = jit(jax.vmap(init_one))(rng_key, init_params)
             self._sample_fn = jax.vmap(self._sample_one, in_axes=(0, None, None))
         else:
-            state = init_one(rng_key, init_params)
+            state = jit(init_one)(rng_key, init_params)
             self._sample_fn = self._sample_one
         energy = concrete_array(state.potential_energy)
         bad = np.zeros(1, bool) if energy is None else ~np.isfinite(np.atleast_1d(energy))

@@ -76,7 +76,7 @@ def test_vmf_posterior_matches_quadrature_and_arviz_reads_the_run():
 
     import arviz
 
-    tree = arviz.from_numpyro(mcmc)
+    tree = arviz.from_numpyro(mcmc, log_likelihood=True)
     assert tree.posterior["mu"].shape == (4, 300, 3)
     assert {"diverging", "acceptance_rate", "step_size"} <= set(tree.sample_stats.data_vars)
     assert tree.log_likelihood["x"].shape == (4, 300, 40)
