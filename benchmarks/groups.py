@@ -80,7 +80,7 @@ FULL = {
     "warmup": 300,
     "burn_in": 100,
     "chains": 8,
-    "draws": 2000,
+    "draws": 5000,  # long enough that the timed call is not lost in the noise of a shared CPU
     "mici_chains": 2,
     "mici_draws": 300,
     # The matrix Fisher rejection sampler proposes from Haar (acceptance ≈ 3%): fewer draws.
@@ -89,12 +89,12 @@ FULL = {
 }
 QUICK = {
     **FULL,
-    "warmup": 100,
+    "warmup": 60,
     "burn_in": 20,
     "chains": 4,
-    "draws": 300,
-    "mici_chains": 2,
-    "mici_draws": 60,
+    "draws": 200,
+    "mici_chains": 1,
+    "mici_draws": 50,
     "iid_draws": {"matrix_fisher": 2_000, "vmf_product": 20_000},
     "langevin": False,
 }
@@ -105,6 +105,20 @@ SAMPLERS = {
     "geometric_langevin": "liesample adjusted geometric Langevin",
     "mici": "mici constrained HMC (dynamic multinomial)",
     "nuts": "BlackJAX NUTS (unconstrained)",
+}
+COLORS = {
+    "iid": "0.55",
+    "geometric_hmc": "C0",
+    "geometric_langevin": "C9",
+    "mici": "C2",
+    "nuts": "C3",
+}
+IID_NOTES = {
+    "matrix_fisher": (
+        "its exact sampler (`liesample.numpyro.MatrixFisher.sample`) proposes from Haar measure "
+        "and accepts ≈ 3% of proposals, and a vmapped rejection loop runs until its slowest "
+        "lane accepts"
+    ),
 }
 OURS = ("geometric_hmc", "geometric_langevin")
 PEERS = ("mici", "nuts")
@@ -624,7 +638,7 @@ def _plot(results, out_dir):
     import matplotlib.pyplot as plt
 
     keys = [k for k in SAMPLERS if any(r["sampler"] == k for t in results for r in t["rows"])]
-    fig, ax = plt.subplots(figsize=(8, 4.2))
+    fig, ax = plt.subplots(figsize=(8, 5))
     width = 0.8 / len(keys)
     for i, key in enumerate(keys):
         values, hatch = [], []
@@ -634,7 +648,7 @@ def _plot(results, out_dir):
             values.append(v if np.isfinite(v) else 0.0)
             hatch.append(bool(row) and not row["matched"])
         x = np.arange(len(results)) + (i - (len(keys) - 1) / 2) * width
-        bars = ax.bar(x, values, width, label=SAMPLERS[key], color=f"C{i}")
+        bars = ax.bar(x, values, width, label=SAMPLERS[key], color=COLORS[key])
         for bar, unmatched in zip(bars, hatch, strict=True):
             if unmatched:
                 bar.set_hatch("//")
@@ -643,7 +657,7 @@ def _plot(results, out_dir):
     ax.set_yscale("log")
     ax.set_ylabel("min ESS per second (sampling only)")
     ax.set_title("Lie groups and spheres: ESS/s at matched accuracy (hatched: not matched)")
-    ax.legend(fontsize=7, loc="upper right")
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2)
     fig.tight_layout()
     fig.savefig(out_dir / f"{NAME}.png", dpi=110)
     plt.close(fig)
@@ -718,8 +732,13 @@ def report(out_dir: Path, md_dir: Path) -> str:
                 f"Best liesample sampler ({ratios['best_liesample']}) over the best peer "
                 f"({ratios['best_peer']}) in ESS/s: "
                 f"{_fmt(ratios['best_liesample_over_best_peer'], 3)}× (target ≥ 3×: "
-                f"**{verdict}**); over the exact i.i.d. sampler, the ceiling: "
-                f"{_fmt(ratios['best_liesample_over_iid'], 3)}×."
+                f"**{verdict}**); over exact i.i.d. draws: "
+                f"{_fmt(ratios['best_liesample_over_iid'], 3)}×"
+                + (
+                    f" (not a ceiling here: {IID_NOTES[t['name']]})."
+                    if ratios["best_liesample_over_iid"] > 1 and t["name"] in IID_NOTES
+                    else " (the ceiling)."
+                )
             ),
             "",
         ]
