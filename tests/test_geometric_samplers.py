@@ -159,6 +159,55 @@ def test_adjusted_langevin_matches_exact_moments():
     assert_within_mcse(means, exact)
 
 
+# --------------------------------------------------------------------------- a magnetic field
+
+FIELD_X = np.array([[0.0, 2.0], [-2.0, 0.0]])  # on the two coordinates of "x"
+DENSE_X = np.array([[0.25, 0.3], [0.3, 4.0]])
+
+
+@pytest.mark.parametrize("which", ["hmc", "adjusted langevin"])
+def test_a_magnetic_field_and_a_dense_mass_on_the_euclidean_block_keep_the_exact_law(which):
+    """``G`` on R² (next to S²) changes the dynamics, not the law: exact moments within 5 MCSE."""
+    space, logdensity, observables, exact = product_target(["s2", "x"])
+    mass = {"s2": 1.0, "x": DENSE_X}
+    if which == "hmc":
+        sampler = liesample.geometric_hmc(logdensity, space, 0.3, 6, mass, FIELD_X)
+    else:
+        sampler = liesample.geometric_langevin(
+            logdensity, space, 0.3, 1.0, mass, FIELD_X, adjusted=True
+        )
+    starts = _dispersed_starts(space, jax.random.key(13))
+    means, acceptance = chain_means(sampler, jax.random.key(14), starts, 1500, observables)
+    assert 0.6 < acceptance.mean() < 1.0
+    assert_within_mcse(means, exact)
+
+
+def test_magnetic_hmc_is_geometric_hmc_on_a_euclidean_space():
+    """Key for key the same chain: ``magnetic_hmc`` is ``geometric_hmc`` on ``Euclidean((d,))``
+    with the field (dense mass, partial refreshment, the sign flips included)."""
+
+    def banana(x):
+        return -0.5 * x[0] ** 2 - 2.0 * (x[1] - x[0] ** 2) ** 2 - 0.5 * x[2] ** 2
+
+    field = np.array([[0.0, 1.0, -2.0], [-1.0, 0.0, 0.5], [2.0, -0.5, 0.0]])
+    imm = np.array([[1.0, 0.2, 0.0], [0.2, 0.5, 0.1], [0.0, 0.1, 2.0]])
+    options = {"momentum_persistence": 0.5, "divergence_threshold": 50.0}
+    magnetic = liesample.magnetic_hmc(banana, 0.3, imm, 5, field, **options)
+    geometric = liesample.geometric_hmc(banana, S.Euclidean((3,)), 0.3, 5, imm, field, **options)
+    runs = [
+        blackjax.util.run_inference_algorithm(
+            jax.random.key(15), sampler, num_steps=200, initial_position=jnp.zeros(3),
+            transform=lambda state, info: (state.position, state.magnetic_sign, info.is_accepted),
+        )[1]
+        for sampler in (magnetic, geometric)
+    ]  # fmt: skip
+    (q1, s1, a1), (q2, s2, a2) = runs
+    np.testing.assert_allclose(q1, q2, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(s1, s2)
+    np.testing.assert_array_equal(a1, a2)
+    assert 0 < np.mean(np.asarray(s1) > 0) < 1 and 0 < np.mean(a1) < 1
+
+
 # --------------------------------------------------------------------------- lattice gauge
 
 L = 4

@@ -27,6 +27,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.flatten_util import ravel_pytree
 
 from liesample import spaces
 from liesample._validation import concrete_array
@@ -35,6 +36,7 @@ from liesample.cotangent import (
     CotangentBundle,
     PhasePoint,
     compose,
+    cotangent_bundle,
     drift,
     evaluated,
     fractions,
@@ -45,11 +47,14 @@ from liesample.cotangent import (
 __all__ = [
     "GeometricInfo",
     "GeometricState",
+    "Integrator",
     "check_starts",
     "drift_flows",
     "energy",
     "hamiltonian_transition",
     "init",
+    "make_integrator",
+    "ravelled",
     "metropolis",
     "select",
     "unadjusted_transition",
@@ -201,6 +206,35 @@ def drift_flows(bundle: CotangentBundle, step_size, scheme, precompute: bool = T
     return lambda sign: select(sign > 0, plus, minus)
 
 
+class Integrator(NamedTuple):
+    """What a move needs at fixed parameters: ``value_and_grad`` (trivialised), the
+    :class:`~liesample.cotangent.CotangentBundle`, ``flows`` (:func:`drift_flows`) and the
+    step size."""
+
+    value_and_grad: Callable
+    bundle: CotangentBundle
+    flows: Callable
+    step_size: object
+
+    def effects(self, sign, friction=None):
+        """The one-effect steps ``B``, ``A`` (field sign ``sign``) and, with a friction, ``O``."""
+        bundle, step_size = self.bundle, self.step_size
+        effects = {"B": kick(self.value_and_grad, step_size), "A": drift(bundle, self.flows(sign))}
+        if friction is not None:
+            effects["O"] = refresh(bundle, step_size, friction)
+        return effects
+
+
+def make_integrator(logdensity_fn, space, step_size, inverse_mass_matrix, magnetic_field, scheme,
+                    dtype=None, precompute=True):  # fmt: skip
+    """:class:`Integrator` of a sampler on ``space``; ``precompute=False`` in kernels (traced
+    parameters)."""
+    bundle = cotangent_bundle(space, inverse_mass_matrix, magnetic_field, dtype)
+    flows = drift_flows(bundle, step_size, scheme, precompute)
+    value_and_grad = spaces.trivialised_value_and_grad(logdensity_fn, space)
+    return Integrator(value_and_grad, bundle, flows, step_size)
+
+
 def _point(state: GeometricState, momentum) -> PhasePoint:
     return PhasePoint(state.position, momentum, state.logdensity, state.logdensity_grad)
 
@@ -209,39 +243,30 @@ def hamiltonian_transition(
     rng_key,
     state: GeometricState,
     momentum,
-    value_and_grad,
-    bundle: CotangentBundle,
-    flows,
-    step_size,
+    integrator: Integrator,
     num_integration_steps,
     divergence_threshold,
     persistent: bool = True,
 ):
     """``L`` leapfrog steps from ``(state.position, momentum)``, the Metropolis test and the
-    flip; ``flows`` from :func:`drift_flows`. Returns ``(state, (is_accepted, acceptance_rate,
-    is_divergent, initial energy, proposal energy))``.
+    flip. Returns ``(state, (is_accepted, acceptance_rate, is_divergent, initial energy,
+    proposal energy))``.
 
     The involution ``(g, p, s) ↦ (g', −p', −s)`` then, if ``persistent``, the flip
     ``(p, s) ↦ (−p, −s)``: accepted ``(g', p', s)``, rejected ``(g, −p, −s)``. With
     ``persistent=False``: accepted ``(g', −p', −s)``, rejected ``(g, p, s)``.
     """
     sign = state.magnetic_sign
-    effects = {"B": kick(value_and_grad, step_size), "A": drift(bundle, flows(sign))}
-    step = compose(LEAPFROG, effects)
+    step = compose(LEAPFROG, integrator.effects(sign))
     initial = _point(state, momentum)
-
-    def body(_, point):
-        return step(point)
-
-    proposal = jax.lax.fori_loop(0, num_integration_steps, body, initial)
-    outcome = metropolis(rng_key, bundle, initial, proposal, divergence_threshold)
+    proposal = jax.lax.fori_loop(0, num_integration_steps, lambda _, point: step(point), initial)
+    outcome = metropolis(rng_key, integrator.bundle, initial, proposal, divergence_threshold)
     is_accepted = outcome[0]
-    after = -1.0 if persistent else 1.0
     negate = lambda tree: jax.tree.map(jnp.negative, tree)  # noqa: E731
     new_momentum = select(is_accepted, proposal.momentum, negate(momentum))
+    new_sign = jnp.where(is_accepted, sign, -sign)
     if not persistent:
-        new_momentum = negate(new_momentum)
-    new_sign = after * jnp.where(is_accepted, -sign, sign)
+        new_momentum, new_sign = negate(new_momentum), -new_sign
     new_state = GeometricState(
         select(is_accepted, proposal.position, state.position),
         jnp.where(is_accepted, proposal.logdensity, state.logdensity),
@@ -253,29 +278,23 @@ def hamiltonian_transition(
 
 
 def unadjusted_transition(
-    rng_key,
-    state: GeometricState,
-    value_and_grad,
-    bundle: CotangentBundle,
-    flows,
-    step_size,
-    friction,
-    scheme,
-    divergence_threshold,
+    rng_key, state: GeometricState, integrator: Integrator, friction, scheme, divergence_threshold
 ):
     """One step of ``scheme`` (``B``, ``A`` and ``O`` pieces), taken when finite; a non-finite
     step keeps the state. Returns ``(state, (is_accepted, metropolis_rate, is_divergent,
     energy of the new state))``; ``metropolis_rate`` is ``min(1, e^{−(ΔH − heat)})``, the rate
     the step's Hamiltonian pieces would be accepted at (what step-size adaptation targets)."""
-    effects = {
-        "B": kick(value_and_grad, step_size),
-        "A": drift(bundle, flows(state.magnetic_sign)),
-        "O": refresh(bundle, step_size, friction),
-    }
+    step = compose(scheme, integrator.effects(state.magnetic_sign, friction))
     initial = _point(state, state.momentum)._replace(heat=jnp.zeros_like(state.logdensity))
-    proposal = evaluated(compose(scheme, effects)(initial, rng_key), value_and_grad)
+    proposal = evaluated(step(initial, rng_key), integrator.value_and_grad)
     is_accepted, rate, is_divergent, start, final = metropolis(
-        None, bundle, initial, proposal, divergence_threshold, accept=False, heat=proposal.heat
+        None,
+        integrator.bundle,
+        initial,
+        proposal,
+        divergence_threshold,
+        accept=False,
+        heat=proposal.heat,
     )
     new_state = GeometricState(
         select(is_accepted, proposal.position, state.position),
@@ -285,6 +304,23 @@ def unadjusted_transition(
         state.magnetic_sign,
     )
     return new_state, (is_accepted, rate, is_divergent, jnp.where(is_accepted, final, start))
+
+
+def ravelled(state, logdensity_fn, integrator: Integrator, transition: Callable):
+    """Run ``transition(flat_state, integrator)`` on the raveled position of ``state`` (any
+    state with ``position``, ``logdensity``, ``logdensity_grad`` and a flat ``momentum``):
+    ``(flat new state, info, unravel)``. How the magnetic samplers run on ``Euclidean((d,))``."""
+    flat_q, unravel = ravel_pytree(state.position)
+    value_and_grad = jax.value_and_grad(lambda x: logdensity_fn(unravel(x)))
+    flat_state = GeometricState(
+        flat_q,
+        state.logdensity,
+        ravel_pytree(state.logdensity_grad)[0],
+        state.momentum,
+        getattr(state, "magnetic_sign", 1.0),
+    )
+    new, info = transition(flat_state, integrator._replace(value_and_grad=value_and_grad))
+    return new, info, unravel
 
 
 def partial_refresh(fresh, momentum, momentum_persistence):

@@ -29,18 +29,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from liesample import spaces
 from liesample._validation import concrete_array
-from liesample.cotangent import LEAPFROG, cotangent_bundle
+from liesample.cotangent import LEAPFROG
 from liesample.samplers.contract import Sampler, sampling_api, setting
 from liesample.samplers.geometric import (
     GeometricInfo,
     GeometricState,
     check_divergence_threshold,
+    Integrator,
     check_starts,
-    drift_flows,
     hamiltonian_transition,
     init,
+    make_integrator,
     partial_refresh,
 )
 from liesample.samplers.magnetic import check_step_size
@@ -74,28 +74,22 @@ def check_options(momentum_persistence, divergence_threshold, persistent):
 def transition(
     rng_key,
     state: GeometricState,
-    value_and_grad,
-    bundle,
-    flows,
-    step_size,
+    integrator: Integrator,
     num_integration_steps,
     divergence_threshold,
     momentum_persistence=0.0,
     persistent=True,
 ):
-    """One geometric HMC transition (``flows`` from
-    :func:`liesample.samplers.geometric.drift_flows`)."""
+    """One geometric HMC transition (``integrator`` from
+    :func:`liesample.samplers.geometric.make_integrator` for the leapfrog)."""
     key_momentum, key_accept = jax.random.split(rng_key)
-    fresh = bundle.sample_momentum(key_momentum, state.position)
+    fresh = integrator.bundle.sample_momentum(key_momentum, state.position)
     momentum = partial_refresh(fresh, state.momentum, momentum_persistence)
     new_state, outcome = hamiltonian_transition(
         key_accept,
         state,
         momentum,
-        value_and_grad,
-        bundle,
-        flows,
-        step_size,
+        integrator,
         num_integration_steps,
         divergence_threshold,
         persistent,
@@ -122,6 +116,7 @@ def build_kernel(
     inverse_mass_matrix=None, magnetic_field=None) -> (state, info)``; parameters may be
     traced (adaptation): the kinetic–magnetic exponential is then computed per transition."""
     check_options(momentum_persistence, divergence_threshold, persistent)
+    options = (divergence_threshold, momentum_persistence, persistent)
 
     def kernel(
         rng_key,
@@ -135,20 +130,17 @@ def build_kernel(
     ):
         check_step_size(step_size)
         check_integer("num_integration_steps", num_integration_steps)
-        dtype = jnp.asarray(state.logdensity).dtype
-        bundle = cotangent_bundle(space, inverse_mass_matrix, magnetic_field, dtype)
-        return transition(
-            rng_key,
-            state,
-            spaces.trivialised_value_and_grad(logdensity_fn, space),
-            bundle,
-            drift_flows(bundle, step_size, LEAPFROG, precompute=False),
+        integrator = make_integrator(
+            logdensity_fn,
+            space,
             step_size,
-            num_integration_steps,
-            divergence_threshold,
-            momentum_persistence,
-            persistent,
+            inverse_mass_matrix,
+            magnetic_field,
+            LEAPFROG,
+            jnp.asarray(state.logdensity).dtype,
+            precompute=False,
         )
+        return transition(rng_key, state, integrator, num_integration_steps, *options)
 
     return kernel
 
@@ -202,9 +194,10 @@ def as_top_level_api(
     check_step_size(step_size)
     check_integer("num_integration_steps", num_integration_steps)
     check_options(momentum_persistence, divergence_threshold, persistent)
-    bundle = cotangent_bundle(space, inverse_mass_matrix, magnetic_field)
-    flows = drift_flows(bundle, step_size, LEAPFROG)
-    value_and_grad = spaces.trivialised_value_and_grad(logdensity_fn, space)
+    integrator = make_integrator(
+        logdensity_fn, space, step_size, inverse_mass_matrix, magnetic_field, LEAPFROG
+    )
+    options = (divergence_threshold, momentum_persistence, persistent)
 
     settings = {
         "sampler": "geometric_hmc",
@@ -225,18 +218,7 @@ def as_top_level_api(
         return init(position, logdensity_fn, space)
 
     def step_fn(rng_key, state):
-        return transition(
-            rng_key,
-            state,
-            value_and_grad,
-            bundle,
-            flows,
-            step_size,
-            num_integration_steps,
-            divergence_threshold,
-            momentum_persistence,
-            persistent,
-        )
+        return transition(rng_key, state, integrator, num_integration_steps, *options)
 
     return Sampler(init_fn, step_fn, settings=settings, check_positions=check_starts(space))
 

@@ -30,18 +30,18 @@ from collections.abc import Callable
 import jax
 import jax.numpy as jnp
 
-from liesample import spaces
 from liesample._validation import concrete_array, finite_float
-from liesample.cotangent import LEAPFROG, OBAB, cotangent_bundle
+from liesample.cotangent import LEAPFROG, OBAB
 from liesample.samplers.contract import Sampler, sampling_api, setting
 from liesample.samplers.geometric import (
     GeometricInfo,
     GeometricState,
     check_divergence_threshold,
+    Integrator,
     check_starts,
-    drift_flows,
     hamiltonian_transition,
     init,
+    make_integrator,
     unadjusted_transition,
 )
 from liesample.samplers.magnetic import check_step_size
@@ -59,47 +59,28 @@ def check_friction(friction):
 def transition(
     rng_key,
     state: GeometricState,
-    value_and_grad,
-    bundle,
-    flows,
-    step_size,
+    integrator: Integrator,
     friction,
     adjusted,
     divergence_threshold,
     scheme=OBAB,
 ):
-    """One geometric Langevin transition (``flows`` from
-    :func:`liesample.samplers.geometric.drift_flows` for ``scheme``, or for the leapfrog when
-    ``adjusted``)."""
+    """One geometric Langevin transition (``integrator`` from
+    :func:`liesample.samplers.geometric.make_integrator` for ``scheme``, or for the leapfrog
+    when ``adjusted``)."""
     if not adjusted:
         new_state, outcome = unadjusted_transition(
-            rng_key,
-            state,
-            value_and_grad,
-            bundle,
-            flows,
-            step_size,
-            friction,
-            scheme,
-            divergence_threshold,
+            rng_key, state, integrator, friction, scheme, divergence_threshold
         )
         is_accepted, metropolis_rate, is_divergent, new_energy = outcome
         acceptance_rate = is_accepted.astype(metropolis_rate.dtype)
     else:
         key_noise, key_accept = jax.random.split(rng_key)
-        momentum = bundle.ornstein_uhlenbeck(
-            key_noise, state.position, state.momentum, friction, step_size
+        momentum = integrator.bundle.ornstein_uhlenbeck(
+            key_noise, state.position, state.momentum, friction, integrator.step_size
         )
         new_state, outcome = hamiltonian_transition(
-            key_accept,
-            state,
-            momentum,
-            value_and_grad,
-            bundle,
-            flows,
-            step_size,
-            1,
-            divergence_threshold,
+            key_accept, state, momentum, integrator, 1, divergence_threshold
         )
         is_accepted, metropolis_rate, is_divergent, initial_energy, proposal_energy = outcome
         acceptance_rate = metropolis_rate
@@ -136,19 +117,17 @@ def build_kernel(adjusted: bool = False, divergence_threshold: float = 1000.0):
     ):
         check_step_size(step_size)
         check_friction(friction)
-        dtype = jnp.asarray(state.logdensity).dtype
-        bundle = cotangent_bundle(space, inverse_mass_matrix, magnetic_field, dtype)
-        return transition(
-            rng_key,
-            state,
-            spaces.trivialised_value_and_grad(logdensity_fn, space),
-            bundle,
-            drift_flows(bundle, step_size, scheme, precompute=False),
+        integrator = make_integrator(
+            logdensity_fn,
+            space,
             step_size,
-            friction,
-            adjusted,
-            divergence_threshold,
+            inverse_mass_matrix,
+            magnetic_field,
+            scheme,
+            jnp.asarray(state.logdensity).dtype,
+            precompute=False,
         )
+        return transition(rng_key, state, integrator, friction, adjusted, divergence_threshold)
 
     return kernel
 
@@ -185,9 +164,10 @@ def as_top_level_api(
     if not isinstance(adjusted, bool):
         raise TypeError(f"adjusted must be a bool, got {adjusted!r}")
     check_divergence_threshold(divergence_threshold)
-    bundle = cotangent_bundle(space, inverse_mass_matrix, magnetic_field)
-    flows = drift_flows(bundle, step_size, LEAPFROG if adjusted else OBAB)
-    value_and_grad = spaces.trivialised_value_and_grad(logdensity_fn, space)
+    scheme = LEAPFROG if adjusted else OBAB
+    integrator = make_integrator(
+        logdensity_fn, space, step_size, inverse_mass_matrix, magnetic_field, scheme
+    )
 
     settings = {
         "sampler": "geometric_langevin",
@@ -206,17 +186,7 @@ def as_top_level_api(
         return init(position, logdensity_fn, space)
 
     def step_fn(rng_key, state):
-        return transition(
-            rng_key,
-            state,
-            value_and_grad,
-            bundle,
-            flows,
-            step_size,
-            friction,
-            adjusted,
-            divergence_threshold,
-        )
+        return transition(rng_key, state, integrator, friction, adjusted, divergence_threshold)
 
     return Sampler(init_fn, step_fn, settings=settings, check_positions=check_starts(space))
 

@@ -24,11 +24,11 @@ from liesample.cotangent import (
     KineticMagneticFlow,
     Metric,
     check_magnetic_field,
-    cotangent_bundle,
     kinetic_magnetic_flow,
     make_metric,
 )
 from liesample.samplers.contract import first_bad_chain
+from liesample.samplers.geometric import make_integrator
 from liesample.spaces import Euclidean, check_inverse_mass_matrix
 
 __all__ = [
@@ -38,11 +38,10 @@ __all__ = [
     "check_magnetic_field",
     "default_magnetic_field",
     "check_starts",
-    "euclidean_bundle",
+    "euclidean_integrator",
     "initial_values",
     "magnetic_flow",
     "make_metric",
-    "ravel_logdensity",
 ]
 
 MagneticFlow = KineticMagneticFlow
@@ -60,23 +59,20 @@ def check_step_size(step_size):
         raise ValueError(f"step_size must be finite and > 0, got {float(value)}")
 
 
-def euclidean_bundle(inverse_mass_matrix, magnetic_field, dtype=None):
-    """The cotangent bundle of ``Rᵈ`` (one ``Euclidean((d,))`` block) with ``M⁻¹`` and ``G``."""
+def euclidean_integrator(
+    step_size, inverse_mass_matrix, magnetic_field, scheme, dtype=None, precompute=True
+):
+    """The geometric samplers' :class:`~liesample.samplers.geometric.Integrator` on
+    ``Euclidean((d,))`` with ``M⁻¹`` and ``G`` (its gradient is set per move by
+    :func:`liesample.samplers.geometric.ravelled`)."""
     d = np.shape(inverse_mass_matrix)[0]
-    return cotangent_bundle(Euclidean((d,)), inverse_mass_matrix, magnetic_field, dtype)
+    return make_integrator(
+        None, Euclidean((d,)), step_size, inverse_mass_matrix, magnetic_field, scheme, dtype,
+        precompute,
+    )  # fmt: skip
 
 
 # --------------------------------------------------------------------------- pytrees
-
-
-def ravel_logdensity(position, logdensity_fn):
-    """``(flat_position, flat_logdensity_fn, unravel)`` for a pytree ``position``."""
-    flat, unravel = ravel_pytree(position)
-
-    def flat_logdensity_fn(x):
-        return logdensity_fn(unravel(x))
-
-    return flat, flat_logdensity_fn, unravel
 
 
 def ravel(tree):

@@ -37,7 +37,7 @@ import numpy as np
 
 from liesample.cotangent import LEAPFROG, PhasePoint, compose, drift, kick
 from liesample.samplers.contract import Sampler, sampling_api, setting
-from liesample.samplers.geometric import GeometricState, drift_flows
+from liesample.samplers.geometric import ravelled
 from liesample.samplers.geometric_hmc import check_integer, check_options, transition
 from liesample.samplers.magnetic import (
     MagneticFlow,
@@ -45,10 +45,9 @@ from liesample.samplers.magnetic import (
     check_magnetic_field,
     check_starts,
     check_step_size,
-    euclidean_bundle,
+    euclidean_integrator,
     initial_values,
     ravel,
-    ravel_logdensity,
 )
 
 __all__ = [
@@ -114,7 +113,7 @@ def magnetic_leapfrog(flat_logdensity_fn, metric, flow: MagneticFlow, step_size)
     as the drift (with ``G = 0`` this *is* velocity Verlet).
     """
     value_and_grad = jax.value_and_grad(flat_logdensity_fn)
-    bundle = euclidean_bundle(metric.inverse_mass_matrix, None)
+    bundle = euclidean_integrator(step_size, metric.inverse_mass_matrix, None, LEAPFROG).bundle
     drift_flow = bundle.kinetic_flow(step_size)._replace(euclidean=flow)
     effects = {"B": kick(value_and_grad, step_size), "A": drift(bundle, {1.0: drift_flow})}
     step = compose(LEAPFROG, effects)
@@ -126,36 +125,14 @@ def magnetic_leapfrog(flat_logdensity_fn, metric, flow: MagneticFlow, step_size)
     return one
 
 
-def _transition(
-    rng_key,
-    state: MagneticHMCState,
-    logdensity_fn,
-    step_size,
-    bundle,
-    flows,
-    num_integration_steps,
-    momentum_persistence,
-    divergence_threshold,
-    persistent,
-):
-    """Geometric HMC on the raveled position; ``flows`` from
-    :func:`liesample.samplers.geometric.drift_flows`."""
-    flat_q, flat_logdensity_fn, unravel = ravel_logdensity(state.position, logdensity_fn)
-    flat_state = GeometricState(
-        flat_q, state.logdensity, ravel(state.logdensity_grad), state.momentum, state.magnetic_sign
-    )
-    new, info = transition(
-        rng_key,
-        flat_state,
-        jax.value_and_grad(flat_logdensity_fn),
-        bundle,
-        flows,
-        step_size,
-        num_integration_steps,
-        divergence_threshold,
-        momentum_persistence,
-        persistent,
-    )
+def _transition(rng_key, state: MagneticHMCState, logdensity_fn, integrator, num_steps, options):
+    """Geometric HMC on the raveled position (``options``: divergence threshold, momentum
+    persistence, persistent)."""
+
+    def move(flat_state, flat_integrator):
+        return transition(rng_key, flat_state, flat_integrator, num_steps, *options)
+
+    new, info, unravel = ravelled(state, logdensity_fn, integrator, move)
     new_state = MagneticHMCState(
         unravel(new.position),
         new.logdensity,
@@ -202,6 +179,7 @@ def build_kernel(
             f"(or blackjax's velocity_verlet, which it generalises), got {integrator!r}"
         )
     check_options(momentum_persistence, divergence_threshold, persistent)
+    options = (divergence_threshold, momentum_persistence, persistent)
 
     def kernel(
         rng_key,
@@ -215,20 +193,12 @@ def build_kernel(
         _check_parameters(state.position, step_size, inverse_mass_matrix, magnetic_field)
         check_integer("num_integration_steps", num_integration_steps)
         dtype = ravel(state.logdensity_grad).dtype
-        bundle = euclidean_bundle(inverse_mass_matrix, magnetic_field, dtype)
         # One expm per transition, for the sign this trajectory uses.
-        flows = drift_flows(bundle, step_size, LEAPFROG, precompute=False)
+        integrator = euclidean_integrator(
+            step_size, inverse_mass_matrix, magnetic_field, LEAPFROG, dtype, precompute=False
+        )
         return _transition(
-            rng_key,
-            state,
-            logdensity_fn,
-            step_size,
-            bundle,
-            flows,
-            num_integration_steps,
-            momentum_persistence,
-            divergence_threshold,
-            persistent,
+            rng_key, state, logdensity_fn, integrator, num_integration_steps, options
         )
 
     return kernel
@@ -280,8 +250,8 @@ def as_top_level_api(
     check_magnetic_field(magnetic_field, np.shape(inverse_mass_matrix)[0])
     check_integer("num_integration_steps", num_integration_steps)
     check_options(momentum_persistence, divergence_threshold, persistent)
-    bundle = euclidean_bundle(inverse_mass_matrix, magnetic_field)
-    flows = drift_flows(bundle, step_size, LEAPFROG)
+    integrator = euclidean_integrator(step_size, inverse_mass_matrix, magnetic_field, LEAPFROG)
+    options = (divergence_threshold, momentum_persistence, persistent)
 
     def init_fn(position, rng_key=None):
         state = init(position, logdensity_fn, rng_key)
@@ -290,16 +260,7 @@ def as_top_level_api(
 
     def step_fn(rng_key, state):
         return _transition(
-            rng_key,
-            state,
-            logdensity_fn,
-            step_size,
-            bundle,
-            flows,
-            num_integration_steps,
-            momentum_persistence,
-            divergence_threshold,
-            persistent,
+            rng_key, state, logdensity_fn, integrator, num_integration_steps, options
         )
 
     def check_positions(positions, **_):

@@ -35,17 +35,16 @@ import numpy as np
 
 from liesample.cotangent import BAOAB
 from liesample.samplers.contract import Sampler, sampling_api, setting
-from liesample.samplers.geometric import GeometricState, drift_flows
+from liesample.samplers.geometric import ravelled
 from liesample.samplers.geometric_langevin import check_friction, transition
 from liesample.samplers.magnetic import (
     check_inverse_mass_matrix,
     check_magnetic_field,
     check_starts,
     check_step_size,
-    euclidean_bundle,
+    euclidean_integrator,
     initial_values,
     ravel,
-    ravel_logdensity,
 )
 
 __all__ = [
@@ -90,24 +89,13 @@ def init(position, logdensity_fn: Callable, rng_key=None) -> MagneticLangevinSta
     return MagneticLangevinState(position, momentum, logdensity, grad)
 
 
-def _step(rng_key, state, logdensity_fn, step_size, bundle, flows, friction):
+def _step(rng_key, state, logdensity_fn, integrator, friction):
     """One ``B A O A B`` step: unadjusted geometric Langevin on the raveled position."""
-    flat_q, flat_logdensity_fn, unravel = ravel_logdensity(state.position, logdensity_fn)
-    flat_state = GeometricState(
-        flat_q, state.logdensity, ravel(state.logdensity_grad), state.momentum
-    )
-    new, info = transition(
-        rng_key,
-        flat_state,
-        jax.value_and_grad(flat_logdensity_fn),
-        bundle,
-        flows,
-        step_size,
-        friction,
-        False,
-        jnp.inf,
-        BAOAB,
-    )
+
+    def move(flat_state, flat_integrator):
+        return transition(rng_key, flat_state, flat_integrator, friction, False, jnp.inf, BAOAB)
+
+    new, info, unravel = ravelled(state, logdensity_fn, integrator, move)
     new_state = MagneticLangevinState(
         unravel(new.position), new.momentum, new.logdensity, unravel(new.logdensity_grad)
     )
@@ -132,9 +120,10 @@ def build_kernel():
         check_inverse_mass_matrix(inverse_mass_matrix, d)
         check_magnetic_field(magnetic_field, d)
         check_friction(friction)
-        bundle = euclidean_bundle(inverse_mass_matrix, magnetic_field, state.momentum.dtype)
-        flows = drift_flows(bundle, step_size, BAOAB, precompute=False)
-        return _step(rng_key, state, logdensity_fn, step_size, bundle, flows, friction)
+        integrator = euclidean_integrator(
+            step_size, inverse_mass_matrix, magnetic_field, BAOAB, state.momentum.dtype, False
+        )
+        return _step(rng_key, state, logdensity_fn, integrator, friction)
 
     return kernel
 
@@ -167,8 +156,7 @@ def as_top_level_api(
     d = np.shape(inverse_mass_matrix)[0]
     check_magnetic_field(magnetic_field, d)
     check_friction(friction)
-    bundle = euclidean_bundle(inverse_mass_matrix, magnetic_field)
-    flows = drift_flows(bundle, step_size, BAOAB)
+    integrator = euclidean_integrator(step_size, inverse_mass_matrix, magnetic_field, BAOAB)
 
     def init_fn(position, rng_key=None):
         dimension = ravel(position).shape[0]
@@ -180,7 +168,7 @@ def as_top_level_api(
         return init(position, logdensity_fn, rng_key)
 
     def step_fn(rng_key, state):
-        return _step(rng_key, state, logdensity_fn, step_size, bundle, flows, friction)
+        return _step(rng_key, state, logdensity_fn, integrator, friction)
 
     def check_positions(positions, **_):
         check_starts(positions, logdensity_fn, d)
