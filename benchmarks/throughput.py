@@ -8,20 +8,37 @@ every ``n``. Compilation is excluded; calibration calls warm the executable up a
 so that one call lasts about ``target_seconds``; the reported time is the best of ``repeats``.
 Step ``k`` of chain ``c`` uses the key ``fold_in(key_c, k)`` as ``liesample.runner`` does, so the
 cost of drawing the noise is included (and is absent where the scene has no noise).
+
+**Library against a hand-fused step** (:func:`run_fused_comparison`; alone:
+``benchmarks/throughput.py --fused [--quick]``, writes ``results/throughput_fused.json``). The
+Metropolis-adjusted orbit step of the rigid body and of the heavy top, in one run: the library
+(``liesample.adjusted_lie_poisson`` driven by ``liesample.samplers.stepping.run_steps``) with its
+noise drawn per step (``fold_in`` + draw) and in blocks, and a hand-written loop of the same
+scheme (closed-form gradients, brackets and coadjoint moves in plain ``jnp``, the same noise
+blocks). The fused loop is checked to give the library's chain (same noise, max difference
+recorded); the ratio fused ÷ library is the cost of the library's abstractions.
 """
 
 from __future__ import annotations
 
+import argparse
+import sys
 import time
 from pathlib import Path
 
+if __name__ == "__main__":
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
 import jax
+import jax.numpy as jnp
 import numpy as np
 from matplotlib.figure import Figure
 
 from benchmarks import common
 
 import liesample
+from liesample.samplers.stepping import run_steps
+from liesample.systems import heavy_top
 
 RNG_ONLY = "RNG only (fold_in + 3 normals)"
 
@@ -162,6 +179,272 @@ def sanity_check_iid(n=200_000, seed=0) -> dict:
         "variance": m2.var(0, ddof=1),
         "radius_error": float(np.max(np.abs(np.linalg.norm(draws, axis=1) - common.RADIUS))),
     }
+
+
+# --------------------------------------------------------------------------- hand-fused step
+
+FUSED_NAME = "throughput_fused"
+FUSED_FULL = {"chains": (1, 1000), "block_size": 32, "target_seconds": 0.6, "repeats": 5}
+FUSED_QUICK = {"chains": (1000,), "block_size": 32, "target_seconds": 0.15, "repeats": 3}
+HEAVY_TOP = {"inertia": (1.0, 1.5, 2.0), "mgl": 1.0, "chi": (0.0, 0.0, 1.0)}
+FUSED_SETTINGS = {  # (β, step) of the adjusted sampler per system: acceptance ≈ 0.5–0.7
+    "rigid body": (common.BETA, 1.0),
+    "heavy top": (1.0, 0.3),
+}
+
+
+def _cross(a, b):
+    return jnp.stack(
+        [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ]
+    )
+
+
+def _rotate(axis, x):
+    """``Ad*_{exp a} x`` on so(3)*: ``x − (sin θ/θ) a×x + ((1−cos θ)/θ²) a×(a×x)``, θ = |a|."""
+    theta = jnp.sqrt(jnp.sum(axis * axis))
+    a_x = _cross(axis, x)
+    return x - jnp.sin(theta) / theta * a_x + (1 - jnp.cos(theta)) / theta**2 * _cross(axis, a_x)
+
+
+def _fused_rigid_body(inertia):
+    """``(energy_and_brackets(μ), move(c, μ))`` for the rigid body, by hand: ∇h = μ/I,
+    ``{h, ĥ_i} = −(μ × ∇h)_i``, the move is the rotation of :func:`_rotate`."""
+    inverse = 1.0 / np.asarray(inertia)
+
+    def energy_and_brackets(mu):
+        omega = inverse * mu
+        return 0.5 * jnp.sum(omega * mu), -_cross(mu, omega)
+
+    return energy_and_brackets, _rotate
+
+
+def _fused_heavy_top(inertia, mgl, chi):
+    """The same for the heavy top on se(3)*: ∇h = (Π/I, mgl χ), brackets
+    ``−ad*_{∇h} μ = −(Π×Ω + Γ×g, Γ×Ω)``, and the se(3)* coadjoint move in closed form."""
+    inverse = 1.0 / np.asarray(inertia)
+    g = mgl * np.asarray(chi)
+
+    def energy_and_brackets(mu):
+        pi, gamma = mu[:3], mu[3:]
+        omega = inverse * pi
+        energy = 0.5 * jnp.sum(omega * pi) + jnp.sum(g * gamma)
+        brackets = jnp.concatenate([_cross(pi, omega) + _cross(gamma, g), _cross(gamma, omega)])
+        return energy, -brackets
+
+    def move(c, mu):
+        a, v, pi, gamma = c[:3], c[3:], mu[:3], mu[3:]
+        theta_sq = jnp.sum(a * a)
+        theta = jnp.sqrt(theta_sq)
+        a_v = _cross(a, v)
+        w = v - (1 - jnp.cos(theta)) / theta_sq * a_v
+        w = w + (theta - jnp.sin(theta)) / (theta * theta_sq) * _cross(a, a_v)
+        gamma_new = _rotate(a, gamma)
+        return jnp.concatenate([_rotate(a, pi) + _cross(gamma_new, w), gamma_new])
+
+    return energy_and_brackets, move
+
+
+def _fused_loop(energy_and_brackets, move, num_noises, beta, step_size, block_size):
+    """``(positions, keys, n) -> positions``: ``n`` adjusted steps per chain, written by hand
+    (sigma = 1), the noise in blocks ``normal(fold_in(key, b), (B, m + 1))`` as the library."""
+    theta = 0.5 * beta
+    drift, scale = theta * step_size, np.sqrt(step_size)
+
+    def step(row, carry):
+        mu, energy, brackets = carry
+        normals, accept = row[:num_noises], row[num_noises]
+        c = -drift * brackets + scale * normals
+        proposal = move(c, mu)
+        new_energy, new_brackets = energy_and_brackets(proposal)
+        reverse = (-c + drift * new_brackets) / scale
+        log_ratio = (
+            -beta * (new_energy - energy) - 0.5 * jnp.sum(reverse**2) + 0.5 * jnp.sum(normals**2)
+        )
+        ok = jnp.all(jnp.isfinite(proposal)) & jnp.isfinite(log_ratio)
+        accepted = ok & (jax.scipy.special.log_ndtr(accept) < log_ratio)
+        return (
+            jnp.where(accepted, proposal, mu),
+            jnp.where(accepted, new_energy, energy),
+            jnp.where(accepted, new_brackets, brackets),
+        )
+
+    def run(positions, keys, n):
+        def chain(mu, key):
+            def one_block(b, carry):
+                noise = jax.random.normal(
+                    jax.random.fold_in(key, b), (block_size, num_noises + 1), mu.dtype
+                )
+                high = jnp.clip(n - b * block_size, 0, block_size)
+                return jax.lax.fori_loop(0, high, lambda j, c: step(noise[j], c), carry)
+
+            carry = (mu, *energy_and_brackets(mu))
+            num_blocks = (n + block_size - 1) // block_size
+            return jax.lax.fori_loop(0, num_blocks, one_block, carry)[0]
+
+        return jax.vmap(chain)(positions, keys)
+
+    return liesample.jit(run)
+
+
+def _library_loop(algorithm, blocked):
+    """``(positions, keys, n) -> positions`` through ``run_steps`` (per-step keys when not
+    ``blocked``)."""
+    if not blocked:
+        algorithm = liesample.samplers.contract.Sampler(algorithm.init, algorithm.step)
+
+    def run(positions, keys, n):
+        def chain(mu, key):
+            return run_steps(algorithm, key, algorithm.init(mu), 0, n)[0].position
+
+        return jax.vmap(chain)(positions, keys)
+
+    return liesample.jit(run)
+
+
+def _measure_interleaved(loops, positions, keys, num_chains, cfg):
+    """:func:`_measure` for several loops at once: each calibrated alone, then the timed calls
+    taken in turns (a load change on a shared machine hits every loop alike); best of
+    ``repeats``."""
+    timing = common.Config(mode="fused", throughput_target_seconds=cfg["target_seconds"])
+    compiled, steps, times = {}, {}, {}
+    for label, loop in loops.items():
+        compiled[label] = loop.lower(positions, keys, 1).compile()
+        n = max(1, 20_000 // num_chains)
+        while True:
+            _, seconds = common.timed(compiled[label], positions, keys, n)
+            if seconds >= 0.05 or n >= 10**8:
+                break
+            n *= 4
+        steps[label] = max(1, round(n * timing.throughput_target_seconds / seconds))
+        times[label] = []
+    for _ in range(cfg["repeats"]):
+        for label in loops:
+            _, seconds = common.timed(compiled[label], positions, keys, steps[label])
+            times[label].append(seconds)
+    return {
+        label: {
+            "chains": num_chains,
+            "steps": steps[label],
+            "seconds_best": min(times[label]),
+            "seconds_all": times[label],
+            "chain_steps_per_second": num_chains * steps[label] / min(times[label]),
+        }
+        for label in loops
+    }
+
+
+def _fused_case(name):
+    if name == "rigid body":
+        system = common.system()
+        pieces = _fused_rigid_body(common.INERTIA)
+    else:
+        system = heavy_top(**HEAVY_TOP)
+        pieces = _fused_heavy_top(**HEAVY_TOP)
+    return system, pieces
+
+
+def _starts(system, name, num_chains, key):
+    if name == "rigid body":
+        return common.target().sample(key, num_chains)
+    base = jnp.asarray(system.default_position)
+    tilt = jnp.concatenate([jnp.array([0.3, -0.2, 0.1]), jnp.zeros(3)])
+    return jnp.tile(base + tilt, (num_chains, 1))
+
+
+def run_fused_comparison(quick: bool = False, log=print) -> dict:
+    """Chain-steps per second of the library's adjusted step (per-step keys, blocks) and of a
+    hand-fused loop of the same scheme, rigid body and heavy top, measured side by side."""
+    cfg = FUSED_QUICK if quick else FUSED_FULL
+    rows = []
+    for name in FUSED_SETTINGS:
+        beta, step_size = FUSED_SETTINGS[name]
+        system, (energy_and_brackets, move) = _fused_case(name)
+        algorithm = liesample.adjusted_lie_poisson(
+            system, beta=beta, step_size=step_size, noise_block_size=cfg["block_size"]
+        )
+        loops = {
+            "library, per-step keys": _library_loop(algorithm, blocked=False),
+            "library, noise blocks": _library_loop(algorithm, blocked=True),
+            "hand-fused, noise blocks": _fused_loop(
+                energy_and_brackets, move, system.num_noises, beta, step_size, cfg["block_size"]
+            ),
+        }
+        for num_chains in cfg["chains"]:
+            key = jax.random.fold_in(jax.random.key(7), num_chains)
+            positions = _starts(system, name, num_chains, key)
+            keys = jax.random.split(jax.random.fold_in(key, 1), num_chains)
+            check = {label: np.asarray(loop(positions, keys, 200)) for label, loop in loops.items()}
+            agreement = float(
+                np.max(np.abs(check["hand-fused, noise blocks"] - check["library, noise blocks"]))
+            )
+            measured = _measure_interleaved(loops, positions, keys, num_chains, cfg)
+            library = measured["library, noise blocks"]["chain_steps_per_second"]
+            per_step = measured["library, per-step keys"]["chain_steps_per_second"]
+            fused = measured["hand-fused, noise blocks"]["chain_steps_per_second"]
+            rows.append(
+                {
+                    "system": name,
+                    "chains": num_chains,
+                    "beta": beta,
+                    "step_size": step_size,
+                    "block_size": cfg["block_size"],
+                    "measurements": measured,
+                    "fused_over_library": fused / library,
+                    "blocks_over_per_step": library / per_step,
+                    "max_difference_after_200_steps": agreement,
+                }
+            )
+            log(
+                f"  {name:>10}, {num_chains:>5} chains: library {per_step:.3g} (per-step keys), "
+                f"{library:.3g} (blocks), hand-fused {fused:.3g} chain-steps/s; fused ÷ library "
+                f"{fused / library:.2f}, blocks ÷ per-step {library / per_step:.2f}, "
+                f"max |Δ| {agreement:.1e}"
+            )
+    return {"config": cfg, "machine": common.machine_info(), "rows": rows}
+
+
+def fused_report_section(out_dir: Path) -> str:
+    path = out_dir / f"{FUSED_NAME}.json"
+    if not path.exists():
+        return ""
+    data = common.read_json(path)
+    machine = data["machine"]
+    lines = [
+        "### The library's step against a hand-fused step",
+        "",
+        (
+            f"`benchmarks/throughput.py --fused` ({machine['date_utc']}, {machine['usable_cpus']} "
+            f"CPUs {machine['cpu_model']}, jax {machine['jax']}): the Metropolis-adjusted orbit "
+            "step (`liesample.adjusted_lie_poisson`, driven by `run_steps`) against a "
+            "hand-written loop of the same scheme in plain `jnp` (closed-form brackets and "
+            f"coadjoint moves) with the same noise blocks of {data['config']['block_size']} "
+            "steps; chain-steps per second, best of "
+            f"{data['config']['repeats']}. Max |Δ| is the largest difference between the two "
+            "chains after 200 steps from the same keys (same scheme, same draws)."
+        ),
+        "",
+        (
+            "| system | chains | library, per-step keys | library, noise blocks | hand-fused | "
+            "blocks ÷ per-step | fused ÷ library | max abs difference |"
+        ),
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for r in data["rows"]:
+        m = r["measurements"]
+        lines.append(
+            f"| {r['system']} (β = {r['beta']:g}, dt = {r['step_size']:g}) | {r['chains']:,} | "
+            f"{common.format_rate(m['library, per-step keys']['chain_steps_per_second'])} | "
+            f"{common.format_rate(m['library, noise blocks']['chain_steps_per_second'])} | "
+            f"{common.format_rate(m['hand-fused, noise blocks']['chain_steps_per_second'])} | "
+            f"{r['blocks_over_per_step']:.2f}× | {r['fused_over_library']:.2f}× | "
+            f"{r['max_difference_after_200_steps']:.1e} |"
+        )
+    lines.append("")
+    return "\n".join(lines)
 
 
 # --------------------------------------------------------------------------- plots and tables
@@ -314,7 +597,8 @@ Speed-up relative to all effects (> 1 = faster):
 {ratio_table}
 
 ![throughput]({results.link(plot)})
-"""
+
+{fused_report_section(results.out_dir)}"""
 
 
 def iid_report_section(results: common.CoreResults) -> str:
@@ -331,6 +615,8 @@ warmed up, best of {results.config["throughput_repeats"]}:
 
 __all__ = [
     "RNG_ONLY",
+    "fused_report_section",
+    "run_fused_comparison",
     "iid_report_section",
     "plot_throughput",
     "report_section",
@@ -338,3 +624,21 @@ __all__ = [
     "run_sampler_throughput",
     "sanity_check_iid",
 ]
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description="library step against a hand-fused step")
+    parser.add_argument("--fused", action="store_true", help="run the hand-fused comparison")
+    parser.add_argument("--quick", action="store_true", help="shorter timings, 1000 chains")
+    args = parser.parse_args(argv)
+    if not args.fused:
+        parser.error("the core throughput runs from benchmarks/run.py; pass --fused here")
+    out_dir = common.BENCH_DIR / "results" / ("quick" if args.quick else "")
+    data = run_fused_comparison(args.quick)
+    path = common.write_json(out_dir / f"{FUSED_NAME}.json", data)
+    print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

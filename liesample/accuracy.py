@@ -39,6 +39,7 @@ from liesample.compile import jit
 from liesample._validation import finite_float, prng_key
 from liesample.dynamics import PoissonLangevin, make_dynamics
 from liesample.integrators import DEFAULT_INTEGRATOR, get_integrator
+from liesample.samplers.stepping import run_steps
 from liesample.stability import stiffness
 from liesample.systems.base import LiePoissonSystem
 
@@ -339,7 +340,8 @@ def ergodic_averages(
 
     ``algorithm`` has ``init(position)`` and ``step(rng_key, state) -> (state, info)``
     (:func:`liesample.lie_poisson_langevin`, :func:`liesample.adjusted_lie_poisson`); step ``i``
-    of chain ``c`` uses ``fold_in(key_c, i)``. Nothing per step is stored, so long runs of many
+    of chain ``c`` uses ``fold_in(key_c, i)``, or the sampler's noise blocks
+    (:mod:`liesample.samplers.stepping`). Nothing per step is stored, so long runs of many
     chains fit in memory. The scalar ``info`` fields named in ``info_fields`` (default: all) are
     averaged over the kept steps; fields not asked for are not computed (XLA drops them).
     """
@@ -361,26 +363,24 @@ def ergodic_averages(
         raise ValueError(f"info_fields {unknown} are not scalar info fields; have {scalars}")
 
     def chain(key, start):
-        state = algorithm.init(start)
-
-        def body(i, carry):
-            state, total, square, infos = carry
-            state, info = algorithm.step(jax.random.fold_in(key, i), state)
+        def update(i, state, info, carry):
+            total, square, infos = carry
             value = jnp.ravel(observables(state.position))
             kept = i >= num_warmup
             info_values = jnp.asarray(
                 [getattr(info, n).astype(total.dtype) for n in info_names], total.dtype
             )
             return (
-                state,
                 jnp.where(kept, total + value, total),
                 jnp.where(kept, square + value * value, square),
                 jnp.where(kept, infos + info_values, infos),
             )
 
         zero = jnp.zeros(num_obs, starts.dtype)
-        carry = (state, zero, zero, jnp.zeros(len(info_names), starts.dtype))
-        _, total, square, infos = jax.lax.fori_loop(0, num_warmup + num_steps, body, carry)
+        carry = (zero, zero, jnp.zeros(len(info_names), starts.dtype))
+        _, (total, square, infos) = run_steps(
+            algorithm, key, algorithm.init(start), 0, num_warmup + num_steps, update, carry
+        )
         return total / num_steps, square / num_steps, infos / num_steps
 
     keys = jax.random.split(prng_key(rng_key), starts.shape[0])

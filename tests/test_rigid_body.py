@@ -38,7 +38,7 @@ def deterministic_runner(integrator, theta=0.0, hamiltonian=True):
 
     @liesample.jit
     def run(mu0, dt, num_steps):
-        state = LiePoissonState(mu0, SYSTEM.casimirs(mu0))
+        state = LiePoissonState(mu0, SYSTEM.casimirs(mu0), SYSTEM.hamiltonian(mu0))
         e0 = SYSTEM.hamiltonian(mu0)
 
         def body(_, carry):

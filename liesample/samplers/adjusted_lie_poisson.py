@@ -56,6 +56,7 @@ from liesample.compile import jit
 from liesample.dynamics import PoissonLangevin, Scene
 from liesample.samplers._starts import check_orbit_starts, check_start_energy, distinct_orbits
 from liesample.samplers.contract import Sampler, sampling_api
+from liesample.samplers.stepping import DEFAULT_NOISE_BLOCK_SIZE, NoiseBlocks, check_block_size
 from liesample.stability import check_precision, stiffness
 from liesample.systems.base import LiePoissonSystem
 
@@ -66,6 +67,7 @@ __all__ = [
     "adjusted_lie_poisson",
     "as_top_level_api",
     "build_kernel",
+    "build_noise_kernel",
     "check_linear_noise",
     "init",
     "involution",
@@ -181,25 +183,28 @@ def involution(system: LiePoissonSystem, position, noise, step_size, sigma, beta
     return proposal, reverse_noise, energy, new_brackets
 
 
-def build_kernel(system: LiePoissonSystem):
-    """Build ``kernel(rng_key, state, step_size, sigma, beta) -> (state, info)``.
+def build_noise_kernel(system: LiePoissonSystem):
+    """Build ``kernel(noise, state, step_size, sigma, beta) -> (state, info)``, the step as a
+    function of its draws: ``m + 1`` standard normals, ``W = noise[:m]`` for the proposal and
+    ``z = noise[m]`` for the acceptance test, which accepts when ``log Φ(z) < L`` (``Φ(z)`` is
+    uniform on ``(0, 1)``, so one normal draw serves both).
 
-    ``step_size``, ``sigma`` and ``beta`` may be traced. Raises ``ValueError`` for a system
-    whose noise gradients depend on ``μ`` (:func:`check_linear_noise`).
+    What :func:`build_kernel` draws per step and :mod:`liesample.samplers.stepping` in blocks.
+    Raises ``ValueError`` for a system whose noise gradients depend on ``μ``
+    (:func:`check_linear_noise`).
     """
     check_linear_noise(system)
 
-    def kernel(rng_key, state: AdjustedLiePoissonState, step_size, sigma, beta):
-        key_noise, key_accept = jax.random.split(rng_key)
+    def kernel(noise, state: AdjustedLiePoissonState, step_size, sigma, beta):
+        normals, accept = noise[:-1], noise[-1]
         position = state.position
-        noise = jax.random.normal(key_noise, (system.num_noises,), dtype=position.dtype)
         proposal, reverse_noise, energy, brackets = involution(
-            system, position, noise, step_size, sigma, beta, state.brackets
+            system, position, normals, step_size, sigma, beta, state.brackets
         )
         log_ratio = (
             -beta * (energy - state.energy)
             - 0.5 * jnp.sum(reverse_noise**2)
-            + 0.5 * jnp.sum(noise**2)
+            + 0.5 * jnp.sum(normals**2)
         )
         nonfinite = ~(
             jnp.all(jnp.isfinite(proposal))
@@ -209,7 +214,7 @@ def build_kernel(system: LiePoissonSystem):
         )
         log_ratio = jnp.where(nonfinite, -jnp.inf, log_ratio)
         acceptance_rate = jnp.exp(jnp.minimum(log_ratio, 0.0))
-        is_accepted = jnp.log(jax.random.uniform(key_accept, dtype=position.dtype)) < log_ratio
+        is_accepted = jax.scipy.special.log_ndtr(accept) < log_ratio
         new_state = AdjustedLiePoissonState(
             jnp.where(is_accepted, proposal, position),
             state.reference_casimirs,
@@ -228,6 +233,30 @@ def build_kernel(system: LiePoissonSystem):
     return kernel
 
 
+def _draw_noise(system, rng_key, shape, dtype):
+    """The draws of ``shape`` steps: standard normals ``(*shape, m + 1)`` (proposal, acceptance)."""
+    return jax.random.normal(rng_key, (*shape, system.num_noises + 1), dtype=dtype)
+
+
+def build_kernel(system: LiePoissonSystem):
+    """Build ``kernel(rng_key, state, step_size, sigma, beta) -> (state, info)``.
+
+    ``step_size``, ``sigma`` and ``beta`` may be traced. Raises ``ValueError`` for a system
+    whose noise gradients depend on ``μ`` (:func:`check_linear_noise`).
+    """
+    return _keyed(system, build_noise_kernel(system))
+
+
+def _keyed(system, noise_kernel):
+    """The kernel of ``noise_kernel`` that draws its own noise from ``rng_key``."""
+
+    def kernel(rng_key, state: AdjustedLiePoissonState, step_size, sigma, beta):
+        noise = _draw_noise(system, rng_key, (), state.position.dtype)
+        return noise_kernel(noise, state, step_size, sigma, beta)
+
+    return kernel
+
+
 def _default_step_size(system, beta, sigma, position) -> float:
     """``κ = 1.3 m^{−1/3}`` in units of the stiffness on the orbit of ``position`` (module
     docstring), or ``0.4/σ²`` where ``h`` is flat along the noise (no stiffness)."""
@@ -238,28 +267,41 @@ def _default_step_size(system, beta, sigma, position) -> float:
     return 1.3 * system.num_noises ** (-1.0 / 3.0) / stiff
 
 
-def dual_averaging_warmup(kernel, target_acceptance_rate):
+def dual_averaging_warmup(noise_kernel, draw, block_size, target_acceptance_rate):
     """``run(chain_keys, states, initial_step, sigma, beta, num_steps) -> (states, step_size,
     mean_acceptance)``: ``num_steps`` vmapped steps whose shared step size is tuned by dual
     averaging (``blackjax.adaptation.step_size.dual_averaging_adaptation``) on the mean
-    acceptance over the chains; step ``i`` of chain ``c`` uses ``fold_in(key_c, i)`` as the
-    runner does. The final step is the dual-averaging average ``exp(log_step_size_avg)``."""
+    acceptance over the chains. The noise is drawn in blocks of ``block_size`` steps with the
+    key scheme of :mod:`liesample.samplers.stepping` (``draw(key, state)``, one block per chain
+    from ``fold_in(key_c, b)``). The final step is the dual-averaging average
+    ``exp(log_step_size_avg)``."""
     da_init, da_update, da_final = dual_averaging_adaptation(target_acceptance_rate)
+    steps = jax.vmap(noise_kernel, in_axes=(0, 0, None, None, None))
+    draws = jax.vmap(
+        lambda key, block, state: draw(jax.random.fold_in(key, block), state), in_axes=(0, None, 0)
+    )
 
     def run(chain_keys, states, initial_step, sigma, beta, num_steps):
-        def one(carry, i):
-            states, da = carry
-            step_size = jnp.exp(da.log_step_size)
-            keys = jax.vmap(lambda k: jax.random.fold_in(k, i))(chain_keys)
-            states, infos = jax.vmap(kernel, in_axes=(0, 0, None, None, None))(
-                keys, states, step_size, sigma, beta
-            )
-            rate = jnp.mean(infos.acceptance_rate)
-            return (states, da_update(da, rate)), rate
+        first_kept = num_steps // 2
 
-        da = da_init(initial_step)
-        (states, da), rates = jax.lax.scan(one, (states, da), jnp.arange(num_steps))
-        return states, da_final(da), jnp.mean(rates[num_steps // 2 :])
+        def one_block(block, carry):
+            noise = draws(chain_keys, block, carry[0])
+            start = block * block_size
+
+            def one(row, carry):
+                states, da, total = carry
+                states, infos = steps(noise[:, row], states, jnp.exp(da.log_step_size), sigma, beta)
+                rate = jnp.mean(infos.acceptance_rate)
+                total = total + jnp.where(start + row >= first_kept, rate, 0.0)
+                return states, da_update(da, rate), total
+
+            high = jnp.minimum(num_steps - start, block_size)
+            return jax.lax.fori_loop(0, high, one, carry)
+
+        num_blocks = -(-num_steps // block_size)
+        carry = (states, da_init(initial_step), jnp.zeros((), initial_step.dtype))
+        states, da, total = jax.lax.fori_loop(0, num_blocks, one_block, carry)
+        return states, da_final(da), total / (num_steps - first_kept)
 
     return jit(run, static_argnums=5)
 
@@ -271,6 +313,7 @@ def as_top_level_api(
     sigma=1.0,
     step_size=None,
     target_acceptance_rate=DEFAULT_TARGET_ACCEPTANCE_RATE,
+    noise_block_size: int = DEFAULT_NOISE_BLOCK_SIZE,
 ) -> Sampler:
     """Metropolis-adjusted Lie–Poisson sampler of ``exp(−βh)`` on the orbit of the initial state.
 
@@ -292,6 +335,11 @@ def as_top_level_api(
         docstring). A given step is kept unless ``liesample.sample(..., adapt=True)``.
     target_acceptance_rate : float in (0, 1)
         What the warm-up's dual averaging aims at (default 0.574).
+    noise_block_size : int
+        Steps whose draws are made at once in :func:`liesample.sample`, the warm-up and the
+        other drivers (default 32; :mod:`liesample.samplers.stepping`). Block ``b`` of chain
+        ``c`` is drawn from ``fold_in(key_c, b)``, so the draws do not depend on how a run is
+        chunked; another block size gives other draws of the same law.
 
     Returns
     -------
@@ -311,7 +359,9 @@ def as_top_level_api(
     target = finite_float("target_acceptance_rate", target_acceptance_rate)
     if not 0.0 < target < 1.0:
         raise ValueError(f"target_acceptance_rate must be in (0, 1), got {target}")
-    kernel = build_kernel(system)
+    noise_block_size = check_block_size(noise_block_size)
+    noise_kernel = build_noise_kernel(system)
+    kernel = _keyed(system, noise_kernel)
     settings = {
         "sampler": "adjusted_lie_poisson",
         "system": system.name,
@@ -320,9 +370,15 @@ def as_top_level_api(
         "step_size": step_size,
         "step_size_source": "given" if step_size is not None else "automatic (not yet chosen)",
         "target_acceptance_rate": target,
+        "noise_block_size": noise_block_size,
     }
     chosen = [step_size]
-    warmup = dual_averaging_warmup(kernel, target)  # one compilation per sampler and shape
+
+    def draw_block(rng_key, state):
+        return _draw_noise(system, rng_key, (noise_block_size,), state.position.dtype)
+
+    # One compilation per sampler and shape.
+    warmup = dual_averaging_warmup(noise_kernel, draw_block, noise_block_size, target)
 
     def resolve(position):
         if chosen[0] is None:
@@ -350,6 +406,9 @@ def as_top_level_api(
     def step_fn(rng_key, state):
         return kernel(rng_key, state, resolve(system.default_position), sigma, beta)
 
+    def block_step(noise, state):
+        return noise_kernel(noise, state, resolve(system.default_position), sigma, beta)
+
     def check_positions(positions, *, step_size_checks=True):
         positions = np.asarray(positions, dtype=jnp.result_type(float))
         casimirs = check_orbit_starts(system, positions)
@@ -372,7 +431,12 @@ def as_top_level_api(
             num_warmup,
         )
         tuned = as_top_level_api(
-            system, beta=beta, sigma=sigma, step_size=float(tuned_step), target_acceptance_rate=target
+            system,
+            beta=beta,
+            sigma=sigma,
+            step_size=float(tuned_step),
+            target_acceptance_rate=target,
+            noise_block_size=noise_block_size,
         )
         tuned.settings["step_size_source"] = (
             f"warm-up dual averaging to mean acceptance {target:g} over chains, from "
@@ -380,9 +444,11 @@ def as_top_level_api(
         )
         return tuned, states
 
-    return Sampler(
+    sampler = Sampler(
         init_fn, step_fn, settings=settings, check_positions=check_positions, adapt=adapt
     )
+    sampler.noise_blocks = NoiseBlocks(noise_block_size, draw_block, block_step)
+    return sampler
 
 
 adjusted_lie_poisson = sampling_api(

@@ -9,6 +9,11 @@ Safe defaults: a step size beyond the measured stability bound (:mod:`liesample.
 refused, and without a step size the sampler picks one below the bound whose predicted bias is
 at most :data:`DEFAULT_BIAS_TOLERANCE` posterior standard deviations
 (:func:`liesample.accuracy.default_step_size`).
+
+The Brownian increments of a run are drawn in blocks of ``noise_block_size`` steps
+(:mod:`liesample.samplers.stepping`); ``step(rng_key, state)`` alone draws one step's increments
+from ``rng_key``. The state carries ``h(μ)``, so a step evaluates ``h`` once (at the proposal,
+for the divergence test).
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ from liesample.dynamics import PoissonLangevin, Scene, make_dynamics
 from liesample.integrators import DEFAULT_INTEGRATOR, get_integrator
 from liesample.samplers._starts import check_orbit_starts, check_start_energy, distinct_orbits
 from liesample.samplers.contract import Sampler, sampling_api
+from liesample.samplers.stepping import DEFAULT_NOISE_BLOCK_SIZE, NoiseBlocks, check_block_size
 from liesample.stability import (
     STABILITY_MODES,
     check_precision,
@@ -39,6 +45,7 @@ __all__ = [
     "LiePoissonState",
     "as_top_level_api",
     "build_kernel",
+    "build_noise_kernel",
     "init",
     "lie_poisson_langevin",
     "make_dynamics",
@@ -54,10 +61,12 @@ class LiePoissonState(NamedTuple):
 
     position : the point ``μ`` on the orbit.
     reference_casimirs : the Casimirs of the initial point, against which drift is measured.
+    energy : ``h(μ)``, cached (the step's ``info.energy`` when the proposal is rejected).
     """
 
     position: jax.Array
     reference_casimirs: jax.Array
+    energy: jax.Array
 
 
 class LiePoissonInfo(NamedTuple):
@@ -94,7 +103,45 @@ def init(position, system: LiePoissonSystem, rng_key=None) -> LiePoissonState:
         if energy is not None:  # None when staged out: the runner checks every start itself
             check_start_energy(system, value, energy)
     position = jnp.asarray(position, dtype=jnp.result_type(float))
-    return LiePoissonState(position, system.casimirs(position))
+    return LiePoissonState(position, system.casimirs(position), system.hamiltonian(position))
+
+
+def build_noise_kernel(
+    system: LiePoissonSystem, integrator=DEFAULT_INTEGRATOR, scene: Scene | None = None
+):
+    """Build ``kernel(noise, state, step_size, sigma, theta) -> (state, info)``, the step as a
+    function of its standard normal draws ``noise`` (shape ``(m,)``; ``dW = √dt · noise``), or
+    ``None`` when the scene has no noise.
+
+    What :func:`build_kernel` draws per step and :mod:`liesample.samplers.stepping` in blocks.
+    """
+    integrator = get_integrator(integrator)
+    scene = Scene() if scene is None else scene
+
+    def kernel(noise, state: LiePoissonState, step_size, sigma, theta):
+        dynamics = PoissonLangevin(system, sigma=sigma, theta=theta, scene=scene)
+        dW = None if noise is None else jnp.sqrt(step_size) * noise
+        proposal = integrator(dynamics, state.position, step_size, dW)
+        energy = system.hamiltonian(proposal)
+        divergent = ~(jnp.all(jnp.isfinite(proposal)) & jnp.isfinite(energy))
+        position = jnp.where(divergent, state.position, proposal)
+        energy = jnp.where(divergent, state.energy, energy)
+        info = LiePoissonInfo(
+            divergent,
+            jnp.where(divergent, 0.0, 1.0).astype(position.dtype),
+            energy,
+            system.casimir_error(position, state.reference_casimirs),
+        )
+        return LiePoissonState(position, state.reference_casimirs, energy), info
+
+    return kernel
+
+
+def _draw_noise(system, scene, rng_key, shape, dtype):
+    """Standard normals of shape ``(*shape, m)``, or ``None`` without noise (no bits drawn)."""
+    if not scene.noise:
+        return None
+    return jax.random.normal(rng_key, (*shape, system.num_noises), dtype=dtype)
 
 
 def build_kernel(
@@ -105,25 +152,12 @@ def build_kernel(
     The scene and integrator are structural (they decide what is traced); ``step_size``,
     ``sigma`` and ``theta`` may be traced values. ``rng_key`` may be either key style.
     """
-    integrator = get_integrator(integrator)
     scene = Scene() if scene is None else scene
+    noise_kernel = build_noise_kernel(system, integrator, scene)
 
     def kernel(rng_key, state: LiePoissonState, step_size, sigma, theta):
-        dynamics = PoissonLangevin(system, sigma=sigma, theta=theta, scene=scene)
-        dW = dynamics.brownian_increments(rng_key, step_size, state.position.dtype)
-        proposal = integrator(dynamics, state.position, step_size, dW)
-        divergent = ~(
-            jnp.all(jnp.isfinite(proposal)) & jnp.isfinite(system.hamiltonian(proposal))
-        )
-        position = jnp.where(divergent, state.position, proposal)
-        energy = system.hamiltonian(position)
-        info = LiePoissonInfo(
-            divergent,
-            jnp.where(divergent, 0.0, 1.0).astype(position.dtype),
-            energy,
-            system.casimir_error(position, state.reference_casimirs),
-        )
-        return LiePoissonState(position, state.reference_casimirs), info
+        noise = _draw_noise(system, scene, rng_key, (), state.position.dtype)
+        return noise_kernel(noise, state, step_size, sigma, theta)
 
     return kernel
 
@@ -166,6 +200,7 @@ def as_top_level_api(
     hamiltonian: bool = True,
     stability: str = "raise",
     bias_tolerance=DEFAULT_BIAS_TOLERANCE,
+    noise_block_size: int = DEFAULT_NOISE_BLOCK_SIZE,
 ) -> Sampler:
     """Lie–Poisson–Langevin sampler of ``exp(−βh)`` on the orbit of the initial state.
 
@@ -201,6 +236,11 @@ def as_top_level_api(
     bias_tolerance : float
         Relative bias tolerance of the automatic step size (default
         :data:`DEFAULT_BIAS_TOLERANCE` = 0.05 posterior sd).
+    noise_block_size : int
+        Steps whose Brownian increments are drawn at once in :func:`liesample.sample` and the
+        other drivers (default 32; :mod:`liesample.samplers.stepping`). Block ``b`` of chain
+        ``c`` is drawn from ``fold_in(key_c, b)``, so the draws do not depend on how a run is
+        chunked; another block size gives other draws of the same law.
 
     Returns
     -------
@@ -214,6 +254,7 @@ def as_top_level_api(
     if step_size is not None:
         step_size = finite_float("step_size", step_size, positive=True)
     bias_tolerance = finite_float("bias_tolerance", bias_tolerance, positive=True)
+    noise_block_size = check_block_size(noise_block_size)
     sigma, theta, scene = make_dynamics(
         system, beta=beta, sigma=sigma, theta=theta, hamiltonian=hamiltonian
     )
@@ -226,6 +267,7 @@ def as_top_level_api(
         raise ValueError(f"stability must be one of {STABILITY_MODES}, got {stability!r}")
     integrator = get_integrator(integrator)
     kernel = build_kernel(system, integrator, scene)
+    noise_kernel = build_noise_kernel(system, integrator, scene)
     options = dict(
         beta=beta,
         sigma=sigma,
@@ -234,6 +276,7 @@ def as_top_level_api(
         hamiltonian=hamiltonian,
         stability=stability,
         bias_tolerance=bias_tolerance,
+        noise_block_size=noise_block_size,
     )
     settings = {
         "sampler": "lie_poisson_langevin",
@@ -245,6 +288,7 @@ def as_top_level_api(
         "stability": stability,
         "step_size": step_size,
         "step_size_source": "given" if step_size is not None else "automatic (not yet chosen)",
+        "noise_block_size": noise_block_size,
     }
 
     def choose(positions, rng_key=None):
@@ -292,6 +336,13 @@ def as_top_level_api(
         dt = step.resolve(np.asarray(system.default_position)[None])
         return kernel(rng_key, state, dt, sigma, theta)
 
+    def block_step(noise, state):
+        dt = step.resolve(np.asarray(system.default_position)[None])
+        return noise_kernel(noise, state, dt, sigma, theta)
+
+    def draw_block(rng_key, state):
+        return _draw_noise(system, scene, rng_key, (noise_block_size,), state.position.dtype)
+
     def check_positions(positions, *, step_size_checks=True):
         positions = np.asarray(positions)
         casimirs = check_orbit_starts(system, positions)
@@ -306,9 +357,12 @@ def as_top_level_api(
         tuned.settings["step_size_source"] = "warm-up bias model: " + _source(choice)
         return tuned, None
 
-    return Sampler(
+    sampler = Sampler(
         init_fn, step_fn, settings=settings, check_positions=check_positions, adapt=adapt
     )
+    if scene.noise:  # without noise nothing is drawn: the per-step loop is already lean
+        sampler.noise_blocks = NoiseBlocks(noise_block_size, draw_block, block_step)
+    return sampler
 
 
 lie_poisson_langevin = sampling_api(
