@@ -1,4 +1,4 @@
-"""Window adaptation for the geometric samplers: step size, mass and trajectory length.
+"""Window adaptation for the geometric and magnetic samplers: step size, mass, trajectory length.
 
 ``liesample.window_adaptation(algorithm, logdensity_fn, space, **parameters)`` mirrors
 ``blackjax.window_adaptation``: ``.run(rng_key, initial_position, num_steps)`` returns
@@ -26,6 +26,13 @@ of its start), with ``num_integration_steps = ceil(T / step_size)`` re-derived a
 of the warm-up and for the tuned sampler. Pass ``integration_time`` to change ``T`` or
 ``num_integration_steps`` to fix ``L`` instead (then the integration time follows the step
 size, as in ``blackjax.window_adaptation``). Measured in ``docs/groups.md``.
+
+**Magnetic HMC** (``liesample.window_adaptation(liesample.magnetic_hmc, logdensity_fn)``, i.e.
+:func:`magnetic_window_adaptation`): several chains tuned together on the same schedule; the
+field is re-derived from the current mass and step size at every step (a fixed rotation angle
+per leapfrog step), so the step size is dual-averaged with the field on, and the trajectory
+length is learnt by a ChEES-type rule over jittered lengths; sample with
+:func:`jittered_magnetic_hmc`.
 """
 
 from __future__ import annotations
@@ -339,10 +346,18 @@ def window_adaptation(
 
 # --------------------------------------------------------------------------- magnetic HMC
 
-DEFAULT_ANGLE = 0.25
+DEFAULT_ANGLE = 0.0
+"""Default field of :func:`magnetic_window_adaptation`, as the angle (rad) per leapfrog step.
+
+Measured with the ChEES-type trajectory rule and jittered lengths (4 chains x 2000 draws,
+``benchmarks/euclidean.py``): on the 100-d rotated Gaussian (κ = 100) angle 0.25 gave 0.70x
+the ESS per gradient of angle 0 (its slowest directions slow down further), on the 2-d
+Gaussian (ρ = 0.99) angles 0.25 and 0.5 were within noise of 0; the field broke the
+periodicity of fixed-length trajectories, which jittered lengths now do. So no field by
+default; ``angle > 0`` turns it on, adapted jointly, and the benchmark reports both."""
 CHEES_TARGET_ACCEPTANCE_RATE = 0.651
-CHEES_LEARNING_RATE = 0.025
-CHEES_BETA2 = 0.95
+CHEES_LEARNING_RATE = 0.01
+CHEES_AVERAGING = 0.95  # running means of the ChEES estimates
 
 
 class MagneticAdaptationInfo(NamedTuple):
@@ -381,16 +396,19 @@ def _field(rotation, inverse_mass, strength):
     return strength * rotation * scale[:, None] * scale[None, :]
 
 
-def _chees_gradient(before, after, momentum, accepted, acceptance, inverse_mass, time):
-    """Estimate of ``∂ ChEES / ∂ log T`` from a batch of chains (Hoffman, Radul & Sountsov 2021).
+def _chees_terms(before, after, momentum, accepted, acceptance, inverse_mass, time):
+    """Estimates of ``ChEES`` and of ``∂ ChEES / ∂ log T`` from a batch of chains.
 
-    ``ChEES = ¼ E[(‖x' − E x‖² − ‖x − E x‖²)²]`` in the coordinates whitened by the mass
-    (``x = M^{1/2} q``), the centre estimated by the mean over chains. Its derivative along a
-    trajectory of length ``t = u T`` is ``Δ · (x' − x̄')·ẋ' · t`` with ``Δ`` the change of squared
-    distance; ``(x' − x̄')·ẋ' = (q' − q̄')·p'`` (the mass cancels, and the field does not enter:
+    ``ChEES = ¼ E[(‖x' − E x‖² − ‖x − E x‖²)²]`` (Hoffman, Radul & Sountsov 2021) in the
+    coordinates whitened by the mass (``x = M^{1/2} q``), the centre estimated by the mean
+    over chains. Its derivative along a trajectory of length ``t = u T`` is
+    ``Δ · (x' − x̄')·ẋ' · t`` with ``Δ`` the change of squared distance, and
+    ``(x' − x̄')·ẋ' = (q' − q̄')·p'`` (the mass cancels, and the field does not enter:
     ``q̇ = M⁻¹p`` with or without it). The paper weights each chain's proposal by its
     acceptance probability; here the chain's accepted move stands in for it (a rejected move
-    contributes 0, which is the same in expectation), normalised by the summed probabilities.
+    contributes 0, the same in expectation), normalised by the summed probabilities.
+    Returns ``(chees, gradient, spread)``, ``spread`` the chains' mean of ``‖x' − x̄'‖²`` and
+    of its square.
     """
     centred_before = before - jnp.mean(before, 0)
     centred_after = after - jnp.mean(after, 0)
@@ -398,9 +416,37 @@ def _chees_gradient(before, after, momentum, accepted, acceptance, inverse_mass,
         centred_before**2 / inverse_mass, -1
     )
     rate = jnp.sum(centred_after * momentum, -1)
-    terms = jnp.where(accepted, time * change * rate, 0.0)
     total = jnp.sum(acceptance)
-    return jnp.where(total > 0, jnp.sum(terms) / jnp.maximum(total, 1e-30), 0.0)
+    norm = jnp.where(total > 0, 1.0 / jnp.maximum(total, 1e-30), 0.0)
+    chees = norm * jnp.sum(jnp.where(accepted, 0.25 * change**2, 0.0))
+    gradient = norm * jnp.sum(jnp.where(accepted, time * change * rate, 0.0))
+    distance = jnp.sum(centred_after**2 / inverse_mass, -1)
+    spread = jnp.stack([jnp.mean(distance), jnp.mean(distance**2)])
+    return chees, gradient, spread
+
+
+def _chees_gradient(*args):
+    """``∂ ChEES / ∂ log T`` of :func:`_chees_terms`."""
+    return _chees_terms(*args)[1]
+
+
+def _log_efficiency_gradient(means, cost_slope):
+    """``∂/∂ log T`` of ``log[(1 − ρ)/((1 + ρ) E L)]`` from running means ``(Ĉ, ĝ, E s, E s²)``.
+
+    ``ρ`` is the one-transition autocorrelation of the squared distance ``s = ‖x − x̄‖²``, so
+    ``(1 − ρ)/(1 + ρ)`` is its effective sample size per transition and dividing by the mean
+    number of leapfrog steps, ``E L ≈ T/(2ε) + ½``, makes it per gradient evaluation
+    (``cost_slope = ∂ log E L / ∂ log T = T/(T + ε)``). ChEES is ``(1 − ρ)`` times its value for
+    independent draws, ``½ Var s``, so with ``r = Ĉ / (½ Var s)``, ``1 − ρ = r/2`` and the
+    gradient is ``(ĝ/Ĉ) · 4/(4 − r) − cost_slope``.
+    For one Gaussian direction of frequency ``ω`` its maximum is at ``T ≈ 1.8/ω`` (ChEES
+    alone first peaks at ``2.25/ω``, ChEES per unit length at ``π/(2ω)``).
+    """
+    chees, gradient, mean, square = means[0], means[1], means[2], means[3]
+    independent = 0.5 * (square - mean**2)
+    r = jnp.clip(chees / jnp.maximum(independent, 1e-300), 0.0, 3.0)
+    ratio = gradient / jnp.maximum(chees, 1e-300)
+    return jnp.where((chees > 0) & (independent > 0), ratio * 4.0 / (4.0 - r) - cost_slope, 0.0)
 
 
 def _harmonic_mean(rates):
@@ -459,20 +505,32 @@ def magnetic_window_adaptation(
 
     **Trajectory length (ChEES).** Each transition integrates for ``t = u T`` with ``u`` from the
     base-2 Halton sequence (the same for every chain), ``L = ceil(t / ε)`` steps; ``log T`` is
-    moved by Adam (``β₁ = 0``, ``β₂ = 0.95``, ``learning_rate``) up the estimated gradient of
-    ChEES (:func:`_chees_gradient`). The returned ``T`` is ``exp`` of the mean of ``log T`` over
-    the last slow window and the final fast window. ``integration_time=T`` fixes ``T`` instead.
+    moved by ``learning_rate`` times the estimated gradient (clipped to ``[−2, 2]``) of the log
+    of the squared distance's ESS per gradient, ``(1 − ρ)/((1 + ρ) T)``, with ``1 − ρ``
+    read off ChEES normalised by its value for independent draws
+    (:func:`_log_efficiency_gradient`, from running means of the estimates of
+    :func:`_chees_terms`). ChEES alone saturates once the trajectory outlasts the slowest
+    direction's decorrelation time, and its noisy gradient then lets ``T`` drift (measured on
+    the 100-d Gaussian of ``benchmarks/euclidean.py``: the adapted ``T`` fell anywhere in
+    5.5–15 between runs, ESS per gradient varying 2x with it); ChEES per unit length has a
+    maximum but favours the fast directions (``T = 2.2`` there, ESS per gradient 0.8x). The
+    gradient is dimensionless and bounded, so the step is plain stochastic ascent, not Adam
+    (Adam's normalised steps keep their size where the mean gradient vanishes: with 4 chains
+    ``T`` then wandered by a factor 3 around the optimum). The returned ``T`` is ``exp`` of the
+    mean of ``log T`` over the last slow window and the final fast window;
+    ``integration_time=T`` fixes ``T`` instead.
 
     Parameters
     ----------
     logdensity_fn : callable
         ``log π`` of a position (a pytree; flattened as the sampler flattens it).
     angle : float
-        Rotation (rad) of the whitened velocity per leapfrog step; 0 is plain (ChEES-)HMC.
+        Rotation (rad) of the whitened velocity per leapfrog step; 0 (:data:`DEFAULT_ANGLE`,
+        measured) is plain HMC with the same rules.
     initial_step_size, target_acceptance_rate
         Dual averaging's start and target (0.651, ChEES-HMC's, by default).
     integration_time, initial_integration_time, learning_rate
-        Fixed ``T`` (no ChEES), or ChEES's starting ``T`` (``π/2``) and Adam's learning rate.
+        Fixed ``T`` (no ChEES), or the rule's starting ``T`` (``π/2``) and step on ``log T``.
     adapt_mass : bool
         Adapt the diagonal inverse mass (else unit mass).
     divergence_threshold : float
@@ -522,7 +580,7 @@ def magnetic_window_adaptation(
         time0 = integration_time if integration_time is not None else initial_time
 
         def one_step(carry, xs):
-            states, da_state, log_time, adam, inverse_mass, welford = carry
+            states, da_state, log_time, means, inverse_mass, welford = carry
             key, u, stage, window_end, index = xs
             step_size = jnp.exp(da_state.log_step_size)
             strength = angle / step_size
@@ -544,22 +602,27 @@ def magnetic_window_adaptation(
             before = jax.vmap(_ravel)(states.position)
             after = jax.vmap(_ravel)(new_states.position)
             if learn:
-                gradient = _chees_gradient(
+                chees, gradient, spread = _chees_terms(
                     before,
                     after,
                     new_states.momentum,
                     info.is_accepted,
                     info.acceptance_rate,
                     inverse_mass,
-                    steps * step_size,
+                    u * trajectory,
                 )
-                t = index + 1
-                second = CHEES_BETA2 * adam + (1.0 - CHEES_BETA2) * gradient**2
-                corrected = second / (1.0 - CHEES_BETA2**t)
-                update = learning_rate * gradient / (jnp.sqrt(corrected) + 1e-8)
-                ok = jnp.isfinite(update)
-                log_time = jnp.where(ok, log_time + update, log_time)
-                adam = jnp.where(ok, second, adam)
+                # Running means of the estimates, then their ratios (not the mean of ratios:
+                # one batch's ChEES can be near 0).
+                terms = jnp.concatenate([jnp.stack([chees, gradient]), spread])
+                ok = jnp.all(jnp.isfinite(terms))
+                means = jnp.where(
+                    ok, CHEES_AVERAGING * means + (1.0 - CHEES_AVERAGING) * terms, means
+                )
+                gradient = _log_efficiency_gradient(means, trajectory / (trajectory + step_size))
+                # The gradient is dimensionless (≈ +1 for too short, ≥ −1 for too long a
+                # trajectory), so plain stochastic ascent on log T with a fixed step.
+                update = learning_rate * jnp.clip(gradient, -2.0, 2.0)
+                log_time = jnp.where(jnp.isfinite(update), log_time + update, log_time)
                 cap = jnp.log(max_steps * step_size)
                 log_time = jnp.minimum(log_time, cap)
             in_slow = (stage == 1) & adapt_mass
@@ -584,14 +647,14 @@ def magnetic_window_adaptation(
             record = MagneticAdaptationInfo(
                 new_states, info, step_size, steps, trajectory, strength
             )
-            return (new_states, da_state, log_time, adam, inverse_mass, welford), record
+            return (new_states, da_state, log_time, means, inverse_mass, welford), record
 
         welford = (jnp.zeros(dimension, dtype), jnp.zeros(dimension, dtype), jnp.asarray(0))
         carry = (
             states,
             da_init(jnp.asarray(initial_step_size, dtype)),
             jnp.log(jnp.asarray(time0, dtype)),
-            jnp.zeros((), dtype),
+            jnp.zeros(4, dtype),
             jnp.ones(dimension, dtype),
             welford,
         )
@@ -656,7 +719,8 @@ def _flat_starts(positions, logdensity_fn):
     if not jnp.issubdtype(flat.dtype, jnp.floating):
         raise TypeError(f"initial_positions must be real floating point, got {flat.dtype}")
     values = jax.vmap(jax.value_and_grad(logdensity_fn))(positions)
-    ok = np.asarray(jnp.isfinite(values[0]) & jnp.all(jnp.isfinite(jax.vmap(_ravel)(values[1])), -1))
+    grads = jax.vmap(_ravel)(values[1])
+    ok = np.asarray(jnp.isfinite(values[0]) & jnp.all(jnp.isfinite(grads), -1))
     chain = first_bad_chain(ok)
     if chain is not None:
         raise ValueError(
