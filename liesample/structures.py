@@ -367,16 +367,19 @@ def _deterministic_scene(scene):
     return replace(scene, noise=False)
 
 
-def stratonovich_heun_step(sde: PoissonLangevinSDE, z, dt, dW=None):
-    """One stochastic Heun step ``z + ½(J(z)ζ(z) + J(z̃)ζ(z̃))``, ``z̃ = z + J(z)ζ(z)``.
+def heun_step(increment: Callable, z):
+    """The explicit Stratonovich Heun step ``z + ½(F(z) + F(z + F(z)))`` for a fixed increment
+    map ``F`` (one step's ``dt`` and ``dW`` already in it): weak order 1, strong order 1 for
+    additive noise, consistent with the Stratonovich reading (the same ``dW`` feeds both
+    stages). A baseline: it preserves neither Casimirs nor the symplectic form."""
+    start = increment(z)
+    return z + 0.5 * (start + increment(z + start))
 
-    Structure-agnostic and consistent with the Stratonovich reading (the same ``dW`` feeds both
-    stages); weak order 1, strong order 1 for additive noise. A baseline: it preserves neither
-    Casimirs nor the symplectic form.
-    """
-    increment_start = sde.increment(z, dt, dW)
-    increment_end = sde.increment(z + increment_start, dt, dW)
-    return z + 0.5 * (increment_start + increment_end)
+
+def stratonovich_heun_step(sde: PoissonLangevinSDE, z, dt, dW=None):
+    """One stochastic Heun step (:func:`heun_step`) of the structure-agnostic increment
+    ``J(z)ζ(z)``."""
+    return heun_step(lambda x: sde.increment(x, dt, dW), z)
 
 
 def kinetic_magnetic_exponential(generator, time):

@@ -39,6 +39,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from liesample._validation import finite_float
+from liesample.structures import heun_step
 
 _DEFAULT_TOLERANCE = 1e-14
 _DEFAULT_MAX_ITERATIONS = 100
@@ -150,9 +151,9 @@ def stochastic_midpoint_step(
 
 
 def stochastic_heun_step(system: SymplecticDiffusion, z, increments):
-    """Explicit Stratonovich Heun ``z + ½(F(z) + F(z + F(z)))``, ``F = J∇𝓗``: not symplectic."""
-    start = system.vector_field(z, increments)
-    return z + 0.5 * (start + system.vector_field(z + start, increments))
+    """Explicit Stratonovich Heun ``z + ½(F(z) + F(z + F(z)))``, ``F = J∇𝓗``
+    (:func:`liesample.structures.heun_step`): not symplectic."""
+    return heun_step(lambda x: system.vector_field(x, increments), z)
 
 
 SCHEMES = ("midpoint", "heun")
