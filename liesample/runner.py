@@ -1,7 +1,9 @@
 """Run many chains of a BlackJAX-style sampler, vmapped, in chunks with a progress bar.
 
-Draw ``d`` of chain ``c`` uses the key ``fold_in(key_c, step)``, so the draws do not depend on
-the chunk size and a run can be split or resumed without changing them.
+Draw ``d`` of chain ``c`` uses the key ``fold_in(key_c, step)`` (a sampler that draws its noise
+in blocks, as the orbit samplers do, ``fold_in(key_c, block)``: :mod:`liesample.samplers.stepping`),
+so the draws do not depend on the chunk size and a run can be split or resumed without changing
+them.
 
 - **Devices.** ``devices=`` splits the chain axis over several devices with JAX's own sharding
   (:mod:`liesample.sharding`); the draws are those of the unsharded run.
@@ -33,6 +35,7 @@ from tqdm.auto import tqdm
 from liesample._validation import finite_float, is_single_array, prng_key
 from liesample.compile import jit
 from liesample.samplers.contract import reduce_over_thinning
+from liesample.samplers.stepping import run_draws, run_steps
 from liesample.sharding import chain_sharding, shard_chains, to_host
 
 DEFAULT_MIN_ACCEPTANCE_RATE = 0.05
@@ -291,11 +294,22 @@ def sample_chains(
 
         return jax.lax.scan(one, state, first_step + jnp.arange(num_steps))
 
+    blocked = getattr(algorithm, "noise_blocks", None) is not None  # liesample.samplers.stepping
+
     @jit
     def warmup(states, keys, first_step):
+        if blocked:
+            return jax.vmap(lambda s, k: run_steps(algorithm, k, s, first_step, num_warmup)[0])(
+                states, keys
+            )
         return jax.vmap(lambda s, k: advance(s, k, first_step, num_warmup)[0])(states, keys)
 
     def draws(state, key, first_step, count):
+        if blocked:
+            return run_draws(
+                algorithm, key, state, first_step, count, thinning, reduce_over_thinning
+            )
+
         def one_draw(state, draw):
             state, infos = advance(state, key, first_step + draw * thinning, thinning)
             info = {

@@ -193,3 +193,38 @@ def test_blocked_heavy_top_runs_and_keeps_its_casimirs():
     split, _ = run_steps(algorithm, jax.random.key(2), split, 9, 21)
     np.testing.assert_array_equal(np.asarray(whole.position), np.asarray(split.position))
     assert float(system.casimir_error(whole.position, whole.reference_casimirs)) < 1e-12
+
+
+def test_the_runner_draws_the_blocked_chain_whatever_the_chunks():
+    """``sample_chains`` with thinning keeps the states of :func:`run_steps` (chain ``c`` with
+    key ``split(key)[c]``) at steps ``k(d + 1) − 1``, in any chunking, and reduces the info
+    over each window (any / mean)."""
+    from liesample.runner import sample_chains
+
+    algorithm = _samplers(block_size=8)["adjusted"]
+    starts = jnp.stack([START, -START])
+    key = jax.random.key(9)
+    runs = [
+        sample_chains(algorithm, key, starts, 10, thinning=3, chunk_draws=c, progress=False)
+        for c in (None, 4)
+    ]
+    np.testing.assert_array_equal(runs[0].positions, runs[1].positions)
+    np.testing.assert_array_equal(runs[0].info["acceptance_rate"], runs[1].info["acceptance_rate"])
+    chain_keys = jax.random.split(key, 2)
+
+    @jit
+    def direct(keys):
+        def chain(k, x):
+            def update(step, state, info, carry):
+                return carry.at[step].set(info.acceptance_rate)
+
+            state, rates = run_steps(algorithm, k, algorithm.init(x), 0, 30, update, jnp.zeros(30))
+            return state.position, rates
+
+        return jax.vmap(chain)(keys, starts)
+
+    final, rates = direct(chain_keys)
+    np.testing.assert_allclose(runs[0].positions[:, -1], np.asarray(final), rtol=0, atol=1e-13)
+    np.testing.assert_allclose(
+        runs[0].info["acceptance_rate"], np.asarray(rates).reshape(2, 10, 3).mean(-1), atol=1e-13
+    )
