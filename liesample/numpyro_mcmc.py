@@ -34,9 +34,11 @@ model sees. The state also carries ``diverging`` (collected by default: ``print_
 counts divergences), ``accept_prob``, ``potential_energy``, ``num_steps`` and ``step_size``
 (``extra_fields``; ``arviz.from_numpyro`` names them ``acceptance_rate``, ``lp``, ``n_steps``).
 
-**Chains.** ``chain_method="vectorized"`` vmaps init and transition over chains (each chain's
-draws equal those of the same chain run alone, to the last bit, on jax 0.12 CPU);
-``"sequential"`` works as well.
+**Chains.** ``chain_method="vectorized"`` vmaps init and transition over chains;
+``"sequential"`` works as well. NumPyro compiles its loop with plain ``jax.jit``, not
+:func:`liesample.jit`; the vmapped chains were checked against the same chains run alone (equal
+to round-off, a slow test), as XLA:CPU's vmapped-loop miscompile (:mod:`liesample.compile`)
+would show there.
 """
 
 from __future__ import annotations
