@@ -162,7 +162,8 @@ class VonMisesFisher(Distribution):
         # Below 1e-8 the series C_d(κ) = C_d(0) (1 − A κ² + …) is C_d(0) to round-off.
         small = kappa < 1e-8
         safe = jnp.where(small, 1.0, kappa)
-        general = nu * jnp.log(safe) - (self.d / 2.0) * jnp.log(2 * jnp.pi) - log_bessel_iv(nu, safe)
+        log_2pi = jnp.log(2 * jnp.pi)
+        general = nu * jnp.log(safe) - (self.d / 2.0) * log_2pi - log_bessel_iv(nu, safe)
         uniform = special.gammaln(self.d / 2.0) - np.log(2.0) - (self.d / 2.0) * np.log(np.pi)
         return jnp.where(small, uniform, general)
 

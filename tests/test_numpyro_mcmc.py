@@ -3,7 +3,8 @@
 (a) vMF data with a mean direction on S² and a LogNormal concentration (an Euclidean site in
 unconstrained coordinates, so the log-Jacobian matters), through
 examples/numpyro_directional.py: the exact posterior by quadrature over log κ; (b) a matrix
-Fisher prior on SO(3): exact E[R]; (c) a Bingham prior on S²: exact E[x xᵀ]. Tolerances: 5 MCSE (ArviZ, from the chains); fixed keys. Then the refusals.
+Fisher prior on SO(3): exact E[R]; (c) a Bingham prior on S²: exact E[x xᵀ]. Tolerances:
+5 MCSE (ArviZ, from the chains); fixed keys. Then the refusals.
 """
 
 import importlib.util
