@@ -27,6 +27,7 @@ from scipy.special import roots_legendre
 
 from liesample.compile import jit
 from liesample._validation import finite_float, nonzero_vector3, principal_moments
+from liesample.targets.spins import von_mises_fisher
 
 __all__ = [
     "HeavyTopGibbs",
@@ -558,23 +559,6 @@ class HeavyTopGibbs:
         )
 
 
-def _sample_vmf_s2(key, direction, kappa, num):
-    """Exact draws from the von Mises–Fisher law ``∝ exp(κ n·direction)`` on S² (κ ≥ 0).
-
-    ``w = n·direction`` has density ``∝ e^{κw}`` on ``[−1, 1]``, inverted in logs:
-    ``w = 1 + log(u + (1 − u) e^{−2κ})/κ`` (``w = 2u − 1`` at ``κ = 0``).
-    """
-    k_w, k_v = jax.random.split(key)
-    u = jax.random.uniform(k_w, (num,), dtype=direction.dtype, minval=1e-300)
-    safe = jnp.where(kappa > 1e-8, kappa, 1.0)
-    w_exp = 1.0 + jnp.logaddexp(jnp.log(u), jnp.log1p(-u) - 2.0 * safe) / safe
-    w = jnp.clip(jnp.where(kappa > 1e-8, w_exp, 2.0 * u - 1.0), -1.0, 1.0)
-    v = jax.random.normal(k_v, (num, 3), dtype=direction.dtype)
-    v = v - (v @ direction)[:, None] * direction
-    v = v / jnp.linalg.norm(v, axis=-1, keepdims=True)
-    return w[:, None] * direction + jnp.sqrt(1.0 - w * w)[:, None] * v
-
-
 @partial(jit, static_argnames=("num_samples",))
 def _sample_heavy_top(key, inertia, direction, kappa, beta, radius, s, log_g_max, num_samples):
     batch = 2 * num_samples + 64
@@ -585,7 +569,7 @@ def _sample_heavy_top(key, inertia, direction, kappa, beta, radius, s, log_g_max
     def body(state):
         key, out, count = state
         key, k_dir, k_acc, k_pi = jax.random.split(key, 4)
-        n = _sample_vmf_s2(k_dir, direction, kappa, batch)
+        n = von_mises_fisher(k_dir, jnp.broadcast_to(direction, (batch, 3)), kappa)
         q = jnp.sum(inertia * n * n, axis=-1)
         log_ratio = -0.5 * jnp.log(q) - beta * s * s / (2.0 * q) - log_g_max
         keep = jnp.log(jax.random.uniform(k_acc, (batch,), dtype=n.dtype)) < log_ratio
