@@ -48,6 +48,10 @@ from liesample.samplers.geometric_hmc import geometric_hmc  # noqa: E402
 from liesample.samplers.geometric_langevin import geometric_langevin  # noqa: E402
 
 __all__ += ["geometric_hmc", "geometric_langevin", "spaces"]
-from liesample.adaptation import window_adaptation  # noqa: E402
+from liesample.adaptation import (  # noqa: E402
+    jittered_magnetic_hmc,
+    magnetic_window_adaptation,
+    window_adaptation,
+)
 
-__all__ += ["window_adaptation"]
+__all__ += ["jittered_magnetic_hmc", "magnetic_window_adaptation", "window_adaptation"]
