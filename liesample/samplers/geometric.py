@@ -93,7 +93,8 @@ class GeometricInfo(NamedTuple):
         (``inf`` when non-finite).
     num_integration_steps : leapfrog steps (gradient evaluations) of the transition.
     metropolis_rate : ``min(1, e^{−ΔH})`` of the proposal, also for unadjusted chains (what
-        step-size adaptation targets).
+        step-size adaptation targets; there ``ΔH`` leaves out the energy the ``O`` step
+        exchanged with the heat bath, so it measures the error of the Hamiltonian pieces).
     """
 
     acceptance_rate: jax.Array
