@@ -6,8 +6,10 @@ the chain state (no trajectory, no per-step info: XLA drops the unused ``energy`
 ``While`` loop that ``lax.scan`` lowers to, without stacked outputs, so one compilation serves
 every ``n``. Compilation is excluded; calibration calls warm the executable up and pick ``n``
 so that one call lasts about ``target_seconds``; the reported time is the best of ``repeats``.
-Step ``k`` of chain ``c`` uses the key ``fold_in(key_c, k)`` as ``liesample.runner`` does, so the
-cost of drawing the noise is included (and is absent where the scene has no noise).
+Step ``k`` of chain ``c`` uses the key ``fold_in(key_c, k)`` (``sampler.step`` with per-step keys,
+as BlackJAX's drivers call it), so the cost of drawing the noise is included (and is absent where
+the scene has no noise); ``liesample.sample`` draws the orbit samplers' noise in blocks, which
+the hand-fused comparison below measures.
 
 **Library against a hand-fused step** (:func:`run_fused_comparison`; alone:
 ``benchmarks/throughput.py --fused [--quick]``, writes ``results/throughput_fused.json``). The
@@ -579,8 +581,8 @@ Chain-steps per second of `liesample.lie_poisson_langevin(system, …, step_size
 {cfg["throughput_step_size"]:g})`, `jax.jit(jax.vmap(chain))` where each chain is a
 `jax.lax.fori_loop` of `n` calls to `algorithm.step` carrying only the state (the same XLA
 While loop `lax.scan` lowers to, without stacked outputs; a traced trip count lets one
-compilation serve every `n`). Step `k` of chain `c` uses `fold_in(key_c, k)` as
-`liesample.runner` does. Chains start from exact Gibbs draws. Compilation is excluded; calls
+compilation serve every `n`). Step `k` of chain `c` uses `fold_in(key_c, k)` (per-step
+keys; `liesample.sample` draws the noise in blocks, measured in the last table of this section). Chains start from exact Gibbs draws. Compilation is excluded; calls
 are warmed up, `n` is chosen so that one call lasts ≈ {cfg["throughput_target_seconds"]:g} s,
 and the time is the best of {cfg["throughput_repeats"]}. Per-step `info` is not kept, so XLA
 drops the energy and Casimir diagnostics (the non-finite guard stays: it decides the state).
