@@ -44,10 +44,11 @@ ESS/s divides it by the wall time of the kept draws only (compilation, adaptatio
 are reported separately; the compiled JAX loops and the i.i.d. sampler are timed again in
 interleaved rounds and keep their fastest call, mici's chains are timed once, per
 iteration); ESS per gradient divides it by the gradient evaluations of the kept draws
-(leapfrog steps). ESS per CPU-second divides by this process's CPU time instead: steadier than
-the wall time on a shared machine, where other processes take turns on the cores. **Matched accuracy**: every estimate is compared with the exact
-``E[·]`` in MCSE units; a sampler counts (is a peer or a candidate in the ratios) only where
-``max |z| ≤ 5`` and max R-hat ≤ 1.05. Ratios are to the best non-i.i.d. peer (mici or NUTS).
+(leapfrog steps). ESS per CPU-second divides by this process's CPU time instead: steadier
+than the wall time on a shared machine, where other processes take turns on the cores.
+**Matched accuracy**: every estimate is compared with the exact ``E[·]`` in MCSE units; a
+sampler counts (is a peer or a candidate in the ratios) only where ``max |z| ≤ 5`` and max
+R-hat ≤ 1.05. Ratios are to the best non-i.i.d. peer (mici or NUTS).
 Target (issue 13): liesample ≥ 3× the best peer in ESS/s.
 """
 
@@ -750,6 +751,7 @@ def report(out_dir: Path, md_dir: Path) -> str:
             "of the bulk ESS; ESS/s uses the wall time of the kept draws only (compilation and "
             "warm-up in their own columns; each compiled JAX loop keeps its fastest of "
             f"{cfg['timing_rounds'] + 1} calls, interleaved with the other samplers' calls); "
+            "ESS per CPU-s uses this process's CPU time instead (steadier on a shared machine); "
             "gradients = leapfrog steps of the kept draws. "
             f"**Matched accuracy**: max |z| ≤ {data['z_limit']:g} against the exact mean (z = "
             f"error / MCSE) and max R-hat ≤ {data['r_hat_limit']:g}; ratios are to the best "
