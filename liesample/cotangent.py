@@ -40,6 +40,7 @@ import jax.scipy.linalg
 import numpy as np
 
 from liesample import spaces
+from liesample._validation import concrete_array
 from liesample.structures import kinetic_magnetic_exponential
 
 __all__ = [
@@ -366,6 +367,9 @@ def cotangent_bundle(space, inverse_mass_matrix=None, magnetic_field=None, dtype
                 "magnetic_field acts on the Euclidean coordinates, and this space has none"
             )
         check_magnetic_field(magnetic_field, dimension)
+        concrete = concrete_array(magnetic_field)
+        if concrete is not None and not np.any(concrete):
+            magnetic_field = None  # a zero field: the free drift, no matrix exponential
     metric = None
     if euclidean:
         if all(not spaces.is_dense_inverse_mass(s, m) for s, m in euclidean):
