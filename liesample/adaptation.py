@@ -148,6 +148,19 @@ class WarmupPieces(NamedTuple):
     final_step_size: Callable  # WarmupState -> the averaged step size of dual averaging
 
 
+def _close_window(window_end, new_inverse_mass, da_init, da_final, operands):
+    """At the end of a slow window (Stan's schedule): the mass from the window's Welford moments
+    ``new_inverse_mass(mean, m2, count)``, dual averaging restarted from its averaged step size,
+    the moments reset. Otherwise ``operands = (da_state, inverse_mass, welford)`` unchanged."""
+
+    def close(operands):
+        da_state, _, (mean, m2, count) = operands
+        welford = (jnp.zeros_like(mean), jnp.zeros_like(m2), 0 * count)
+        return da_init(da_final(da_state)), new_inverse_mass(mean, m2, count), welford
+
+    return jax.lax.cond(window_end, close, lambda operands: operands, operands)
+
+
 def warmup_pieces(space, target_acceptance_rate: float, adapt_mass: bool = True) -> WarmupPieces:
     """Dual averaging of the step size towards ``target_acceptance_rate`` and the Welford mass
     of :func:`_inverse_mass`, one transition at a time, on Stan's schedule: ``stage`` 1 (slow
@@ -177,18 +190,11 @@ def warmup_pieces(space, target_acceptance_rate: float, adapt_mass: bool = True)
             lambda a, b: jnp.where(slow, a, b), (new_mean, new_m2, new_count), welford
         )
 
-        def end_window(operands):
-            da_state, inverse_mass, welford = operands
-            mean, m2, count = welford
-            dtype = mean.dtype
-            inverse_mass = _inverse_mass(space, mean, m2, count, dtype)
-            da_state = da_init(da_final(da_state))
-            return da_state, inverse_mass, (jnp.zeros_like(mean), jnp.zeros_like(m2), 0 * count)
-
-        da_state, inverse_mass, welford = jax.lax.cond(
+        da_state, inverse_mass, welford = _close_window(
             window_end & adapt_mass,
-            end_window,
-            lambda operands: operands,
+            lambda mean, m2, count: _inverse_mass(space, mean, m2, count, mean.dtype),
+            da_init,
+            da_final,
             (da_state, inverse_mass, welford),
         )
         return WarmupState(da_state, jnp.exp(da_state.log_step_size), inverse_mass, welford)
@@ -633,18 +639,13 @@ def magnetic_window_adaptation(
                 lambda a, b: jnp.where(in_slow, a, b), _welford_batch(welford, after), welford
             )
 
-            def end_window(operands):
-                da_state, inverse_mass, welford = operands
-                mean, m2, count = welford
-                variance = m2 / jnp.maximum(count - 1, 1)
-                inverse_mass = _regularised_variance(variance, count.astype(dtype))
-                da_state = da_init(da_final(da_state))
-                return da_state, inverse_mass, (jnp.zeros_like(mean), jnp.zeros_like(m2), 0 * count)
-
-            da_state, inverse_mass, welford = jax.lax.cond(
+            da_state, inverse_mass, welford = _close_window(
                 window_end & adapt_mass,
-                end_window,
-                lambda operands: operands,
+                lambda mean, m2, count: _regularised_variance(
+                    m2 / jnp.maximum(count - 1, 1), count.astype(dtype)
+                ),
+                da_init,
+                da_final,
                 (da_state, inverse_mass, welford),
             )
             record = MagneticAdaptationInfo(
