@@ -66,6 +66,21 @@ def test_matrix_fisher_draws_and_log_prob():
     assert abs(density.mean() - 1.0) < 5 * density.std() / np.sqrt(len(density))
 
 
+@pytest.mark.parametrize("singular_values", [(30.0, 20.0, -5.0), (0.0, 0.0, 0.0), (8.0, 8.0, 8.0)])
+def test_matrix_fisher_exact_sampler_for_concentrated_and_rotated_F(singular_values):
+    # Bingham draws of the quaternion: exact for any F, including concentrated ones that
+    # rejection from Haar could not reach.
+    q, p = np.linalg.qr(np.random.default_rng(0).standard_normal((2, 3, 3)))[0]
+    q, p = q * np.sign(np.linalg.det(q)), p * np.sign(np.linalg.det(p))
+    F = q @ np.diag(singular_values) @ p.T
+    R = np.asarray(MatrixFisher(F).sample(jax.random.key(3), (20000,)))
+    assert np.allclose(np.swapaxes(R, 1, 2) @ R, np.eye(3), atol=1e-12)
+    assert np.allclose(np.linalg.det(R), 1.0, atol=1e-12)
+    exact = MatrixFisherReference(F).mean()
+    se = R.std(0) / np.sqrt(len(R))
+    assert np.all(np.abs(R.mean(0) - exact) < 5 * se + 1e-12)
+
+
 def test_missing_numpyro_is_a_clear_error(monkeypatch):
     monkeypatch.setitem(sys.modules, "numpyro", None)
     monkeypatch.delitem(sys.modules, "liesample.numpyro", raising=False)
