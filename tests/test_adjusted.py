@@ -156,8 +156,10 @@ def test_exact_on_the_heavy_top_where_the_unadjusted_chain_is_biased():
 
     starts = reference.sample(jax.random.key(21), 256)
     step = 0.8
+    # The unadjusted chain is meant to be run past its bias tolerance: some exact starts lie
+    # where dt = 0.8 is beyond Lie–Euler's stability bound (κ ≈ 2.3), so the guard is off.
     unadjusted = liesample.lie_poisson_langevin(
-        TOP, beta=HT_BETA, sigma=1.0, step_size=step, integrator="lie_euler"
+        TOP, beta=HT_BETA, sigma=1.0, step_size=step, integrator="lie_euler", stability="off"
     )
     adjusted = adjusted_lie_poisson(TOP, beta=HT_BETA, sigma=1.0, step_size=step)
     z_unadjusted, _ = _z_scores(unadjusted, starts, observables, exact, 250, 22)
