@@ -164,7 +164,7 @@ class MatrixFisher:
         basis = np.eye(4)
 
         def form(q):
-            return float(np.sum(self.F * np.asarray(quaternion_to_rotation(q))))
+            return float(np.sum(self.F * quaternion_to_rotation(q, xp=np)))
 
         diagonal = np.array([form(e) for e in basis])
         B = np.diag(diagonal)
@@ -181,16 +181,17 @@ class MatrixFisher:
         return quaternion_to_rotation(x @ jnp.asarray(eigenvectors).T)
 
 
-def quaternion_to_rotation(q):
+def quaternion_to_rotation(q, xp=jnp):
     """The rotation of a unit quaternion ``(w, x, y, z)`` (``±q`` give the same one); the
-    entries are homogeneous quadratics in ``q``. Leading axes broadcast."""
+    entries are homogeneous quadratics in ``q``. Leading axes broadcast; ``xp=numpy`` computes
+    it eagerly (also inside a trace)."""
     w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     rows = [
         [w * w + x * x - y * y - z * z, 2 * (x * y - w * z), 2 * (x * z + w * y)],
         [2 * (x * y + w * z), w * w - x * x + y * y - z * z, 2 * (y * z - w * x)],
         [2 * (x * z - w * y), 2 * (y * z + w * x), w * w - x * x - y * y + z * z],
     ]
-    return jnp.stack([jnp.stack(row, -1) for row in rows], -2)
+    return xp.stack([xp.stack(row, -1) for row in rows], -2)
 
 
 def _log_vmf_normalizer_s2(kappa):
