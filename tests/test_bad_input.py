@@ -731,7 +731,7 @@ ROWS = [
     ),
     (
         "sample_bingham lam shape",
-        lambda: targets.sample_bingham(KEY, np.ones(2), 3),
+        lambda: targets.sample_bingham(KEY, np.ones((2, 3)), 3),
         ValueError,
         "lam.*shape",
     ),
