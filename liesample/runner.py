@@ -391,9 +391,10 @@ def _report_divergences(result: ChainsResult, on_nonfinite: str):
     chains = np.flatnonzero(np.any(flags, axis=1))
     message = (
         f"{int(np.sum(flags))} draws in {len(chains)} chain(s) (chains {_chain_list(chains)}) "
-        "contain a divergent step (a non-finite state or energy); those steps were rejected "
+        "contain a divergent step (a non-finite state or energy, or for the Metropolis-adjusted "
+        "samplers an energy error above the divergence threshold); those steps were rejected "
         "and flagged in info['is_divergent'] (sample_stats 'diverging'). Reduce step_size or "
-        "sigma."
+        "sigma, or let the warm-up adapt it."
     )
     if on_nonfinite == "raise":
         raise NonFiniteStateError(message)
