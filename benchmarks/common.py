@@ -288,6 +288,13 @@ def format_g(x, digits=3) -> str:
     return f"{x:.{digits}g}".replace("-", "−")
 
 
+def format_or_dash(x, digits=3) -> str:
+    """``x`` to ``digits`` significant figures; ``–`` for a missing or non-finite value."""
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "–"
+    return f"{x:.{digits}g}"
+
+
 def format_signed(x, se) -> str:
     return f"{x:+.4f} ± {se:.4f}".replace("-", "−")
 

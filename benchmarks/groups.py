@@ -704,12 +704,6 @@ def _plot(results, out_dir):
     plt.close(fig)
 
 
-def _fmt(x, digits=3):
-    if x is None or (isinstance(x, float) and not math.isfinite(x)):
-        return "–"
-    return f"{x:.{digits}g}"
-
-
 def report(out_dir: Path, md_dir: Path) -> str:
     path = out_dir / f"{NAME}.json"
     if not path.exists():
@@ -764,14 +758,14 @@ def report(out_dir: Path, md_dir: Path) -> str:
                     extra += f", {r['divergences']} divergent"
             lines.append(
                 f"| {r['label']}{flag} | {r.get('settings', '')}{extra} | "
-                f"{_fmt(r['max_abs_z'], 2)} | {_fmt(r['max_r_hat'], 4)} | {_fmt(r['min_ess'])} | "
-                f"{_fmt(r['ess_per_second'])} | {_fmt(r['ess_per_cpu_second'])} | "
-                f"{_fmt(1000 * r['ess_per_gradient'])} | "
-                f"{_fmt(r['wall_seconds'])}, {_fmt(r['cpu_seconds'])} | "
-                f"{_fmt(r['warmup_seconds'])} | {_fmt(r['compile_seconds'], 2)} | "
-                f"{_fmt(r['ess_per_second_over_best_peer'], 3)}, "
-                f"{_fmt(r['ess_per_cpu_second_over_best_peer'], 3)}, "
-                f"{_fmt(r['ess_per_gradient_over_best_peer'], 3)} |"
+                f"{common.format_or_dash(r['max_abs_z'], 2)} | {common.format_or_dash(r['max_r_hat'], 4)} | {common.format_or_dash(r['min_ess'])} | "
+                f"{common.format_or_dash(r['ess_per_second'])} | {common.format_or_dash(r['ess_per_cpu_second'])} | "
+                f"{common.format_or_dash(1000 * r['ess_per_gradient'])} | "
+                f"{common.format_or_dash(r['wall_seconds'])}, {common.format_or_dash(r['cpu_seconds'])} | "
+                f"{common.format_or_dash(r['warmup_seconds'])} | {common.format_or_dash(r['compile_seconds'], 2)} | "
+                f"{common.format_or_dash(r['ess_per_second_over_best_peer'], 3)}, "
+                f"{common.format_or_dash(r['ess_per_cpu_second_over_best_peer'], 3)}, "
+                f"{common.format_or_dash(r['ess_per_gradient_over_best_peer'], 3)} |"
             )
         verdict = "met" if ratios["target_met"] else "missed"
         lines += [
@@ -779,18 +773,18 @@ def report(out_dir: Path, md_dir: Path) -> str:
             (
                 f"Best liesample sampler ({ratios['best_liesample']}) over the best peer "
                 f"({ratios['best_peer']}) in ESS/s: "
-                f"{_fmt(ratios['best_liesample_over_best_peer'], 3)}× (target ≥ 3×: "
+                f"{common.format_or_dash(ratios['best_liesample_over_best_peer'], 3)}× (target ≥ 3×: "
                 f"**{verdict}**; per CPU-second "
-                f"{_fmt(ratios['best_liesample_over_best_peer_cpu'], 3)}×); over exact i.i.d. "
+                f"{common.format_or_dash(ratios['best_liesample_over_best_peer_cpu'], 3)}×); over exact i.i.d. "
                 f"draws: "
-                f"{_fmt(ratios['best_liesample_over_iid'], 3)}×"
+                f"{common.format_or_dash(ratios['best_liesample_over_iid'], 3)}×"
                 + (
                     f" (not a ceiling here: {IID_NOTES[t['name']]})."
                     if ratios["best_liesample_over_iid"] > 1 and t["name"] in IID_NOTES
                     else " (the ceiling)."
                 )
                 + " Per CPU-second over i.i.d.: "
-                + f"{_fmt(ratios['best_liesample_over_iid_cpu'], 3)}×."
+                + f"{common.format_or_dash(ratios['best_liesample_over_iid_cpu'], 3)}×."
             ),
             "",
         ]

@@ -629,12 +629,6 @@ def _plot(contenders, out_dir):
     plt.close(fig)
 
 
-def _fmt(x, digits=3):
-    if x is None or (isinstance(x, float) and not math.isfinite(x)):
-        return "–"
-    return f"{x:.{digits}g}"
-
-
 def report(out_dir: Path, md_dir: Path) -> str:
     path = out_dir / f"{NAME}.json"
     if not path.exists():
@@ -678,10 +672,10 @@ def report(out_dir: Path, md_dir: Path) -> str:
             extra = f" (acceptance {r['acceptance_rate']:.2f})"
         lines.append(
             f"| {r['label']}{extra} | {r.get('settings', '')} | {bias} | {z} | "
-            f"{_fmt(r['min_ess'])} | {_fmt(r['wall_seconds'])} | {_fmt(r['ess_per_second'])} | "
-            f"{_fmt(matched) if math.isfinite(matched) else 'not reached'} | "
-            f"{_fmt(matched / iid['ess_per_second_matched'], 2)} | "
-            f"{_fmt(matched / nuts['ess_per_second_matched'], 2)} |"
+            f"{common.format_or_dash(r['min_ess'])} | {common.format_or_dash(r['wall_seconds'])} | {common.format_or_dash(r['ess_per_second'])} | "
+            f"{common.format_or_dash(matched) if math.isfinite(matched) else 'not reached'} | "
+            f"{common.format_or_dash(matched / iid['ess_per_second_matched'], 2)} | "
+            f"{common.format_or_dash(matched / nuts['ess_per_second_matched'], 2)} |"
         )
     lines += [
         "",
@@ -705,9 +699,9 @@ def report(out_dir: Path, md_dir: Path) -> str:
             for b, s in zip(r["bias"], r["se"], strict=True)
         )
         lines.append(
-            f"| {r['label']} | {r['step_size']} | {_fmt(r['chain_steps_per_second'])} | "
-            f"{r['chains_finite']}/{r['chains']} | {_fmt(r['orbit_drift_median'], 2)} / "
-            f"{_fmt(r['orbit_drift_max'], 2)} | {r['chains_off_orbit_10pct']} | {bias} |"
+            f"| {r['label']} | {r['step_size']} | {common.format_or_dash(r['chain_steps_per_second'])} | "
+            f"{r['chains_finite']}/{r['chains']} | {common.format_or_dash(r['orbit_drift_median'], 2)} / "
+            f"{common.format_or_dash(r['orbit_drift_max'], 2)} | {r['chains_off_orbit_10pct']} | {bias} |"
         )
     unadjusted = next(r for r in data["contenders"] if r["kind"] == "unadjusted")
     choice = unadjusted["choice"]
