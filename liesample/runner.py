@@ -288,36 +288,16 @@ def sample_chains(
                 states = shard_chains(saved_states, sharding)
                 run_warmup = False
 
-    def advance(state, key, first_step, num_steps):
-        def one(state, step):
-            return algorithm.step(jax.random.fold_in(key, step), state)
-
-        return jax.lax.scan(one, state, first_step + jnp.arange(num_steps))
-
-    blocked = getattr(algorithm, "noise_blocks", None) is not None  # liesample.samplers.stepping
-
+    # One loop for every sampler (liesample.samplers.stepping): per-step keys, or noise blocks
+    # for the samplers that declare them.
     @jit
     def warmup(states, keys, first_step):
-        if blocked:
-            return jax.vmap(lambda s, k: run_steps(algorithm, k, s, first_step, num_warmup)[0])(
-                states, keys
-            )
-        return jax.vmap(lambda s, k: advance(s, k, first_step, num_warmup)[0])(states, keys)
+        return jax.vmap(lambda s, k: run_steps(algorithm, k, s, first_step, num_warmup)[0])(
+            states, keys
+        )
 
     def draws(state, key, first_step, count):
-        if blocked:
-            return run_draws(
-                algorithm, key, state, first_step, count, thinning, reduce_over_thinning
-            )
-
-        def one_draw(state, draw):
-            state, infos = advance(state, key, first_step + draw * thinning, thinning)
-            info = {
-                name: reduce_over_thinning(name)(value) for name, value in infos._asdict().items()
-            }
-            return state, (state.position, info)
-
-        return jax.lax.scan(one_draw, state, jnp.arange(count))
+        return run_draws(algorithm, key, state, first_step, count, thinning, reduce_over_thinning)
 
     chunk = chunk_draws if chunk_draws is not None else max(1, math.ceil(num_draws / 20))
     run_chunk = jit(
