@@ -2,15 +2,17 @@
 
 A pure-JAX reproducer (no liesample code, no PRNG): two steps of a heavy-top-like map in a
 ``fori_loop``, vmapped over 8 rows. Each row of the batched result must equal the row run alone.
-On jaxlib 0.12 (CPU) plain ``jax.jit`` gives 1.7e-2 differences; ``liesample.jit`` (the same
-``jax.jit`` with the ``small-while-loop-hoisting`` pass disabled) gives round-off on every
-supported version. The plain-``jax.jit`` test is marked ``xfail(strict=True)`` where the bug is
-known, so a jax release that fixes it shows up as an unexpected pass instead of being hidden.
+``liesample.jit`` (``jax.jit`` with the ``small-while-loop-hoisting`` pass disabled) must give
+round-off on every host: that is what liesample promises, and what these tests assert.
+
+Whether plain ``jax.jit`` miscompiles depends on the jaxlib version *and* on the CPU (seen on
+some x86 hosts with jaxlib 0.12, absent on others), so it is measured and reported, never
+asserted: ``test_plain_jax_jit_on_this_host`` always skips, with the measured error in its reason
+(``pytest -rs`` shows it).
 """
 
 import jax
 import jax.numpy as jnp
-import jaxlib
 import numpy as np
 import pytest
 
@@ -19,8 +21,6 @@ from liesample.compile import SAFE_COMPILER_OPTIONS, safe_compiler_options
 
 INV_INERTIA = 1.0 / np.array([1.0, 1.5, 2.5])
 GRAVITY = np.array([0.2, 0.0, 1.0])
-JAXLIB = tuple(int(part) for part in jaxlib.__version__.split(".")[:2])
-KNOWN_MISCOMPILE = JAXLIB >= (0, 12) and jax.default_backend() == "cpu"
 
 
 def _cross(a, b):
@@ -72,13 +72,15 @@ def test_safe_jit_through_lower_and_compile():
     np.testing.assert_allclose(np.asarray(compiled(rows)), alone, rtol=0, atol=1e-12)
 
 
-@pytest.mark.xfail(
-    KNOWN_MISCOMPILE,
-    reason="XLA:CPU small-while-loop-hoisting miscompiles jit(vmap(fori_loop)) on jaxlib 0.12",
-    strict=True,
-)
-def test_plain_jax_jit_of_the_batched_loop():
-    assert _batched_error(jax.jit) < 1e-12
+def test_plain_jax_jit_on_this_host():
+    """A record, not an assertion: what plain ``jax.jit`` does with the reproducer here. The
+    miscompile is a property of jaxlib and the host CPU, not of liesample."""
+    error = _batched_error(jax.jit)
+    verdict = "miscompiles" if error > 1e-12 else "compiles correctly"
+    pytest.skip(
+        f"plain jax.jit {verdict} the batched loop on this host (jax {jax.__version__}, "
+        f"{jax.default_backend()}): batched-vs-alone error {error:.1e}"
+    )
 
 
 def test_safe_compiler_options_keep_user_options():
