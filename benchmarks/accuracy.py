@@ -23,7 +23,7 @@ Statistics, per component ``f = μ_i²``:
   included, compilation excluded).
 
 Cross-check: a stored run of ``ess_check_chains`` chains per setting (every step kept) gives
-ArviZ's rank-normalised ``ess_bulk`` of ``μ₃²`` via ``liesample.diagnostics.expectation_table``,
+ArviZ's rank-normalised ``ess_bulk`` of ``μ₃²`` via ``liesample.analysis.diagnostics.expectation_table``,
 converted to ``tau_int`` for comparison.
 """
 
@@ -39,12 +39,12 @@ import jax.numpy as jnp
 import numpy as np
 from matplotlib.figure import Figure
 
+import liesample
 from benchmarks import common
 from benchmarks.throughput import RNG_ONLY
-import liesample
-from liesample.diagnostics import expectation_table
+from liesample.analysis.diagnostics import expectation_table
 from liesample.integrators import DEFAULT_INTEGRATOR, get_integrator
-from liesample.samplers.lie_poisson_langevin import build_kernel, init
+from liesample.samplers.orbit.lie_poisson_langevin import build_kernel, init
 
 SCENE = "all effects"
 
@@ -982,7 +982,7 @@ component f = μ_i²:
   "(n.r.)" = **not resolved**, |bias| < 2 SE.
 - **ESS** = Var(f) / SE², with Var(f) the pooled mean(f²) − mean(f)² (batch means with one
   batch per chain); **τ_int** = chains × (kept time) / ESS, in time units. Cross-check: ArviZ
-  `ess_bulk` of μ₃² (via `liesample.diagnostics.expectation_table`) from a separate stored run
+  `ess_bulk` of μ₃² (via `liesample.analysis.diagnostics.expectation_table`) from a separate stored run
   of {cfg["ess_check_chains"]} chains keeping every step, converted to τ_int the same way.
 - **wall** = wall time of the whole {a0["chains"]}-chain run, burn-in included, compilation
   excluded (one executable per integrator; the step size is a traced argument).

@@ -9,10 +9,10 @@ Writes ``euclidean.json`` and ``euclidean.png``. Every sampler gets the same num
 transitions per chain (``num_warmup``), then ``NUM_CHAINS`` chains draw ``num_draws`` each:
 
 - ``magnetic_hmc`` (``liesample``): ``liesample.window_adaptation(liesample.magnetic_hmc, …)``
-  (:func:`liesample.adaptation.magnetic_window_adaptation`) on the ``NUM_CHAINS`` chains at once
+  (:func:`liesample.tuning.adaptation.magnetic_window_adaptation`) on the ``NUM_CHAINS`` chains at once
   — step size, diagonal mass and the field ``default_magnetic_field(M⁻¹, angle / ε)`` adapted
   jointly, the trajectory length by the ChEES-type rule — then
-  :func:`liesample.adaptation.jittered_magnetic_hmc` from the adapted states; one row per
+  :func:`liesample.tuning.adaptation.jittered_magnetic_hmc` from the adapted states; one row per
   angle in ``ANGLES`` (the default, and angle 0.25 or 0 beside it);
 - ``blackjax nuts`` and ``blackjax hmc`` (``L = NUM_STEPS``): ``blackjax.window_adaptation``
   (diagonal mass, target acceptance 0.8) on one chain, all chains start from its state. Their
@@ -53,7 +53,7 @@ NUM_CHAINS = 4
 NUM_STEPS = 10  # leapfrog steps of BlackJAX HMC
 # The field's strength as the angle (rad) it turns the whitened velocity per leapfrog step:
 # the adaptation's default, and the other angle measured beside it.
-ANGLE = liesample.adaptation.DEFAULT_ANGLE
+ANGLE = liesample.tuning.adaptation.DEFAULT_ANGLE
 ANGLES = tuple(sorted({ANGLE, 0.0, 0.25}))
 GOALS = {"blackjax nuts": 1.0, "blackjax hmc": 1.5}  # ESS/gradient ratios (HMC: Gaussians)
 
@@ -207,7 +207,7 @@ def measure_magnetic(target, key, num_warmup, num_draws, angle):
     start = time.perf_counter()
     (states, parameters), info = warmup.run(key_warmup, starts, num_steps=num_warmup)
     warmup_seconds = time.perf_counter() - start
-    sampler = liesample.adaptation.jittered_magnetic_hmc(target.logdensity_fn, **parameters)
+    sampler = liesample.tuning.adaptation.jittered_magnetic_hmc(target.logdensity_fn, **parameters)
     draws, logdensity, gradients, seconds, divergences = run_chains(
         sampler, states, key_run, num_draws
     )

@@ -32,7 +32,7 @@ Samplers, each given the same warm-up budget of ``warmup`` transitions per chain
   the uniform law on S³ modulo ±) and on ``y_i ∈ R³`` with ``x_i = y_i/|y_i|`` (Stan's
   ``unit_vector``), density ``π(x(y)) e^{−|y|²/2}`` (in polar coordinates ``y/|y|`` has
   density ``∝ π``), ``blackjax.window_adaptation`` on one chain, vmapped chains;
-- **exact i.i.d.**: ``liesample.numpyro.MatrixFisher.sample`` (the quaternion's Bingham law,
+- **exact i.i.d.**: ``liesample.interop.numpyro_distributions.MatrixFisher.sample`` (the quaternion's Bingham law,
   angular-central-Gaussian rejection) and
   ``liesample.targets.spins.von_mises_fisher`` (closed form), the ceiling; ESS = draws.
 
@@ -71,8 +71,8 @@ import numpy as np
 
 import liesample
 from liesample import spaces
-from liesample.diagnostics import expectation_table
-from liesample.numpyro import MatrixFisher as MatrixFisherLaw
+from liesample.analysis.diagnostics import expectation_table
+from liesample.interop.numpyro_distributions import MatrixFisher as MatrixFisherLaw
 from liesample.targets import groups as exact_groups
 from liesample.targets.groups import quaternion_to_rotation
 from liesample.targets.spins import von_mises_fisher

@@ -11,7 +11,7 @@ with the public runner, ``liesample.sample_chains`` (vmapped chains, chunked ``l
 draws copied to the host after each chunk; compilation excluded from the wall time), for
 1 … 10⁶ chains, on the default device and — in a subprocess started with
 ``XLA_FLAGS=--xla_force_host_platform_device_count=2`` — split over two forced host devices with
-``devices=2`` (:mod:`liesample.sharding`). Throughput is chain-steps per second. The device
+``devices=2`` (:mod:`liesample.run.sharding`). Throughput is chain-steps per second. The device
 kind is recorded; on a GPU machine the same file runs unchanged (the 2-device row then uses two
 GPUs if there are two, else it is skipped).
 """

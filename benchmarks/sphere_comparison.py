@@ -17,16 +17,16 @@ Contenders:
   the limit; ESS = number of draws.
 - **BlackJAX NUTS** on ``y ∈ R³`` with density ``f(y/|y|) e^{−|y|²/2}`` (Stan's ``unit_vector``:
   in polar coordinates ``y/|y|`` has density ``∝ f``), ``blackjax.window_adaptation``, vmapped
-  chains; ESS from ArviZ ``ess_bulk`` (via ``liesample.diagnostics.expectation_table``).
+  chains; ESS from ArviZ ``ess_bulk`` (via ``liesample.analysis.diagnostics.expectation_table``).
 - **diffrax** Stratonovich solvers (``EulerHeun``, ``Heun``) on the same SDE in ambient R³,
   ``dμ = μ×Ω dt + θ μ×(μ×Ω) dt + σ Σ μ×e_i ∘ dW_i`` (``UnsafeBrownianPath``, constant step; the
   time integral of ``μ_i²`` is carried as extra state), and liesample's splitting at the same
   step and chains: throughput, orbit drift, bias.
 - **liesample**: the unadjusted splitting sampler at the step (and σ) picked by
-  ``liesample.accuracy.choose_step_size`` for the tolerance; Richardson–Romberg extrapolation
+  ``liesample.integrators.accuracy.choose_step_size`` for the tolerance; Richardson–Romberg extrapolation
   (coupled ``h``, ``h/2``); the Metropolis-adjusted sampler ``liesample.adjusted_lie_poisson``
   over a grid of steps (exact at every step; best ESS/s kept). Both draw their noise in blocks
-  of steps (``liesample.samplers.stepping``), as ``liesample.sample`` runs them.
+  of steps (``liesample.integrators.chain_loop``), as ``liesample.sample`` runs them.
 
 **Matched accuracy**: ``|bias| ≤ TOLERANCE`` on every ``E[μ_i²]``. Exact methods meet it by
 construction (checked: |z| against the exact value). A biased method counts only where the run
@@ -51,7 +51,7 @@ import numpy as np
 import liesample
 from benchmarks import common, suites
 from liesample import accuracy
-from liesample.diagnostics import expectation_table
+from liesample.analysis.diagnostics import expectation_table
 
 SUITE = {"order": 10, "title": "restricted Gaussian on S²: liesample vs i.i.d., NUTS, diffrax"}
 NAME = "sphere_comparison"

@@ -27,7 +27,7 @@ the budget; the first 20 % of the steps is warm-up and discarded. Samplers:
   discretised dynamics of all spins together (biased at O(dt²));
 - ``wolff``: ``liesample.heisenberg_wolff``, one step = one cluster reflection.
 
-ESS (bulk) and R-hat come from ``liesample.diagnostics.expectation_table`` (ArviZ) for the energy
+ESS (bulk) and R-hat come from ``liesample.analysis.diagnostics.expectation_table`` (ArviZ) for the energy
 per spin and ``|m|``; ESS/s divides by the sampling wall time (compilation excluded, warm-up
 included). ``ess_per_sweep`` is the machine-independent ESS per sweep of all chains together
 (``steps × chains``; a Wolff step counts as ``cluster size / N`` sweeps).
@@ -51,7 +51,7 @@ import numpy as np
 
 import liesample
 from benchmarks import common, suites
-from liesample.diagnostics import expectation_table
+from liesample.analysis.diagnostics import expectation_table
 from liesample.systems.heisenberg import heisenberg
 
 SUITE = {

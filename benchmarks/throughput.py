@@ -14,7 +14,7 @@ the hand-fused comparison below measures.
 **Library against a hand-fused step** (:func:`run_fused_comparison`; alone:
 ``benchmarks/throughput.py --fused [--quick]``, writes ``results/throughput_fused.json``). The
 Metropolis-adjusted orbit step of the rigid body and of the heavy top, in one run: the library
-(``liesample.adjusted_lie_poisson`` driven by ``liesample.samplers.stepping.run_steps``) with its
+(``liesample.adjusted_lie_poisson`` driven by ``liesample.integrators.chain_loop.run_steps``) with its
 noise drawn per step (``fold_in`` + draw) and in blocks, and a hand-written loop of the same
 scheme (closed-form gradients, brackets and coadjoint moves in plain ``jnp``, the same noise
 blocks). The fused loop is checked to give the library's chain (same noise, max difference
@@ -36,10 +36,9 @@ import jax.numpy as jnp
 import numpy as np
 from matplotlib.figure import Figure
 
-from benchmarks import common
-
 import liesample
-from liesample.samplers.stepping import run_steps
+from benchmarks import common
+from liesample.integrators.chain_loop import run_steps
 from liesample.systems import heavy_top
 
 RNG_ONLY = "RNG only (fold_in + 3 normals)"

@@ -44,7 +44,7 @@ import liesample
 from benchmarks import common, suites
 from liesample.dynamics import PoissonLangevin
 from liesample.integrators import get_integrator
-from liesample.substepping import substep
+from liesample.integrators.substeps import substep
 from liesample.systems.point_vortices import (
     point_vortex_integrator,
     point_vortices,
@@ -195,7 +195,7 @@ def substep_cost(quick, log):
         system = point_vortices(PAIR, max_degree=2)
         base = get_integrator("rkmk_heun")
         rate_fn = substep_rate(system)
-        sigma_, theta, scene = liesample.samplers.lie_poisson_langevin.make_dynamics(
+        sigma_, theta, scene = liesample.samplers.orbit.lie_poisson_langevin.make_dynamics(
             system, beta=beta, sigma=sigma
         )
         dynamics = PoissonLangevin(system, sigma_, theta, scene)

@@ -1,7 +1,7 @@
 """A user-defined system: a planar pendulum on se(2)*, from an algebra, h and noise alone.
 
 se(2) in the basis (J, P_x, P_y) is built from its structure constants
-(``liesample.algebras.se2``). A state ``μ = (m, p_x, p_y)`` lies on the coadjoint orbit
+(``liesample.geometry.algebras.se2``). A state ``μ = (m, p_x, p_y)`` lies on the coadjoint orbit
 ``|p| = r`` (a cylinder: angular momentum ``m ∈ R``, angle ``φ`` of ``p``), whose Liouville
 measure is ``dm dφ``. With
 
@@ -26,7 +26,7 @@ import numpy as np
 from scipy.special import i0e, i1e
 
 import liesample
-from liesample.algebras import se2
+from liesample.geometry.algebras import se2
 from liesample.systems import lie_poisson_system
 
 INERTIA, STIFFNESS, BETA, RADIUS = 0.5, 1.5, 2.0, 1.2

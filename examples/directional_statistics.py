@@ -31,7 +31,7 @@ import numpy as np
 from scipy.stats import vonmises_fisher
 
 import liesample
-from liesample.spaces import Euclidean, Sphere
+from liesample.geometry.spaces import Euclidean, Sphere
 from liesample.targets.groups import VonMisesFisherPosterior
 
 TRUE_DIRECTION = np.array([1.0, 2.0, 2.0]) / 3.0

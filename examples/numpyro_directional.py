@@ -2,7 +2,7 @@
 
 Run with ``.venv/bin/python examples/numpyro_directional.py`` (about 30 s on 2 cores).
 
-The model is written in NumPyro; :class:`liesample.numpyro_mcmc.GeometricHMC` samples it with
+The model is written in NumPyro; :class:`liesample.interop.numpyro_kernel.GeometricHMC` samples it with
 geometric HMC, moving the direction ``mu`` on the sphere itself (no unit-vector trick, no
 projected parametrisation) and the concentration ``kappa`` in NumPyro's unconstrained
 coordinate ``log κ``::
@@ -34,8 +34,8 @@ import numpyro.distributions as dist
 from numpyro.infer import MCMC
 from scipy.stats import vonmises_fisher
 
-from liesample.numpyro import VonMisesFisher
-from liesample.numpyro_mcmc import GeometricHMC
+from liesample.interop.numpyro_distributions import VonMisesFisher
+from liesample.interop.numpyro_kernel import GeometricHMC
 from liesample.targets.groups import VonMisesFisherPosterior
 
 TRUE_DIRECTION = np.array([1.0, 2.0, 2.0]) / 3.0

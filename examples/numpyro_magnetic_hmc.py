@@ -6,7 +6,7 @@ Run with ``.venv/bin/python examples/numpyro_magnetic_hmc.py`` (about 15 s on 2 
 2. ``blackjax.window_adaptation(liesample.magnetic_hmc, ...)`` tunes the step size and the
    diagonal inverse mass matrix (with a provisional zero field).
 3. The field is built from the adapted mass matrix and step size with
-   :func:`liesample.samplers.magnetic.default_magnetic_field` and its tuning rule (the field
+   :func:`liesample.samplers.cotangent.magnetic.default_magnetic_field` and its tuning rule (the field
    turns the whitened velocity by ``ANGLE_PER_STEP`` rad per leapfrog step), and 4 chains are
    run with ``liesample.magnetic_hmc``.
 4. Draws are mapped back to the constrained space and summarised with ArviZ.
@@ -29,7 +29,7 @@ from jax.flatten_util import ravel_pytree
 from numpyro.infer.util import initialize_model
 
 import liesample
-from liesample.samplers.magnetic import default_magnetic_field
+from liesample.samplers.cotangent.magnetic import default_magnetic_field
 
 Y = np.array([28.0, 8.0, -3.0, 7.0, -1.0, 1.0, 18.0, 12.0])
 SIGMA = np.array([15.0, 10.0, 16.0, 11.0, 9.0, 11.0, 10.0, 18.0])

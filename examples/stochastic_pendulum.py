@@ -2,7 +2,7 @@
 
 ``H_0 = p²/2 − cos q`` with noise in both coordinates, ``H_1 = σ₁ cos q`` (random torque
 ``σ₁ sin q ∘ dW¹``) and ``H_2 = σ₂ p`` (random displacement ``σ₂ ∘ dW²``). Paths are integrated
-by the stochastic implicit midpoint rule (:mod:`liesample.symplectic`), whose one-step map is
+by the stochastic implicit midpoint rule (:mod:`liesample.dynamics.symplectic`), whose one-step map is
 symplectic for every path; the figure shows the paths over the deterministic energy contours,
 the energy along each path, and the measured symplecticity defect ``max |Dφᵀ Ω Dφ − Ω|``.
 
@@ -20,10 +20,9 @@ import numpy as np
 from matplotlib.figure import Figure
 
 import liesample
-from liesample.symplectic import (
+from liesample.dynamics.symplectic import (
     brownian_increments,
     stochastic_midpoint_step,
-    stochastic_pendulum,
     symplectic_path,
     symplecticity_defect,
 )
@@ -33,7 +32,7 @@ jax.config.update("jax_enable_x64", True)
 
 def main(output="stochastic_pendulum.png", num_paths=6, num_steps=2000, step_size=0.01, seed=0):
     """Simulate ``num_paths`` paths, write the phase portrait to ``output``, return a summary."""
-    system = stochastic_pendulum(noise_position=0.4, noise_momentum=0.15)
+    system = liesample.systems.stochastic_pendulum(noise_position=0.4, noise_momentum=0.15)
     keys = jax.random.split(jax.random.key(seed), num_paths)
     angles = np.linspace(0.3, 2.6, num_paths)
     starts = jnp.stack([jnp.asarray(angles), jnp.zeros(num_paths)], axis=1)

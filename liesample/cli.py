@@ -9,7 +9,6 @@ from pathlib import Path
 
 import numpy as np
 
-
 DEMO_DESCRIPTION = """\
 Sample the stochastic-dissipative rigid body on the sphere |μ| = radius with the
 Lie–Poisson–Langevin sampler, and compare the chains with the exact Gibbs law exp(−βh),
@@ -91,20 +90,20 @@ def demo(args) -> int:
     jax.config.update("jax_enable_x64", True)  # Casimirs to round-off need float64
 
     from liesample import lie_poisson_langevin, systems
-    from liesample.diagnostics import (
+    from liesample.analysis.diagnostics import (
         autocovariance,
         casimir_drift,
         count_nonfinite,
         expectation_table,
         format_table,
     )
-    from liesample.plots import (
+    from liesample.analysis.plots import (
         plot_autocorrelation,
         plot_marginals,
         plot_sphere_density,
         plot_traces,
     )
-    from liesample.runner import sample
+    from liesample.run.runner import sample
     from liesample.targets import isotropic_autocorrelation
 
     if args.chains < 1:

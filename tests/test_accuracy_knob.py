@@ -1,4 +1,4 @@
-"""Accuracy as a knob (``liesample.accuracy``): ask for a bias tolerance, get it.
+"""Accuracy as a knob (``liesample.integrators.accuracy``): ask for a bias tolerance, get it.
 
 - :func:`richardson_romberg`: the arithmetic on synthetic data with a known bias, its MCSE
   (independent and paired), and parameter checks;

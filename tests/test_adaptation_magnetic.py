@@ -13,15 +13,15 @@ import numpy as np
 import pytest
 
 import liesample
-from liesample.adaptation import (
+from liesample.samplers.cotangent.magnetic import default_magnetic_field
+from liesample.targets import correlated_gaussian
+from liesample.tuning.adaptation import (
     MagneticAdaptationInfo,
     _chees_gradient,
     _van_der_corput,
     jittered_magnetic_hmc,
     magnetic_window_adaptation,
 )
-from liesample.samplers.magnetic import default_magnetic_field
-from liesample.targets import correlated_gaussian
 
 CHAINS = 4
 MEAN = np.array([1.0, -2.0, 0.5])
@@ -160,7 +160,7 @@ def test_bad_input_is_refused_with_what_is_allowed():
         magnetic_window_adaptation(logdensity_fn, max_num_integration_steps=0)
     with pytest.raises(TypeError, match="takes no space"):
         liesample.window_adaptation(
-            liesample.magnetic_hmc, logdensity_fn, liesample.spaces.Euclidean((3,))
+            liesample.magnetic_hmc, logdensity_fn, liesample.geometry.spaces.Euclidean((3,))
         )
     with pytest.raises(TypeError, match="give the space"):
         liesample.window_adaptation(liesample.geometric_hmc, logdensity_fn)

@@ -18,10 +18,10 @@ import numpy as np
 import pytest
 
 import liesample
-from liesample.accuracy import ergodic_averages
-from liesample.algebras import so3
-from liesample.samplers import adjusted_lie_poisson as module
-from liesample.samplers.adjusted_lie_poisson import (
+from liesample.geometry.algebras import so3
+from liesample.integrators.accuracy import ergodic_averages
+from liesample.samplers.orbit import adjusted_lie_poisson as module
+from liesample.samplers.orbit.adjusted_lie_poisson import (
     AdjustedLiePoissonInfo,
     AdjustedLiePoissonState,
     adjusted_lie_poisson,

@@ -19,7 +19,7 @@ from hypothesis.extra.numpy import arrays
 from scipy.spatial.transform import Rotation
 
 import liesample
-from liesample.algebras import so3
+from liesample.geometry.algebras import so3
 
 RNG_SEED = 20240611
 REL = 1e-13  # see module docstring

@@ -19,7 +19,7 @@ from hypothesis.extra.numpy import arrays
 
 import liesample
 from liesample import algebras
-from liesample.algebras import SE3, StructureConstants
+from liesample.geometry.algebras import SE3, StructureConstants
 
 REL = 1e-13
 RNG_SEED = 31415

@@ -16,7 +16,7 @@ import pytest
 
 import liesample
 from liesample import algebras, systems, targets
-from liesample.algebras import StructureConstants
+from liesample.geometry.algebras import StructureConstants
 
 NAN, INF = math.nan, math.inf
 RIGID = systems.rigid_body()
@@ -365,7 +365,7 @@ ROWS = [
     ("sample adapt type", lambda: _sample(adapt="yes"), TypeError, "adapt"),
     (
         "accuracy rng_key int",
-        lambda: liesample.accuracy.coupled_ergodic_averages(
+        lambda: liesample.integrators.accuracy.coupled_ergodic_averages(
             RIGID, 1.0, _identity, step_size=0.1, initial_positions=STARTS, rng_key=7,
             total_time=1.0,
         ),
@@ -374,7 +374,7 @@ ROWS = [
     ),  # fmt: skip
     (
         "accuracy tolerance and relative_tolerance",
-        lambda: liesample.accuracy.choose_step_size(
+        lambda: liesample.integrators.accuracy.choose_step_size(
             RIGID, 1.0, 0.01, relative_tolerance=0.05, observables=_identity,
             initial_positions=STARTS, rng_key=KEY,
         ),

@@ -22,10 +22,10 @@ import pytest
 
 import liesample
 from liesample import PoissonLangevin, Scene
-from liesample.cotangent import kinetic_magnetic_flow, make_metric
-from liesample.structures import (
+from liesample.dynamics.sde import PoissonLangevinSDE
+from liesample.geometry.cotangent import kinetic_magnetic_flow, make_metric
+from liesample.geometry.poisson import (
     LiePoissonStructure,
-    PoissonLangevinSDE,
     field_from_vector_potential,
     magnetic_structure,
 )
@@ -192,7 +192,7 @@ def test_jacobi_identity_holds_for_a_field_from_a_vector_potential():
         )
 
     # A field with div B ≠ 0 (B = q) breaks it: the test can fail.
-    broken = liesample.structures.CanonicalStructure(
+    broken = liesample.geometry.poisson.CanonicalStructure(
         3, lambda q: jnp.array([[0, q[2], -q[1]], [-q[2], 0, q[0]], [q[1], -q[0], 0]])
     )
 

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import liesample
-from liesample.compile import SAFE_COMPILER_OPTIONS, safe_compiler_options
+from liesample.foundation.compile import SAFE_COMPILER_OPTIONS, safe_compiler_options
 
 INV_INERTIA = 1.0 / np.array([1.0, 1.5, 2.5])
 GRAVITY = np.array([0.2, 0.0, 1.0])

@@ -8,7 +8,7 @@ import pytest
 import scipy.linalg
 
 from liesample import spaces as S
-from liesample.cotangent import (
+from liesample.geometry.cotangent import (
     BAOAB,
     LEAPFROG,
     PhasePoint,

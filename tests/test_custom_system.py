@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from liesample.algebras import so3
+from liesample.geometry.algebras import so3
 from liesample.systems import lie_poisson_system
 
 

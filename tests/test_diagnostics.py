@@ -1,4 +1,4 @@
-"""Tests for liesample.diagnostics and liesample.plots on synthetic chains with known answers."""
+"""Tests for liesample.analysis.diagnostics and liesample.analysis.plots on synthetic chains with known answers."""
 
 from collections import namedtuple
 
@@ -9,7 +9,7 @@ from scipy import integrate, stats
 from scipy.signal import lfilter
 
 from liesample import diagnostics as diag
-from liesample import plots
+from liesample.analysis import plots
 
 Info = namedtuple("Info", ["energy", "casimir_error", "nonfinite", "acceptance_rate"])
 

@@ -17,14 +17,14 @@ import pytest
 import scipy.linalg
 
 import liesample
-from liesample.algebras import so3
-from liesample.drivers import (
+from liesample.dynamics import PoissonLangevin, Scene
+from liesample.geometry.algebras import so3
+from liesample.integrators.drivers import (
     BrownianMotion,
     DriftedBrownianMotion,
     TimeChangedBrownianMotion,
     simulate,
 )
-from liesample.dynamics import PoissonLangevin, Scene
 from liesample.systems import heavy_top, rigid_body
 
 MU0 = np.array([0.3, -0.5, 1.2])

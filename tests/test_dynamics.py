@@ -20,7 +20,7 @@ import pytest
 import liesample
 from liesample import PoissonLangevin, Scene
 from liesample.integrators import INTEGRATORS
-from liesample.samplers.lie_poisson_langevin import make_dynamics
+from liesample.samplers.orbit.lie_poisson_langevin import make_dynamics
 
 INERTIA = np.array([1.0, 2.0, 4.0])
 SYSTEM = liesample.systems.rigid_body(tuple(INERTIA))

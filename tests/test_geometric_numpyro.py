@@ -1,4 +1,4 @@
-"""liesample.numpyro: von Mises–Fisher and matrix Fisher distributions (log_prob, exact draws)."""
+"""liesample.interop.numpyro_distributions: von Mises–Fisher and matrix Fisher distributions (log_prob, exact draws)."""
 
 import importlib
 import sys
@@ -11,7 +11,7 @@ from scipy.stats import vonmises_fisher
 
 pytest.importorskip("numpyro")
 
-from liesample.numpyro import MatrixFisher, VonMisesFisher, log_bessel_iv  # noqa: E402
+from liesample.interop.numpyro_distributions import MatrixFisher, VonMisesFisher, log_bessel_iv  # noqa: E402
 from liesample.targets.groups import MatrixFisher as MatrixFisherReference  # noqa: E402
 from liesample.targets.groups import vmf_mean_resultant_length  # noqa: E402
 
@@ -59,7 +59,7 @@ def test_matrix_fisher_draws_and_log_prob():
     se = R.std(0) / np.sqrt(len(R))
     assert np.all(np.abs(R.mean(0) - exact) < 5 * se + 1e-12)
     # exp(log_prob) integrates to 1 against Haar: its Haar mean over uniform rotations is 1.
-    from liesample.spaces import SO
+    from liesample.geometry.spaces import SO
 
     haar = SO(3, shape=(20000,)).uniform(jax.random.key(2))
     density = np.exp(np.asarray(law.log_prob(haar)))
@@ -83,6 +83,6 @@ def test_matrix_fisher_exact_sampler_for_concentrated_and_rotated_F(singular_val
 
 def test_missing_numpyro_is_a_clear_error(monkeypatch):
     monkeypatch.setitem(sys.modules, "numpyro", None)
-    monkeypatch.delitem(sys.modules, "liesample.numpyro", raising=False)
+    monkeypatch.delitem(sys.modules, "liesample.interop.numpyro_distributions", raising=False)
     with pytest.raises(ImportError, match="pip install numpyro"):
-        importlib.import_module("liesample.numpyro")
+        importlib.import_module("liesample.interop.numpyro_distributions")

@@ -11,7 +11,6 @@ from scipy.stats import vonmises_fisher
 
 import liesample
 from liesample import spaces as S
-from liesample.adaptation import window_adaptation
 from liesample.targets.groups import (
     MatrixFisher,
     VonMisesFisherPosterior,
@@ -19,6 +18,7 @@ from liesample.targets.groups import (
     u1_plaquette_mean,
     vmf_mean_resultant_length,
 )
+from liesample.tuning.adaptation import window_adaptation
 
 NUM_CHAINS = 16
 
@@ -297,7 +297,7 @@ def test_blackjax_driver_info_contract_and_divergences_are_rejected():
         jax.random.key(8), sampler, num_steps=300, initial_position=jnp.array([0.0, 0.0, 1.0]),
         transform=lambda state, info: (state.position, info),
     )
-    assert set(liesample.samplers.geometric.GeometricInfo._fields) >= {
+    assert set(liesample.samplers.cotangent.geometric.GeometricInfo._fields) >= {
         "acceptance_rate", "is_divergent", "energy"
     }
     assert np.all(np.isfinite(positions)) and np.all(positions[:, 2] > -0.2)

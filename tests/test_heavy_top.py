@@ -19,7 +19,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import liesample
-from liesample.samplers.lie_poisson_langevin import make_dynamics
+from liesample.samplers.orbit.lie_poisson_langevin import make_dynamics
 from liesample.systems.heavy_top import heavy_top
 from liesample.systems.rigid_body import rigid_body
 from liesample.targets import HeavyTopGibbs
@@ -46,7 +46,7 @@ def on_orbit(mu0, num, seed):
 def test_declaration():
     assert SYSTEM.event_shape == (6,)
     assert SYSTEM.num_noises == 6
-    assert SYSTEM.algebra is liesample.algebras.se3
+    assert SYSTEM.algebra is liesample.geometry.algebras.se3
     mu = np.array([0.3, -0.7, 1.1, 0.2, 0.9, -0.4])
     expected = 0.5 * np.sum(mu[:3] ** 2 / np.array(INERTIA)) + MGL * mu[3:] @ np.array(CHI)
     assert float(SYSTEM.hamiltonian(mu)) == pytest.approx(expected, rel=1e-14)

@@ -13,6 +13,8 @@ import numpy as np
 import pytest
 
 import liesample
+from liesample.samplers.spins.heisenberg_metropolis import heisenberg_metropolis
+from liesample.samplers.spins.lattice import local_energy_change
 from liesample.systems import rigid_body
 from liesample.systems.heisenberg import (
     colouring,
@@ -20,8 +22,6 @@ from liesample.systems.heisenberg import (
     neighbour_sum,
     noise_groups,
 )
-from liesample.samplers.spins import local_energy_change
-from liesample.samplers.spins_metropolis import heisenberg_metropolis
 from liesample.targets import heisenberg_chain_correlation
 
 BETA = 2.0  # βJ = 2: u = 0.537, u³ = 0.155

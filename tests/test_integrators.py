@@ -7,8 +7,8 @@ import pytest
 
 import liesample
 from liesample.integrators import DEFAULT_INTEGRATOR, INTEGRATORS, Integrator, get_integrator
-from liesample.stability import STABILITY_LIMITS, check_step_size, stability_number
-from liesample.substepping import adaptive_substepping
+from liesample.integrators.stability import STABILITY_LIMITS, check_step_size, stability_number
+from liesample.integrators.substeps import adaptive_substepping
 
 RIGID = liesample.systems.rigid_body((1.0, 2.0, 4.0))
 START = np.array([1.5, 0.0, 0.0])

@@ -16,10 +16,14 @@ import scipy.linalg
 from blackjax.util import run_inference_algorithm
 
 import liesample
-from liesample.samplers import magnetic_hmc as hmc_module
-from liesample.samplers import magnetic_langevin as langevin_module
-from liesample.samplers.magnetic import default_magnetic_field, magnetic_flow, make_metric
-from liesample.samplers.magnetic_hmc import MagneticHMCInfo, MagneticHMCState, magnetic_leapfrog
+from liesample.samplers.cotangent import magnetic_hmc as hmc_module
+from liesample.samplers.cotangent import magnetic_langevin as langevin_module
+from liesample.samplers.cotangent.magnetic import default_magnetic_field, magnetic_flow, make_metric
+from liesample.samplers.cotangent.magnetic_hmc import (
+    MagneticHMCInfo,
+    MagneticHMCState,
+    magnetic_leapfrog,
+)
 from liesample.targets import (
     correlated_gaussian,
     linear_step_moments,

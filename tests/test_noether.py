@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import liesample
-from liesample.drivers import DriftedBrownianMotion, TimeChangedBrownianMotion, simulate
+from liesample.integrators.drivers import DriftedBrownianMotion, TimeChangedBrownianMotion, simulate
 from liesample.systems import heavy_top
 
 LAGRANGE = {"inertia": (1.0, 1.0, 2.5), "mgl": 1.3, "chi": (0.0, 0.0, 1.0)}

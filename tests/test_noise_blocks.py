@@ -1,4 +1,4 @@
-"""Noise drawn in blocks (liesample.samplers.stepping): reproducible, independent of how a run
+"""Noise drawn in blocks (liesample.integrators.chain_loop): reproducible, independent of how a run
 is split into ranges, the same kernel as the per-step draws, and the exact law.
 
 Block ``b`` of a chain with key ``k`` is ``normal(fold_in(k, b), (B, …))`` and step ``s`` uses
@@ -16,10 +16,10 @@ import pytest
 
 import liesample
 from liesample import accuracy
-from liesample.compile import jit
-from liesample.samplers import adjusted_lie_poisson as adjusted_module
-from liesample.samplers import lie_poisson_langevin as unadjusted_module
-from liesample.samplers.stepping import run_steps
+from liesample.foundation.compile import jit
+from liesample.integrators.chain_loop import run_steps
+from liesample.samplers.orbit import adjusted_lie_poisson as adjusted_module
+from liesample.samplers.orbit import lie_poisson_langevin as unadjusted_module
 from liesample.systems import heavy_top, rigid_body
 from liesample.targets import RestrictedGaussian
 
@@ -199,7 +199,7 @@ def test_the_runner_draws_the_blocked_chain_whatever_the_chunks():
     """``sample_chains`` with thinning keeps the states of :func:`run_steps` (chain ``c`` with
     key ``split(key)[c]``) at steps ``k(d + 1) − 1``, in any chunking, and reduces the info
     over each window (any / mean)."""
-    from liesample.runner import sample_chains
+    from liesample.run.runner import sample_chains
 
     algorithm = _samplers(block_size=8)["adjusted"]
     starts = jnp.stack([START, -START])

@@ -1,4 +1,4 @@
-"""liesample.numpyro: the Bingham distribution (exact normaliser and draws) and vMF at κ = 0."""
+"""liesample.interop.numpyro_distributions: the Bingham distribution (exact normaliser and draws) and vMF at κ = 0."""
 
 import jax
 import jax.numpy as jnp
@@ -8,8 +8,8 @@ import pytest
 pytest.importorskip("numpyro")
 from numpyro.distributions import constraints  # noqa: E402
 
-from liesample.numpyro import Bingham, VonMisesFisher  # noqa: E402
-from liesample.spaces import SO, Sphere  # noqa: E402
+from liesample.geometry.spaces import SO, Sphere  # noqa: E402
+from liesample.interop.numpyro_distributions import Bingham, VonMisesFisher  # noqa: E402
 from liesample.targets.orbits import bingham_second_moments  # noqa: E402
 
 LAM = np.array([0.5, 3.0, -1.0])

@@ -1,4 +1,4 @@
-"""liesample.numpyro_mcmc.GeometricHMC: a NumPyro MCMC kernel against exact references.
+"""liesample.interop.numpyro_kernel.GeometricHMC: a NumPyro MCMC kernel against exact references.
 
 (a) vMF data with a mean direction on S² and a LogNormal concentration (an Euclidean site in
 unconstrained coordinates, so the log-Jacobian matters), through
@@ -21,9 +21,9 @@ import numpyro.distributions as dist  # noqa: E402
 from numpyro.distributions import constraints  # noqa: E402
 from numpyro.infer import MCMC  # noqa: E402
 
-from liesample.numpyro import Bingham, MatrixFisher, VonMisesFisher  # noqa: E402
-from liesample.numpyro_mcmc import GeometricHMC  # noqa: E402
-from liesample.spaces import SO  # noqa: E402
+from liesample.geometry.spaces import SO  # noqa: E402
+from liesample.interop.numpyro_distributions import Bingham, MatrixFisher, VonMisesFisher  # noqa: E402
+from liesample.interop.numpyro_kernel import GeometricHMC  # noqa: E402
 from liesample.targets.groups import MatrixFisher as MatrixFisherReference  # noqa: E402
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "numpyro_directional.py"
@@ -170,7 +170,7 @@ def test_bad_settings_and_starts_are_refused():
 
 @pytest.mark.slow
 def test_vectorized_chains_equal_chains_run_alone():
-    """NumPyro compiles the vmapped chains with plain jax.jit (liesample.compile): each chain
+    """NumPyro compiles the vmapped chains with plain jax.jit (liesample.foundation.compile): each chain
     must still give the draws of the same chain run alone, to round-off. Short runs: HMC
     amplifies round-off (1e-16 after 10 transitions, ~1e-5 after 90, measured)."""
     kwargs = dict(num_warmup=10, num_samples=10, progress_bar=False)

@@ -469,7 +469,7 @@ def test_one_transport_mode_equals_its_column_with_its_gradient(max_degree, dtyp
     """``transport_mode`` (one mode, what each splitting piece evaluates) equals the column of
     ``transport_modes`` to round-off, values and gradients, poles and equator included; in
     float32 it takes the recurrence path (monomials would lose accuracy)."""
-    from liesample.spherical_harmonics import transport_mode, transport_modes
+    from liesample.geometry.spherical_harmonics import transport_mode, transport_modes
 
     x = jnp.concatenate(
         [

@@ -19,7 +19,7 @@ from hypothesis.extra.numpy import arrays
 
 import liesample
 from liesample import algebras
-from liesample.samplers import lie_poisson_langevin as lpl
+from liesample.samplers.orbit import lie_poisson_langevin as lpl
 from liesample.systems.heisenberg import SpinLatticeSystem
 
 PROFILE = settings(

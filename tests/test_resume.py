@@ -20,8 +20,8 @@ import pytest
 import xarray as xr
 
 import liesample
-from liesample import runner
-from liesample.runner import load_chains, sample_chains
+from liesample.run import runner
+from liesample.run.runner import load_chains, sample_chains
 
 SYSTEM = liesample.systems.rigid_body((1.0, 2.0, 4.0))
 STARTS = np.array([[0.6, 1.0, 0.8], [1.0, 0.0, 0.0], [0.0, -2.0, 0.5]])
@@ -38,7 +38,7 @@ SCRIPT = textwrap.dedent(
     jax.config.update("jax_enable_x64", True)
     import numpy as np
     import liesample
-    from liesample import runner
+    from liesample.run import runner
 
     def kill(draws_done):
         if draws_done >= {KILL_AFTER} * {RUN["chunk_draws"]}:

@@ -16,7 +16,7 @@ from scipy.integrate import solve_ivp
 
 import liesample
 from liesample import Scene, lie_poisson_langevin
-from liesample.samplers.lie_poisson_langevin import LiePoissonState, make_dynamics
+from liesample.samplers.orbit.lie_poisson_langevin import LiePoissonState, make_dynamics
 
 INERTIA = np.array([1.0, 2.0, 4.0])
 SYSTEM = liesample.systems.rigid_body(tuple(INERTIA))

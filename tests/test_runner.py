@@ -1,4 +1,4 @@
-"""``liesample.runner.sample_chains``: shapes, determinism independent of chunking, thinning and
+"""``liesample.run.runner.sample_chains``: shapes, determinism independent of chunking, thinning and
 warm-up as exact sub-sequences of the plain run, and argument checks."""
 
 import math
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import liesample
-from liesample import runner
-from liesample.runner import sample_chains
+from liesample.run import runner
+from liesample.run.runner import sample_chains
 
 SYSTEM = liesample.systems.rigid_body((1.0, 2.0, 4.0))
 # The runner does not care which integrator steps; Lie–Euler compiles fastest.

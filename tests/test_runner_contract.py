@@ -24,9 +24,9 @@ import pytest
 
 import liesample
 from liesample import algebras, systems
+from liesample.integrators.stability import check_precision
 from liesample.samplers.contract import CONTRACT_FIELDS, check_info
-from liesample.samplers.lie_poisson_langevin import DEFAULT_BIAS_TOLERANCE
-from liesample.stability import check_precision
+from liesample.samplers.orbit.lie_poisson_langevin import DEFAULT_BIAS_TOLERANCE
 
 RIGID = systems.rigid_body((1.0, 2.0, 4.0))
 STARTS = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.6, 0.0, 0.8]])
@@ -103,7 +103,7 @@ def test_both_key_styles_give_the_same_draws():
     ]
     np.testing.assert_array_equal(*runs)
     averages = [
-        liesample.accuracy.coupled_ergodic_averages(
+        liesample.integrators.accuracy.coupled_ergodic_averages(
             RIGID, 1.0, _coordinates, step_size=0.1, levels=1, integrator="lie_euler",
             initial_positions=STARTS, rng_key=key, total_time=1.0,
         ).chain_means

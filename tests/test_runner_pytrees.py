@@ -8,10 +8,10 @@ import pytest
 import xarray as xr
 
 import liesample
-from liesample.diagnostics import to_datatree
-from liesample import runner
-from liesample.runner import load_chains, sample_chains
-from liesample.spaces import SU, Euclidean, Sphere
+from liesample.analysis.diagnostics import to_datatree
+from liesample.geometry.spaces import SU, Euclidean, Sphere
+from liesample.run import runner
+from liesample.run.runner import load_chains, sample_chains
 
 jax.config.update("jax_enable_x64", True)
 

@@ -14,9 +14,9 @@ from blackjax.util import run_inference_algorithm
 import liesample
 from liesample import lie_poisson_langevin
 from liesample.integrators import INTEGRATORS
-from liesample.runner import NonFiniteStateError, sample_chains
-from liesample.samplers import lie_poisson_langevin as module
-from liesample.samplers.lie_poisson_langevin import LiePoissonInfo, LiePoissonState
+from liesample.run.runner import NonFiniteStateError, sample_chains
+from liesample.samplers.orbit import lie_poisson_langevin as module
+from liesample.samplers.orbit.lie_poisson_langevin import LiePoissonInfo, LiePoissonState
 
 SYSTEM = liesample.systems.rigid_body((1.0, 2.0, 4.0))
 MU0 = np.array([0.6, 1.0, 0.8])

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 import liesample
-from liesample.diagnostics import expectation_table
-from liesample.runner import sample_chains
+from liesample.analysis.diagnostics import expectation_table
+from liesample.run.runner import sample_chains
 from liesample.systems import rigid_body
 from liesample.targets import isotropic_autocorrelation
 

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 import liesample
-from liesample.sharding import chain_sharding
+from liesample.run.sharding import chain_sharding
 
 SCRIPT = textwrap.dedent(
     """
@@ -67,7 +67,7 @@ SCRIPT = textwrap.dedent(
     short = liesample.sample_chains(algorithm, key, starts, 6, progress=False)
     np.testing.assert_allclose(np.asarray(tree.posterior["mu"]), short.positions, atol=1e-13)
     # The chunk really is split: each device holds half of the chains' states.
-    sharding = liesample.sharding.chain_sharding(2, 4)
+    sharding = liesample.run.sharding.chain_sharding(2, 4)
     placed = jax.device_put(np.zeros((4, 3)), sharding)
     assert len({s.device for s in placed.addressable_shards}) == 2
     assert all(s.data.shape == (2, 3) for s in placed.addressable_shards)

@@ -1,4 +1,4 @@
-"""Spaces (liesample.spaces): validation, Haar draws, exact flows, trivialised gradients; and
+"""Spaces (liesample.geometry.spaces): validation, Haar draws, exact flows, trivialised gradients; and
 the exact references of liesample.targets.groups against independent quadrature."""
 
 import jax
@@ -9,7 +9,7 @@ from scipy import integrate
 
 import liesample
 from liesample import spaces as S
-from liesample.cotangent import cotangent_bundle
+from liesample.geometry.cotangent import cotangent_bundle
 from liesample.targets.groups import (
     MatrixFisher,
     VonMisesFisherPosterior,

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.special import eval_legendre, sph_harm_y
 
-from liesample.spherical_harmonics import (
+from liesample.geometry.spherical_harmonics import (
     degrees_and_orders,
     num_harmonics,
     real_spherical_harmonics,

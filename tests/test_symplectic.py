@@ -16,12 +16,11 @@ import numpy as np
 import pytest
 
 import liesample
-from liesample.symplectic import (
+from liesample.dynamics.symplectic import (
     brownian_increments,
     coarsen_increments,
     stochastic_heun_step,
     stochastic_midpoint_step,
-    stochastic_pendulum,
     symplectic_diffusion,
     symplectic_path,
     symplecticity_defect,
@@ -63,8 +62,8 @@ def rotation_invariant(sigma=0.6):
 
 
 SYSTEMS = {
-    "pendulum": stochastic_pendulum(1.0, 0.8),
-    "pendulum p²": stochastic_pendulum(1.0, 0.8, quadratic_momentum_noise=True),
+    "pendulum": liesample.systems.stochastic_pendulum(1.0, 0.8),
+    "pendulum p²": liesample.systems.stochastic_pendulum(1.0, 0.8, quadratic_momentum_noise=True),
     "coupled n=2": coupled_pendula(),
 }
 
@@ -147,13 +146,13 @@ def test_midpoint_strong_order(noise_momentum, order):
     1/2 without (``{H_1, H_2} ≠ 0`` and no Lévy areas). The fitted slope over ``Δt = 1/8 … 1/64``
     (128 paths, fixed key) is within ±0.15 of the order; the two cases differ by 0.5, so the
     bounds separate them."""
-    rms, slope = strong_errors(stochastic_pendulum(1.0, noise_momentum), "midpoint")
+    rms, slope = strong_errors(liesample.systems.stochastic_pendulum(1.0, noise_momentum), "midpoint")
     assert abs(slope - order) < 0.15, (rms, slope)
     assert rms[-1] < 0.05
 
 
 def test_symplectic_path_rejects_bad_input():
-    system = stochastic_pendulum()
+    system = liesample.systems.stochastic_pendulum()
     with pytest.raises(ValueError, match="scheme"):
         symplectic_path(system, jnp.zeros(2), jnp.zeros((3, 3)), scheme="euler")
     with pytest.raises(ValueError, match=r"initial_state must have shape \(2,\)"):
@@ -169,12 +168,12 @@ def test_symplectic_path_rejects_bad_input():
     with pytest.raises(TypeError, match="hamiltonians"):
         symplectic_diffusion(3.0, 1)
     with pytest.raises(TypeError, match="noise_position"):
-        stochastic_pendulum(noise_position="big")
+        liesample.systems.stochastic_pendulum(noise_position="big")
 
 
 def test_non_convergence_is_flagged():
     """``H_2 = σ p²/2`` with a huge increment: the fixed-point map expands, the flag says so."""
-    system = stochastic_pendulum(1.0, 1.0, quadratic_momentum_noise=True)
+    system = liesample.systems.stochastic_pendulum(1.0, 1.0, quadratic_momentum_noise=True)
     _, converged = liesample.jit(lambda z, inc: stochastic_midpoint_step(system, z, inc))(
         jnp.array([0.3, 1.0]), jnp.array([0.1, 10.0, 10.0])
     )

@@ -18,10 +18,10 @@ import pytest
 import scipy.linalg
 
 import liesample
-from liesample.algebras import Unitary
 from liesample.dynamics import PoissonLangevin, Scene
+from liesample.geometry.algebras import Unitary
+from liesample.geometry.spherical_harmonics import real_spherical_harmonics
 from liesample.integrators import get_integrator
-from liesample.spherical_harmonics import real_spherical_harmonics
 from liesample.systems import rigid_body
 from liesample.systems.zeitlin import (
     isospectral_midpoint,
@@ -155,7 +155,7 @@ def test_laplacian_is_the_su2_casimir_with_spectrum_l_l_plus_1(rng, size):
 @pytest.mark.parametrize("size", [6])
 def test_symbols_of_the_basis_are_positive_multiples_of_the_real_harmonics(rng, size):
     """``⟨n| −iE_ℓm |n⟩ = c_ℓ Y_ℓm(n)`` with ``c_ℓ > 0`` for spin coherent states ``|n⟩``: the
-    phases of the quantised harmonics are those of liesample.spherical_harmonics."""
+    phases of the quantised harmonics are those of liesample.geometry.spherical_harmonics."""
     basis = quantised_harmonics(size)
     e = np.asarray(Unitary(size).to_matrix(jnp.asarray(basis.basis(size - 1, 0))))
     _, sy, sz = spin_matrices(size)

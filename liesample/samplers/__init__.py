@@ -1,10 +1,9 @@
-"""BlackJAX-shaped samplers: ``init``, ``build_kernel``, ``as_top_level_api``.
+"""Samplers, BlackJAX-shaped (``init``, ``build_kernel``, ``as_top_level_api``), by phase space:
 
-Every sampler's ``info`` follows one contract, ``is_divergent``, ``acceptance_rate`` and
-``energy`` plus its own fields (:mod:`liesample.samplers.contract`, which also holds the
-:class:`~liesample.samplers.contract.Sampler` object and the ``help()``-friendly API factory).
+- ``orbit/``: on coadjoint orbits (``lie_poisson_langevin``, ``adjusted_lie_poisson``);
+- ``cotangent/``: on ``T*G`` for products of spheres, groups and ``Rⁿ`` (``geometric_hmc``,
+  ``geometric_langevin``; ``magnetic_hmc`` and ``magnetic_langevin`` are their ``Rᵈ`` fronts);
+- ``spins/``: the physicists' spin-lattice baselines.
+
+Every sampler's ``info`` follows one contract (:mod:`liesample.samplers.contract`).
 """
-
-from liesample.samplers.spins_heat_bath import heisenberg_heat_bath
-from liesample.samplers.spins_metropolis import heisenberg_metropolis
-from liesample.samplers.spins_wolff import heisenberg_wolff

@@ -32,7 +32,7 @@ hooks the runner uses: ``settings`` (recorded in the ``DataTree`` attributes),
 
 **Precision.** Samplers run in the precision of their inputs: JAX's default is float32; call
 ``jax.config.update("jax_enable_x64", True)`` at start-up for float64 (what every test and
-benchmark here uses). :func:`liesample.stability.check_precision` states when float32 is not
+benchmark here uses). :func:`liesample.integrators.stability.check_precision` states when float32 is not
 enough and warns once.
 """
 

@@ -1,11 +1,13 @@
 """Thin systems: each declares its structure, Hamiltonian, noise and exact reference."""
 
-from liesample.systems.base import LiePoissonSystem, lie_poisson_system
+from liesample.dynamics.system import LiePoissonSystem
 from liesample.systems.charged_particle import charged_particle, charged_particle_path
+from liesample.systems.custom import lie_poisson_system
 from liesample.systems.heavy_top import heavy_top
 from liesample.systems.heisenberg import heisenberg
 from liesample.systems.point_vortices import point_vortex_integrator, point_vortices
 from liesample.systems.rigid_body import rigid_body
+from liesample.systems.stochastic_pendulum import stochastic_pendulum
 from liesample.systems.zeitlin import isospectral_midpoint, zeitlin_euler
 
 __all__ = [
@@ -18,6 +20,7 @@ __all__ = [
     "point_vortex_integrator",
     "point_vortices",
     "rigid_body",
+    "stochastic_pendulum",
     "isospectral_midpoint",
     "zeitlin_euler",
 ]

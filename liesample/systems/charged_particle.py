@@ -1,8 +1,8 @@
 """The charged Brownian particle in a magnetic field (paper, ``sec:brownian-particle``; MATH.md §3).
 
-On ``T*Rⁿ`` with ``J(q) = [[0, I], [−I, G(q)]]`` (:class:`liesample.structures.CanonicalStructure`),
+On ``T*Rⁿ`` with ``J(q) = [[0, I], [−I, G(q)]]`` (:class:`liesample.geometry.poisson.CanonicalStructure`),
 ``h = |p|²/2m + V(q)`` and unit noise Hamiltonians ``ĥ_i = −q_i`` (noise ``σ ĥ_i``), the generic
-Poisson–Langevin SDE (:class:`liesample.structures.PoissonLangevinSDE`) is
+Poisson–Langevin SDE (:class:`liesample.dynamics.sde.PoissonLangevinSDE`) is
 
     dq = p/m dt,     dp = (−∇V + G(q) p/m − θ p/m) dt + σ dW,       θ = βσ²/2,
 
@@ -14,7 +14,7 @@ The system runs as a simulation (:func:`charged_particle_path`, or
 :func:`charged_particle_dynamics` for a pure, vmappable step). Integrators:
 
 - ``"baoab"`` (default): Strang splitting ``B(ε/2) A(ε/2) O(ε) A(ε/2) B(ε/2)``, the scheme
-  :data:`liesample.cotangent.BAOAB` of the one-effect steps the samplers use: ``B`` the potential
+  :data:`liesample.geometry.cotangent.BAOAB` of the one-effect steps the samplers use: ``B`` the potential
   kick, ``A`` the kinetic + magnetic flow (exact ``e^{εG/m}`` rotation and ``φ₁`` displacement
   for a constant field; implicit midpoint, solved by fixed-point iteration, for ``G(q)``, which
   conserves ``|p|`` to the solver tolerance), ``O`` the exact Ornstein–Uhlenbeck flow of the
@@ -36,9 +36,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from liesample.compile import jit
-from liesample._validation import concrete_array, finite_float
-from liesample.cotangent import (
+from liesample.dynamics.poisson_langevin import make_dynamics
+from liesample.dynamics.sde import PoissonLangevinSDE, stratonovich_heun_step
+from liesample.foundation.compile import jit
+from liesample.foundation.validation import concrete_array, finite_float
+from liesample.geometry.cotangent import (
     BAOAB,
     PhasePoint,
     compose,
@@ -48,15 +50,8 @@ from liesample.cotangent import (
     kick,
     ornstein_uhlenbeck,
 )
-from liesample.dynamics import make_dynamics
-from liesample.spaces import Euclidean
-from liesample.structures import (
-    CanonicalStructure,
-    PoissonLangevinSDE,
-    canonical_structure,
-    magnetic_structure,
-    stratonovich_heun_step,
-)
+from liesample.geometry.poisson import CanonicalStructure, canonical_structure, magnetic_structure
+from liesample.geometry.spaces import Euclidean
 
 INTEGRATORS = ("baoab", "heun")
 
@@ -307,7 +302,7 @@ class ChargedParticleDynamics:
         return step
 
     def _baoab_step(self, step_size):
-        """``B A O A B`` from the one-effect steps of :mod:`liesample.cotangent`; the carry is
+        """``B A O A B`` from the one-effect steps of :mod:`liesample.geometry.cotangent`; the carry is
         ``(point, converged)`` (``converged`` tracks the implicit midpoint of a ``G(q)``)."""
         system, scene, structure = self.system, self.scene, self.structure
         effects = {}
@@ -386,7 +381,7 @@ class ChargedParticleDynamics:
 
 
 def _carrying(effect):
-    """An effect on a :class:`~liesample.cotangent.PhasePoint` lifted to ``(point, converged)``."""
+    """An effect on a :class:`~liesample.geometry.cotangent.PhasePoint` lifted to ``(point, converged)``."""
 
     def lifted(carry, fraction, key):
         point, converged = carry

@@ -17,9 +17,9 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from liesample._validation import finite_float, nonzero_vector3, principal_moments
-from liesample.algebras import se3
-from liesample.systems.base import LiePoissonSystem
+from liesample.dynamics.system import LiePoissonSystem
+from liesample.foundation.validation import finite_float, nonzero_vector3, principal_moments
+from liesample.geometry.algebras import se3
 from liesample.systems.rigid_body import kinetic_pieces
 from liesample.targets import HeavyTopGibbs
 

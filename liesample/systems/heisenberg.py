@@ -35,9 +35,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from liesample._validation import concrete_array, finite_float
-from liesample.algebras import so3
-from liesample.systems.base import LiePoissonSystem
+from liesample.dynamics.system import LiePoissonSystem
+from liesample.foundation.validation import concrete_array, finite_float
+from liesample.geometry.algebras import so3
 from liesample.targets.spins import HeisenbergChainReference, HeisenbergRingReference
 
 __all__ = [

@@ -20,7 +20,7 @@ are the Casimirs. The sign ``−`` picks the classical orientation: the Hamilton
 all pairs (``O(N²)`` memory and time, no Python loop over vortices).
 
 **Noise.** ``ĥ_ℓm = Σ_k Γ_k ψ_ℓm(x_k/R)``, ``ψ_ℓm = Y_ℓ^m/√(ℓ(ℓ+1))`` (real orthonormal
-harmonics, :mod:`liesample.spherical_harmonics`), ``1 ≤ ℓ ≤ L``: ``L(L+2)`` directions. Each
+harmonics, :mod:`liesample.geometry.spherical_harmonics`), ``1 ≤ ℓ ≤ L``: ``L(L+2)`` directions. Each
 moves every vortex with the same divergence-free velocity ``−(1/R) u × ∇ψ_ℓm(u)``, ``u = x/R``
 (transport noise; the ``Γ_k`` cancel). The **dissipation** is the engine's, derived from these
 same truncated modes, so ``exp(−βh)`` is exactly invariant for every ``L`` (MATH.md §1). With
@@ -38,7 +38,7 @@ erratum 3); ``benchmarks/vortices.py`` measures how far its stationary law is fr
 
 **Collisions.** The Hamiltonian drift turns a pair at distance ``d`` at the rate
 ``(|Γ_j| + |Γ_k|)/(2πd²)``; :func:`point_vortex_integrator` wraps any integrator in adaptive
-substeps driven by that rate (:mod:`liesample.substepping`). The derived (truncated)
+substeps driven by that rate (:mod:`liesample.integrators.substeps`). The derived (truncated)
 dissipation and the noise stay bounded as ``d → 0``: they need no substeps, and the
 Hamiltonian drift can be switched off for sampling (``hamiltonian=False``: same invariant law).
 """
@@ -51,13 +51,13 @@ from dataclasses import dataclass, field, replace
 import jax.numpy as jnp
 import numpy as np
 
-from liesample._validation import concrete_array, finite_float, nonzero_circulations
-from liesample.algebras import LieAlgebra, cross, so3
-from liesample.dynamics import Scene
-from liesample.integrators import Integrator, get_integrator
-from liesample.spherical_harmonics import num_harmonics, transport_mode, transport_modes
-from liesample.substepping import adaptive_substepping
-from liesample.systems.base import LiePoissonSystem
+from liesample.dynamics.poisson_langevin import Scene
+from liesample.dynamics.system import LiePoissonSystem
+from liesample.foundation.validation import concrete_array, finite_float, nonzero_circulations
+from liesample.geometry.algebras import LieAlgebra, cross, so3
+from liesample.geometry.spherical_harmonics import num_harmonics, transport_mode, transport_modes
+from liesample.integrators.orbit import Integrator, get_integrator
+from liesample.integrators.substeps import adaptive_substepping
 from liesample.targets.vortices import VortexPairLaw, check_vortex_beta
 
 __all__ = [
@@ -406,7 +406,7 @@ def point_vortex_integrator(
     safety : float
         Largest rotation of the closest pair per substep, in radians (roughly).
     max_substeps : int
-        Cap per step (beyond it the rest of the step is dropped; :mod:`liesample.substepping`).
+        Cap per step (beyond it the rest of the step is dropped; :mod:`liesample.integrators.substeps`).
     """
     if not isinstance(system, PointVortexSystem):
         raise TypeError(f"system must be a PointVortexSystem, got {type(system).__name__}")

@@ -13,9 +13,9 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from liesample._validation import principal_moments
-from liesample.algebras import so3
-from liesample.systems.base import LiePoissonSystem
+from liesample.dynamics.system import LiePoissonSystem
+from liesample.foundation.validation import principal_moments
+from liesample.geometry.algebras import so3
 from liesample.targets import RestrictedGaussian
 
 

@@ -3,7 +3,7 @@
 The paper's dissipative SALT-Euler equation (``eq:salt-euler-with-dissipation``) is formal in
 infinite dimensions; Zeitlin's quantisation is its structure-preserving finite model. The
 vorticity is a skew-Hermitian trace-free matrix ``W ∈ su(N)``, stored as the real ``N × N``
-coordinates of :class:`liesample.algebras.Unitary` (``x = Re W + Im W``; pairing
+coordinates of :class:`liesample.geometry.algebras.Unitary` (``x = Re W + Im W``; pairing
 ``⟨W, Ξ⟩ = −tr(WΞ)``, the Frobenius product). With the engine's conventions (MATH.md §2)
 ``Ẇ = ad*_{∇h} W = [W, ∇h]``; ``∇h = −P`` below, so this is Zeitlin's ``Ẇ = [P, W]``.
 
@@ -17,7 +17,7 @@ Condon–Shortley phases of spherical tensor operators: ``T_ℓ0`` has a positiv
 coefficient as a polynomial in ``S₃`` (so its value at the north pole ``μ = s`` is positive) and
 ``[S₊, T_ℓm] = √(ℓ(ℓ+1) − m(m+1)) T_ℓ,m+1``, which makes the coherent-state symbol of ``T_ℓm``
 a positive multiple of ``Y_ℓm`` (``tests/test_zeitlin.py`` checks it). The real orthonormal basis
-``E_ℓm`` of ``u(N)`` matches :mod:`liesample.spherical_harmonics` (no Condon–Shortley phase)::
+``E_ℓm`` of ``u(N)`` matches :mod:`liesample.geometry.spherical_harmonics` (no Condon–Shortley phase)::
 
     E_ℓ0 = i T_ℓ0,   E_ℓm = (−1)^m i (T_ℓm + T_ℓmᵀ)/√2,   E_ℓ,−m = (−1)^m (T_ℓm − T_ℓmᵀ)/√2,
 
@@ -51,11 +51,11 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.linalg
 
-from liesample._validation import concrete_array
-from liesample.algebras import Unitary
-from liesample.integrators import Integrator
-from liesample.spherical_harmonics import degrees_and_orders, real_spherical_harmonics
-from liesample.system_base import LiePoissonSystem
+from liesample.dynamics.system import LiePoissonSystem
+from liesample.foundation.validation import concrete_array
+from liesample.geometry.algebras import Unitary
+from liesample.geometry.spherical_harmonics import degrees_and_orders, real_spherical_harmonics
+from liesample.integrators.orbit import Integrator
 from liesample.targets.zeitlin import UnitaryOrbitLaw
 
 __all__ = [
@@ -78,7 +78,7 @@ def _check_size(size):
 class QuantisedHarmonics:
     """The quantised spherical harmonics of su(N) and the operators built on them.
 
-    Every method takes real ``(..., N, N)`` coordinates (:class:`liesample.algebras.Unitary`) and
+    Every method takes real ``(..., N, N)`` coordinates (:class:`liesample.geometry.algebras.Unitary`) and
     broadcasts over leading axes. Build with :func:`quantised_harmonics` (cached per ``N``).
     """
 
@@ -139,7 +139,7 @@ class QuantisedHarmonics:
         self._solve_bands = (lo, d, up)
         ell = index[:, None] + index[None, :]  # [m, k] -> ℓ = m + k
         self._ell = np.where(valid, ell, 0)
-        # Coefficient vector order: ℓ = 0 … N−1, m = −ℓ … ℓ (liesample.spherical_harmonics).
+        # Coefficient vector order: ℓ = 0 … N−1, m = −ℓ … ℓ (liesample.geometry.spherical_harmonics).
         ell_c, m_c = degrees_and_orders(n - 1)
         am = np.abs(m_c)
         sign = (-1.0) ** am
@@ -210,7 +210,7 @@ class QuantisedHarmonics:
 
     def coefficients(self, x):
         """``ω_ℓm`` with ``W = Σ ω_ℓm E_ℓm``, shape ``(..., N²)``, order ``(ℓ, m)`` as in
-        :func:`liesample.spherical_harmonics.degrees_and_orders` (``ℓ ≤ N−1``). O(N³)."""
+        :func:`liesample.geometry.spherical_harmonics.degrees_and_orders` (``ℓ ≤ N−1``). O(N³)."""
         v = jnp.asarray(self.eigenvectors, dtype=jnp.result_type(x, float))
         p = self._pack(x)
         c = jnp.einsum("mik,...mi->...mk", v, p)  # [..., 2, m, ℓ − m]
@@ -356,7 +356,7 @@ def zeitlin_euler(size: int, noise_degree: int = 2, noise_smoothness: int = 1, p
     Returns
     -------
     LiePoissonSystem
-        Algebra ``u(N)`` (:class:`liesample.algebras.Unitary`); Casimirs the spectrum of
+        Algebra ``u(N)`` (:class:`liesample.geometry.algebras.Unitary`); Casimirs the spectrum of
         ``iW`` and ``‖W‖²``. ``system.params["harmonics"]`` is the :class:`QuantisedHarmonics`.
         ``system.reference(beta, position)`` is the exact orbit law by Haar importance sampling
         (:class:`liesample.targets.zeitlin.UnitaryOrbitLaw`), for small ``N``.
@@ -436,7 +436,7 @@ def _isospectral_midpoint(dynamics, mu, dt, dW):
     algebra = dynamics.algebra
     if not isinstance(algebra, Unitary):
         raise TypeError(
-            f"isospectral_midpoint needs a system on u(N) (liesample.algebras.Unitary), "
+            f"isospectral_midpoint needs a system on u(N) (liesample.geometry.algebras.Unitary), "
             f"got the algebra {algebra.name}"
         )
     w0 = algebra.to_matrix(mu)

@@ -20,7 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.linalg
 
-from liesample._validation import finite_float
+from liesample.foundation.validation import finite_float
 
 __all__ = [
     "Gaussian",

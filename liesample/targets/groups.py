@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy import integrate, special
 
-from liesample._validation import finite_float
+from liesample.foundation.validation import finite_float
 from liesample.targets import orbits
 
 __all__ = [

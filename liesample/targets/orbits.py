@@ -25,8 +25,8 @@ import numpy as np
 from jax.scipy.special import i0e, i1e, logsumexp
 from scipy.special import roots_legendre
 
-from liesample.compile import jit
-from liesample._validation import (
+from liesample.foundation.compile import jit
+from liesample.foundation.validation import (
     concrete_array,
     finite_float,
     nonzero_vector3,

@@ -15,8 +15,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from liesample._validation import finite_float
-from liesample.compile import jit
+from liesample.foundation.compile import jit
+from liesample.foundation.validation import finite_float
 
 __all__ = [
     "HeisenbergChainReference",

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import jax
 import numpy as np
 
-from liesample._validation import finite_float, nonzero_circulations
+from liesample.foundation.validation import finite_float, nonzero_circulations
 
 __all__ = [
     "VortexPairLaw",

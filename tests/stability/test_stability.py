@@ -1,6 +1,6 @@
 """Hard cases stay numerically stable, on the orbit, and Gibbs-exact — or are refused.
 
-The stability bound (``liesample.stability``)
+The stability bound (``liesample.integrators.stability``)
 ----------------------------------------------
 The stiff part of the Poisson–Langevin SDE is the derived dissipation. Along noise direction
 ``i`` it relaxes at the rate ``θ h''_i``, ``h''_i`` the curvature of ``h`` along the noise flow,
@@ -62,8 +62,8 @@ import pytest
 import liesample
 from liesample.dynamics import PoissonLangevin, Scene
 from liesample.integrators import INTEGRATORS
-from liesample.runner import NonFiniteStateError
-from liesample.stability import STABILITY_LIMITS, stiffness
+from liesample.integrators.stability import STABILITY_LIMITS, stiffness
+from liesample.run.runner import NonFiniteStateError
 from liesample.targets import HeavyTopGibbs, RestrictedGaussian
 
 GEOMETRIC = ("splitting", "rkmk_heun", "lie_euler")

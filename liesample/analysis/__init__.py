@@ -1,0 +1,1 @@
+"""Analysis: comparison with exact references (MCSE z-scores, ESS, R-hat) and plots."""

@@ -1,0 +1,535 @@
+"""Convergence and accuracy diagnostics for sampler output.
+
+Sampler runs produce ``positions`` shaped ``(chains, draws, *event_shape)`` and an ``info``
+record of per-draw arrays shaped ``(chains, draws)``. This module turns them into an ArviZ
+``xarray.DataTree``, tabulates Monte-Carlo estimates against exact values using ArviZ's
+ESS, R-hat and MCSE, and computes the FFT autocovariances used to check time correlations.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping, Sequence
+
+import arviz_stats as azs
+import jax
+import numpy as np
+import pandas as pd
+import scipy.fft
+import xarray as xr
+from arviz_base import from_dict
+
+from liesample.foundation.validation import is_single_array
+from liesample.samplers.contract import SAMPLE_STATS_NAMES
+
+__all__ = [
+    "autocovariance",
+    "casimir_drift",
+    "count_nonfinite",
+    "expectation_table",
+    "format_table",
+    "pytree_variables",
+    "to_datatree",
+]
+
+# Sampler info key -> ArviZ ``sample_stats`` name: the Info contract's, and ``nonfinite``
+# (the divergence flag's name in liesample < 0.2 output) read as ``diverging``.
+_SAMPLE_STATS_NAMES = {**SAMPLE_STATS_NAMES, "nonfinite": "diverging"}
+_DIVERGENCE_KEYS = ("is_divergent", "diverging", "nonfinite")
+
+# Quantiles for the tail ESS (Vehtari et al. 2021): min of the ESS of the 5% and 95% quantiles.
+_TAIL_PROB = (0.05, 0.95)
+_MIN_DRAWS = 4
+
+TABLE_COLUMNS = (
+    "estimate",
+    "exact",
+    "mcse",
+    "z",
+    "ess_bulk",
+    "ess_tail",
+    "r_hat",
+    "ess_per_second",
+)
+
+
+# --------------------------------------------------------------------------- input handling
+
+
+def _info_dict(info, name: str = "info") -> dict[str, np.ndarray]:
+    """Return ``info`` as a ``{key: numpy array}`` dict (``None`` gives ``{}``)."""
+    if info is None:
+        return {}
+    if hasattr(info, "_asdict"):
+        items = info._asdict()
+    elif isinstance(info, Mapping):
+        items = info
+    elif dataclasses.is_dataclass(info) and not isinstance(info, type):
+        items = {f.name: getattr(info, f.name) for f in dataclasses.fields(info)}
+    else:
+        raise TypeError(
+            f"{name} must be a mapping, a NamedTuple or a dataclass of arrays, "
+            f"got {type(info).__name__}"
+        )
+    return {str(k): np.asarray(v) for k, v in items.items() if v is not None}
+
+
+def _chain_draw_array(x, name: str, *, min_draws: int = 1, ndims: Sequence[int] = (2,)):
+    """``np.asarray(x)`` after checking its rank and its (chain, draw) sizes."""
+    arr = np.asarray(x)
+    if arr.ndim not in ndims:
+        want = " or ".join(str(n) for n in ndims)
+        raise ValueError(
+            f"{name} must have {want} dimensions (chain, draw, ...), got shape {arr.shape}"
+        )
+    if arr.shape[0] < 1:
+        raise ValueError(f"{name} must have at least 1 chain, got shape {arr.shape}")
+    if arr.shape[1] < min_draws:
+        raise ValueError(
+            f"{name} must have at least {min_draws} draws per chain, got shape {arr.shape}"
+        )
+    return arr
+
+
+def _netcdf_attr(value):
+    """Convert ``value`` to something NetCDF can store as an attribute, or ``None`` to drop it."""
+    if value is None:
+        return None
+    if isinstance(value, (bool, np.bool_)):
+        return int(value)
+    if isinstance(value, (str, int, float)):
+        return value
+    arr = np.asarray(value) if not isinstance(value, Mapping) else None
+    if arr is not None and arr.dtype.kind in "biuf":
+        if arr.dtype.kind == "b":
+            arr = arr.astype(np.int8)
+        return arr.item() if arr.ndim == 0 else arr.ravel().tolist()
+    if arr is not None and arr.dtype.kind == "U":
+        return str(arr.item()) if arr.ndim == 0 else [str(s) for s in arr.ravel()]
+    return str(value)
+
+
+# --------------------------------------------------------------------------- DataTree
+
+
+def _leaf_name(path) -> str:
+    """A posterior variable's name from a pytree key path: dict keys as given, sequence
+    entries ``x0``, ``x1``…, named-tuple fields by name; nested keys joined with ``.``."""
+    parts = []
+    for key in path:
+        if isinstance(key, jax.tree_util.DictKey):
+            parts.append(str(key.key))
+        elif isinstance(key, jax.tree_util.SequenceKey):
+            parts.append(f"x{key.idx}")
+        elif isinstance(key, jax.tree_util.GetAttrKey):
+            parts.append(key.name)
+        elif isinstance(key, jax.tree_util.FlattenedIndexKey):
+            parts.append(f"x{key.key}")
+        else:
+            parts.append(str(key))
+    return ".".join(parts)
+
+
+def pytree_variables(positions) -> dict[str, tuple[np.ndarray, str]]:
+    """``{variable name: (real array, leaf name)}`` for the leaves of a pytree of draws.
+
+    Each leaf ``(chains, draws, *event)`` is named from its key path (:func:`_leaf_name`); a
+    complex leaf ``U`` gives two real variables ``U.real`` and ``U.imag`` (ArviZ's ESS and R-hat
+    need real arrays), both with the event dims of ``U``.
+    """
+    paths, _ = jax.tree_util.tree_flatten_with_path(positions)
+    if not paths:
+        raise ValueError("positions is an empty pytree: it has no arrays")
+    variables: dict[str, tuple[np.ndarray, str]] = {}
+    for path, leaf in paths:
+        name = _leaf_name(path)
+        leaf = np.asarray(leaf)
+        if leaf.ndim < 2:
+            raise ValueError(
+                f"positions leaf {name!r} must have shape (chains, draws, *event_shape), got "
+                f"shape {leaf.shape}"
+            )
+        parts = (
+            {f"{name}.real": leaf.real, f"{name}.imag": leaf.imag}
+            if np.iscomplexobj(leaf)
+            else {name: leaf}
+        )
+        for part, value in parts.items():
+            if part in variables:
+                raise ValueError(
+                    f"two leaves of positions are both named {part!r}: rename the pytree's keys"
+                )
+            variables[part] = (value, name)
+    shapes = {value.shape[:2] for value, _ in variables.values()}
+    if len(shapes) > 1:
+        raise ValueError(
+            "every leaf of positions must have the same (chains, draws) sizes, got "
+            f"{sorted(shapes)}"
+        )
+    return variables
+
+
+def to_datatree(
+    positions,
+    info=None,
+    *,
+    var_name: str | None = None,
+    event_dims: Sequence[str] | Mapping[str, Sequence[str]] | None = None,
+    coords: Mapping[str, Sequence] | None = None,
+    step_size: float | None = None,
+    thinning: int = 1,
+    attrs: Mapping | None = None,
+) -> xr.DataTree:
+    """Package sampler output as an ArviZ ``DataTree``.
+
+    Parameters
+    ----------
+    positions : array_like ``(chains, draws, *event_shape)``, or a pytree of such arrays
+        Sampled states. A pytree (dict, tuple, named tuple: the positions of the geometric
+        samplers on product spaces) gives one posterior variable per leaf, named from its key
+        path: dict keys and named-tuple fields as given (``mu``, ``log_kappa``), tuple entries
+        ``x0``, ``x1``…, nested keys joined with ``.`` (``{"a": {"b": …}}`` -> ``a.b``). Its
+        event dims are ``<name>_dim_0``, ``<name>_dim_1``…. A complex leaf ``U`` (``SU(n)``
+        matrices) is stored as the two real variables ``U.real`` and ``U.imag``, sharing the
+        dims of ``U``. ESS, R-hat and MCSE computed from the tree are those of these ambient
+        coordinates (vector components, matrix entries), not of intrinsic coordinates on the
+        group or sphere. A list is read as one array.
+    info : mapping, NamedTuple or dataclass, optional
+        Per-draw arrays shaped ``(chains, draws)`` (the Info contract of
+        :mod:`liesample.samplers.contract`). Recognised keys are renamed to ArviZ's
+        ``sample_stats`` names: ``is_divergent`` -> ``diverging`` (stored as bool; a legacy
+        ``nonfinite`` too), ``acceptance_rate``, ``energy`` and ``casimir_error`` unchanged.
+        Other keys are stored under their own names. ``None`` gives a tree without
+        ``sample_stats``.
+    var_name : str, default "mu"
+        Name of the sampled variable in the ``posterior`` group (single-array positions; a
+        pytree's variables are named from its key paths).
+    event_dims : sequence of str, default ("component",)
+        Dimension names for the event axes; one per axis after (chain, draw). For pytree
+        positions, optionally a mapping from a leaf's name to its dims (the others keep
+        ``<name>_dim_k``).
+    coords : mapping, optional
+        Coordinate values by dimension name. Event dimensions without coordinates get
+        ``["x", "y", "z"]`` for a single axis of length 3, otherwise ``0, 1, ...``.
+    step_size : float, optional
+        Integrator step size, stored as an attribute.
+    thinning : int, default 1
+        Thinning factor between stored draws, stored as an attribute.
+    attrs : mapping, optional
+        Extra run metadata (sampler name, seed, ...). Stored on the root and on both groups;
+        ``None`` values are dropped and other values are converted to NetCDF-safe types.
+
+    Returns
+    -------
+    xarray.DataTree
+        Groups ``posterior`` and (if ``info`` is given) ``sample_stats``.
+    """
+    single = is_single_array(positions)
+    if single:
+        var_name = "mu" if var_name is None else var_name
+        if not isinstance(var_name, str) or not var_name:
+            raise ValueError(f"var_name must be a non-empty string, got {var_name!r}")
+        event_dims = ("component",) if event_dims is None else event_dims
+        if isinstance(event_dims, Mapping):
+            raise TypeError("event_dims must be a sequence of dim names for array positions")
+        pos = np.asarray(positions)
+        if pos.ndim < 2:
+            raise ValueError(
+                f"positions must have shape (chains, draws, *event_shape), got shape {pos.shape}"
+            )
+        variables = {var_name: (pos, var_name)}
+        leaf_dims = {var_name: tuple(event_dims)}
+    else:
+        if var_name is not None:
+            raise ValueError(
+                "var_name names a single array of positions; the variables of pytree positions "
+                "are named from their key paths"
+            )
+        variables = pytree_variables(positions)
+        given = {} if event_dims is None else event_dims
+        if not isinstance(given, Mapping):
+            raise TypeError(
+                "event_dims for pytree positions must be a mapping {leaf name: dims}, got "
+                f"{event_dims!r}"
+            )
+        leaf_names = {leaf for _, leaf in variables.values()}
+        unknown = sorted(set(given) - leaf_names)
+        if unknown:
+            raise ValueError(f"event_dims names no leaf of positions: {unknown}")
+        leaf_dims = {leaf: tuple(dims) for leaf, dims in given.items()}
+        for value, leaf in variables.values():
+            leaf_dims.setdefault(leaf, tuple(f"{leaf}_dim_{k}" for k in range(value.ndim - 2)))
+    if isinstance(thinning, bool) or int(thinning) != thinning or thinning < 1:
+        raise ValueError(f"thinning must be a positive integer, got {thinning!r}")
+
+    all_coords: dict[str, Sequence] = {}
+    dims: dict[str, list[str]] = {}
+    for name, (value, leaf) in variables.items():
+        label = "positions" if single else f"positions {name!r}"
+        value = _chain_draw_array(value, label, ndims=(value.ndim,))
+        event_shape, event = value.shape[2:], leaf_dims[leaf]
+        if len(event) != len(event_shape):
+            raise ValueError(
+                f"event_dims must name each event axis of positions: got {event} for "
+                f"event shape {event_shape}"
+            )
+        dims[name] = list(event)
+        for dim, size in zip(event, event_shape, strict=True):
+            if len(event_shape) == 1 and size == 3:
+                all_coords.setdefault(dim, ["x", "y", "z"])
+            else:
+                all_coords.setdefault(dim, list(range(size)))
+    if coords is not None:
+        all_coords.update(coords)
+    for name, (value, leaf) in variables.items():
+        for dim, size in zip(dims[name], value.shape[2:], strict=True):
+            if len(all_coords[dim]) != size:
+                raise ValueError(
+                    f"coords[{dim!r}] has {len(all_coords[dim])} values but positions "
+                    f"{name!r} has {size} along that axis"
+                )
+    n_chains, n_draws = next(iter(variables.values()))[0].shape[:2]
+
+    sample_stats: dict[str, np.ndarray] = {}
+    for key, value in _info_dict(info).items():
+        if value.shape[:2] != (n_chains, n_draws):
+            raise ValueError(
+                f"info[{key!r}] must have leading shape (chains, draws) = "
+                f"{(n_chains, n_draws)} like positions, got shape {value.shape}"
+            )
+        name = _SAMPLE_STATS_NAMES.get(key, key)
+        if name == "diverging":
+            value = value.astype(bool)
+        sample_stats[name] = value
+
+    run_attrs = {"thinning": int(thinning), "step_size": step_size, **dict(attrs or {})}
+    run_attrs = {str(k): _netcdf_attr(v) for k, v in run_attrs.items()}
+    run_attrs = {k: v for k, v in run_attrs.items() if v is not None}
+
+    data = {"posterior": {name: value for name, (value, _) in variables.items()}}
+    group_attrs = {"/": run_attrs, "posterior": run_attrs}
+    if sample_stats:
+        data["sample_stats"] = sample_stats
+        group_attrs["sample_stats"] = run_attrs
+    return from_dict(
+        data,
+        dims=dims,
+        coords=all_coords,
+        attrs=group_attrs,
+    )
+
+
+# --------------------------------------------------------------------------- tables
+
+
+def expectation_table(
+    draws: Mapping[str, np.ndarray],
+    exact: Mapping[str, float] | None = None,
+    wall_time: float | None = None,
+) -> pd.DataFrame:
+    """Tabulate Monte-Carlo estimates of expectations with ArviZ diagnostics.
+
+    Parameters
+    ----------
+    draws : mapping of str to array_like, each shape (chains, draws)
+        Per-draw values of each test function, e.g. ``{"mu_z": positions[..., 2]}``.
+    exact : mapping of str to float, optional
+        Exact expectations; quantities without one get ``NaN`` in ``exact`` and ``z``.
+    wall_time : float, optional
+        Sampling wall time in seconds, for ``ess_per_second``.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Indexed by quantity, with columns ``estimate`` (mean over all chains and draws),
+        ``exact``, ``mcse`` (ArviZ MCSE of the mean), ``z = (estimate - exact) / mcse``,
+        ``ess_bulk``, ``ess_tail`` (5%/95% quantiles), ``r_hat`` (rank-normalised split
+        R-hat; ``NaN`` for a single chain) and ``ess_per_second = ess_bulk / wall_time``
+        (``NaN`` without ``wall_time``).
+    """
+    if not isinstance(draws, Mapping) or len(draws) == 0:
+        raise ValueError("draws must be a non-empty mapping of name -> array (chains, draws)")
+    exact = dict(exact or {})
+    unknown = sorted(set(exact) - set(draws))
+    if unknown:
+        raise ValueError(f"exact has quantities not in draws: {unknown}")
+    if wall_time is not None:
+        try:
+            seconds = float(wall_time)
+        except (TypeError, ValueError):
+            seconds = math.nan
+        if not (math.isfinite(seconds) and seconds > 0):
+            raise ValueError(f"wall_time must be a finite number of seconds > 0, got {wall_time!r}")
+        wall_time = seconds
+
+    rows = {}
+    for name, values in draws.items():
+        x = _chain_draw_array(values, f"draws[{name!r}]", min_draws=_MIN_DRAWS).astype(float)
+        estimate = float(np.mean(x))
+        truth = float(exact[name]) if name in exact else math.nan
+        mcse = float(azs.mcse(x, method="mean"))
+        ess_bulk = float(azs.ess(x, method="bulk"))
+        with np.errstate(invalid="ignore", divide="ignore"):  # constant draws: R-hat is 0/0
+            r_hat = float(azs.rhat(x))
+        rows[name] = {
+            "estimate": estimate,
+            "exact": truth,
+            "mcse": mcse,
+            "z": (estimate - truth) / mcse if mcse > 0 else math.nan,
+            "ess_bulk": ess_bulk,
+            "ess_tail": float(azs.ess(x, method="tail", prob=_TAIL_PROB)),
+            "r_hat": r_hat,
+            "ess_per_second": ess_bulk / wall_time if wall_time is not None else math.nan,
+        }
+    df = pd.DataFrame.from_dict(rows, orient="index", columns=list(TABLE_COLUMNS))
+    df.index.name = "quantity"
+    return df
+
+
+def _format_cell(column: str, value) -> str:
+    if isinstance(value, str):
+        return value
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "-"
+    if isinstance(value, (bool, np.bool_)):
+        return str(bool(value))
+    if not isinstance(value, (int, float, np.integer, np.floating)):
+        return str(value)
+    v = float(value)
+    if not math.isfinite(v):
+        return str(v)
+    if column.startswith("ess") or column in ("n", "draws", "chains"):
+        return f"{v:.0f}" if abs(v) >= 10 or v == 0 else f"{v:.2g}"
+    if column == "r_hat":
+        return f"{v:.3f}"
+    if column == "z":
+        return f"{v:+.2f}"
+    return f"{v:.4g}"
+
+
+def format_table(df: pd.DataFrame) -> str:
+    """Render a table as fixed-width text for a terminal.
+
+    Numbers get column-appropriate precision: 4 significant digits in general, whole numbers
+    for ESS columns, 3 decimals for ``r_hat``, signed 2 decimals for ``z``; ``NaN`` shows as
+    ``-``.
+
+    Parameters
+    ----------
+    df : pandas.DataFrame
+        Typically the output of :func:`expectation_table`.
+
+    Returns
+    -------
+    str
+        The table, one line per row, with a header and an underline.
+    """
+    if not isinstance(df, pd.DataFrame):
+        raise TypeError(f"df must be a pandas DataFrame, got {type(df).__name__}")
+    index_name = str(df.index.name or "")
+    columns = [str(c) for c in df.columns]
+    body = [
+        [str(idx)] + [_format_cell(col, val) for col, val in zip(columns, row, strict=True)]
+        for idx, row in zip(df.index, df.itertuples(index=False), strict=True)
+    ]
+    header = [index_name] + columns
+    widths = [max(len(r[i]) for r in [header, *body]) for i in range(len(header))]
+
+    def line(cells):
+        first = cells[0].ljust(widths[0])
+        rest = [c.rjust(w) for c, w in zip(cells[1:], widths[1:], strict=True)]
+        return "  ".join([first, *rest]).rstrip()
+
+    rule = "  ".join("-" * w for w in widths)
+    return "\n".join([line(header), rule, *(line(r) for r in body)])
+
+
+# --------------------------------------------------------------------------- time correlations
+
+
+def autocovariance(x, max_lag: int, *, center: bool = True) -> np.ndarray:
+    """Autocovariance over lags ``0..max_lag``, averaged over chains and time, via FFT.
+
+    ``c[k] = sum over chains and t of (x_t - m) . (x_{t+k} - m) / (chains * (draws - k))``,
+    i.e. each lag is divided by its number of pairs. ``m`` is the mean over all chains and
+    draws (per component); for 3-D input ``.`` is the inner product over the last axis.
+
+    Parameters
+    ----------
+    x : array_like, shape (chains, draws) or (chains, draws, d)
+        Chains of scalar or vector observations.
+    max_lag : int
+        Largest lag, ``0 <= max_lag < draws``.
+    center : bool, default True
+        Subtract ``m`` first. Use ``False`` when the exact mean is known to be zero (e.g.
+        ``E[mu(t) . mu(0)]`` on the isotropic sphere), which avoids the bias of estimating it.
+
+    Returns
+    -------
+    numpy.ndarray, shape (max_lag + 1,)
+    """
+    arr = _chain_draw_array(x, "x", ndims=(2, 3)).astype(float)
+    if arr.ndim == 2:
+        arr = arr[..., None]
+    n_chains, n_draws, _ = arr.shape
+    if isinstance(max_lag, bool) or not isinstance(max_lag, (int, np.integer)):
+        raise TypeError(f"max_lag must be an integer, got {max_lag!r}")
+    if not 0 <= max_lag < n_draws:
+        raise ValueError(f"max_lag must satisfy 0 <= max_lag < draws = {n_draws}, got {max_lag}")
+    if center:
+        arr = arr - arr.mean(axis=(0, 1), keepdims=True)
+    n_fft = scipy.fft.next_fast_len(2 * n_draws, real=True)  # zero-pad: no wrap-around
+    spectrum = scipy.fft.rfft(arr, n=n_fft, axis=1)
+    lagged = scipy.fft.irfft(spectrum * spectrum.conj(), n=n_fft, axis=1)[:, : max_lag + 1]
+    total = lagged.sum(axis=(0, 2))
+    pairs = n_chains * (n_draws - np.arange(max_lag + 1))
+    return total / pairs
+
+
+# --------------------------------------------------------------------------- health checks
+
+
+def casimir_drift(info) -> dict[str, float]:
+    """Summarise the relative Casimir error recorded by the sampler.
+
+    Parameters
+    ----------
+    info : mapping, NamedTuple or dataclass
+        Must contain ``casimir_error`` shaped ``(chains, draws)``.
+
+    Returns
+    -------
+    dict
+        ``max``: largest error over all chains and draws; ``final``: largest error at the last
+        draw over chains. Both are ``nan`` if any considered value is ``nan`` (a chain that
+        became non-finite).
+    """
+    items = _info_dict(info)
+    if "casimir_error" not in items:
+        raise ValueError(f"info must contain 'casimir_error', got keys {sorted(items)}")
+    err = _chain_draw_array(items["casimir_error"], "info['casimir_error']")
+    return {"max": float(np.max(err)), "final": float(np.max(err[:, -1]))}
+
+
+def count_nonfinite(info) -> int:
+    """Number of draws, over all chains, flagged divergent (non-finite state or energy).
+
+    Parameters
+    ----------
+    info : mapping, NamedTuple or dataclass
+        Must contain ``is_divergent`` (the Info contract), ``diverging`` (ArviZ's name) or
+        ``nonfinite`` (legacy), bool, shaped ``(chains, draws)``.
+
+    Returns
+    -------
+    int
+    """
+    items = _info_dict(info)
+    key = next((k for k in _DIVERGENCE_KEYS if k in items), None)
+    if key is None:
+        raise ValueError(
+            f"info must contain one of {list(_DIVERGENCE_KEYS)}, got keys {sorted(items)}"
+        )
+    flags = _chain_draw_array(items[key], f"info[{key!r}]")
+    return int(np.count_nonzero(flags))

@@ -1,0 +1,1 @@
+"""Foundation: argument checks and the one compile path (``liesample.jit``)."""

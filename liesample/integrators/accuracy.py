@@ -1,0 +1,811 @@
+"""Accuracy as a knob: ask for a bias tolerance, not a step size.
+
+The unadjusted samplers' ergodic averages carry a discretisation bias ``A(h) − A(0) ≈ C h^q``
+(``q`` → the integrator's weak order, ``liesample.integrators.INTEGRATORS[name].weak_order``,
+as ``h → 0``; MATH.md §2). This module measures it instead of guessing:
+
+- :func:`coupled_ergodic_averages` runs independent chains, each at several step sizes
+  ``h, h/2, h/4, …`` driven by *the same* Brownian path (the coarse increments are sums of the
+  fine ones), so that the differences ``A(h) − A(h/2)`` have a small variance; per-chain means
+  make every standard error honest (the chains are independent);
+- :func:`choose_step_size` turns short coupled pilots into a step size (and a noise strength
+  ``σ``, which at fixed ``β`` trades mixing against stiffness) whose predicted bias is below a
+  tolerance, allowing for pre-asymptotic slopes;
+- :func:`richardson_romberg` combines averages at ``h`` and ``h/2``,
+  ``(2^p A(h/2) − A(h)) / (2^p − 1)``, with its MCSE; :func:`richardson_romberg_run` does both
+  runs, coupled;
+- :func:`ergodic_averages` runs any BlackJAX-style sampler (unadjusted or
+  :func:`liesample.adjusted_lie_poisson`) as vmapped chains keeping only running sums.
+
+Without Lévy areas the schemes are strong order 1/2 under non-commuting noise, so coupled levels
+drift apart by ``O(√h)``: the coupling shrinks the variance of the differences (measured in
+``tests/test_accuracy_knob.py``) but does not remove it; every SE here comes from the spread of
+independent chains, coupling included.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from liesample.dynamics.poisson_langevin import PoissonLangevin, make_dynamics
+from liesample.dynamics.system import LiePoissonSystem
+from liesample.foundation.compile import jit
+from liesample.foundation.validation import finite_float, prng_key
+from liesample.integrators.chain_loop import run_steps
+from liesample.integrators.orbit import DEFAULT_INTEGRATOR, get_integrator
+from liesample.integrators.stability import stiffness
+
+__all__ = [
+    "DEFAULT_RELATIVE_TOLERANCE",
+    "ChainAverages",
+    "CoupledAverages",
+    "RichardsonRomberg",
+    "StepSizeChoice",
+    "choose_step_size",
+    "coupled_ergodic_averages",
+    "default_step_size",
+    "ergodic_averages",
+    "richardson_romberg",
+    "richardson_romberg_run",
+]
+
+# A difference counts as measured when it is at least this many standard errors from zero.
+_RESOLVED_Z = 2.0
+# The slope used to extrapolate the bias down is never taken below this (a flatter observed
+# slope is noise or a regime far from asymptotic; the user should lower the pilot step sizes).
+_MIN_SLOPE = 0.5
+
+DEFAULT_RELATIVE_TOLERANCE = 0.05
+"""Default bias tolerance of :func:`default_step_size`: ``|bias| ≤ 0.05 × posterior sd`` of each
+observable (about 1/20 of the spread: well below the MCSE of runs with fewer than ~400 effective
+draws)."""
+
+
+def _positive_int(name, value, low=1):
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+        raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
+    return int(value)
+
+
+class _IndependentChains:
+    """Estimates from per-chain time averages ``chain_means`` / ``chain_square_means`` (leading
+    axis: independent chains): mean, MCSE from the chains' spread, and ESS (batch means, one
+    batch per chain)."""
+
+    @property
+    def num_chains(self) -> int:
+        return self.chain_means.shape[0]
+
+    @property
+    def estimate(self) -> np.ndarray:
+        """Mean over chains, shape (levels, k)."""
+        return self.chain_means.mean(0)
+
+    @property
+    def mcse(self) -> np.ndarray:
+        """Standard error of :attr:`estimate` from the spread of independent chains."""
+        return self.chain_means.std(0, ddof=1) / math.sqrt(self.num_chains)
+
+    @property
+    def ess(self) -> np.ndarray:
+        """Effective sample size per level and observable: stationary variance / MCSE²."""
+        variance = self.chain_square_means.mean(0) - self.estimate**2
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return variance / self.mcse**2
+
+
+@dataclass(frozen=True)
+class CoupledAverages(_IndependentChains):
+    """Per-chain time averages at step sizes ``step_sizes`` driven by one Brownian path per chain.
+
+    Attributes
+    ----------
+    step_sizes : tuple of float
+        ``h, h/2, …`` (largest first).
+    chain_means : array (chains, levels, k)
+        Time average of each observable, per chain and step size (burn-in excluded).
+    chain_square_means : array (chains, levels, k)
+        Time average of the squared observables (for the stationary variance).
+    nonfinite_steps : array (chains, levels)
+        Steps rejected because they produced NaN/inf (the chain kept its state).
+    wall_time : float
+        Seconds for the whole run (compilation excluded).
+    kept_time : float
+        Physical time averaged over per chain.
+    """
+
+    step_sizes: tuple[float, ...]
+    chain_means: np.ndarray
+    chain_square_means: np.ndarray
+    nonfinite_steps: np.ndarray
+    wall_time: float
+    kept_time: float
+
+    @property
+    def tau_int(self) -> np.ndarray:
+        """Integrated autocorrelation time in time units: chains × kept time / ESS."""
+        with np.errstate(divide="ignore"):
+            return self.num_chains * self.kept_time / self.ess
+
+
+def _guarded(integrator, dynamics, mu, dt, dW):
+    proposal = integrator(dynamics, mu, dt, dW)
+    bad = ~jnp.all(jnp.isfinite(proposal))
+    return jnp.where(bad, mu, proposal), bad
+
+
+def _coupled_runner(system, integrator, levels, observables, scene, example):
+    """Compiled ``(keys, starts, step_size, sigma, theta, num_total, num_burn) -> (means, squares,
+    nonfinite)``; the scalars are traced, so one executable serves every step size and σ."""
+    fine = 2 ** (levels - 1)
+    m = system.num_noises
+    num_obs = int(np.size(jax.eval_shape(observables, example)))
+
+    def chain(key, start, step_size, sigma, theta, num_total, num_burn):
+        dynamics = PoissonLangevin(system, sigma=sigma, theta=theta, scene=scene)
+        fine_dt = step_size / fine
+
+        def coarse_step(i, carry):
+            mus, sums, squares, bad = carry
+            dW = jnp.sqrt(fine_dt) * jax.random.normal(
+                jax.random.fold_in(key, i), (fine, m), start.dtype
+            )
+            kept = i >= num_burn
+            new_mus, new_sums, new_squares, new_bad = [], [], [], []
+            for level in range(levels):
+                blocks = dW.reshape(2**level, fine // 2**level, m).sum(1)
+                dt = step_size / 2**level
+
+                def sub(c, increment, dt=dt):
+                    mu, total, square, count = c
+                    mu, flag = _guarded(integrator, dynamics, mu, dt, increment)
+                    value = jnp.ravel(observables(mu))
+                    return (mu, total + value, square + value * value, count + flag), None
+
+                zero = jnp.zeros(num_obs, start.dtype)
+                (mu, total, square, count), _ = jax.lax.scan(
+                    sub, (mus[level], zero, zero, jnp.int32(0)), blocks
+                )
+                new_mus.append(mu)
+                new_sums.append(sums[level] + jnp.where(kept, total / 2**level, 0.0))
+                new_squares.append(squares[level] + jnp.where(kept, square / 2**level, 0.0))
+                new_bad.append(bad[level] + count)
+            return (
+                jnp.stack(new_mus),
+                jnp.stack(new_sums),
+                jnp.stack(new_squares),
+                jnp.stack(new_bad),
+            )
+
+        zeros = jnp.zeros((levels, num_obs), start.dtype)
+        carry = (jnp.stack([start] * levels), zeros, zeros, jnp.zeros(levels, jnp.int32))
+        _, sums, squares, bad = jax.lax.fori_loop(0, num_total, coarse_step, carry)
+        kept = num_total - num_burn
+        return sums / kept, squares / kept, bad
+
+    batched = jax.vmap(chain, in_axes=(0, 0, None, None, None, None, None))
+    return jit(batched)
+
+
+@functools.lru_cache(maxsize=16)
+def _compiled_runner(system, integrator, levels, observables, scene, shape, dtype):
+    """The compiled coupled runner, cached: repeated runs (pilots, refinements, a production
+    run at the same level count) pay compilation once."""
+    starts = jax.ShapeDtypeStruct(shape, jnp.dtype(dtype))
+    runner = _coupled_runner(
+        system, integrator, levels, observables, scene, jnp.zeros(shape[1:], dtype)
+    )
+    keys = jax.random.split(jax.random.key(0), shape[0])
+    scalar = jax.ShapeDtypeStruct((), jnp.dtype(dtype))
+    count = jax.ShapeDtypeStruct((), jnp.int32)
+    return runner.lower(keys, starts, scalar, scalar, scalar, count, count).compile()
+
+
+class _CoupledRun:
+    """One compiled coupled runner for a system, integrator, level count and observables."""
+
+    def __init__(self, system, beta, observables, integrator, levels, initial_positions):
+        self.system = system
+        self.beta = beta
+        self.integrator = get_integrator(integrator)
+        self.levels = _positive_int("levels", levels)
+        _, _, self.scene = make_dynamics(system, beta=beta, sigma=1.0)
+        starts = jnp.asarray(initial_positions, dtype=jnp.result_type(float))
+        if starts.ndim != len(system.event_shape) + 1 or starts.shape[0] < 2:
+            raise ValueError(
+                f"initial_positions must have shape (chains, *{system.event_shape}) with chains "
+                f">= 2 (the standard errors come from independent chains), got "
+                f"{tuple(starts.shape)}"
+            )
+        system.check_position(starts[0], "initial_positions[0]")
+        self.starts = starts
+        self.compiled = _compiled_runner(
+            system,
+            self.integrator,
+            self.levels,
+            observables,
+            self.scene,
+            tuple(starts.shape),
+            str(starts.dtype),
+        )
+
+    def __call__(self, *, step_size, sigma, rng_key, total_time, burn_in) -> CoupledAverages:
+        step_size = finite_float("step_size", step_size, positive=True)
+        total_time = finite_float("total_time", total_time, positive=True)
+        burn_in = finite_float("burn_in", burn_in, nonnegative=True)
+        sigma, theta, scene = make_dynamics(self.system, beta=self.beta, sigma=sigma)
+        if scene != self.scene:
+            raise ValueError(f"sigma must be > 0 to sample exp(-beta*h), got {sigma}")
+        num_total = max(1, round(total_time / step_size))
+        num_burn = round(burn_in / step_size)
+        if num_burn >= num_total:
+            raise ValueError(f"burn_in ({burn_in}) must be shorter than total_time ({total_time})")
+        keys = jax.random.split(prng_key(rng_key), self.starts.shape[0])
+        dtype = self.starts.dtype
+        args = (
+            keys,
+            self.starts,
+            jnp.asarray(step_size, dtype),
+            jnp.asarray(sigma, dtype),
+            jnp.asarray(theta, dtype),
+            jnp.asarray(num_total, jnp.int32),
+            jnp.asarray(num_burn, jnp.int32),
+        )
+        begin = time.perf_counter()
+        means, squares, bad = jax.block_until_ready(self.compiled(*args))
+        wall = time.perf_counter() - begin
+        return CoupledAverages(
+            step_sizes=tuple(step_size / 2**level for level in range(self.levels)),
+            chain_means=np.asarray(means),
+            chain_square_means=np.asarray(squares),
+            nonfinite_steps=np.asarray(bad),
+            wall_time=wall,
+            kept_time=(num_total - num_burn) * step_size,
+        )
+
+
+def coupled_ergodic_averages(
+    system: LiePoissonSystem,
+    beta,
+    observables: Callable,
+    *,
+    step_size,
+    levels: int = 2,
+    integrator=DEFAULT_INTEGRATOR,
+    sigma=1.0,
+    initial_positions,
+    rng_key,
+    total_time,
+    burn_in=0.0,
+) -> CoupledAverages:
+    """Time averages of ``observables`` at ``step_size / 2^l``, ``l < levels``, on coupled paths.
+
+    Each chain draws, per coarse step, ``2^(levels−1)`` Brownian increments of the finest step;
+    level ``l`` advances with their sums over blocks of ``2^(levels−1−l)``, i.e. all levels see
+    the same Brownian path. All effects are on (``θ = βσ²/2``), as in
+    :func:`liesample.lie_poisson_langevin`. A step that produces NaN/inf is rejected and counted.
+    With ``levels=1`` this is a plain run of independent chains.
+
+    Parameters
+    ----------
+    observables : callable
+        ``μ ↦`` array of shape ``(k,)``.
+    initial_positions : array (chains, *event_shape)
+        One start per chain (all on the orbit to be sampled), at least 2 chains.
+    total_time, burn_in : float
+        Physical time per chain, and the part of it (at the start) not averaged.
+    """
+    rng_key = prng_key(rng_key)
+    run = _CoupledRun(system, beta, observables, integrator, levels, initial_positions)
+    return run(
+        step_size=step_size, sigma=sigma, rng_key=rng_key, total_time=total_time, burn_in=burn_in
+    )
+
+
+@dataclass(frozen=True)
+class ChainAverages(_IndependentChains):
+    """Per-chain time averages of observables from any BlackJAX-style sampler.
+
+    ``chain_means``/``chain_square_means`` have shape ``(chains, k)``; ``info_means`` holds the
+    per-chain mean of each numeric ``info`` field (e.g. ``acceptance_rate``), shape
+    ``(chains,)``; ``wall_time`` excludes compilation; ``num_steps`` are the averaged steps.
+    """
+
+    chain_means: np.ndarray
+    chain_square_means: np.ndarray
+    info_means: dict
+    wall_time: float
+    num_steps: int
+
+
+def ergodic_averages(
+    algorithm,
+    rng_key,
+    initial_positions,
+    observables: Callable,
+    *,
+    num_steps,
+    num_warmup=0,
+    info_fields=None,
+) -> ChainAverages:
+    """Run independent vmapped chains of ``algorithm`` and keep only running sums.
+
+    ``algorithm`` has ``init(position)`` and ``step(rng_key, state) -> (state, info)``
+    (:func:`liesample.lie_poisson_langevin`, :func:`liesample.adjusted_lie_poisson`); step ``i``
+    of chain ``c`` uses ``fold_in(key_c, i)``, or the sampler's noise blocks
+    (:mod:`liesample.integrators.chain_loop`). Nothing per step is stored, so long runs of many
+    chains fit in memory. The scalar ``info`` fields named in ``info_fields`` (default: all) are
+    averaged over the kept steps; fields not asked for are not computed (XLA drops them).
+    """
+    num_steps = _positive_int("num_steps", num_steps)
+    num_warmup = _positive_int("num_warmup", num_warmup, low=0)
+    starts = jnp.asarray(initial_positions, dtype=jnp.result_type(float))
+    if starts.ndim < 1 or starts.shape[0] < 2:
+        raise ValueError(
+            f"initial_positions must have a leading chain axis with >= 2 chains, got "
+            f"{tuple(starts.shape)}"
+        )
+    example_state = algorithm.init(starts[0])
+    num_obs = int(np.size(jax.eval_shape(observables, starts[0])))
+    _, example_info = jax.eval_shape(algorithm.step, jax.random.key(0), example_state)
+    scalars = [name for name, value in example_info._asdict().items() if value.shape == ()]
+    info_names = scalars if info_fields is None else list(info_fields)
+    unknown = sorted(set(info_names) - set(scalars))
+    if unknown:
+        raise ValueError(f"info_fields {unknown} are not scalar info fields; have {scalars}")
+
+    def chain(key, start):
+        def update(i, state, info, carry):
+            total, square, infos = carry
+            value = jnp.ravel(observables(state.position))
+            kept = i >= num_warmup
+            info_values = jnp.asarray(
+                [getattr(info, n).astype(total.dtype) for n in info_names], total.dtype
+            )
+            return (
+                jnp.where(kept, total + value, total),
+                jnp.where(kept, square + value * value, square),
+                jnp.where(kept, infos + info_values, infos),
+            )
+
+        zero = jnp.zeros(num_obs, starts.dtype)
+        carry = (zero, zero, jnp.zeros(len(info_names), starts.dtype))
+        _, (total, square, infos) = run_steps(
+            algorithm, key, algorithm.init(start), 0, num_warmup + num_steps, update, carry
+        )
+        return total / num_steps, square / num_steps, infos / num_steps
+
+    keys = jax.random.split(prng_key(rng_key), starts.shape[0])
+    run = jit(jax.vmap(chain)).lower(keys, starts).compile()
+    begin = time.perf_counter()
+    means, squares, infos = jax.block_until_ready(run(keys, starts))
+    wall = time.perf_counter() - begin
+    infos = np.asarray(infos)
+    return ChainAverages(
+        np.asarray(means),
+        np.asarray(squares),
+        {name: infos[:, i] for i, name in enumerate(info_names)},
+        wall,
+        num_steps,
+    )
+
+
+# --------------------------------------------------------------------------- Richardson–Romberg
+
+
+@dataclass(frozen=True)
+class RichardsonRomberg:
+    """``(2^p A(h/2) − A(h)) / (2^p − 1)`` per observable, with its MCSE and the inputs."""
+
+    estimate: np.ndarray
+    mcse: np.ndarray
+    order: float
+    coarse: np.ndarray
+    fine: np.ndarray
+    coarse_mcse: np.ndarray
+    fine_mcse: np.ndarray
+    paired: bool
+    wall_time: float = math.nan
+
+
+def richardson_romberg(coarse, fine, order, *, paired: bool = False) -> RichardsonRomberg:
+    """Richardson–Romberg extrapolation of ergodic averages across step sizes ``h`` and ``h/2``.
+
+    Parameters
+    ----------
+    coarse, fine : array (chains, k) or (chains,)
+        Per-chain time averages at ``h`` and at ``h/2`` from independent chains.
+    order : float
+        The order ``p`` of the leading bias term (the integrator's ``weak_order``, or a
+        measured slope); the combination cancels ``C h^p``.
+    paired : bool
+        ``True`` when chain ``c`` of both inputs was driven by the same Brownian path
+        (:func:`coupled_ergodic_averages`): the MCSE then comes from the spread of the per-chain
+        combinations (which includes the coupling's correlation). ``False``: the two runs are
+        independent and their variances add.
+    """
+    order = finite_float("order", order, positive=True)
+    coarse = np.asarray(coarse, dtype=float)
+    fine = np.asarray(fine, dtype=float)
+    if coarse.ndim == 1:
+        coarse, fine = coarse[:, None], fine[:, None] if fine.ndim == 1 else fine
+    if coarse.ndim != 2 or fine.ndim != 2 or coarse.shape[1] != fine.shape[1]:
+        raise ValueError(
+            f"coarse and fine must be per-chain averages of shape (chains, k) with the same k, "
+            f"got {coarse.shape} and {fine.shape}"
+        )
+    if min(coarse.shape[0], fine.shape[0]) < 2:
+        raise ValueError("coarse and fine need at least 2 chains each (for the MCSE)")
+    if paired and coarse.shape != fine.shape:
+        raise ValueError(f"paired runs need the same shape, got {coarse.shape} and {fine.shape}")
+    weight = 2.0**order
+    se_coarse = coarse.std(0, ddof=1) / math.sqrt(coarse.shape[0])
+    se_fine = fine.std(0, ddof=1) / math.sqrt(fine.shape[0])
+    if paired:
+        combined = (weight * fine - coarse) / (weight - 1.0)
+        estimate = combined.mean(0)
+        mcse = combined.std(0, ddof=1) / math.sqrt(combined.shape[0])
+    else:
+        estimate = (weight * fine.mean(0) - coarse.mean(0)) / (weight - 1.0)
+        mcse = np.hypot(weight * se_fine, se_coarse) / (weight - 1.0)
+    return RichardsonRomberg(
+        estimate, mcse, order, coarse.mean(0), fine.mean(0), se_coarse, se_fine, paired
+    )
+
+
+def richardson_romberg_run(
+    system: LiePoissonSystem,
+    beta,
+    observables: Callable,
+    *,
+    step_size,
+    initial_positions,
+    rng_key,
+    total_time,
+    burn_in=0.0,
+    integrator=DEFAULT_INTEGRATOR,
+    sigma=1.0,
+    order=None,
+) -> RichardsonRomberg:
+    """Run coupled chains at ``step_size`` and ``step_size/2`` and extrapolate.
+
+    ``order`` defaults to the integrator's declared weak order. Arguments as in
+    :func:`coupled_ergodic_averages`.
+    """
+    integrator = get_integrator(integrator)
+    averages = coupled_ergodic_averages(
+        system,
+        beta,
+        observables,
+        step_size=step_size,
+        levels=2,
+        integrator=integrator,
+        sigma=sigma,
+        initial_positions=initial_positions,
+        rng_key=rng_key,
+        total_time=total_time,
+        burn_in=burn_in,
+    )
+    result = richardson_romberg(
+        averages.chain_means[:, 0],
+        averages.chain_means[:, 1],
+        integrator.weak_order if order is None else order,
+        paired=True,
+    )
+    return RichardsonRomberg(**{**result.__dict__, "wall_time": averages.wall_time})
+
+
+# --------------------------------------------------------------------------- step-size choice
+
+
+@dataclass(frozen=True)
+class StepSizeChoice:
+    """The step size (and σ) :func:`choose_step_size` picked, and the evidence for it.
+
+    Attributes
+    ----------
+    step_size, sigma, integrator : what to pass to :func:`liesample.lie_poisson_langevin`.
+    tolerance : the requested absolute bound on ``|bias|`` of every observable (or ``None``).
+    relative_tolerance : the requested bound in posterior sd (or ``None``).
+    tolerances : array (k,), the absolute bound applied per observable (``inf``: not bounded).
+    predicted_bias_bound : array (k,)
+        Upper bound (2 SE) on ``|bias|`` at ``step_size`` from the model ``C h^q``.
+    slope : array (k,)
+        The exponent ``q`` used per observable: ``min(observed, weak order)`` when the pilot
+        resolved the slope, else the weak order.
+    steps_per_effective_sample : float
+        Predicted cost: ``max_k τ_int,k / step_size`` (τ from the finest pilot).
+    candidates : list of dict
+        Per σ tried: its step size, bounds, slopes, τ and cost.
+    pilot_wall_time : float
+        Seconds spent in pilots (compilation excluded).
+    """
+
+    step_size: float
+    sigma: float
+    integrator: str
+    tolerance: float | None
+    predicted_bias_bound: np.ndarray
+    slope: np.ndarray
+    steps_per_effective_sample: float
+    candidates: list = field(default_factory=list)
+    pilot_wall_time: float = 0.0
+    relative_tolerance: float | None = None
+    tolerances: np.ndarray | None = None
+
+    def sampler_kwargs(self) -> dict:
+        """Keyword arguments for :func:`liesample.lie_poisson_langevin` (with ``beta``)."""
+        return {"step_size": self.step_size, "sigma": self.sigma, "integrator": self.integrator}
+
+
+def _tolerances(averages: CoupledAverages, tolerance, relative_tolerance):
+    """Per-observable absolute tolerances, and the averages the bias model is applied to.
+
+    Absolute: ``tolerance`` on each observable's mean. Relative: ``relative_tolerance × sd`` on
+    each mean and ``2 × relative_tolerance × variance`` on each variance (so the sd is within
+    ``relative_tolerance`` of itself), the variance taken per chain (``E[f²] − E[f]²`` of its
+    time averages: coupled levels share its finite-time bias, which cancels in the
+    differences) and the stationary sd from the finest level. Observables constant to
+    round-off are not bounded (``inf``). Returns ``(tolerances, averages)``.
+    """
+    if relative_tolerance is None:
+        return np.full(averages.chain_means.shape[-1], tolerance), averages
+    means = averages.chain_means
+    variances = np.maximum(averages.chain_square_means - means**2, 0.0)
+    finest = means[:, -1].mean(0)
+    variance = np.maximum(averages.chain_square_means[:, -1].mean(0) - finest**2, 0.0)
+    sd = np.sqrt(variance)
+    constant = sd <= 1e-7 * (np.abs(finest) + np.max(sd, initial=0.0) + 1e-300)
+    tolerances = np.concatenate(
+        [
+            np.where(constant, np.inf, relative_tolerance * sd),
+            np.where(constant, np.inf, 2.0 * relative_tolerance * variance),
+        ]
+    )
+    augmented = replace(averages, chain_means=np.concatenate([means, variances], axis=-1))
+    return tolerances, augmented
+
+
+def _bias_model(averages: CoupledAverages, weak_order: float, tolerance: float):
+    """Step size meeting ``tolerance`` from three coupled levels ``h, h/2, h/4``.
+
+    ``D₁ = A(h) − A(h/2)``, ``D₂ = A(h/2) − A(h/4)`` (per-chain, so their SEs include the
+    coupling). Under ``b(h) = C h^q``: ``D₁/D₂ = 2^q`` and ``b(h/4) = D₂/(2^q − 1)``. The slope
+    is ``min(observed, weak order)`` when both differences are resolved with the same sign (a
+    pre-asymptotic slope below the order steepens as ``h`` falls, one above it flattens, so the
+    smaller is the cautious one), else the weak order. The bias bound at ``h/4`` uses
+    ``|D₂| + 2 SE(D₂)``, and then ``h* = (h/4) (tolerance / bound)^{1/q}``, capped at ``h``.
+    """
+    means = averages.chain_means
+    d1 = means[:, 0] - means[:, 1]
+    d2 = means[:, 1] - means[:, 2]
+    n = means.shape[0]
+    m1, s1 = d1.mean(0), d1.std(0, ddof=1) / math.sqrt(n)
+    m2, s2 = d2.mean(0), d2.std(0, ddof=1) / math.sqrt(n)
+    resolved = (np.abs(m1) > _RESOLVED_Z * s1) & (np.abs(m2) > _RESOLVED_Z * s2) & (m1 * m2 > 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        observed = np.where(resolved, np.log2(np.abs(m1 / m2)), np.nan)
+    slope = np.where(resolved, np.clip(observed, _MIN_SLOPE, weak_order), weak_order)
+    finest = averages.step_sizes[2]
+    bound = (np.abs(m2) + _RESOLVED_Z * s2) / (2.0**slope - 1.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        steps = np.nan_to_num(finest * (tolerance / bound) ** (1.0 / slope), nan=np.inf)
+    step = float(min(np.min(steps), averages.step_sizes[0]))
+    predicted = bound * (step / finest) ** slope
+    return step, predicted, slope, observed, (m1, s1, m2, s2)
+
+
+def choose_step_size(
+    system: LiePoissonSystem,
+    beta,
+    tolerance=None,
+    *,
+    relative_tolerance=None,
+    observables: Callable,
+    initial_positions,
+    rng_key,
+    integrator=DEFAULT_INTEGRATOR,
+    sigmas=(1.0,),
+    pilot_step_size=0.4,
+    pilot_time=50.0,
+    burn_in=5.0,
+    max_refinements: int = 2,
+) -> StepSizeChoice:
+    """Pick the step size (and σ) whose bias on every observable is at most ``tolerance``
+    (absolute) or ``relative_tolerance`` × its posterior sd.
+
+    For each σ in ``sigmas``, one coupled pilot (:func:`coupled_ergodic_averages`, levels
+    ``h, h/2, h/4`` with ``h = pilot_step_size / σ²``: noise and dissipation scale with
+    ``σ² dt``) measures the differences between levels; the
+    bias model ``C h^q`` (see :func:`_bias_model`: ``q`` the integrator's weak order, or the
+    observed slope where it is smaller) gives the largest step with predicted
+    ``|bias| ≤ tolerance`` (never larger than the pilot's). Among the σ, the one with the fewest
+    steps per effective sample (``max_k τ_int,k / h*``, τ from the finest level) wins.
+
+    Parameters
+    ----------
+    tolerance : float, optional
+        Bound on the absolute bias of each observable (> 0). The statistical error of the
+        production run comes on top; size the run for it.
+    relative_tolerance : float, optional
+        Bound on the bias of each observable relative to its stationary standard deviation
+        (measured on the pilot's finest level); observables constant to round-off are not
+        bounded; the variance of each observable is bounded too (by ``2 × relative_tolerance ×
+        variance``, i.e. its sd is within ``relative_tolerance`` of itself), so the arrays of
+        the result list the means' entries, then the variances'. Give this or ``tolerance``;
+        with neither,
+        :data:`DEFAULT_RELATIVE_TOLERANCE` (0.05 sd) applies.
+    rng_key : jax.random.key or jax.random.PRNGKey
+    observables : callable
+        ``μ ↦`` array (k,): the expectations that must be accurate.
+    initial_positions : array (chains, *event_shape)
+        Starts of the pilot chains (≥ 2; a few hundred give a usable bias constant).
+    sigmas : sequence of float
+        Noise strengths to try (each > 0).
+    pilot_step_size, pilot_time, burn_in : float
+        The coarsest pilot step at ``σ = 1`` (divided by ``σ²`` for other σ), and the pilot's
+        physical time and discarded start per chain.
+    max_refinements : int
+        When the chosen step is below half the pilot's finest step, the pilot is repeated
+        closer to it (coarse step ``max(4 h*, h/8)``), at most this many times: a slope
+        measured at larger steps is not trusted over a range it was not seen on.
+
+    Returns
+    -------
+    StepSizeChoice
+    """
+    if tolerance is not None and relative_tolerance is not None:
+        raise ValueError("give tolerance (absolute) or relative_tolerance, not both")
+    if tolerance is None and relative_tolerance is None:
+        relative_tolerance = DEFAULT_RELATIVE_TOLERANCE
+    if tolerance is not None:
+        tolerance = finite_float("tolerance", tolerance, positive=True)
+    else:
+        relative_tolerance = finite_float("relative_tolerance", relative_tolerance, positive=True)
+    rng_key = prng_key(rng_key)
+    integrator = get_integrator(integrator)
+    if np.ndim(sigmas) != 1 or len(sigmas) < 1:
+        raise ValueError(f"sigmas must be a non-empty sequence of floats > 0, got {sigmas!r}")
+    sigmas = [finite_float(f"sigmas[{i}]", s, positive=True) for i, s in enumerate(sigmas)]
+    pilot_step_size = finite_float("pilot_step_size", pilot_step_size, positive=True)
+    run = _CoupledRun(system, beta, observables, integrator, 3, initial_positions)
+    candidates, wall = [], 0.0
+    for i, sigma in enumerate(sigmas):
+        # Noise and dissipation scale with σ²·dt: the same stiffness at every σ.
+        coarse = pilot_step_size / sigma**2
+        pilots = []
+        for attempt in range(max_refinements + 1):
+            pilot = run(
+                step_size=coarse,
+                sigma=sigma,
+                rng_key=jax.random.fold_in(jax.random.fold_in(rng_key, i), attempt),
+                total_time=pilot_time,
+                burn_in=burn_in,
+            )
+            wall += pilot.wall_time
+            tolerances, modelled = _tolerances(pilot, tolerance, relative_tolerance)
+            step, predicted, slope, observed, (m1, s1, m2, s2) = _bias_model(
+                modelled, integrator.weak_order, tolerances
+            )
+            pilots.append(
+                {
+                    "pilot_step_size": coarse,
+                    "step_size": step,
+                    "observed_slope": observed,
+                    "difference_coarse": m1,
+                    "difference_coarse_se": s1,
+                    "difference_fine": m2,
+                    "difference_fine_se": s2,
+                    "wall_time": pilot.wall_time,
+                }
+            )
+            # Far below the pilot's finest step, the extrapolation spans a range whose slope
+            # was not seen: measure again closer to the candidate (at most 8× lower per round).
+            if step >= 0.5 * pilot.step_sizes[2] or attempt == max_refinements:
+                break
+            coarse = max(4.0 * step, coarse / 8.0)
+        tau = pilot.tau_int[2]
+        candidates.append(
+            {
+                "sigma": sigma,
+                "step_size": step,
+                "predicted_bias_bound": predicted,
+                "slope": slope,
+                "observed_slope": observed,
+                "tau_int": tau,
+                "steps_per_effective_sample": float(np.max(tau) / step),
+                "nonfinite_steps": int(pilot.nonfinite_steps.sum()),
+                "tolerances": tolerances,
+                "pilots": pilots,
+            }
+        )
+    best = min(candidates, key=lambda c: c["steps_per_effective_sample"])
+    return StepSizeChoice(
+        step_size=best["step_size"],
+        sigma=best["sigma"],
+        integrator=integrator.name,
+        tolerance=tolerance,
+        relative_tolerance=relative_tolerance,
+        tolerances=best["tolerances"],
+        predicted_bias_bound=best["predicted_bias_bound"],
+        slope=best["slope"],
+        steps_per_effective_sample=best["steps_per_effective_sample"],
+        candidates=candidates,
+        pilot_wall_time=wall,
+    )
+
+
+# --------------------------------------------------------------------------- default step size
+
+_PILOT_CHAINS = 16
+_PILOT_COARSE_STEPS = 2000
+_MAX_PILOT_TIME = 50.0
+
+
+def _coordinates(mu):
+    return jnp.ravel(mu)
+
+
+def default_step_size(
+    system: LiePoissonSystem,
+    beta,
+    *,
+    sigma=1.0,
+    integrator=DEFAULT_INTEGRATOR,
+    initial_positions=None,
+    rng_key=None,
+    relative_tolerance=DEFAULT_RELATIVE_TOLERANCE,
+) -> StepSizeChoice:
+    """The step size :func:`liesample.lie_poisson_langevin` uses when none is given.
+
+    :func:`choose_step_size` on the coordinates of ``μ`` with ``relative_tolerance`` (bias at
+    most 0.05 posterior sd by default), with pilots scaled to the problem: the coarsest pilot
+    step is ``min(0.4/σ², 1/s)`` with ``s = θ·max_i|h''_i|`` the stiffness on the orbit
+    (:mod:`liesample.integrators.stability`), i.e. half the stability bound ``κ ≤ 2``, so every level of
+    the pilot and the chosen step are stable; the pilot runs ``min(50, 2000 h)`` time units
+    (10 % burn-in) on 16 chains started from ``initial_positions`` (cycled; default: the
+    system's default position), ``rng_key`` default ``jax.random.key(0)``.
+    """
+    integrator = get_integrator(integrator)
+    sigma, theta, _ = make_dynamics(system, beta=beta, sigma=sigma)
+    if initial_positions is None:
+        initial_positions = np.asarray(system.default_position)[None]
+    starts = np.asarray(initial_positions, dtype=float)
+    if starts.ndim != len(system.event_shape) + 1 or starts.shape[0] < 1:
+        raise ValueError(
+            f"initial_positions must have shape (chains, *{tuple(system.event_shape)}), got "
+            f"{starts.shape}"
+        )
+    starts = starts[np.arange(_PILOT_CHAINS) % starts.shape[0]]
+    stiff = max(
+        stiffness(system, theta, start) if system.curvature_bound else 0.0
+        for start in _distinct(starts)
+    )
+    coarse = 0.4 / sigma**2 if stiff == 0.0 else min(0.4 / sigma**2, 1.0 / stiff)
+    pilot_time = min(_MAX_PILOT_TIME, _PILOT_COARSE_STEPS * coarse)
+    return choose_step_size(
+        system,
+        beta,
+        relative_tolerance=relative_tolerance,
+        observables=_coordinates,
+        initial_positions=starts,
+        rng_key=jax.random.key(0) if rng_key is None else rng_key,
+        integrator=integrator,
+        sigmas=(sigma,),
+        pilot_step_size=coarse * sigma**2,
+        pilot_time=pilot_time,
+        burn_in=0.1 * pilot_time,
+    )
+
+
+def _distinct(starts):
+    _, first = np.unique(starts.reshape(len(starts), -1), axis=0, return_index=True)
+    return starts[np.sort(first)]

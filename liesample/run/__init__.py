@@ -1,0 +1,1 @@
+"""Running chains: vmapped chunks with progress, sharding, saving and resuming."""

@@ -1,0 +1,745 @@
+"""Run many chains of a BlackJAX-style sampler, vmapped, in chunks with a progress bar.
+
+Draw ``d`` of chain ``c`` uses the key ``fold_in(key_c, step)`` (a sampler that draws its noise
+in blocks, as the orbit samplers do, ``fold_in(key_c, block)``: :mod:`liesample.integrators.chain_loop`),
+so the draws do not depend on the chunk size and a run can be split or resumed without changing
+them.
+
+- **Devices.** ``devices=`` splits the chain axis over several devices with JAX's own sharding
+  (:mod:`liesample.run.sharding`); the draws are those of the unsharded run.
+- **Pytree positions.** ``initial_positions`` may be a pytree (a dict or tuple of arrays, e.g.
+  ``{"mu": (chains, 3), "log_kappa": (chains,)}`` for the geometric samplers) whose leaves share
+  the leading chain axis; the draws are then a pytree of arrays ``(chains, draws, *event)``.
+  A list is read as one array, as before.
+- **Long runs lose nothing.** ``output=`` writes every chunk of draws, and the chain states after
+  it, to a NetCDF-4 file (h5netcdf, growing ``draw`` dimension) as soon as the chunk is done;
+  ``resume=True`` continues a run from the last chunk saved there, after an interruption or to
+  extend it to more draws, and returns the same draws as an uninterrupted run (bitwise).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import time
+import warnings
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from tqdm.auto import tqdm
+
+from liesample.foundation.compile import jit
+from liesample.foundation.validation import finite_float, is_single_array, prng_key
+from liesample.integrators.chain_loop import run_draws, run_steps
+from liesample.run.sharding import chain_sharding, shard_chains, to_host
+from liesample.samplers.contract import reduce_over_thinning
+
+DEFAULT_MIN_ACCEPTANCE_RATE = 0.05
+"""A chain whose mean acceptance rate over the run is below this is reported as stuck."""
+
+# Test hook: called as ``_after_chunk_hook(draws_done)`` once a chunk is saved to ``output``
+# (tests/test_resume.py kills the process there to simulate an interruption).
+_after_chunk_hook = None
+
+_FORMAT = "liesample-chains-1"
+
+
+class NonFiniteStateError(FloatingPointError):
+    """A chain diverged: a step produced a non-finite state or energy (the sampler kept the
+    previous state and flagged ``info.is_divergent``)."""
+
+
+@dataclass(frozen=True)
+class ChainsResult:
+    """Draws of ``positions`` with shape ``(chains, draws, *event_shape)`` (a pytree of such
+    arrays for pytree positions), per-draw ``info``
+    arrays with shape ``(chains, draws)``, the sampling wall time in seconds (compilation
+    excluded; on a resumed run, the time of this session only), and the sampler's ``settings``
+    after warm-up (step size and how it was chosen, stability mode, …)."""
+
+    positions: np.ndarray
+    info: dict
+    wall_time: float
+    num_steps: int
+    settings: dict = None
+
+
+def _as_positions(initial_positions):
+    """``initial_positions`` as a JAX array, or a pytree of JAX arrays, with a leading chain axis
+    shared by every leaf (checked); returns ``(positions, num_chains)``."""
+    if is_single_array(initial_positions):
+        positions = jnp.asarray(initial_positions)
+        if positions.ndim < 1 or positions.shape[0] < 1:
+            raise ValueError(
+                "initial_positions must have a leading chain axis with at least one chain, "
+                f"shape (chains, ...); got shape {positions.shape}"
+            )
+        return positions, positions.shape[0]
+    paths, treedef = jax.tree_util.tree_flatten_with_path(initial_positions)
+    if not paths:
+        raise ValueError("initial_positions is an empty pytree: it has no arrays")
+    leaves = [jnp.asarray(leaf) for _, leaf in paths]
+    names = [f"initial_positions{jax.tree_util.keystr(path)}" for path, _ in paths]
+    for name, leaf in zip(names, leaves, strict=True):
+        if leaf.ndim < 1 or leaf.shape[0] < 1:
+            raise ValueError(
+                f"{name} must have a leading chain axis with at least one chain, shape "
+                f"(chains, ...); got shape {leaf.shape}"
+            )
+        if leaf.shape[0] != leaves[0].shape[0]:
+            raise ValueError(
+                "every leaf of initial_positions must have the same leading chain axis: "
+                f"{names[0]} has {leaves[0].shape[0]} chains (shape {leaves[0].shape}), {name} "
+                f"has {leaf.shape[0]} (shape {leaf.shape})"
+            )
+    return jax.tree.unflatten(treedef, leaves), leaves[0].shape[0]
+
+
+def _take_chain(positions, chain):
+    return jax.tree.map(lambda leaf: leaf[chain], positions)
+
+
+def _check_run_arguments(num_draws, num_warmup, thinning, on_nonfinite, chunk_draws, adapt):
+    for name, value, low in (
+        ("num_draws", num_draws, 1),
+        ("num_warmup", num_warmup, 0),
+        ("thinning", thinning, 1),
+    ):
+        if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value < low:
+            raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
+    if chunk_draws is not None and (
+        not isinstance(chunk_draws, (int, np.integer))
+        or isinstance(chunk_draws, bool)
+        or chunk_draws < 1
+    ):
+        raise ValueError(f"chunk_draws must be None or an integer >= 1, got {chunk_draws!r}")
+    if on_nonfinite not in ("warn", "raise"):
+        raise ValueError(f"on_nonfinite must be 'warn' or 'raise', got {on_nonfinite!r}")
+    if adapt not in (None, True, False):
+        raise TypeError(f"adapt must be None, True or False, got {adapt!r}")
+    if adapt is True and num_warmup == 0:
+        raise ValueError("adapt=True needs warm-up steps: pass num_warmup > 0")
+
+
+def _wants_adaptation(algorithm, adapt, num_warmup) -> bool:
+    """``adapt=None``: adapt what the user left unset (a sampler built without ``step_size``)
+    when there is a warm-up; ``True``: adapt (the sampler must support it); ``False``: never."""
+    hook = getattr(algorithm, "adapt", None)
+    if adapt is True and hook is None:
+        raise ValueError(
+            f"adapt=True: {type(algorithm).__name__} has no warm-up adaptation; the orbit "
+            "samplers (liesample.lie_poisson_langevin, liesample.adjusted_lie_poisson) have one, "
+            "the magnetic samplers are tuned with blackjax.window_adaptation"
+        )
+    if adapt is None:
+        settings = getattr(algorithm, "settings", {})
+        return hook is not None and num_warmup > 0 and settings.get("step_size_source") not in (
+            None,
+            "given",
+        )
+    return bool(adapt)
+
+
+def _check_starts(algorithm, initial_positions, num_chains, step_size_checks=True):
+    """Every start checked: in one vectorised call when the sampler has ``check_positions``,
+    else its ``init`` on each distinct start; errors name the first bad chain."""
+    hook = getattr(algorithm, "check_positions", None)
+    if hook is not None:
+        hook(jax.tree.map(np.asarray, initial_positions), step_size_checks=step_size_checks)
+        return
+    flat = np.concatenate(
+        [
+            np.ascontiguousarray(np.asarray(leaf).reshape(num_chains, -1)).view(np.uint8)
+            for leaf in jax.tree.leaves(initial_positions)
+        ],
+        axis=1,
+    )  # bytes: one row per chain, whatever the leaves' dtypes
+    _, first_chains = np.unique(flat, axis=0, return_index=True)
+    for chain in np.sort(first_chains):
+        try:
+            algorithm.init(_take_chain(initial_positions, chain))
+        except (ValueError, TypeError) as error:
+            raise type(error)(f"initial_positions[{chain}]: {error}") from None
+
+
+def sample_chains(
+    algorithm,
+    rng_key,
+    initial_positions,
+    num_draws: int,
+    *,
+    num_warmup: int = 0,
+    thinning: int = 1,
+    progress: bool = True,
+    chunk_draws: int | None = None,
+    on_nonfinite: str = "warn",
+    devices=None,
+    output=None,
+    resume: bool = False,
+    adapt: bool | None = None,
+    min_acceptance_rate: float = DEFAULT_MIN_ACCEPTANCE_RATE,
+) -> ChainsResult:
+    """Run ``len(initial_positions)`` chains of ``algorithm`` in parallel (``jax.vmap``).
+
+    Parameters
+    ----------
+    algorithm : blackjax.base.SamplingAlgorithm
+        ``init(position)`` and ``step(rng_key, state) -> (state, info)``; ``state.position``
+        is recorded. liesample's samplers (:class:`liesample.samplers.contract.Sampler`) also
+        check every start in one vectorised call, record their settings, and adapt.
+    rng_key : jax.random.key or jax.random.PRNGKey
+    initial_positions : array ``(chains, *event_shape)``, or a pytree of such arrays
+        A pytree (dict, tuple, named tuple; e.g. the positions of ``liesample.geometric_hmc``
+        on a product space) gives draws with the same structure; every leaf has the chain axis
+        first, with the same number of chains. A (nested) list is read as one array.
+    num_draws : int
+        Draws kept per chain, each ``thinning`` steps apart, after ``num_warmup`` steps.
+    num_warmup : int
+        Steps run and discarded before the first draw; the adaptation happens there.
+    adapt : None, True or False
+        Warm-up adaptation of the step size. ``None`` (default): adapt a sampler built without
+        ``step_size`` when ``num_warmup > 0`` (the unadjusted sampler then chooses its step
+        from the bias model on the run's starts, the adjusted one tunes it by dual averaging to
+        its target acceptance); ``True``: adapt even a given step size; ``False``: never.
+    progress : bool
+        Show a progress bar (tqdm) over the draws (on a resumed run it starts at the draws
+        already saved).
+    chunk_draws : int, optional
+        Draws per compiled chunk (default: about 20 chunks); also the unit of saving.
+    on_nonfinite : {"warn", "raise"}
+        What to do if any step diverged (``info.is_divergent``: a non-finite state or energy):
+        a ``RuntimeWarning`` naming the chains, or :class:`NonFiniteStateError`.
+    min_acceptance_rate : float
+        Chains whose mean ``acceptance_rate`` over the draws is below this are reported as
+        stuck (``RuntimeWarning`` naming them); 0 disables the check.
+    devices : None, "all", int, sequence of jax devices, or NamedSharding
+        Split the chains over these devices (:func:`liesample.run.sharding.chain_sharding`); the
+        number of chains must be a multiple of the number of devices. ``None``: one device.
+    output : str or path, optional
+        NetCDF file to which each chunk of draws and info, and the chain states after it, are
+        written as soon as the chunk is done (:func:`load_chains` reads it back, so does
+        ``xarray.open_dataset``). Refuses an existing file unless ``resume=True``. Pytree
+        positions made of dicts (string keys), tuples and lists are saved leaf by leaf.
+    resume : bool
+        Continue the run saved in ``output``: same ``algorithm``, ``rng_key``,
+        ``initial_positions``, ``num_warmup`` and ``thinning`` (checked, except the algorithm);
+        ``num_draws`` may be larger than before to extend it. Starts afresh if the file does not
+        exist yet. The returned draws include the saved ones and equal those of one
+        uninterrupted run.
+    """
+    initial_positions, num_chains = _as_positions(initial_positions)
+    _check_run_arguments(num_draws, num_warmup, thinning, on_nonfinite, chunk_draws, adapt)
+    rng_key = prng_key(rng_key)
+    min_acceptance_rate = finite_float(
+        "min_acceptance_rate", min_acceptance_rate, nonnegative=True
+    )
+    if not isinstance(resume, bool):
+        raise TypeError(f"resume must be a bool, got {resume!r}")
+    if resume and output is None:
+        raise ValueError("resume=True needs output= (the file the run was saved to)")
+    finite = np.all(
+        [
+            np.isfinite(np.asarray(leaf)).reshape(num_chains, -1).all(axis=1)
+            for leaf in jax.tree.leaves(initial_positions)
+        ],
+        axis=0,
+    )
+    if not finite.all():
+        raise ValueError(f"initial_positions[{int(np.argmin(finite))}] must be finite")
+    sharding = chain_sharding(devices, num_chains)
+    adapting = _wants_adaptation(algorithm, adapt, num_warmup)
+    # Concrete checks (shape, orbit, constraints, energy, step size) of every start.
+    _check_starts(algorithm, initial_positions, num_chains, step_size_checks=not adapting)
+    states = jax.vmap(algorithm.init)(initial_positions)
+    chain_keys = jax.random.split(rng_key, num_chains)
+
+    states, chain_keys = shard_chains((states, chain_keys), sharding)
+    run_warmup = num_warmup > 0
+    if adapting:
+        # From the initial states and deterministic given rng_key: a resumed run re-derives
+        # the same parameters.
+        algorithm, adapted = algorithm.adapt(
+            rng_key, chain_keys, states, initial_positions, num_warmup
+        )
+        _check_starts(algorithm, initial_positions, num_chains)
+        if adapted is not None:
+            run_warmup = False
+            states = adapted
+
+    store = None
+    done = 0
+    previous = None
+    if output is not None:
+        store = _ChainStore(
+            output, rng_key, initial_positions, num_warmup=num_warmup, thinning=thinning
+        )
+        if store.exists():
+            if not resume:
+                raise FileExistsError(
+                    f"output {os.fspath(output)!r} exists; pass resume=True to continue the run "
+                    "saved there, or choose another path"
+                )
+            done, saved_states, previous = store.load(states, num_draws)
+            if done:
+                states = shard_chains(saved_states, sharding)
+                run_warmup = False
+
+    # One loop for every sampler (liesample.integrators.chain_loop): per-step keys, or noise blocks
+    # for the samplers that declare them.
+    @jit
+    def warmup(states, keys, first_step):
+        return jax.vmap(lambda s, k: run_steps(algorithm, k, s, first_step, num_warmup)[0])(
+            states, keys
+        )
+
+    def draws(state, key, first_step, count):
+        return run_draws(algorithm, key, state, first_step, count, thinning, reduce_over_thinning)
+
+    chunk = chunk_draws if chunk_draws is not None else max(1, math.ceil(num_draws / 20))
+    run_chunk = jit(
+        lambda states, keys, first_step, count: jax.vmap(
+            lambda s, k: draws(s, k, first_step, count)
+        )(states, keys),
+        static_argnums=3,
+    )
+    remaining = num_draws - done
+    # Compile outside the timed region (one chunk shape, plus the last partial one).
+    if run_warmup:
+        warmup = warmup.lower(states, chain_keys, 0).compile()
+    compiled = {}
+    if remaining:
+        for count in {min(chunk, remaining), remaining % chunk or chunk}:
+            compiled[count] = run_chunk.lower(states, chain_keys, 0, count).compile()
+
+    positions, infos = [], []
+    if previous is not None:
+        positions.append(previous[0])
+        infos.append(previous[1])
+    start = time.perf_counter()
+    if run_warmup:
+        states = jax.block_until_ready(warmup(states, chain_keys, 0))
+    bar = tqdm(
+        total=num_draws,
+        initial=done,
+        disable=not progress,
+        unit="draw",
+        desc=f"{num_chains} chains",
+    )
+    while done < num_draws:
+        count = min(chunk, num_draws - done)
+        states, (chunk_positions, chunk_info) = compiled[count](
+            states, chain_keys, num_warmup + done * thinning
+        )
+        chunk_positions, chunk_info = to_host((chunk_positions, chunk_info))
+        positions.append(chunk_positions)
+        infos.append(chunk_info)
+        if store is not None:
+            store.append(done, chunk_positions, chunk_info, to_host(states))
+        done += count
+        bar.update(count)
+        if store is not None and _after_chunk_hook is not None:
+            _after_chunk_hook(done)
+    bar.close()
+    wall_time = time.perf_counter() - start
+
+    info = {name: np.concatenate([i[name] for i in infos], axis=1) for name in infos[0]}
+    result = ChainsResult(
+        jax.tree.map(lambda *chunks: np.concatenate(chunks, axis=1), *positions),
+        info,
+        wall_time,
+        num_warmup + num_draws * thinning,
+        dict(getattr(algorithm, "settings", {}), num_warmup=num_warmup, adapted=adapting),
+    )
+    _report_divergences(result, on_nonfinite)
+    _report_stuck_chains(result, min_acceptance_rate)
+    return result
+
+
+def _chain_list(chains, limit=10) -> str:
+    shown = ", ".join(str(int(c)) for c in chains[:limit])
+    return shown + (f", … ({len(chains)} in all)" if len(chains) > limit else "")
+
+
+def _report_divergences(result: ChainsResult, on_nonfinite: str):
+    flags = result.info.get("is_divergent")
+    if flags is None or not np.any(flags):
+        return
+    chains = np.flatnonzero(np.any(flags, axis=1))
+    message = (
+        f"{int(np.sum(flags))} draws in {len(chains)} chain(s) (chains {_chain_list(chains)}) "
+        "contain a divergent step (a non-finite state or energy, or for the Metropolis-adjusted "
+        "samplers an energy error above the divergence threshold); those steps were rejected "
+        "and flagged in info['is_divergent'] (sample_stats 'diverging'). Reduce step_size or "
+        "sigma, or let the warm-up adapt it."
+    )
+    if on_nonfinite == "raise":
+        raise NonFiniteStateError(message)
+    warnings.warn(message, RuntimeWarning, stacklevel=3)
+
+
+def _report_stuck_chains(result: ChainsResult, threshold: float):
+    rates = result.info.get("acceptance_rate")
+    if rates is None or threshold == 0.0:
+        return
+    per_chain = np.mean(rates, axis=1)
+    chains = np.flatnonzero(per_chain < threshold)
+    if chains.size == 0:
+        return
+    worst = ", ".join(f"chain {int(c)}: {per_chain[c]:.3f}" for c in chains[:5])
+    warnings.warn(
+        f"{len(chains)} chain(s) are stuck: their mean acceptance rate is below "
+        f"{threshold:g} (chains {_chain_list(chains)}; {worst}). Use a smaller step_size, or "
+        "let the warm-up adapt it (leave step_size unset and pass num_warmup > 0).",
+        RuntimeWarning,
+        stacklevel=3,
+    )
+
+
+# --------------------------------------------------------------------------- saved runs
+
+
+def _key_data(rng_key) -> np.ndarray:
+    rng_key = jnp.asarray(rng_key) if not isinstance(rng_key, jax.Array) else rng_key
+    if jnp.issubdtype(rng_key.dtype, jax.dtypes.prng_key):
+        return np.asarray(jax.random.key_data(rng_key))
+    return np.asarray(rng_key)
+
+
+def _fingerprint(positions, layout) -> str:
+    digest = hashlib.sha256(b"" if layout == "null" else layout.encode())
+    for leaf in jax.tree.leaves(positions):
+        array = np.ascontiguousarray(np.asarray(leaf))
+        digest.update(array.tobytes())
+        digest.update(f"{array.dtype.str}{array.shape}".encode())
+    return digest.hexdigest()
+
+
+def _layout(positions):
+    """The pytree structure of ``positions`` as JSON-able nested lists (``None`` for one array):
+    ``["dict", [[key, sub], …]]``, ``["tuple", [sub, …]]``, ``["list", [sub, …]]`` or
+    ``["leaf", i]``, leaves numbered in ``jax.tree.leaves`` order. Named tuples are recorded as
+    dicts of their fields."""
+    if is_single_array(positions):
+        return None
+    count = [0]
+
+    def walk(node):
+        if isinstance(node, dict):
+            if not all(isinstance(key, str) for key in node):
+                raise TypeError(
+                    "output= saves dict positions with string keys only; got keys "
+                    f"{sorted(map(repr, node))}"
+                )
+            return ["dict", [[key, walk(node[key])] for key in sorted(node)]]
+        if isinstance(node, tuple) and hasattr(node, "_fields"):
+            return ["dict", [[name, walk(getattr(node, name))] for name in node._fields]]
+        if isinstance(node, (tuple, list)):
+            return [type(node).__name__, [walk(item) for item in node]]
+        count[0] += 1
+        return ["leaf", count[0] - 1]
+
+    layout = walk(positions)
+    if count[0] != len(jax.tree.leaves(positions)):
+        raise TypeError(
+            "output= saves positions made of arrays in dicts, tuples and lists; this pytree has "
+            f"other nodes ({jax.tree.structure(positions)})"
+        )
+    return layout
+
+
+def _rebuild(layout, leaves):
+    """The pytree that :func:`_layout` described, with ``leaves``."""
+    kind, content = layout
+    if kind == "leaf":
+        return leaves[content]
+    if kind == "dict":
+        return {key: _rebuild(sub, leaves) for key, sub in content}
+    items = [_rebuild(sub, leaves) for sub in content]
+    return tuple(items) if kind == "tuple" else items
+
+
+def _position_names(layout, num_leaves):
+    return ["position"] if layout is None else [f"position_{i}" for i in range(num_leaves)]
+
+
+def _to_stored(leaf):
+    """Complex draws are stored as a trailing (real, imag) axis (NetCDF has no complex type)."""
+    leaf = np.asarray(leaf)
+    return np.stack([leaf.real, leaf.imag], axis=-1) if np.iscomplexobj(leaf) else leaf
+
+
+def _from_stored(variable, value):
+    dtype = np.dtype(variable.attrs.get("dtype", value.dtype.str))
+    if dtype.kind == "c":
+        return (value[..., 0] + 1j * value[..., 1]).astype(dtype)
+    return value.astype(dtype)
+
+
+def _read_positions(f, layout, done):
+    names = sorted(
+        (name for name in f.variables if name == "position" or name.startswith("position_")),
+        key=lambda name: int(name[9:] or 0),
+    )
+    leaves = [_from_stored(f.variables[n], np.asarray(f.variables[n][:, :done])) for n in names]
+    return leaves[0] if layout is None else _rebuild(layout, leaves)
+
+
+class _ChainStore:
+    """A run saved in one NetCDF-4 file (h5netcdf), grown chunk by chunk.
+
+    Layout: dims ``chain``, ``draw`` (unlimited); the draws as ``position``
+    ``(chain, draw, *event)`` (dims ``event_<j>``), or for pytree positions one variable
+    ``position_<i>`` per leaf (dims ``position_<i>_dim_<j>``; complex leaves with a trailing
+    ``(real, imag)`` axis) and the structure as the JSON attribute ``position_layout``;
+    ``info_<name>`` ``(chain, draw)``, and the states after the last saved chunk, ``state_<i>``
+    (leaf ``i`` of the state pytree, ``(chain, ...)``). Attributes: ``draws_done`` (written
+    last, so a chunk interrupted while being written is ignored), ``num_warmup``,
+    ``thinning``, ``key_data`` and a fingerprint of the initial positions. Each chunk opens and
+    closes the file, so a run killed between chunks leaves a valid file.
+    """
+
+    def __init__(self, path, rng_key, initial_positions, *, num_warmup, thinning):
+        self.path = os.fspath(path)
+        self.key_data = _key_data(rng_key)
+        self.layout = _layout(initial_positions)
+        self.layout_json = json.dumps(self.layout)
+        self.fingerprint = _fingerprint(initial_positions, self.layout_json)
+        self.treedef = jax.tree.structure(initial_positions)
+        self.num_chains = int(jax.tree.leaves(initial_positions)[0].shape[0])
+        self.num_warmup = int(num_warmup)
+        self.thinning = int(thinning)
+        self.created = False
+
+    def exists(self) -> bool:
+        return os.path.exists(self.path)
+
+    def _check_compatible(self, attrs):
+        expected = {
+            "format": _FORMAT,
+            "initial_positions_sha256": self.fingerprint,
+            "num_warmup": self.num_warmup,
+            "thinning": self.thinning,
+        }
+        for name, value in expected.items():
+            saved = attrs.get(name)
+            saved = saved.item() if isinstance(saved, np.ndarray) and saved.ndim == 0 else saved
+            if saved != value:
+                raise ValueError(
+                    f"cannot resume from {self.path!r}: it was saved with a different {name} "
+                    f"({saved!r}, now {value!r})"
+                )
+        if not np.array_equal(np.asarray(attrs.get("key_data")), self.key_data.reshape(-1)):
+            raise ValueError(
+                f"cannot resume from {self.path!r}: it was saved with a different rng_key"
+            )
+
+    def load(self, states, num_draws):
+        """``(draws_done, states, (positions, info))`` of the saved run (``states`` gives the
+        pytree structure and dtypes)."""
+        import h5netcdf
+
+        with h5netcdf.File(self.path, "r") as f:
+            self._check_compatible(dict(f.attrs))
+            done = int(f.attrs["draws_done"])
+            if done > num_draws:
+                raise ValueError(
+                    f"cannot resume from {self.path!r} with num_draws={num_draws}: it already "
+                    f"holds {done} draws"
+                )
+            self.created = True
+            if done == 0:
+                return 0, None, None
+            positions = _read_positions(f, self.layout, done)
+            if self.layout is not None:  # the caller's own node types (named tuples, …)
+                positions = jax.tree.unflatten(self.treedef, jax.tree.leaves(positions))
+            info = {}
+            for name, variable in f.variables.items():
+                if name.startswith("info_"):
+                    value = np.asarray(variable[:, :done])
+                    info[name[5:]] = value.astype(variable.attrs["dtype"])
+            leaves, treedef = jax.tree.flatten(states)
+            saved = []
+            for i, leaf in enumerate(leaves):
+                value = np.asarray(f.variables[f"state_{i}"][...])
+                if jnp.issubdtype(leaf.dtype, jax.dtypes.prng_key):
+                    saved.append(jax.random.wrap_key_data(value, impl=jax.random.key_impl(leaf)))
+                else:
+                    value = _from_stored(f.variables[f"state_{i}"], value)
+                    saved.append(jnp.asarray(value.astype(leaf.dtype)))
+                if saved[-1].shape != leaf.shape:
+                    raise ValueError(
+                        f"cannot resume from {self.path!r}: saved state leaf {i} has shape "
+                        f"{saved[-1].shape}, the sampler's has {leaf.shape}"
+                    )
+        return done, jax.tree.unflatten(treedef, saved), (positions, info)
+
+    def _create(self, positions, info, states):
+        import h5netcdf
+
+        with h5netcdf.File(self.path, "w") as f:
+            f.dimensions = {"chain": self.num_chains, "draw": None}
+            leaves = jax.tree.leaves(positions)
+            for name, leaf in zip(_position_names(self.layout, len(leaves)), leaves, strict=True):
+                stored = _to_stored(leaf)
+                prefix = "event" if self.layout is None else f"{name}_dim"
+                dims = tuple(f"{prefix}_{j}" for j in range(stored.ndim - 2))
+                for dim, size in zip(dims, stored.shape[2:], strict=True):
+                    f.dimensions[dim] = size
+                variable = f.create_variable(name, ("chain", "draw", *dims), stored.dtype)
+                variable.attrs["dtype"] = np.asarray(leaf).dtype.str
+            for name, value in info.items():
+                stored = np.uint8 if value.dtype == bool else value.dtype
+                variable = f.create_variable(f"info_{name}", ("chain", "draw"), stored)
+                variable.attrs["dtype"] = value.dtype.str
+            for i, leaf in enumerate(jax.tree.leaves(states)):
+                stored = _to_stored(leaf)
+                dims = tuple(f"state_{i}_dim_{j}" for j in range(1, stored.ndim))
+                for dim, size in zip(dims, stored.shape[1:], strict=True):
+                    f.dimensions[dim] = size
+                variable = f.create_variable(f"state_{i}", ("chain", *dims), stored.dtype)
+                variable.attrs["dtype"] = leaf.dtype.str
+            f.attrs["format"] = _FORMAT
+            if self.layout is not None:
+                f.attrs["position_layout"] = self.layout_json
+            f.attrs["initial_positions_sha256"] = self.fingerprint
+            f.attrs["num_warmup"] = self.num_warmup
+            f.attrs["thinning"] = self.thinning
+            f.attrs["key_data"] = self.key_data.reshape(-1)
+            f.attrs["draws_done"] = 0
+        self.created = True
+
+    def append(self, first_draw, positions, info, states):
+        """Write draws ``first_draw …`` and the states after them; then mark them done."""
+        import h5netcdf
+
+        states = jax.tree.map(
+            lambda leaf: (
+                np.asarray(jax.random.key_data(leaf))
+                if jnp.issubdtype(leaf.dtype, jax.dtypes.prng_key)
+                else np.asarray(leaf)
+            ),
+            states,
+        )
+        if not self.created:
+            self._create(positions, info, states)
+        leaves = jax.tree.leaves(positions)
+        end = first_draw + leaves[0].shape[1]
+        with h5netcdf.File(self.path, "a") as f:
+            f.resize_dimension("draw", end)
+            for name, leaf in zip(_position_names(self.layout, len(leaves)), leaves, strict=True):
+                f.variables[name][:, first_draw:end] = _to_stored(leaf)
+            for name, value in info.items():
+                f.variables[f"info_{name}"][:, first_draw:end] = value
+            for i, leaf in enumerate(jax.tree.leaves(states)):
+                f.variables[f"state_{i}"][...] = _to_stored(leaf)
+            f.attrs["draws_done"] = end
+
+
+def load_chains(path) -> ChainsResult:
+    """The draws saved by ``sample_chains(..., output=path)`` (complete or interrupted).
+
+    ``wall_time`` is ``nan`` (not recorded) and ``num_steps`` counts warm-up and saved draws.
+    Pytree positions come back as dicts, tuples and lists (named tuples as dicts of their
+    fields).
+    """
+    import h5netcdf
+
+    with h5netcdf.File(os.fspath(path), "r") as f:
+        if f.attrs.get("format") != _FORMAT:
+            raise ValueError(f"{os.fspath(path)!r} is not a file written by sample_chains")
+        done = int(f.attrs["draws_done"])
+        layout = f.attrs.get("position_layout")
+        positions = _read_positions(f, None if layout is None else json.loads(layout), done)
+        info = {
+            name[5:]: np.asarray(v[:, :done]).astype(v.attrs["dtype"])
+            for name, v in f.variables.items()
+            if name.startswith("info_")
+        }
+        num_steps = int(f.attrs["num_warmup"]) + done * int(f.attrs["thinning"])
+    return ChainsResult(positions, info, math.nan, num_steps)
+
+
+def sample(
+    algorithm,
+    rng_key,
+    initial_positions,
+    num_draws: int,
+    *,
+    num_warmup: int = 0,
+    thinning: int = 1,
+    progress: bool = True,
+    chunk_draws: int | None = None,
+    on_nonfinite: str = "warn",
+    devices=None,
+    output=None,
+    resume: bool = False,
+    adapt: bool | None = None,
+    min_acceptance_rate: float = DEFAULT_MIN_ACCEPTANCE_RATE,
+    var_name: str | None = None,
+    event_dims=None,
+    coords=None,
+    attrs=None,
+):
+    """Run chains with :func:`sample_chains` and return an ArviZ ``DataTree``.
+
+    The tree has ``posterior/<var_name>`` with dims ``(chain, draw, *event_dims)`` (defaults
+    ``mu`` and ``("component",)``) and ``sample_stats`` under ArviZ's names (``diverging``,
+    ``acceptance_rate``, ``energy``, and the sampler's own fields such as ``casimir_error``);
+    its attributes record the wall time, the number of steps, the sampler's settings
+    (``sampler``, ``step_size`` and ``step_size_source``, ``stability`` mode and
+    ``stability_number``, …), whether the warm-up adapted, and ``attrs``. The other arguments
+    are those of :func:`sample_chains` (warm-up adaptation, divergence and stuck-chain
+    reports, sharded chains, incremental saving, resume).
+
+    Pytree positions (dicts, tuples) give one posterior variable per leaf, named from its key
+    path (``mu``, ``log_kappa``; tuple entries ``x0``, ``x1``…; nested keys joined with ``.``),
+    with dims ``<name>_dim_k`` (``event_dims`` may map a leaf's name to other dims); a complex
+    leaf ``U`` is split into ``U.real`` and ``U.imag`` (:func:`liesample.analysis.diagnostics.to_datatree`).
+    ArviZ's ESS and R-hat of these variables are those of the ambient coordinates (vector
+    components, matrix entries), not of intrinsic coordinates on the group or sphere.
+
+    Example: ``sample(liesample.adjusted_lie_poisson(system, beta=1.0), key, starts, 1000,
+    num_warmup=500)`` tunes the step size by dual averaging in the warm-up, then samples.
+    """
+    from liesample.analysis.diagnostics import to_datatree
+
+    result = sample_chains(
+        algorithm,
+        rng_key,
+        initial_positions,
+        num_draws,
+        num_warmup=num_warmup,
+        thinning=thinning,
+        progress=progress,
+        chunk_draws=chunk_draws,
+        on_nonfinite=on_nonfinite,
+        devices=devices,
+        output=output,
+        resume=resume,
+        adapt=adapt,
+        min_acceptance_rate=min_acceptance_rate,
+    )
+    settings = {
+        k: v for k, v in (result.settings or {}).items() if k not in ("num_warmup", "step_size")
+    }
+    return to_datatree(
+        result.positions,
+        result.info,
+        var_name=var_name,
+        event_dims=event_dims,
+        coords=coords,
+        thinning=thinning,
+        step_size=(result.settings or {}).get("step_size"),
+        attrs={
+            "wall_time_seconds": result.wall_time,
+            "num_steps": result.num_steps,
+            "num_warmup": num_warmup,
+            "on_nonfinite": on_nonfinite,
+            **settings,
+            **(attrs or {}),
+        },
+    )

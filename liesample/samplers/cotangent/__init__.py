@@ -1,0 +1,1 @@
+"""Samplers on ``T*G``: geometric HMC and Langevin; the magnetic samplers are their ``Rᵈ`` fronts."""

@@ -1,0 +1,333 @@
+"""The geometric samplers' core on ``T*G`` (left-trivialised, ``G × g*``): chain state, Info
+contract, ``init``, the Metropolis test and the two transitions every sampler is built from.
+
+The Hamiltonian is ``H(g, p) = −log π(g) + ½ pᵀM⁻¹p`` on a space (or product of spaces) from
+:mod:`liesample.geometry.spaces`; ``log π`` is a log-density with respect to the product of Haar
+(groups), uniform (spheres) and Lebesgue (``Euclidean``) measures. An optional constant
+antisymmetric magnetic field ``G`` acts on the ``Euclidean`` coordinates. The moves are the
+one-effect steps of :mod:`liesample.geometry.cotangent` (kick ``B``, exact kinetic–magnetic drift
+``A``, exact OU refresh ``O``) composed by coefficient lists:
+
+- :func:`hamiltonian_transition`: a momentum (fresh, partially refreshed or OU-refreshed),
+  ``L`` leapfrog steps ``B A B``, the Metropolis test and the flip. With a field the proposal
+  ``(g, p, s) ↦ (g', −p', −s)`` (``s = ±1`` the sign of ``G``) is an involution that preserves
+  the Liouville measure (running the flow of ``−sG`` from ``(g', −p')`` retraces the path), so
+  the test keeps ``exp(−H)`` exactly at any step size; the flip ``(p, s) ↦ (−p, −s)`` after it
+  (Horowitz 1991) keeps the direction of motion on acceptance. Without a field ``s`` is inert.
+  Geometric HMC, adjusted geometric Langevin and magnetic HMC are this transition.
+- :func:`unadjusted_transition`: one step of a scheme containing ``O`` (``OBAB`` for geometric
+  Langevin, ``BAOAB`` for magnetic Langevin), every finite step taken.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.flatten_util import ravel_pytree
+
+from liesample.foundation.validation import concrete_array
+from liesample.geometry import spaces
+from liesample.geometry.cotangent import (
+    LEAPFROG,
+    CotangentBundle,
+    PhasePoint,
+    compose,
+    cotangent_bundle,
+    drift,
+    evaluated,
+    fractions,
+    kick,
+    refresh,
+)
+
+__all__ = [
+    "GeometricInfo",
+    "GeometricState",
+    "Integrator",
+    "check_starts",
+    "drift_flows",
+    "energy",
+    "hamiltonian_transition",
+    "init",
+    "make_integrator",
+    "ravelled",
+    "metropolis",
+    "select",
+    "unadjusted_transition",
+]
+
+
+class GeometricState(NamedTuple):
+    """State of a chain.
+
+    position : a point of the space (pytree like the space).
+    logdensity : ``log π(position)``.
+    logdensity_grad : the trivialised gradient (algebra coordinates, pytree like the space).
+    momentum : the momentum carried between transitions (Langevin, and HMC with partial
+        refreshment; full-refresh HMC redraws it).
+    magnetic_sign : ``s = ±1``, the sign of the magnetic field for the next move (inert
+        without a field).
+    """
+
+    position: object
+    logdensity: jax.Array
+    logdensity_grad: object
+    momentum: object
+    magnetic_sign: jax.Array = 1.0
+
+
+class GeometricInfo(NamedTuple):
+    """What one transition did.
+
+    acceptance_rate : ``min(1, e^{−ΔH})`` (0 for a non-finite proposal); for the unadjusted
+        Langevin sampler 1 for a step taken and 0 for a step rejected as non-finite (the
+        library's Info contract for unadjusted samplers).
+    is_accepted : whether the proposal was taken.
+    is_divergent : the proposal's state or energy is non-finite, or ``ΔH`` exceeds the
+        divergence threshold.
+    energy : ``H`` of the proposal for HMC (as in BlackJAX), of the new state for Langevin
+        (``inf`` when non-finite).
+    num_integration_steps : leapfrog steps (gradient evaluations) of the transition.
+    metropolis_rate : ``min(1, e^{−ΔH})`` of the proposal, also for unadjusted chains (what
+        step-size adaptation targets; there ``ΔH`` leaves out the energy the ``O`` step
+        exchanged with the heat bath, so it measures the error of the Hamiltonian pieces).
+    """
+
+    acceptance_rate: jax.Array
+    is_accepted: jax.Array
+    is_divergent: jax.Array
+    energy: jax.Array
+    num_integration_steps: jax.Array
+    metropolis_rate: jax.Array
+
+
+def init(position, logdensity_fn: Callable, space) -> GeometricState:
+    """Initial state; raises if ``position`` is off the space or ``log π`` is not finite there."""
+    spaces.check_position(space, position)
+    value_and_grad = spaces.trivialised_value_and_grad(logdensity_fn, space)
+    logdensity, grad = value_and_grad(position)
+    values = concrete_array(
+        jnp.concatenate([jnp.ravel(g) for g in jax.tree.leaves(grad)] + [jnp.ravel(logdensity)])
+    )
+    if values is not None and not np.all(np.isfinite(values)):
+        raise ValueError(
+            "logdensity_fn or its gradient is not finite at the initial position; start the "
+            "chain where log π is finite"
+        )
+    momentum = spaces.zero_momentum(space, position)
+    return GeometricState(position, logdensity, grad, momentum, jnp.ones((), logdensity.dtype))
+
+
+def check_starts(space):
+    """The runner's ``check_positions`` hook: every chain's start (leading axis) on the space,
+    the first bad one named ``initial_positions[c]``."""
+
+    def check_positions(positions, **_):
+        leaves = jax.tree.leaves(positions)
+        num_chains = np.shape(leaves[0])[0] if leaves and np.ndim(leaves[0]) else 0
+        for chain in range(num_chains):
+            start = jax.tree.map(lambda a: a[chain], positions)
+            spaces.check_position(space, start, f"initial_positions[{chain}]")
+
+    return check_positions
+
+
+def check_divergence_threshold(divergence_threshold):
+    if not (np.ndim(divergence_threshold) == 0 and float(divergence_threshold) > 0):
+        raise ValueError(f"divergence_threshold must be > 0, got {divergence_threshold!r}")
+
+
+def energy(bundle: CotangentBundle, logdensity, momentum):
+    """``H = −log π + ½ pᵀM⁻¹p``."""
+    return -logdensity + bundle.kinetic_energy(momentum)
+
+
+def _all_finite(tree):
+    return jnp.all(jnp.array([jnp.all(jnp.isfinite(x)) for x in jax.tree.leaves(tree)]))
+
+
+def metropolis(rng_key, bundle, initial: PhasePoint, proposal: PhasePoint, divergence_threshold,
+               accept=True, heat=0.0):  # fmt: skip
+    """Accept/reject ``proposal`` from ``initial`` (both evaluated).
+
+    Returns ``(is_accepted, acceptance_rate, is_divergent, initial energy, proposal energy)``
+    with ``acceptance_rate = min(1, e^{−(ΔH − heat)})`` (0 when non-finite; ``heat`` is what the
+    OU steps put in, so the rate measures the error of the Hamiltonian pieces only). With
+    ``accept=False`` (unadjusted chains) every finite proposal is taken. A non-finite proposal
+    (state or energy) is always rejected and flagged divergent.
+    """
+    start = energy(bundle, initial.logdensity, initial.momentum)
+    final = energy(bundle, proposal.logdensity, proposal.momentum)
+    delta = final - start - heat
+    finite = (
+        jnp.isfinite(delta)
+        & _all_finite(proposal.position)
+        & _all_finite(proposal.momentum)
+        & _all_finite(proposal.logdensity_grad)
+    )
+    delta = jnp.where(finite, delta, jnp.inf)
+    acceptance_rate = jnp.where(finite, jnp.minimum(1.0, jnp.exp(-delta)), 0.0)
+    is_divergent = ~finite | (delta > divergence_threshold)
+    if accept:
+        u = jax.random.uniform(rng_key, (), acceptance_rate.dtype)
+        is_accepted = u < acceptance_rate
+    else:
+        is_accepted = finite
+    final = jnp.where(finite, final, jnp.inf)
+    return is_accepted, acceptance_rate, is_divergent, start, final
+
+
+def select(condition, new, old):
+    """``new`` where ``condition`` else ``old``, leaf by leaf."""
+    return jax.tree.map(lambda a, b: jnp.where(condition, a, b), new, old)
+
+
+def drift_flows(bundle: CotangentBundle, step_size, scheme, precompute: bool = True):
+    """``sign ↦ {fraction: kinetic flow}`` for the drifts of ``scheme``.
+
+    With a field and ``precompute`` (fixed parameters) the flows of ``+G`` and ``−G`` are
+    computed here, once, and each move selects one; otherwise (traced parameters, as in
+    adaptation) one ``expm`` per move, for the sign it uses. Without a field the sign is inert.
+    """
+    times = fractions(scheme, "A")
+
+    def flows(sign):
+        return {f: bundle.kinetic_flow(f * step_size, sign) for f in times}
+
+    if bundle.magnetic_field is None:
+        fixed = flows(1.0)
+        return lambda sign: fixed
+    if not precompute:
+        return flows
+    plus, minus = flows(1.0), flows(-1.0)
+    return lambda sign: select(sign > 0, plus, minus)
+
+
+class Integrator(NamedTuple):
+    """What a move needs at fixed parameters: ``value_and_grad`` (trivialised), the
+    :class:`~liesample.geometry.cotangent.CotangentBundle`, ``flows`` (:func:`drift_flows`) and the
+    step size."""
+
+    value_and_grad: Callable
+    bundle: CotangentBundle
+    flows: Callable
+    step_size: object
+
+    def effects(self, sign, friction=None):
+        """The one-effect steps ``B``, ``A`` (field sign ``sign``) and, with a friction, ``O``."""
+        bundle, step_size = self.bundle, self.step_size
+        effects = {"B": kick(self.value_and_grad, step_size), "A": drift(bundle, self.flows(sign))}
+        if friction is not None:
+            effects["O"] = refresh(bundle, step_size, friction)
+        return effects
+
+
+def make_integrator(logdensity_fn, space, step_size, inverse_mass_matrix, magnetic_field, scheme,
+                    dtype=None, precompute=True):  # fmt: skip
+    """:class:`Integrator` of a sampler on ``space``; ``precompute=False`` in kernels (traced
+    parameters)."""
+    bundle = cotangent_bundle(space, inverse_mass_matrix, magnetic_field, dtype)
+    flows = drift_flows(bundle, step_size, scheme, precompute)
+    value_and_grad = spaces.trivialised_value_and_grad(logdensity_fn, space)
+    return Integrator(value_and_grad, bundle, flows, step_size)
+
+
+def _point(state: GeometricState, momentum) -> PhasePoint:
+    return PhasePoint(state.position, momentum, state.logdensity, state.logdensity_grad)
+
+
+def hamiltonian_transition(
+    rng_key,
+    state: GeometricState,
+    momentum,
+    integrator: Integrator,
+    num_integration_steps,
+    divergence_threshold,
+    persistent: bool = True,
+):
+    """``L`` leapfrog steps from ``(state.position, momentum)``, the Metropolis test and the
+    flip. Returns ``(state, (is_accepted, acceptance_rate, is_divergent, initial energy,
+    proposal energy))``.
+
+    The involution ``(g, p, s) ↦ (g', −p', −s)`` then, if ``persistent``, the flip
+    ``(p, s) ↦ (−p, −s)``: accepted ``(g', p', s)``, rejected ``(g, −p, −s)``. With
+    ``persistent=False``: accepted ``(g', −p', −s)``, rejected ``(g, p, s)``.
+    """
+    sign = state.magnetic_sign
+    step = compose(LEAPFROG, integrator.effects(sign))
+    initial = _point(state, momentum)
+    proposal = jax.lax.fori_loop(0, num_integration_steps, lambda _, point: step(point), initial)
+    outcome = metropolis(rng_key, integrator.bundle, initial, proposal, divergence_threshold)
+    is_accepted = outcome[0]
+    negate = lambda tree: jax.tree.map(jnp.negative, tree)  # noqa: E731
+    new_momentum = select(is_accepted, proposal.momentum, negate(momentum))
+    new_sign = jnp.where(is_accepted, sign, -sign)
+    if not persistent:
+        new_momentum, new_sign = negate(new_momentum), -new_sign
+    new_state = GeometricState(
+        select(is_accepted, proposal.position, state.position),
+        jnp.where(is_accepted, proposal.logdensity, state.logdensity),
+        select(is_accepted, proposal.logdensity_grad, state.logdensity_grad),
+        new_momentum,
+        jnp.asarray(new_sign).astype(jnp.result_type(sign)),
+    )
+    return new_state, outcome
+
+
+def unadjusted_transition(
+    rng_key, state: GeometricState, integrator: Integrator, friction, scheme, divergence_threshold
+):
+    """One step of ``scheme`` (``B``, ``A`` and ``O`` pieces), taken when finite; a non-finite
+    step keeps the state. Returns ``(state, (is_accepted, metropolis_rate, is_divergent,
+    energy of the new state))``; ``metropolis_rate`` is ``min(1, e^{−(ΔH − heat)})``, the rate
+    the step's Hamiltonian pieces would be accepted at (what step-size adaptation targets)."""
+    step = compose(scheme, integrator.effects(state.magnetic_sign, friction))
+    initial = _point(state, state.momentum)._replace(heat=jnp.zeros_like(state.logdensity))
+    proposal = evaluated(step(initial, rng_key), integrator.value_and_grad)
+    is_accepted, rate, is_divergent, start, final = metropolis(
+        None,
+        integrator.bundle,
+        initial,
+        proposal,
+        divergence_threshold,
+        accept=False,
+        heat=proposal.heat,
+    )
+    new_state = GeometricState(
+        select(is_accepted, proposal.position, state.position),
+        jnp.where(is_accepted, proposal.logdensity, state.logdensity),
+        select(is_accepted, proposal.logdensity_grad, state.logdensity_grad),
+        select(is_accepted, proposal.momentum, state.momentum),
+        state.magnetic_sign,
+    )
+    return new_state, (is_accepted, rate, is_divergent, jnp.where(is_accepted, final, start))
+
+
+def ravelled(state, logdensity_fn, integrator: Integrator, transition: Callable):
+    """Run ``transition(flat_state, integrator)`` on the raveled position of ``state`` (any
+    state with ``position``, ``logdensity``, ``logdensity_grad`` and a flat ``momentum``):
+    ``(flat new state, info, unravel)``. How the magnetic samplers run on ``Euclidean((d,))``."""
+    flat_q, unravel = ravel_pytree(state.position)
+    value_and_grad = jax.value_and_grad(lambda x: logdensity_fn(unravel(x)))
+    flat_state = GeometricState(
+        flat_q,
+        state.logdensity,
+        ravel_pytree(state.logdensity_grad)[0],
+        state.momentum,
+        getattr(state, "magnetic_sign", 1.0),
+    )
+    new, info = transition(flat_state, integrator._replace(value_and_grad=value_and_grad))
+    return new, info, unravel
+
+
+def partial_refresh(fresh, momentum, momentum_persistence):
+    """``α p + √(1 − α²) ξ`` (``α = 0``: the fresh draw ``ξ ~ N(0, M)`` itself)."""
+    if isinstance(momentum_persistence, (int, float)) and momentum_persistence == 0:
+        return fresh
+    alpha = jnp.asarray(momentum_persistence, jnp.result_type(*jax.tree.leaves(fresh)))
+    scale = jnp.sqrt(1.0 - alpha**2)
+    return jax.tree.map(lambda p, xi: alpha * p + scale * xi, momentum, fresh)

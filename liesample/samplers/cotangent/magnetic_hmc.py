@@ -1,0 +1,281 @@
+"""Metropolis-adjusted magnetic HMC (Tripuraneni et al. 2017) for any ``logdensity_fn``.
+
+A BlackJAX-shaped module (``MagneticHMCState``/``MagneticHMCInfo``, ``init``, ``build_kernel``,
+``as_top_level_api``): geometric HMC (:mod:`liesample.samplers.cotangent.geometric_hmc`) on
+``spaces.Euclidean((d,))``, the position raveled with ``ravel_pytree``, with the magnetic field.
+The extended target is ``π(q) · N(p; 0, M) · ½`` over ``(q, p, s)``, ``s = ±1`` the sign of the
+field. One transition (MATH.md §3):
+
+1. momentum refreshment ``p ← α p + √(1 − α²) ξ``, ``ξ ~ N(0, M)`` (``α`` =
+   ``momentum_persistence``; ``α = 0``, the default, is full refreshment as in ``blackjax.hmc``);
+2. ``L`` magnetic leapfrog steps: half kick ``p += ε/2 ∇log π(q)``, the *exact* kinetic+magnetic
+   flow of ``q̇ = M⁻¹p, ṗ = sG M⁻¹p`` over ``ε`` (:func:`liesample.geometry.cotangent.kinetic_magnetic_flow`,
+   computed once per sign, valid for singular ``G``), half kick. Each piece preserves
+   volume (``tr(GM⁻¹) = 0``), the composition is symmetric;
+3. the proposal ``(q, p, s) ↦ (q', −p', −s)`` is an involution (running the flow of ``−sG`` from
+   ``(q', −p')`` retraces the path), so it is accepted with probability ``min(1, e^{−ΔH})``,
+   ``H = −log π(q) + ½pᵀM⁻¹p`` (the field does no work);
+4. with ``persistent=True`` (default) the chain then applies the measure-preserving flip
+   ``(p, s) ↦ (−p, −s)`` (Horowitz 1991): an accepted move keeps the field's sign and the
+   direction of motion, a rejection reverses both. With ``persistent=False`` the sign flips on
+   acceptance, literally as in Tripuraneni et al. (2017, Alg. 1); combined with partial
+   refreshment that reverses the momentum on every acceptance, so the chain backtracks
+   (valid, but slow: use ``persistent=True`` with ``momentum_persistence > 0``).
+
+Non-finite energies are rejected and flagged ``is_divergent``; the state is then kept.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import NamedTuple
+
+import blackjax
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from liesample.geometry.cotangent import LEAPFROG, PhasePoint, compose, drift, kick
+from liesample.samplers.contract import Sampler, sampling_api, setting
+from liesample.samplers.cotangent.geometric import ravelled
+from liesample.samplers.cotangent.geometric_hmc import check_integer, check_options, transition
+from liesample.samplers.cotangent.magnetic import (
+    MagneticFlow,
+    check_inverse_mass_matrix,
+    check_magnetic_field,
+    check_starts,
+    check_step_size,
+    euclidean_integrator,
+    initial_values,
+    ravel,
+)
+
+__all__ = [
+    "MagneticHMCInfo",
+    "MagneticHMCState",
+    "as_top_level_api",
+    "build_kernel",
+    "init",
+    "magnetic_hmc",
+    "magnetic_leapfrog",
+]
+
+
+class MagneticHMCState(NamedTuple):
+    """State of a chain.
+
+    position : the point ``q`` (any pytree of arrays).
+    logdensity, logdensity_grad : ``log π(q)`` and its gradient (pytree like ``position``).
+    momentum : flat ``(d,)`` momentum carried between transitions (used only when
+        ``momentum_persistence > 0``; ``init`` sets it to zero).
+    magnetic_sign : ``s = ±1``, the sign of the field for the next trajectory.
+    """
+
+    position: jax.Array
+    logdensity: jax.Array
+    logdensity_grad: jax.Array
+    momentum: jax.Array
+    magnetic_sign: jax.Array
+
+
+class MagneticHMCInfo(NamedTuple):
+    """What one transition did (the Info contract of :mod:`liesample.samplers.contract`, in
+    BlackJAX's field order).
+
+    acceptance_rate : ``min(1, e^{−ΔH})`` (0 for a non-finite proposal).
+    is_accepted : whether the proposal was accepted.
+    is_divergent : ``ΔH`` above ``divergence_threshold``, or a non-finite proposal (rejected).
+    energy : ``H`` of the proposal (``-log π + kinetic``; ``inf`` for a non-finite one), as in
+        BlackJAX's HMC.
+    num_integration_steps : leapfrog steps (gradient evaluations) of the trajectory.
+    magnetic_sign : sign of the field used for this trajectory.
+    """
+
+    acceptance_rate: jax.Array
+    is_accepted: jax.Array
+    is_divergent: jax.Array
+    energy: jax.Array
+    num_integration_steps: jax.Array
+    magnetic_sign: jax.Array
+
+
+def init(position, logdensity_fn: Callable, rng_key=None) -> MagneticHMCState:
+    """Initial state (no key needed; ``rng_key`` is ignored). Raises if ``log π`` is non-finite."""
+    del rng_key
+    logdensity, grad, momentum = initial_values(position, logdensity_fn)
+    return MagneticHMCState(position, logdensity, grad, momentum, jnp.ones((), momentum.dtype))
+
+
+def magnetic_leapfrog(flat_logdensity_fn, metric, flow: MagneticFlow, step_size):
+    """One magnetic leapfrog step ``(q, p, ∇log π) -> (q, p, log π, ∇log π)`` on flat ``q``.
+
+    The scheme ``B A B`` of :mod:`liesample.geometry.cotangent` with the exact kinetic+magnetic ``flow``
+    as the drift (with ``G = 0`` this *is* velocity Verlet).
+    """
+    value_and_grad = jax.value_and_grad(flat_logdensity_fn)
+    bundle = euclidean_integrator(step_size, metric.inverse_mass_matrix, None, LEAPFROG).bundle
+    drift_flow = bundle.kinetic_flow(step_size)._replace(euclidean=flow)
+    effects = {"B": kick(value_and_grad, step_size), "A": drift(bundle, {1.0: drift_flow})}
+    step = compose(LEAPFROG, effects)
+
+    def one(position, momentum, grad):
+        point = step(PhasePoint(position, momentum, None, grad))
+        return point.position, point.momentum, point.logdensity, point.logdensity_grad
+
+    return one
+
+
+def _transition(rng_key, state: MagneticHMCState, logdensity_fn, integrator, num_steps, options):
+    """Geometric HMC on the raveled position (``options``: divergence threshold, momentum
+    persistence, persistent)."""
+
+    def move(flat_state, flat_integrator):
+        return transition(rng_key, flat_state, flat_integrator, num_steps, *options)
+
+    new, info, unravel = ravelled(state, logdensity_fn, integrator, move)
+    new_state = MagneticHMCState(
+        unravel(new.position),
+        new.logdensity,
+        unravel(new.logdensity_grad),
+        new.momentum,
+        new.magnetic_sign,
+    )
+    info = MagneticHMCInfo(
+        info.acceptance_rate,
+        info.is_accepted,
+        info.is_divergent,
+        info.energy,
+        info.num_integration_steps,
+        state.magnetic_sign,
+    )
+    return new_state, info
+
+
+def _check_parameters(state_or_position, step_size, inverse_mass_matrix, magnetic_field):
+    d = ravel(state_or_position).shape[0]
+    check_step_size(step_size)
+    check_inverse_mass_matrix(inverse_mass_matrix, d)
+    check_magnetic_field(magnetic_field, d)
+
+
+def build_kernel(
+    integrator=None,
+    *,
+    divergence_threshold: float = 1000.0,
+    momentum_persistence: float = 0.0,
+    persistent: bool = True,
+):
+    """Build ``kernel(rng_key, state, logdensity_fn, step_size, inverse_mass_matrix,
+    num_integration_steps, magnetic_field) -> (state, info)``.
+
+    ``integrator`` exists so that ``blackjax.window_adaptation`` (which calls
+    ``build_kernel(blackjax.mcmc.integrators.velocity_verlet)``) can build this kernel: ``None``
+    or velocity Verlet both mean the magnetic leapfrog (velocity Verlet whose drift is the
+    exact kinetic+magnetic flow); anything else is an error.
+    """
+    if integrator not in (None, "magnetic_leapfrog", blackjax.mcmc.integrators.velocity_verlet):
+        raise ValueError(
+            "magnetic_hmc integrates with the magnetic leapfrog only; integrator must be None "
+            f"(or blackjax's velocity_verlet, which it generalises), got {integrator!r}"
+        )
+    check_options(momentum_persistence, divergence_threshold, persistent)
+    options = (divergence_threshold, momentum_persistence, persistent)
+
+    def kernel(
+        rng_key,
+        state: MagneticHMCState,
+        logdensity_fn: Callable,
+        step_size,
+        inverse_mass_matrix,
+        num_integration_steps,
+        magnetic_field,
+    ):
+        _check_parameters(state.position, step_size, inverse_mass_matrix, magnetic_field)
+        check_integer("num_integration_steps", num_integration_steps)
+        dtype = ravel(state.logdensity_grad).dtype
+        # One expm per transition, for the sign this trajectory uses.
+        integrator = euclidean_integrator(
+            step_size, inverse_mass_matrix, magnetic_field, LEAPFROG, dtype, precompute=False
+        )
+        return _transition(
+            rng_key, state, logdensity_fn, integrator, num_integration_steps, options
+        )
+
+    return kernel
+
+
+def as_top_level_api(
+    logdensity_fn: Callable,
+    step_size,
+    inverse_mass_matrix,
+    num_integration_steps: int,
+    magnetic_field,
+    *,
+    divergence_threshold: float = 1000.0,
+    momentum_persistence: float = 0.0,
+    persistent: bool = True,
+) -> Sampler:
+    """Magnetic HMC: the arguments of ``blackjax.hmc`` plus ``magnetic_field``.
+
+    Parameters
+    ----------
+    logdensity_fn : callable
+        ``log π`` of a pytree position (flattened internally with ``ravel_pytree``).
+    step_size : float
+        Leapfrog step ``ε > 0``.
+    inverse_mass_matrix : array, (d,) or (d, d)
+        Diagonal (> 0) or dense (symmetric positive definite) ``M⁻¹``.
+    num_integration_steps : int
+        Leapfrog steps per transition (= gradient evaluations).
+    magnetic_field : array, (d, d)
+        Antisymmetric ``G`` (any rank, ``0`` allowed), in the order of the raveled position;
+        see :func:`liesample.samplers.cotangent.magnetic.default_magnetic_field`.
+    divergence_threshold : float
+        ``ΔH`` above which a transition is flagged divergent (default 1000).
+    momentum_persistence : float in [0, 1)
+        ``α`` of the partial momentum refreshment; 0 (default) refreshes fully.
+    persistent : bool
+        Apply the ``(p, s) ↦ (−p, −s)`` flip after each Metropolis step (default ``True``; see
+        the module docstring).
+
+    Returns
+    -------
+    liesample.samplers.contract.Sampler
+        ``init(position, rng_key=None)`` and ``step(rng_key, state) -> (state, info)``. The two
+        flows ``e^{±εGM⁻¹}`` are computed once here, not per step. Tune ``step_size`` and
+        ``inverse_mass_matrix`` with ``blackjax.window_adaptation(liesample.magnetic_hmc, …)``.
+    """
+    check_step_size(step_size)
+    check_inverse_mass_matrix(inverse_mass_matrix)
+    check_magnetic_field(magnetic_field, np.shape(inverse_mass_matrix)[0])
+    check_integer("num_integration_steps", num_integration_steps)
+    check_options(momentum_persistence, divergence_threshold, persistent)
+    integrator = euclidean_integrator(step_size, inverse_mass_matrix, magnetic_field, LEAPFROG)
+    options = (divergence_threshold, momentum_persistence, persistent)
+
+    def init_fn(position, rng_key=None):
+        state = init(position, logdensity_fn, rng_key)
+        _check_parameters(position, step_size, inverse_mass_matrix, magnetic_field)
+        return state
+
+    def step_fn(rng_key, state):
+        return _transition(
+            rng_key, state, logdensity_fn, integrator, num_integration_steps, options
+        )
+
+    def check_positions(positions, **_):
+        check_starts(positions, logdensity_fn, np.shape(inverse_mass_matrix)[0])
+
+    settings = {
+        "sampler": "magnetic_hmc",
+        "step_size": setting(step_size),
+        "step_size_source": "given",
+        "num_integration_steps": setting(num_integration_steps),
+        "divergence_threshold": setting(divergence_threshold),
+        "momentum_persistence": setting(momentum_persistence),
+        "persistent": persistent,
+    }
+    return Sampler(init_fn, step_fn, settings=settings, check_positions=check_positions)
+
+
+magnetic_hmc = sampling_api(as_top_level_api, init, build_kernel, "magnetic_hmc", __name__)

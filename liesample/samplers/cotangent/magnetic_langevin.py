@@ -1,0 +1,187 @@
+"""Unadjusted magnetic (underdamped) Langevin: the charged Brownian particle as a sampler.
+
+A BlackJAX-shaped module (``MagneticLangevinState``/``MagneticLangevinInfo``, ``init``,
+``build_kernel``, ``as_top_level_api``). The SDE is MATH.md §3 with ``β = 1``,
+``V = −log π``, ``θ`` = ``friction`` and ``σ = √(2θ)``::
+
+    dq = M⁻¹p dt,   dp = (∇log π(q) + G M⁻¹p − θ M⁻¹p) dt + √(2θ) dW,
+
+whose invariant law is ``π(q) · N(p; 0, M)`` for every antisymmetric ``G``.
+
+**Integrator.** Unadjusted geometric Langevin (:mod:`liesample.samplers.cotangent.geometric_langevin`)
+on ``spaces.Euclidean((d,))`` (the raveled position) with the field, run with the symmetric
+Strang splitting ``B A O A B`` of :mod:`liesample.geometry.cotangent` (BAOAB of Leimkuhler & Matthews
+with the drift ``A`` replaced by the exact kinetic+magnetic flow): ``B`` = half kick
+``p += ε/2 ∇log π``, ``A`` = exact flow of ``q̇ = M⁻¹p, ṗ = GM⁻¹p`` over ``ε/2``
+(:func:`liesample.geometry.cotangent.kinetic_magnetic_flow`), ``O`` = exact OU step of the friction and
+noise over ``ε``. Every piece is solved exactly, so the scheme is weak order 2 (its
+stationary law differs from ``π ⊗ N(0, M)`` by ``O(ε²)``); one gradient per step. On a Gaussian
+target the step is affine, and :func:`liesample.targets.gaussian.linear_step_moments` gives the
+exact stationary law of the discretisation itself (used by the tests).
+
+A step that produces a non-finite state is flagged ``is_divergent`` (with
+``acceptance_rate = 0``; 1 for every other step: the Info contract's rule for unadjusted
+samplers, :mod:`liesample.samplers.contract`) and the state is kept.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from liesample.geometry.cotangent import BAOAB
+from liesample.samplers.contract import Sampler, sampling_api, setting
+from liesample.samplers.cotangent.geometric import ravelled
+from liesample.samplers.cotangent.geometric_langevin import check_friction, transition
+from liesample.samplers.cotangent.magnetic import (
+    check_inverse_mass_matrix,
+    check_magnetic_field,
+    check_starts,
+    check_step_size,
+    euclidean_integrator,
+    initial_values,
+    ravel,
+)
+
+__all__ = [
+    "MagneticLangevinInfo",
+    "MagneticLangevinState",
+    "as_top_level_api",
+    "build_kernel",
+    "init",
+    "magnetic_langevin",
+]
+
+
+class MagneticLangevinState(NamedTuple):
+    """State: ``position`` (pytree), flat ``momentum`` (``(d,)``), ``log π`` and its gradient."""
+
+    position: jax.Array
+    momentum: jax.Array
+    logdensity: jax.Array
+    logdensity_grad: jax.Array
+
+
+class MagneticLangevinInfo(NamedTuple):
+    """What one step did (the Info contract of :mod:`liesample.samplers.contract`).
+
+    is_divergent : the step produced NaN/inf; the previous state was kept.
+    acceptance_rate : 1.0 for a step taken, 0.0 for a divergent (rejected) one (unadjusted).
+    energy : ``H = −log π(q) + ½pᵀM⁻¹p`` at the chain's state after the step.
+    """
+
+    is_divergent: jax.Array
+    acceptance_rate: jax.Array
+    energy: jax.Array
+
+
+def init(position, logdensity_fn: Callable, rng_key=None) -> MagneticLangevinState:
+    """Initial state with zero momentum (no key needed; ``rng_key`` is ignored).
+
+    Raises when ``log π`` or its gradient is not finite at ``position`` (checked when concrete).
+    """
+    del rng_key
+    logdensity, grad, momentum = initial_values(position, logdensity_fn)
+    return MagneticLangevinState(position, momentum, logdensity, grad)
+
+
+def _step(rng_key, state, logdensity_fn, integrator, friction):
+    """One ``B A O A B`` step: unadjusted geometric Langevin on the raveled position."""
+
+    def move(flat_state, flat_integrator):
+        return transition(rng_key, flat_state, flat_integrator, friction, False, jnp.inf, BAOAB)
+
+    new, info, unravel = ravelled(state, logdensity_fn, integrator, move)
+    new_state = MagneticLangevinState(
+        unravel(new.position), new.momentum, new.logdensity, unravel(new.logdensity_grad)
+    )
+    return new_state, MagneticLangevinInfo(info.is_divergent, info.acceptance_rate, info.energy)
+
+
+def build_kernel():
+    """Build ``kernel(rng_key, state, logdensity_fn, step_size, inverse_mass_matrix, friction,
+    magnetic_field) -> (state, info)``; the flow ``e^{εGM⁻¹/2}`` is recomputed per call."""
+
+    def kernel(
+        rng_key,
+        state: MagneticLangevinState,
+        logdensity_fn: Callable,
+        step_size,
+        inverse_mass_matrix,
+        friction,
+        magnetic_field,
+    ):
+        d = state.momentum.shape[0]
+        check_step_size(step_size)
+        check_inverse_mass_matrix(inverse_mass_matrix, d)
+        check_magnetic_field(magnetic_field, d)
+        check_friction(friction)
+        integrator = euclidean_integrator(
+            step_size, inverse_mass_matrix, magnetic_field, BAOAB, state.momentum.dtype, False
+        )
+        return _step(rng_key, state, logdensity_fn, integrator, friction)
+
+    return kernel
+
+
+def as_top_level_api(
+    logdensity_fn: Callable, step_size, inverse_mass_matrix, friction, magnetic_field
+) -> Sampler:
+    """Unadjusted magnetic Langevin sampler (weak order 2; bias ``O(ε²)``, not corrected).
+
+    Parameters
+    ----------
+    logdensity_fn : callable
+        ``log π`` of a pytree position.
+    step_size : float
+        Time step ``ε > 0``.
+    inverse_mass_matrix : array, (d,) or (d, d)
+        Diagonal (> 0) or dense (symmetric positive definite) ``M⁻¹``.
+    friction : float
+        ``θ > 0``; the noise is ``σ = √(2θ)`` (MATH.md §3, ``θ = βσ²/2`` at ``β = 1``).
+    magnetic_field : array, (d, d)
+        Antisymmetric ``G``; see :func:`liesample.samplers.cotangent.magnetic.default_magnetic_field`.
+
+    Returns
+    -------
+    liesample.samplers.contract.Sampler
+        ``init(position, rng_key=None)`` and ``step(rng_key, state) -> (state, info)``.
+    """
+    check_step_size(step_size)
+    check_inverse_mass_matrix(inverse_mass_matrix)
+    d = np.shape(inverse_mass_matrix)[0]
+    check_magnetic_field(magnetic_field, d)
+    check_friction(friction)
+    integrator = euclidean_integrator(step_size, inverse_mass_matrix, magnetic_field, BAOAB)
+
+    def init_fn(position, rng_key=None):
+        dimension = ravel(position).shape[0]
+        if dimension != d:
+            raise ValueError(
+                f"position has {dimension} coordinates but inverse_mass_matrix and "
+                f"magnetic_field are for {d}"
+            )
+        return init(position, logdensity_fn, rng_key)
+
+    def step_fn(rng_key, state):
+        return _step(rng_key, state, logdensity_fn, integrator, friction)
+
+    def check_positions(positions, **_):
+        check_starts(positions, logdensity_fn, d)
+
+    settings = {
+        "sampler": "magnetic_langevin",
+        "step_size": setting(step_size),
+        "step_size_source": "given",
+        "friction": setting(friction),
+    }
+    return Sampler(init_fn, step_fn, settings=settings, check_positions=check_positions)
+
+
+magnetic_langevin = sampling_api(
+    as_top_level_api, init, build_kernel, "magnetic_langevin", __name__
+)

@@ -1,0 +1,1 @@
+"""Samplers on coadjoint orbits: the Poisson–Langevin chain, unadjusted or Metropolis-adjusted."""

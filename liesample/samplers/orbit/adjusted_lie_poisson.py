@@ -1,0 +1,456 @@
+"""Metropolis-adjusted Lie–Poisson sampler: exactly ``exp(−βh)`` on the orbit at any step size.
+
+A BlackJAX-shaped module (``State``/``Info``, ``init``, ``build_kernel``, ``as_top_level_api``),
+the orbit analogue of MALA. One step proposes the coadjoint Lie–Euler move of the
+noise + dissipation part of the Poisson–Langevin SDE (MATH.md §1–§2) and accepts it with a
+Metropolis–Hastings ratio, so the chain's stationary law is the Gibbs law on the orbit of the
+initial state with no discretisation bias.
+
+**The move as an involution.** From ``μ`` draw ``W ~ N(0, I_m)`` and set
+
+    c_i = −θ {h, ĥ_i}(μ) dt + σ √dt W_i,      ξ(c) = Σ_i c_i ξ_i,      μ' = Ad*_{exp ξ(c)} μ,
+
+with ``θ = βσ²/2`` and ``ξ_i = ∇ĥ_i`` the (constant) gradients of the unit-strength noise
+Hamiltonians. The map ``Φ(μ, c) = (μ', −c)`` is an involution of ``orbit × R^m``
+(``Ad*_{exp(−ξ)} Ad*_{exp ξ} = id`` and ``ξ(−c) = −ξ(c)``), and its Jacobian has unit
+determinant: it is block triangular, ``∂c'/∂c = −I`` and, for fixed ``c``, ``μ ↦ Ad*_g μ`` is a
+symplectomorphism of the orbit, so it preserves the Liouville measure. With the auxiliary law
+``q(c | μ) = N(−θ {h, ĥ}(μ) dt, σ² dt I)``, the acceptance probability of ``Φ`` for
+``π(μ) q(c | μ)`` is ``min(1, exp(L))`` with
+
+    L = −β (h(μ') − h(μ)) − ½|W'|² + ½|W|²,      W' = (−c + θ {h, ĥ}(μ') dt) / (σ √dt),
+
+the MALA ratio with Gaussian densities. The construction needs ``ξ_i`` independent of ``μ``
+(linear noise ``ĥ_i = ⟨μ, ξ_i⟩``: rigid body, spins, the heavy top's six); with ``μ``-dependent
+gradients ``Φ`` is no longer an involution, so such systems are refused with a clear error
+(:func:`check_linear_noise`). Ergodicity needs the ``ξ_i`` to span the orbit's tangent
+directions, which holds for the systems above.
+
+The Hamiltonian drift is not part of the move: it preserves ``exp(−βh)`` by itself but is not
+reversible, and alone the noise + dissipation dynamics already has ``exp(−βh)`` as its
+reversible invariant law (its generator is self-adjoint in ``L²(exp(−βh))``, MATH.md §1).
+As ``dt → 0`` the acceptance rate tends to 1 and the chain is the unadjusted Lie–Euler chain of
+that scene; at large ``dt`` rejections remove the bias instead of leaving it in the averages.
+
+**Step size.** Any step is exact, but a too large one is rejected nearly always (a *stuck*
+chain, which :func:`liesample.sample` reports). Under ``liesample.sample(..., num_warmup=N)``
+the step is tuned in the warm-up by dual averaging (Hoffman & Gelman 2014, as in
+``blackjax.window_adaptation``) so that the mean acceptance rate over the chains reaches
+``target_acceptance_rate`` (default 0.574, MALA's optimal rate, Roberts & Rosenthal 1998). Without
+warm-up and without ``step_size`` the step is ``κ = 1.3 m^{−1/3}`` in units of the stiffness
+(``κ = dt·θ·max|h''|``, :mod:`liesample.integrators.stability`; ``m`` noise directions), MALA's optimal
+scaling for a near-Gaussian target.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from blackjax.adaptation.step_size import dual_averaging_adaptation
+
+from liesample.dynamics.poisson_langevin import PoissonLangevin, Scene
+from liesample.dynamics.system import LiePoissonSystem
+from liesample.foundation.compile import jit
+from liesample.foundation.validation import concrete_array, finite_float
+from liesample.integrators.chain_loop import DEFAULT_NOISE_BLOCK_SIZE, NoiseBlocks, check_block_size
+from liesample.integrators.stability import check_precision, stiffness
+from liesample.samplers.contract import Sampler, sampling_api
+from liesample.samplers.orbit.starts import check_orbit_starts, check_start_energy, distinct_orbits
+
+__all__ = [
+    "AdjustedLiePoissonInfo",
+    "AdjustedLiePoissonState",
+    "DEFAULT_TARGET_ACCEPTANCE_RATE",
+    "adjusted_lie_poisson",
+    "as_top_level_api",
+    "build_kernel",
+    "build_noise_kernel",
+    "check_linear_noise",
+    "init",
+    "involution",
+]
+
+# Noise and dissipation only (the reversible part of the SDE; see the module docstring).
+_NOISE_SCENE = Scene(hamiltonian=False, dissipation=True, noise=True)
+
+DEFAULT_TARGET_ACCEPTANCE_RATE = 0.574
+"""Mean acceptance rate the warm-up's dual averaging aims at (MALA's optimum)."""
+
+
+class AdjustedLiePoissonState(NamedTuple):
+    """State of a chain.
+
+    position : the point ``μ`` on the orbit.
+    reference_casimirs : Casimirs of the initial point, against which drift is measured.
+    energy : ``h(μ)``, cached for the next acceptance ratio.
+    brackets : ``{h, ĥ_i}(μ)``, shape ``(m,)``, cached (the drift of the next proposal).
+    """
+
+    position: jax.Array
+    reference_casimirs: jax.Array
+    energy: jax.Array
+    brackets: jax.Array
+
+
+class AdjustedLiePoissonInfo(NamedTuple):
+    """What one step did (the Info contract of :mod:`liesample.samplers.contract`).
+
+    is_divergent : the proposal (or its energy, drift or ratio) was NaN/inf; it was rejected.
+    acceptance_rate : ``min(1, exp(L))`` of the proposal (0 for a divergent one).
+    energy : ``h`` at the chain's state after the step.
+    is_accepted : whether the chain moved.
+    casimir_error : relative Casimir drift of the new state (``LiePoissonSystem.casimir_error``).
+    """
+
+    is_divergent: jax.Array
+    acceptance_rate: jax.Array
+    energy: jax.Array
+    is_accepted: jax.Array
+    casimir_error: jax.Array
+
+
+def check_linear_noise(system: LiePoissonSystem) -> None:
+    """Raise ``ValueError`` unless the noise Hamiltonians have constant gradients.
+
+    The gradients ``∇ĥ_i`` are compared at the default position and at two other fixed points
+    (relative tolerance 1e-9); a non-linear noise (point vortices) changes them.
+    """
+    if not isinstance(system, LiePoissonSystem):
+        raise TypeError(f"system must be a LiePoissonSystem, got {type(system).__name__}")
+    base = np.asarray(system.default_position, dtype=float)
+    rng = np.random.default_rng(0)
+    points = [base, base + 0.3 * rng.normal(size=base.shape), rng.normal(size=base.shape)]
+    with jax.ensure_compile_time_eval():
+        jacobians = [np.asarray(jax.jacfwd(system.noise_hamiltonians)(p)) for p in points]
+    scale = max(1.0, float(np.max(np.abs(jacobians[0]))))
+    for jacobian in jacobians[1:]:
+        if not np.allclose(jacobian, jacobians[0], rtol=0.0, atol=1e-9 * scale):
+            raise ValueError(
+                f"adjusted_lie_poisson needs noise Hamiltonians with constant gradients (linear "
+                f"noise ĥ_i = ⟨μ, ξ_i⟩, e.g. rigid body, spins, heavy top); the {system.name}'s "
+                "gradients change with μ, so the proposal is not an involution. Use the "
+                "unadjusted liesample.lie_poisson_langevin for this system."
+            )
+
+
+def _energy_and_brackets(dynamics: PoissonLangevin, position):
+    energy, grad_h = jax.value_and_grad(dynamics.system.hamiltonian)(position)
+    return energy, dynamics.brackets_with_noise(position, grad_h)
+
+
+def _dynamics(system, sigma, beta):
+    return PoissonLangevin(system, sigma=sigma, theta=0.5 * beta * sigma**2, scene=_NOISE_SCENE)
+
+
+def init(position, system: LiePoissonSystem, rng_key=None) -> AdjustedLiePoissonState:
+    """Initial state on the orbit through ``position`` (no key needed; ``rng_key`` is ignored).
+
+    Raises ``ValueError`` for a bad start and, when ``position`` is concrete, for a start where
+    the energy ``h`` is not finite.
+    """
+    del rng_key
+    system.check_position(position)
+    position = jnp.asarray(position, dtype=jnp.result_type(float))
+    dynamics = PoissonLangevin(system, sigma=1.0, theta=1.0, scene=_NOISE_SCENE)
+    energy, brackets = _energy_and_brackets(dynamics, position)
+    value = concrete_array(energy)
+    if value is not None:
+        check_start_energy(system, position, value)
+    return AdjustedLiePoissonState(position, system.casimirs(position), energy, brackets)
+
+
+def involution(system: LiePoissonSystem, position, noise, step_size, sigma, beta, brackets=None):
+    """``(μ, W) ↦ (μ', W')``: the proposal map in noise coordinates; applying it twice is the
+    identity (to round-off).
+
+    Returns ``(proposal, reverse_noise, energy, brackets)`` with the last two at the proposal.
+    ``brackets`` (``{h, ĥ_i}(μ)``) may be passed when already known.
+    """
+    dynamics = _dynamics(system, sigma, beta)
+    if brackets is None:
+        _, brackets = _energy_and_brackets(dynamics, position)
+    drift = dynamics.theta * step_size
+    scale = sigma * jnp.sqrt(step_size)
+    coefficients = -drift * brackets + scale * noise
+    proposal = system.algebra.coadjoint_exp(
+        dynamics.noise_generator(position, coefficients), position
+    )
+    energy, new_brackets = _energy_and_brackets(dynamics, proposal)
+    reverse_noise = (-coefficients + drift * new_brackets) / scale
+    return proposal, reverse_noise, energy, new_brackets
+
+
+def build_noise_kernel(system: LiePoissonSystem):
+    """Build ``kernel(noise, state, step_size, sigma, beta) -> (state, info)``, the step as a
+    function of its draws: ``m + 1`` standard normals, ``W = noise[:m]`` for the proposal and
+    ``z = noise[m]`` for the acceptance test, which accepts when ``log Φ(z) < L`` (``Φ(z)`` is
+    uniform on ``(0, 1)``, so one normal draw serves both).
+
+    What :func:`build_kernel` draws per step and :mod:`liesample.integrators.chain_loop` in blocks.
+    Raises ``ValueError`` for a system whose noise gradients depend on ``μ``
+    (:func:`check_linear_noise`).
+    """
+    check_linear_noise(system)
+
+    def kernel(noise, state: AdjustedLiePoissonState, step_size, sigma, beta):
+        normals, accept = noise[:-1], noise[-1]
+        position = state.position
+        proposal, reverse_noise, energy, brackets = involution(
+            system, position, normals, step_size, sigma, beta, state.brackets
+        )
+        log_ratio = (
+            -beta * (energy - state.energy)
+            - 0.5 * jnp.sum(reverse_noise**2)
+            + 0.5 * jnp.sum(normals**2)
+        )
+        nonfinite = ~(
+            jnp.all(jnp.isfinite(proposal))
+            & jnp.isfinite(energy)
+            & jnp.all(jnp.isfinite(brackets))
+            & jnp.isfinite(log_ratio)
+        )
+        log_ratio = jnp.where(nonfinite, -jnp.inf, log_ratio)
+        acceptance_rate = jnp.exp(jnp.minimum(log_ratio, 0.0))
+        is_accepted = jax.scipy.special.log_ndtr(accept) < log_ratio
+        new_state = AdjustedLiePoissonState(
+            jnp.where(is_accepted, proposal, position),
+            state.reference_casimirs,
+            jnp.where(is_accepted, energy, state.energy),
+            jnp.where(is_accepted, brackets, state.brackets),
+        )
+        info = AdjustedLiePoissonInfo(
+            nonfinite,
+            acceptance_rate,
+            new_state.energy,
+            is_accepted,
+            system.casimir_error(new_state.position, state.reference_casimirs),
+        )
+        return new_state, info
+
+    return kernel
+
+
+def _draw_noise(system, rng_key, shape, dtype):
+    """The draws of ``shape`` steps: standard normals ``(*shape, m + 1)`` (proposal, acceptance)."""
+    return jax.random.normal(rng_key, (*shape, system.num_noises + 1), dtype=dtype)
+
+
+def build_kernel(system: LiePoissonSystem):
+    """Build ``kernel(rng_key, state, step_size, sigma, beta) -> (state, info)``.
+
+    ``step_size``, ``sigma`` and ``beta`` may be traced. Raises ``ValueError`` for a system
+    whose noise gradients depend on ``μ`` (:func:`check_linear_noise`).
+    """
+    return _keyed(system, build_noise_kernel(system))
+
+
+def _keyed(system, noise_kernel):
+    """The kernel of ``noise_kernel`` that draws its own noise from ``rng_key``."""
+
+    def kernel(rng_key, state: AdjustedLiePoissonState, step_size, sigma, beta):
+        noise = _draw_noise(system, rng_key, (), state.position.dtype)
+        return noise_kernel(noise, state, step_size, sigma, beta)
+
+    return kernel
+
+
+def _default_step_size(system, beta, sigma, position) -> float:
+    """``κ = 1.3 m^{−1/3}`` in units of the stiffness on the orbit of ``position`` (module
+    docstring), or ``0.4/σ²`` where ``h`` is flat along the noise (no stiffness)."""
+    theta = 0.5 * beta * sigma**2
+    stiff = stiffness(system, theta, np.asarray(position)) if system.curvature_bound else 0.0
+    if stiff == 0.0:
+        return 0.4 / sigma**2
+    return 1.3 * system.num_noises ** (-1.0 / 3.0) / stiff
+
+
+def dual_averaging_warmup(noise_kernel, draw, block_size, target_acceptance_rate):
+    """``run(chain_keys, states, initial_step, sigma, beta, num_steps) -> (states, step_size,
+    mean_acceptance)``: ``num_steps`` vmapped steps whose shared step size is tuned by dual
+    averaging (``blackjax.adaptation.step_size.dual_averaging_adaptation``) on the mean
+    acceptance over the chains. The noise is drawn in blocks of ``block_size`` steps with the
+    key scheme of :mod:`liesample.integrators.chain_loop` (``draw(key, state)``, one block per chain
+    from ``fold_in(key_c, b)``). The final step is the dual-averaging average
+    ``exp(log_step_size_avg)``."""
+    da_init, da_update, da_final = dual_averaging_adaptation(target_acceptance_rate)
+    steps = jax.vmap(noise_kernel, in_axes=(0, 0, None, None, None))
+    draws = jax.vmap(
+        lambda key, block, state: draw(jax.random.fold_in(key, block), state), in_axes=(0, None, 0)
+    )
+
+    def run(chain_keys, states, initial_step, sigma, beta, num_steps):
+        first_kept = num_steps // 2
+
+        def one_block(block, carry):
+            noise = draws(chain_keys, block, carry[0])
+            start = block * block_size
+
+            def one(row, carry):
+                states, da, total = carry
+                states, infos = steps(noise[:, row], states, jnp.exp(da.log_step_size), sigma, beta)
+                rate = jnp.mean(infos.acceptance_rate)
+                total = total + jnp.where(start + row >= first_kept, rate, 0.0)
+                return states, da_update(da, rate), total
+
+            high = jnp.minimum(num_steps - start, block_size)
+            return jax.lax.fori_loop(0, high, one, carry)
+
+        num_blocks = -(-num_steps // block_size)
+        carry = (states, da_init(initial_step), jnp.zeros((), initial_step.dtype))
+        states, da, total = jax.lax.fori_loop(0, num_blocks, one_block, carry)
+        return states, da_final(da), total / (num_steps - first_kept)
+
+    return jit(run, static_argnums=5)
+
+
+def as_top_level_api(
+    system: LiePoissonSystem,
+    *,
+    beta,
+    sigma=1.0,
+    step_size=None,
+    target_acceptance_rate=DEFAULT_TARGET_ACCEPTANCE_RATE,
+    noise_block_size: int = DEFAULT_NOISE_BLOCK_SIZE,
+) -> Sampler:
+    """Metropolis-adjusted Lie–Poisson sampler of ``exp(−βh)`` on the orbit of the initial state.
+
+    Parameters
+    ----------
+    system : LiePoissonSystem
+        With linear noise Hamiltonians (rigid body, heavy top, spins).
+    beta : float
+        Inverse temperature, finite (and admissible for the system).
+    sigma : float
+        Noise strength ``σ > 0`` (default 1). Only ``σ²·step_size`` matters for the move (there
+        is no Hamiltonian drift), so ``σ`` and ``step_size`` are one knob: the rotation angle
+        per step.
+    step_size : float or None
+        Time step ``dt > 0``; any value gives the exact law, larger ones lower acceptance.
+        ``None`` (default): tuned in the warm-up of ``liesample.sample(..., num_warmup=N)`` by
+        dual averaging to ``target_acceptance_rate``; used directly (no warm-up), the step is
+        ``κ = 1.3 m^{−1/3}`` in units of the stiffness on the first start's orbit (module
+        docstring). A given step is kept unless ``liesample.sample(..., adapt=True)``.
+    target_acceptance_rate : float in (0, 1)
+        What the warm-up's dual averaging aims at (default 0.574).
+    noise_block_size : int
+        Steps whose draws are made at once in :func:`liesample.sample`, the warm-up and the
+        other drivers (default 32; :mod:`liesample.integrators.chain_loop`). Block ``b`` of chain
+        ``c`` is drawn from ``fold_in(key_c, b)``, so the draws do not depend on how a run is
+        chunked; another block size gives other draws of the same law.
+
+    Returns
+    -------
+    liesample.samplers.contract.Sampler
+        ``init(position)`` and ``step(rng_key, state) -> (state, info)`` (``info``: the Info
+        contract plus ``is_accepted`` and ``casimir_error``); ``rng_key`` may be
+        ``jax.random.key`` or ``jax.random.PRNGKey``.
+    """
+    if not isinstance(system, LiePoissonSystem):
+        raise TypeError(f"system must be a LiePoissonSystem, got {type(system).__name__}")
+    beta = finite_float("beta", beta)
+    if system.check_beta is not None:
+        system.check_beta(beta)
+    sigma = finite_float("sigma", sigma, positive=True)
+    if step_size is not None:
+        step_size = finite_float("step_size", step_size, positive=True)
+    target = finite_float("target_acceptance_rate", target_acceptance_rate)
+    if not 0.0 < target < 1.0:
+        raise ValueError(f"target_acceptance_rate must be in (0, 1), got {target}")
+    noise_block_size = check_block_size(noise_block_size)
+    noise_kernel = build_noise_kernel(system)
+    kernel = _keyed(system, noise_kernel)
+    settings = {
+        "sampler": "adjusted_lie_poisson",
+        "system": system.name,
+        "beta": beta,
+        "sigma": sigma,
+        "step_size": step_size,
+        "step_size_source": "given" if step_size is not None else "automatic (not yet chosen)",
+        "target_acceptance_rate": target,
+        "noise_block_size": noise_block_size,
+    }
+    chosen = [step_size]
+
+    def draw_block(rng_key, state):
+        return _draw_noise(system, rng_key, (noise_block_size,), state.position.dtype)
+
+    # One compilation per sampler and shape.
+    warmup = dual_averaging_warmup(noise_kernel, draw_block, noise_block_size, target)
+
+    def resolve(position):
+        if chosen[0] is None:
+            chosen[0] = _default_step_size(system, beta, sigma, position)
+            settings.update(
+                step_size=chosen[0],
+                step_size_source="default: kappa = 1.3 m^(-1/3) (no warm-up adaptation)",
+            )
+        return chosen[0]
+
+    def check_orbits(positions, representatives):
+        for chain in representatives:
+            position = positions[chain]
+            check_precision(system, beta, 0.5 * beta * sigma**2, position, position.dtype)
+
+    def init_fn(position, rng_key=None):
+        state = init(position, system, rng_key)
+        value = concrete_array(position)
+        if value is not None:
+            value = np.asarray(value, dtype=jnp.result_type(float))
+            resolve(value)
+            check_orbits(value[None], [0])
+        return state
+
+    def step_fn(rng_key, state):
+        return kernel(rng_key, state, resolve(system.default_position), sigma, beta)
+
+    def block_step(noise, state):
+        return noise_kernel(noise, state, resolve(system.default_position), sigma, beta)
+
+    def check_positions(positions, *, step_size_checks=True):
+        positions = np.asarray(positions, dtype=jnp.result_type(float))
+        casimirs = check_orbit_starts(system, positions)
+        if step_size_checks:
+            resolve(positions[0])
+            check_orbits(positions, distinct_orbits(casimirs))
+
+    def adapt(rng_key, chain_keys, states, initial_positions, num_warmup):
+        del rng_key
+        initial = chosen[0]
+        if initial is None:
+            initial = _default_step_size(system, beta, sigma, np.asarray(initial_positions[0]))
+        dtype = states.position.dtype
+        states, tuned_step, rate = warmup(
+            chain_keys,
+            states,
+            jnp.asarray(initial, dtype),
+            jnp.asarray(sigma, dtype),
+            jnp.asarray(beta, dtype),
+            num_warmup,
+        )
+        tuned = as_top_level_api(
+            system,
+            beta=beta,
+            sigma=sigma,
+            step_size=float(tuned_step),
+            target_acceptance_rate=target,
+            noise_block_size=noise_block_size,
+        )
+        tuned.settings["step_size_source"] = (
+            f"warm-up dual averaging to mean acceptance {target:g} over chains, from "
+            f"{initial:.4g}; mean acceptance in the second half of the warm-up {float(rate):.3f}"
+        )
+        return tuned, states
+
+    sampler = Sampler(
+        init_fn, step_fn, settings=settings, check_positions=check_positions, adapt=adapt
+    )
+    sampler.noise_blocks = NoiseBlocks(noise_block_size, draw_block, block_step)
+    return sampler
+
+
+adjusted_lie_poisson = sampling_api(
+    as_top_level_api, init, build_kernel, "adjusted_lie_poisson", __name__
+)

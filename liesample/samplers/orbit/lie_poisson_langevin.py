@@ -1,0 +1,370 @@
+"""The Lie–Poisson–Langevin sampler: Gibbs-exact sampling on a coadjoint orbit.
+
+A BlackJAX-shaped module (``State``/``Info``, ``init``, ``build_kernel``, ``as_top_level_api``).
+The chain is the Poisson–Langevin SDE of MATH.md §1 with ``θ = βσ²/2`` (paper,
+``eq:lie-poisson-langevin``), whose invariant law on the orbit of the initial state is
+``∝ exp(−βh)``; the discretisation bias is that of the chosen integrator.
+
+Safe defaults: a step size beyond the measured stability bound (:mod:`liesample.integrators.stability`) is
+refused, and without a step size the sampler picks one below the bound whose predicted bias is
+at most :data:`DEFAULT_BIAS_TOLERANCE` posterior standard deviations
+(:func:`liesample.integrators.accuracy.default_step_size`).
+
+The Brownian increments of a run are drawn in blocks of ``noise_block_size`` steps
+(:mod:`liesample.integrators.chain_loop`); ``step(rng_key, state)`` alone draws one step's increments
+from ``rng_key``. The state carries ``h(μ)``, so a step evaluates ``h`` once (at the proposal,
+for the divergence test).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from liesample.dynamics.poisson_langevin import PoissonLangevin, Scene, make_dynamics
+from liesample.dynamics.system import LiePoissonSystem
+from liesample.foundation.validation import concrete_array, finite_float
+from liesample.integrators import accuracy
+from liesample.integrators.chain_loop import DEFAULT_NOISE_BLOCK_SIZE, NoiseBlocks, check_block_size
+from liesample.integrators.orbit import DEFAULT_INTEGRATOR, get_integrator
+from liesample.integrators.stability import (
+    STABILITY_MODES,
+    check_precision,
+    check_step_size,
+    stiffness_on_orbits,
+)
+from liesample.samplers.contract import Sampler, sampling_api
+from liesample.samplers.orbit.starts import check_orbit_starts, check_start_energy, distinct_orbits
+
+__all__ = [
+    "DEFAULT_BIAS_TOLERANCE",
+    "LiePoissonInfo",
+    "LiePoissonState",
+    "as_top_level_api",
+    "build_kernel",
+    "build_noise_kernel",
+    "init",
+    "lie_poisson_langevin",
+    "make_dynamics",
+]
+
+DEFAULT_BIAS_TOLERANCE = accuracy.DEFAULT_RELATIVE_TOLERANCE
+"""Default bias tolerance of the automatic step size, in posterior standard deviations of the
+state's coordinates."""
+
+
+class LiePoissonState(NamedTuple):
+    """State of a chain.
+
+    position : the point ``μ`` on the orbit.
+    reference_casimirs : the Casimirs of the initial point, against which drift is measured.
+    energy : ``h(μ)``, cached (the step's ``info.energy`` when the proposal is rejected).
+    """
+
+    position: jax.Array
+    reference_casimirs: jax.Array
+    energy: jax.Array
+
+
+class LiePoissonInfo(NamedTuple):
+    """What one step did (the Info contract of :mod:`liesample.samplers.contract`).
+
+    is_divergent : the proposed state or its energy was NaN/inf; the step was rejected and the
+        chain kept its previous state.
+    acceptance_rate : 1.0 for a step taken, 0.0 for a divergent (rejected) one; the sampler is
+        unadjusted, so there is no other test.
+    energy : ``h`` at the chain's state after the step.
+    casimir_error : largest relative drift ``|C − C₀|/|C₀|`` of the Casimirs; for systems that
+        declare a ``casimir_scale`` (a Casimir may be zero, e.g. the heavy top's ``Π·Γ``) the
+        denominator is ``max(|C₀|, scale(μ))`` (``LiePoissonSystem.casimir_error``).
+    """
+
+    is_divergent: jax.Array
+    acceptance_rate: jax.Array
+    energy: jax.Array
+    casimir_error: jax.Array
+
+
+def init(position, system: LiePoissonSystem, rng_key=None) -> LiePoissonState:
+    """Initial state on the orbit through ``position`` (no key needed; ``rng_key`` is ignored).
+
+    Raises ``ValueError`` for a bad start (shape, non-finite, degenerate orbit) and, when
+    ``position`` is concrete, for a start where the energy ``h`` is not finite.
+    """
+    del rng_key
+    system.check_position(position)
+    value = concrete_array(position)
+    if value is not None:
+        with jax.ensure_compile_time_eval():
+            energy = concrete_array(system.hamiltonian(jnp.asarray(value, jnp.result_type(float))))
+        if energy is not None:  # None when staged out: the runner checks every start itself
+            check_start_energy(system, value, energy)
+    position = jnp.asarray(position, dtype=jnp.result_type(float))
+    return LiePoissonState(position, system.casimirs(position), system.hamiltonian(position))
+
+
+def build_noise_kernel(
+    system: LiePoissonSystem, integrator=DEFAULT_INTEGRATOR, scene: Scene | None = None
+):
+    """Build ``kernel(noise, state, step_size, sigma, theta) -> (state, info)``, the step as a
+    function of its standard normal draws ``noise`` (shape ``(m,)``; ``dW = √dt · noise``), or
+    ``None`` when the scene has no noise.
+
+    What :func:`build_kernel` draws per step and :mod:`liesample.integrators.chain_loop` in blocks.
+    """
+    integrator = get_integrator(integrator)
+    scene = Scene() if scene is None else scene
+
+    def kernel(noise, state: LiePoissonState, step_size, sigma, theta):
+        dynamics = PoissonLangevin(system, sigma=sigma, theta=theta, scene=scene)
+        dW = None if noise is None else jnp.sqrt(step_size) * noise
+        proposal = integrator(dynamics, state.position, step_size, dW)
+        energy = system.hamiltonian(proposal)
+        divergent = ~(jnp.all(jnp.isfinite(proposal)) & jnp.isfinite(energy))
+        position = jnp.where(divergent, state.position, proposal)
+        energy = jnp.where(divergent, state.energy, energy)
+        info = LiePoissonInfo(
+            divergent,
+            jnp.where(divergent, 0.0, 1.0).astype(position.dtype),
+            energy,
+            system.casimir_error(position, state.reference_casimirs),
+        )
+        return LiePoissonState(position, state.reference_casimirs, energy), info
+
+    return kernel
+
+
+def _draw_noise(system, scene, rng_key, shape, dtype):
+    """Standard normals of shape ``(*shape, m)``, or ``None`` without noise (no bits drawn)."""
+    if not scene.noise:
+        return None
+    return jax.random.normal(rng_key, (*shape, system.num_noises), dtype=dtype)
+
+
+def build_kernel(
+    system: LiePoissonSystem, integrator=DEFAULT_INTEGRATOR, scene: Scene | None = None
+):
+    """Build ``kernel(rng_key, state, step_size, sigma, theta) -> (state, info)``.
+
+    The scene and integrator are structural (they decide what is traced); ``step_size``,
+    ``sigma`` and ``theta`` may be traced values. ``rng_key`` may be either key style.
+    """
+    scene = Scene() if scene is None else scene
+    noise_kernel = build_noise_kernel(system, integrator, scene)
+
+    def kernel(rng_key, state: LiePoissonState, step_size, sigma, theta):
+        noise = _draw_noise(system, scene, rng_key, (), state.position.dtype)
+        return noise_kernel(noise, state, step_size, sigma, theta)
+
+    return kernel
+
+
+def _source(choice) -> str:
+    return (
+        f"predicted |bias| <= {choice.relative_tolerance:g} posterior sd for the mean of each "
+        f"coordinate, and its sd within {choice.relative_tolerance:g} of itself "
+        "(liesample.integrators.accuracy.default_step_size)"
+    )
+
+
+class _StepSize:
+    """The step size, given or chosen once on first need (from the first concrete starts)."""
+
+    def __init__(self, value, choose, settings):
+        self.value = value
+        self._choose = choose
+        self._settings = settings
+
+    def resolve(self, positions):
+        if self.value is None:
+            choice = self._choose(positions)
+            self.value = choice.step_size
+            self._settings.update(
+                step_size=choice.step_size,
+                step_size_source="bias model: " + _source(choice),
+            )
+        return self.value
+
+
+def as_top_level_api(
+    system: LiePoissonSystem,
+    *,
+    beta=None,
+    sigma=1.0,
+    step_size=None,
+    integrator=DEFAULT_INTEGRATOR,
+    theta=None,
+    hamiltonian: bool = True,
+    stability: str = "raise",
+    bias_tolerance=DEFAULT_BIAS_TOLERANCE,
+    noise_block_size: int = DEFAULT_NOISE_BLOCK_SIZE,
+) -> Sampler:
+    """Lie–Poisson–Langevin sampler of ``exp(−βh)`` on the orbit of the initial state.
+
+    Parameters
+    ----------
+    system : LiePoissonSystem
+        E.g. :func:`liesample.systems.rigid_body`.
+    beta : float
+        Inverse temperature; any finite value (``β < 0`` samples a negative temperature where
+        the orbit is compact). Required when ``sigma > 0``.
+    sigma : float
+        Noise strength ``σ ≥ 0`` (default 1): trades mixing against stiffness at fixed ``β``.
+    step_size : float or None
+        Time step ``dt > 0``. ``None`` (default): chosen below the stability bound from the bias
+        model of :func:`liesample.integrators.accuracy.default_step_size` (short coupled pilot runs), so
+        that the predicted bias of the mean of every coordinate of ``μ`` is at most
+        ``bias_tolerance`` posterior standard deviations, and of its sd at most
+        ``bias_tolerance`` of itself. The choice is made once, from the first concrete starts
+        the sampler sees (``init`` or :func:`liesample.sample`); under
+        ``liesample.sample(..., num_warmup=N)`` it is made in the warm-up from the run's starts.
+    integrator : str or Integrator
+        One of ``liesample.integrators.INTEGRATORS``; default ``"splitting"``.
+    theta : float, optional
+        Dissipation strength for a noise-free flow (``sigma = 0``) only.
+    hamiltonian : bool
+        Whether the scene has the Hamiltonian drift (it does not change the invariant law).
+    stability : {"raise", "warn", "off"}
+        What happens when ``step_size`` is beyond the integrator's stable bound on the orbit of
+        a start, ``κ = step_size·θ·max_i |h''_i| > 2`` (:mod:`liesample.integrators.stability`; rigid body:
+        ``θ·step_size·r²(1/I_min − 1/I_max) ≤ 2``): ``"raise"`` (default) a ``ValueError``
+        naming the largest allowed step; ``"warn"`` a ``UserWarning`` (the chain then samples a
+        wrong law); ``"off"`` no check. The mode is recorded in the run's attributes.
+    bias_tolerance : float
+        Relative bias tolerance of the automatic step size (default
+        :data:`DEFAULT_BIAS_TOLERANCE` = 0.05 posterior sd).
+    noise_block_size : int
+        Steps whose Brownian increments are drawn at once in :func:`liesample.sample` and the
+        other drivers (default 32; :mod:`liesample.integrators.chain_loop`). Block ``b`` of chain
+        ``c`` is drawn from ``fold_in(key_c, b)``, so the draws do not depend on how a run is
+        chunked; another block size gives other draws of the same law.
+
+    Returns
+    -------
+    liesample.samplers.contract.Sampler
+        ``init(position)`` and ``step(rng_key, state) -> (state, info)`` (``info``: the Info
+        contract, plus ``casimir_error``); ``rng_key`` may be ``jax.random.key`` or
+        ``jax.random.PRNGKey``.
+    """
+    if not isinstance(system, LiePoissonSystem):
+        raise TypeError(f"system must be a LiePoissonSystem, got {type(system).__name__}")
+    if step_size is not None:
+        step_size = finite_float("step_size", step_size, positive=True)
+    bias_tolerance = finite_float("bias_tolerance", bias_tolerance, positive=True)
+    noise_block_size = check_block_size(noise_block_size)
+    sigma, theta, scene = make_dynamics(
+        system, beta=beta, sigma=sigma, theta=theta, hamiltonian=hamiltonian
+    )
+    if step_size is None and sigma == 0.0:
+        raise ValueError(
+            "step_size is required when sigma = 0: the automatic choice bounds the bias of a "
+            "sampled law, and a noise-free flow samples none"
+        )
+    if stability not in STABILITY_MODES:
+        raise ValueError(f"stability must be one of {STABILITY_MODES}, got {stability!r}")
+    integrator = get_integrator(integrator)
+    kernel = build_kernel(system, integrator, scene)
+    noise_kernel = build_noise_kernel(system, integrator, scene)
+    options = dict(
+        beta=beta,
+        sigma=sigma,
+        integrator=integrator,
+        theta=None if sigma > 0 else theta,
+        hamiltonian=hamiltonian,
+        stability=stability,
+        bias_tolerance=bias_tolerance,
+        noise_block_size=noise_block_size,
+    )
+    settings = {
+        "sampler": "lie_poisson_langevin",
+        "system": system.name,
+        "beta": beta,
+        "sigma": sigma,
+        "theta": theta,
+        "integrator": integrator.name,
+        "stability": stability,
+        "step_size": step_size,
+        "step_size_source": "given" if step_size is not None else "automatic (not yet chosen)",
+        "noise_block_size": noise_block_size,
+    }
+
+    def choose(positions, rng_key=None):
+        return accuracy.default_step_size(
+            system,
+            beta,
+            sigma=sigma,
+            integrator=integrator,
+            initial_positions=positions,
+            rng_key=jax.random.key(0) if rng_key is None else rng_key,
+            relative_tolerance=bias_tolerance,
+        )
+
+    step = _StepSize(step_size, choose, settings)
+
+    def check_orbits(positions, representatives, prefix=False):
+        """Stability (one vectorised stiffness call for all orbits) and precision checks."""
+        representatives = np.asarray(representatives)
+        dt = step.resolve(positions[representatives])
+        limit = integrator.stability_limit
+        if stability != "off" and limit is not None and theta != 0.0 and system.curvature_bound:
+            kappas = dt * stiffness_on_orbits(system, theta, positions[representatives])
+            beyond = np.flatnonzero(kappas > limit)
+            if beyond.size:  # the first such chain: its message (raise or warn) from the check
+                chain = int(representatives[beyond[0]])
+                try:
+                    check_step_size(system, integrator, dt, theta, positions[chain], stability)
+                except ValueError as error:
+                    if not prefix:
+                        raise
+                    raise ValueError(f"initial_positions[{chain}]: {error}") from None
+            settings["stability_number"] = float(np.max(kappas))
+            settings["stability_limit"] = limit
+        for chain in representatives:
+            check_precision(system, beta, theta, positions[chain], positions.dtype)
+
+    def init_fn(position, rng_key=None):
+        state = init(position, system, rng_key)
+        value = concrete_array(position)
+        if value is not None:
+            check_orbits(np.asarray(value, dtype=jnp.result_type(float))[None], [0])
+        return state
+
+    def step_fn(rng_key, state):
+        dt = step.resolve(np.asarray(system.default_position)[None])
+        return kernel(rng_key, state, dt, sigma, theta)
+
+    def block_step(noise, state):
+        dt = step.resolve(np.asarray(system.default_position)[None])
+        return noise_kernel(noise, state, dt, sigma, theta)
+
+    def draw_block(rng_key, state):
+        return _draw_noise(system, scene, rng_key, (noise_block_size,), state.position.dtype)
+
+    def check_positions(positions, *, step_size_checks=True):
+        positions = np.asarray(positions)
+        casimirs = check_orbit_starts(system, positions)
+        if step_size_checks:
+            dtype = jnp.result_type(float)
+            check_orbits(np.asarray(positions, dtype), distinct_orbits(casimirs), prefix=True)
+
+    def adapt(rng_key, chain_keys, states, initial_positions, num_warmup):
+        del chain_keys, states, num_warmup
+        choice = choose(np.asarray(initial_positions), jax.random.fold_in(rng_key, 1))
+        tuned = as_top_level_api(system, **options, step_size=choice.step_size)
+        tuned.settings["step_size_source"] = "warm-up bias model: " + _source(choice)
+        return tuned, None
+
+    sampler = Sampler(
+        init_fn, step_fn, settings=settings, check_positions=check_positions, adapt=adapt
+    )
+    if scene.noise:  # without noise nothing is drawn: the per-step loop is already lean
+        sampler.noise_blocks = NoiseBlocks(noise_block_size, draw_block, block_step)
+    return sampler
+
+
+lie_poisson_langevin = sampling_api(
+    as_top_level_api, init, build_kernel, "lie_poisson_langevin", __name__
+)

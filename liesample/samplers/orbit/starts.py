@@ -1,0 +1,90 @@
+"""Checks of many starting points on coadjoint orbits in one vectorised call.
+
+Shared by the orbit samplers' ``check_positions`` hook (:class:`~liesample.samplers.contract.Sampler`):
+shape, finiteness, non-degenerate orbit and finite energy of every start are computed by one
+compiled ``vmap``; only the first failing chain is re-checked by ``system.check_position`` so
+that the error is the system's own message, prefixed by ``initial_positions[c]``.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from liesample.dynamics.system import LiePoissonSystem
+from liesample.foundation.compile import jit
+from liesample.samplers.contract import PositionCheck, first_bad_chain, raise_first_bad
+
+__all__ = ["check_orbit_starts", "check_start_energy", "distinct_orbits"]
+
+
+def _start_values(system):
+    """``jit(vmap(μ ↦ (C(μ), h(μ))))``, compiled once per system."""
+    values = system.__dict__.get("_start_values")
+    if values is None:
+        values = jit(jax.vmap(lambda mu: (system.casimirs(mu), system.hamiltonian(mu))))
+        system.__dict__["_start_values"] = values
+    return values
+
+
+def check_start_energy(system, position, energy) -> None:
+    """``ValueError`` when the energy ``h`` of a concrete start is not finite (NaN/inf)."""
+    if not np.isfinite(energy):
+        raise ValueError(
+            f"the energy h = {float(energy)} at this start of the {system.name} is not finite; "
+            f"the chain would run on NaN. Start where h is finite (position {np.asarray(position)})"
+        )
+
+
+def check_orbit_starts(system: LiePoissonSystem, positions):
+    """Check every start ``positions[c]`` (shape ``(chains, *event_shape)``) at once.
+
+    Raises ``ValueError`` naming the first bad chain. Returns the Casimirs of every start,
+    shape ``(chains, ...)``, for :func:`distinct_orbits`.
+    """
+    positions = np.asarray(positions)
+    if positions.shape[1:] != tuple(system.event_shape):
+        system.check_position(positions[0], "initial_positions[0]")  # the system's message
+        raise ValueError(
+            f"initial_positions must have shape (chains, *{tuple(system.event_shape)}), got "
+            f"{positions.shape}"
+        )
+    flat = positions.reshape(positions.shape[0], -1)
+    finite = np.all(np.isfinite(flat), axis=1)
+    raise_first_bad([PositionCheck(finite, "must be finite")], positions, system.check_position)
+    batched = getattr(system, "check_positions", None)
+    with jax.ensure_compile_time_eval():
+        casimirs, energies = _start_values(system)(jnp.asarray(positions, jnp.result_type(float)))
+    casimirs, energies = np.asarray(casimirs), np.asarray(energies)
+    if batched is not None:
+        batched(positions, "initial_positions")
+    else:
+        chosen = casimirs if system.positive_casimirs is None else casimirs[
+            ..., list(system.positive_casimirs)
+        ]
+        nondegenerate = np.all(chosen.reshape(len(positions), -1) > 0, axis=1)
+        raise_first_bad(
+            [PositionCheck(nondegenerate, "lies on a degenerate orbit")],
+            positions,
+            system.check_position,
+        )
+        if type(system).check_position is not LiePoissonSystem.check_position:
+            # System-specific constraints (unit spins, distinct vortices): once per distinct start.
+            _, first = np.unique(flat, axis=0, return_index=True)
+            for chain in np.sort(first):
+                system.check_position(positions[chain], f"initial_positions[{chain}]")
+    chain = first_bad_chain(np.isfinite(energies))
+    if chain is not None:
+        try:
+            check_start_energy(system, positions[chain], energies[chain])
+        except ValueError as error:
+            raise ValueError(f"initial_positions[{chain}]: {error}") from None
+    return casimirs
+
+
+def distinct_orbits(casimirs) -> np.ndarray:
+    """Index of one start per distinct orbit (Casimirs equal to 12 decimals)."""
+    rounded = np.round(np.asarray(casimirs, dtype=float).reshape(len(casimirs), -1), 12)
+    _, first = np.unique(rounded, axis=0, return_index=True)
+    return np.sort(first)

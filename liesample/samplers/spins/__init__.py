@@ -1,0 +1,1 @@
+"""Spin-lattice samplers: exact heat bath with over-relaxation, single-spin Metropolis, Wolff."""

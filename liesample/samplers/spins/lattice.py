@@ -1,0 +1,223 @@
+"""What the classical-spin samplers share: state, info, local fields and the exact moves.
+
+The samplers (:mod:`~liesample.samplers.spins.heisenberg_heat_bath`,
+:mod:`~liesample.samplers.spins.heisenberg_metropolis`, :mod:`~liesample.samplers.spins.heisenberg_wolff`) act on a
+:func:`liesample.systems.heisenberg` system. Spins of one colour class of the lattice's proper
+colouring (:func:`liesample.systems.heisenberg.colouring`) are never neighbours, so given the
+other classes each feels a fixed local field
+
+    ``F_k = J Σ_{j~k} s_j + B``      (``h = −s_k·F_k + …`` in ``s_k``, when ``D = 0``),
+
+and the stochastic Landau–Lifshitz–Gilbert equation of that spin alone (paper,
+``eq:lie-poisson-langevin``) has two exactly solvable parts:
+
+- its **Hamiltonian flow** ``ṡ_k = s_k × ∇_k h = F_k × s_k``, a precession about ``F_k``
+  (:func:`precess`; by the angle ``π`` it is the physicists' over-relaxation): it keeps ``h``
+  and the area on ``S²``, hence ``exp(−βh)``, exactly, for any angle;
+- its **noise–dissipation part**, a diffusion on ``S²`` whose law at infinite time is the exact
+  conditional law ``∝ exp(β s_k·F_k)``, a von Mises–Fisher law of concentration ``β|F_k|``
+  (:func:`heat_bath`).
+
+Every sampler's info follows the package's one contract: ``is_divergent`` (the new state or
+its energy was non-finite; the chain then kept its state), ``acceptance_rate`` (the Metropolis
+acceptance; 1 for rejection-free moves) and ``energy`` (``h`` after the step).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from liesample.foundation.validation import finite_float
+from liesample.geometry.algebras import so3
+from liesample.systems.heisenberg import (
+    SpinLatticeSystem,
+    colouring,
+    neighbour_sum,
+    neighbour_table,
+)
+from liesample.targets.spins import von_mises_fisher
+
+__all__ = [
+    "SpinInfo",
+    "SpinState",
+    "Sublattice",
+    "check_beta",
+    "check_spin_system",
+    "check_sweeps",
+    "energy_change",
+    "finish_step",
+    "heat_bath",
+    "init",
+    "local_energy_change",
+    "local_field",
+    "precess",
+    "require_isotropic",
+    "sublattice_field",
+    "sublattices",
+]
+
+
+class SpinState(NamedTuple):
+    """The spins (``position``, shape ``(*shape, 3)``, unit vectors)."""
+
+    position: jax.Array
+
+
+class SpinInfo(NamedTuple):
+    """What one step did.
+
+    is_divergent : the step produced a non-finite state or energy; the chain kept its state.
+    acceptance_rate : fraction of accepted proposals (1 for rejection-free moves, 0 for a
+        divergent step).
+    energy : ``h`` of the chain's state after the step.
+    """
+
+    is_divergent: jax.Array
+    acceptance_rate: jax.Array
+    energy: jax.Array
+
+
+def check_spin_system(system) -> dict:
+    """``system.params`` of a :func:`heisenberg` system, or a ``TypeError``."""
+    if not isinstance(system, SpinLatticeSystem):
+        raise TypeError(
+            f"system must be a heisenberg(...) SpinLatticeSystem, got {type(system).__name__}"
+        )
+    return system.params
+
+
+def require_isotropic(system, sampler: str) -> None:
+    """Refuse ``D ≠ 0``: the conditional law of a spin is then Fisher–Bingham, not vMF."""
+    anisotropy = system.params["anisotropy"]
+    if anisotropy != 0.0:
+        raise ValueError(
+            f"{sampler} needs an isotropic system (anisotropy = 0): with D = {anisotropy:g} a "
+            "spin's conditional law exp(beta*(s.F + D s_z^2)) is not von Mises-Fisher and the "
+            "precession about F does not keep h; use heisenberg_metropolis or "
+            "lie_poisson_langevin for anisotropic systems"
+        )
+
+
+def init(position, system: SpinLatticeSystem, rng_key=None) -> SpinState:
+    """Initial state (unit spins are checked; ``rng_key`` is ignored)."""
+    del rng_key
+    system.check_position(position)
+    return SpinState(jnp.asarray(position, dtype=jnp.result_type(float)))
+
+
+class Sublattice(NamedTuple):
+    """One colour class: its flat site indices ``(n,)`` and their neighbours ``(n, 2·dim)``
+    (index ``N``, a zero spin, where an open boundary has none)."""
+
+    sites: jax.Array
+    neighbours: jax.Array
+
+
+def sublattices(system: SpinLatticeSystem) -> list[Sublattice]:
+    """The colour classes of the lattice's proper colouring, as gather indices (static)."""
+    params = system.params
+    colours, num_colours = colouring(params["shape"], params["periodic"])
+    table = neighbour_table(params["shape"], params["periodic"])
+    out = []
+    for c in range(num_colours):
+        sites = np.flatnonzero(colours.reshape(-1) == c)
+        out.append(Sublattice(jnp.asarray(sites, jnp.int32), jnp.asarray(table[sites], jnp.int32)))
+    return out
+
+
+def sublattice_field(system: SpinLatticeSystem, flat, sublattice: Sublattice):
+    """``F_k = J Σ_{j~k} s_j + B`` at the sites of ``sublattice`` (``flat``: spins ``(N, 3)``)."""
+    padded = jnp.concatenate([flat, jnp.zeros((1, 3), flat.dtype)])
+    params = system.params
+    return params["coupling"] * jnp.sum(padded[sublattice.neighbours], axis=1) + jnp.asarray(
+        params["field"], dtype=flat.dtype
+    )
+
+
+def local_field(system: SpinLatticeSystem, s):
+    """``F_k = J Σ_{j~k} s_j + B`` for every site (shape of ``s``)."""
+    params = system.params
+    return params["coupling"] * neighbour_sum(s, params["periodic"]) + jnp.asarray(
+        params["field"], dtype=s.dtype
+    )
+
+
+def energy_change(system: SpinLatticeSystem, old, new, field):
+    """``Δh`` of moving single spins ``old → new`` in their local fields ``field`` (…, 3):
+    ``−(new − old)·F − D((new·e_z)² − (old·e_z)²)``; exact, as ``h`` has no self-interaction
+    (every bond joins two distinct sites)."""
+    delta = -jnp.sum((new - old) * field, axis=-1)
+    anisotropy = system.params["anisotropy"]
+    if anisotropy != 0.0:
+        delta = delta - anisotropy * (new[..., 2] ** 2 - old[..., 2] ** 2)
+    return delta
+
+
+def local_energy_change(system: SpinLatticeSystem, s, new):
+    """``Δh_k = h(s with s_k → new_k) − h(s)`` for every site ``k`` at once (lattice shape)."""
+    return energy_change(system, s, new, local_field(system, s))
+
+
+def _unit(field):
+    """``(F/|F|, |F|)`` with ``F/|F| = 0`` where ``F = 0``."""
+    norm = jnp.linalg.norm(field, axis=-1)
+    safe = jnp.where(norm > 0.0, norm, 1.0)
+    return jnp.where((norm > 0.0)[..., None], field / safe[..., None], 0.0), norm
+
+
+def precess(system: SpinLatticeSystem, flat, sublattice: Sublattice, angle):
+    """The spins of ``sublattice`` precess about their local fields by ``angle``: the exact
+    Hamiltonian flow of each (``ṡ_k = F_k × s_k``, run for time ``angle/|F_k|``), which keeps
+    ``h`` to round-off; spins with ``F_k = 0`` do not move. ``angle = π`` is over-relaxation,
+    ``s ↦ 2(s·F̂)F̂ − s`` (computed so, without trigonometry, when ``angle`` is the float π).
+    ``flat``: spins ``(N, 3)``."""
+    direction, _ = _unit(sublattice_field(system, flat, sublattice))
+    s = flat[sublattice.sites]
+    if isinstance(angle, float) and angle == math.pi:
+        moved = 2.0 * jnp.sum(s * direction, axis=-1, keepdims=True) * direction - s
+        moved = jnp.where(jnp.any(direction != 0.0, axis=-1, keepdims=True), moved, s)
+    else:
+        # Ad*_{exp ζ} s rotates about −ζ/|ζ| by |ζ| (so3.coadjoint_exp): ζ = −angle·F̂.
+        moved = so3.coadjoint_exp(-angle * direction, s)
+    return flat.at[sublattice.sites].set(moved)
+
+
+def heat_bath(system: SpinLatticeSystem, rng_key, flat, sublattice: Sublattice, beta):
+    """The spins of ``sublattice`` are redrawn from their exact conditional law
+    ``∝ exp(β s·F_k)``: the infinite-time limit of each spin's noise–dissipation dynamics in the
+    frozen field ``F_k``, a von Mises–Fisher law
+    (:func:`liesample.targets.spins.von_mises_fisher`); ``F_k = 0`` gives a uniform draw.
+    ``flat``: spins ``(N, 3)``."""
+    direction, norm = _unit(sublattice_field(system, flat, sublattice))
+    return flat.at[sublattice.sites].set(von_mises_fisher(rng_key, direction, beta * norm))
+
+
+def finish_step(system: SpinLatticeSystem, old, new, acceptance_rate, info_class=SpinInfo, **extra):
+    """``(SpinState, info)`` after a step; a non-finite state or energy keeps ``old`` (and
+    reports ``acceptance_rate = 0``)."""
+    energy = system.hamiltonian(new)
+    divergent = ~(jnp.all(jnp.isfinite(new)) & jnp.isfinite(energy))
+    position = jnp.where(divergent, old, new)
+    energy = jnp.where(divergent, system.hamiltonian(old), energy)
+    rate = jnp.where(divergent, 0.0, jnp.asarray(acceptance_rate, dtype=position.dtype))
+    return SpinState(position), info_class(divergent, rate, energy, **extra)
+
+
+def check_beta(beta) -> float:
+    """``β`` as a finite float (any sign: ``β < 0`` samples the negative temperature)."""
+    return finite_float("beta", beta)
+
+
+def check_sweeps(name: str, value) -> int:
+    """A non-negative int count of sweeps, or a clear error."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be a non-negative int (sweeps per step), got {value!r}")
+    if value < 0:
+        raise ValueError(f"{name} must be a non-negative int (sweeps per step), got {value!r}")
+    return int(value)
+

@@ -1,0 +1,1 @@
+"""Tuning: warm-up adaptation of step size, mass, field and trajectory length."""

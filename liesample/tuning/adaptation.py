@@ -1,0 +1,780 @@
+"""Window adaptation for the geometric and magnetic samplers: step size, mass, trajectory length.
+
+``liesample.window_adaptation(algorithm, logdensity_fn, space, **parameters)`` mirrors
+``blackjax.window_adaptation``: ``.run(rng_key, initial_position, num_steps)`` returns
+``((state, parameters), info)`` and ``algorithm(logdensity_fn, space, **parameters)`` is the
+tuned sampler. Stan's schedule (``blackjax.adaptation.window_adaptation.build_schedule``): a
+fast window (step size only), doubling slow windows (step size and mass; the step size is
+restarted at the end of each), a final fast window. The step size is tuned by dual averaging
+(``blackjax.adaptation.step_size.dual_averaging_adaptation``) towards a target Metropolis rate
+(``info.metropolis_rate``: for unadjusted Langevin the rate the step *would* have).
+
+**Mass, in algebra coordinates.** ``Euclidean`` blocks: ``M⁻¹`` is the Welford variance of the
+position (as BlackJAX, with Stan's shrinkage towards ``1e-3``). Group, sphere and ``U1`` blocks
+have no global coordinates whose variance means anything (an angle's variance depends on where
+it is cut), so there the mass is the mean squared trivialised gradient,
+``M = E[(X_k log π)²] + 1`` (one value per copy of a group or sphere, the mean over its
+algebra coordinates; one per angle for ``U1``). Integration by parts against Haar measure
+(left-invariant fields are divergence-free) gives ``E[(X_k log π)²] = −E[X_k² log π]``, the
+mean curvature of ``−log π`` along ``X_k``: for a Gaussian ``N(0, Σ)`` it is ``Σ⁻¹``, i.e. the
+ideal mass. The ``+ 1`` is the unit sphere's own curvature scale: it keeps the mass finite for
+a nearly uniform law, where any mass would do.
+
+**Trajectory length (HMC).** Default: a fixed integration time ``T = π/2`` in the units set by
+the mass (a quarter period of a whitened Gaussian, whose position after ``T`` is independent
+of its start), with ``num_integration_steps = ceil(T / step_size)`` re-derived at every step
+of the warm-up and for the tuned sampler. Pass ``integration_time`` to change ``T`` or
+``num_integration_steps`` to fix ``L`` instead (then the integration time follows the step
+size, as in ``blackjax.window_adaptation``). Measured in ``docs/groups.md``.
+
+**Magnetic HMC** (``liesample.window_adaptation(liesample.magnetic_hmc, logdensity_fn)``, i.e.
+:func:`magnetic_window_adaptation`): several chains tuned together on the same schedule; the
+field is re-derived from the current mass and step size at every step (a fixed rotation angle
+per leapfrog step), so the step size is dual-averaged with the field on, and the trajectory
+length is learnt by a ChEES-type rule over jittered lengths; sample with
+:func:`jittered_magnetic_hmc`.
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+from collections.abc import Callable
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from blackjax.adaptation.step_size import dual_averaging_adaptation
+from blackjax.adaptation.window_adaptation import build_schedule
+from jax.flatten_util import ravel_pytree
+
+from liesample.foundation.compile import jit
+from liesample.foundation.validation import finite_float
+from liesample.geometry import spaces
+from liesample.samplers.contract import Sampler, first_bad_chain
+from liesample.samplers.cotangent.magnetic import default_magnetic_field
+from liesample.samplers.cotangent.magnetic_hmc import magnetic_hmc
+
+__all__ = [
+    "DEFAULT_ANGLE",
+    "DEFAULT_INTEGRATION_TIME",
+    "MagneticAdaptationInfo",
+    "jittered_magnetic_hmc",
+    "magnetic_window_adaptation",
+    "window_adaptation",
+]
+
+DEFAULT_INTEGRATION_TIME = 0.5 * math.pi
+MAX_NUM_INTEGRATION_STEPS = 1024
+
+
+class GeometricAdaptation(NamedTuple):
+    """What ``window_adaptation`` returns: ``run(rng_key, initial_position, num_steps)``."""
+
+    run: Callable
+
+
+class AdaptationInfo(NamedTuple):
+    """Per warm-up step: the sampler's state and info, the step size and trajectory length."""
+
+    state: object
+    info: object
+    step_size: jax.Array
+    num_integration_steps: jax.Array
+
+
+def _statistic(space, state):
+    """Flat vector whose Welford moments give the mass: positions of Euclidean blocks, the
+    trivialised gradient of the others."""
+    leaves = spaces._map(
+        lambda s, x, g: jnp.ravel(x if not s.compact else g),
+        space,
+        state.position,
+        state.logdensity_grad,
+    )
+    return jnp.concatenate(jax.tree.leaves(leaves))
+
+
+def _regularised_variance(variance, count):
+    """Stan's diagonal inverse mass from ``count`` draws: shrunk towards ``1e-3``."""
+    return (count / (count + 5.0)) * variance + 1e-3 * (5.0 / (count + 5.0))
+
+
+def _inverse_mass(space, mean, m2, count, dtype):
+    """Inverse mass (pytree like ``space``) from Welford moments of :func:`_statistic`."""
+    variance = m2 / jnp.maximum(count - 1, 1)
+    n = count.astype(dtype)
+    out, offset = [], 0
+    for s in spaces._spaces(space):
+        size = math.prod(s.momentum_array_shape)
+        var = variance[offset : offset + size].reshape(s.momentum_array_shape)
+        mu = mean[offset : offset + size].reshape(s.momentum_array_shape)
+        offset += size
+        if not s.compact:
+            out.append(_regularised_variance(var, n))
+            continue
+        squared = var + mu**2
+        if s.mass_shape == (1,):
+            squared = jnp.sum(squared, -1, keepdims=True) / s.copy_dimension
+        out.append(1.0 / (squared + 1.0))
+    structure = jax.tree.structure(space, is_leaf=spaces.is_space)
+    return structure.unflatten(out)
+
+
+def integration_steps(step_size, integration_time):
+    """``L = ceil(T / ε)``, clipped to ``[1, MAX_NUM_INTEGRATION_STEPS]`` (traceable)."""
+    steps = jnp.ceil(integration_time / step_size)
+    return jnp.clip(steps, 1, MAX_NUM_INTEGRATION_STEPS).astype(int)
+
+
+class WarmupState(NamedTuple):
+    """Adaptation carry: dual-averaging state, current step size and inverse mass, Welford
+    moments ``(mean, m2, count)`` of :func:`_statistic` in the current slow window."""
+
+    da_state: object
+    step_size: jax.Array
+    inverse_mass: object
+    welford: tuple
+
+
+class WarmupPieces(NamedTuple):
+    """One warm-up step's bookkeeping, shared by :func:`window_adaptation` and samplers that
+    adapt inside another driver's loop (``liesample.interop.numpyro_kernel``)."""
+
+    init: Callable  # (sampler state, initial step size, inverse mass) -> WarmupState
+    update: Callable  # (WarmupState, new state, info, stage, window_end) -> WarmupState
+    final_step_size: Callable  # WarmupState -> the averaged step size of dual averaging
+
+
+def _close_window(window_end, new_inverse_mass, da_init, da_final, operands):
+    """At the end of a slow window (Stan's schedule): the mass from the window's Welford moments
+    ``new_inverse_mass(mean, m2, count)``, dual averaging restarted from its averaged step size,
+    the moments reset. Otherwise ``operands = (da_state, inverse_mass, welford)`` unchanged."""
+
+    def close(operands):
+        da_state, _, (mean, m2, count) = operands
+        welford = (jnp.zeros_like(mean), jnp.zeros_like(m2), 0 * count)
+        return da_init(da_final(da_state)), new_inverse_mass(mean, m2, count), welford
+
+    return jax.lax.cond(window_end, close, lambda operands: operands, operands)
+
+
+def warmup_pieces(space, target_acceptance_rate: float, adapt_mass: bool = True) -> WarmupPieces:
+    """Dual averaging of the step size towards ``target_acceptance_rate`` and the Welford mass
+    of :func:`_inverse_mass`, one transition at a time, on Stan's schedule: ``stage`` 1 (slow
+    window) accumulates the mass statistic, ``window_end`` sets the mass and restarts dual
+    averaging from its averaged step size."""
+    da_init, da_update, da_final = dual_averaging_adaptation(target_acceptance_rate)
+
+    def init(state, initial_step_size, inverse_mass):
+        dtype = jnp.asarray(state.logdensity).dtype
+        size = _statistic(space, state).shape[0]
+        welford = (jnp.zeros(size, dtype), jnp.zeros(size, dtype), jnp.asarray(0))
+        step_size = jnp.asarray(initial_step_size, dtype)
+        return WarmupState(da_init(step_size), step_size, inverse_mass, welford)
+
+    def update(warm, state, info, stage, window_end):
+        da_state, _, inverse_mass, welford = warm
+        rate = jnp.where(jnp.isfinite(info.metropolis_rate), info.metropolis_rate, 0.0)
+        da_state = da_update(da_state, rate)
+        mean, m2, count = welford
+        slow = (stage == 1) & adapt_mass
+        x = _statistic(space, state)
+        new_count = count + 1
+        delta = x - mean
+        new_mean = mean + delta / new_count
+        new_m2 = m2 + delta * (x - new_mean)
+        welford = jax.tree.map(
+            lambda a, b: jnp.where(slow, a, b), (new_mean, new_m2, new_count), welford
+        )
+
+        da_state, inverse_mass, welford = _close_window(
+            window_end & adapt_mass,
+            lambda mean, m2, count: _inverse_mass(space, mean, m2, count, mean.dtype),
+            da_init,
+            da_final,
+            (da_state, inverse_mass, welford),
+        )
+        return WarmupState(da_state, jnp.exp(da_state.log_step_size), inverse_mass, welford)
+
+    def final_step_size(warm):
+        return da_final(warm.da_state)
+
+    return WarmupPieces(init, update, final_step_size)
+
+
+def window_adaptation(
+    algorithm,
+    logdensity_fn: Callable,
+    space=None,
+    *,
+    initial_step_size: float = 0.1,
+    target_acceptance_rate: float | None = None,
+    integration_time: float | None = None,
+    adapt_mass: bool = True,
+    progress_bar: bool = False,
+    **parameters,
+) -> GeometricAdaptation:
+    """Tune ``algorithm`` (``liesample.geometric_hmc`` or ``liesample.geometric_langevin``).
+
+    Parameters
+    ----------
+    algorithm
+        The sampler's API object; its ``build_kernel`` takes the options in ``parameters`` that
+        are not kernel arguments (e.g. ``adjusted=True`` for Langevin).
+    logdensity_fn, space
+        As for the sampler.
+    initial_step_size : float
+        Starting point of dual averaging.
+    target_acceptance_rate : float, optional
+        Target Metropolis rate: 0.8 for HMC, 0.9 for Langevin (one step per transition;
+        unadjusted chains are biased by the step size) by default.
+    integration_time : float, optional
+        HMC only: ``T`` of the trajectory (default ``π/2``) unless ``num_integration_steps`` is
+        given.
+    adapt_mass : bool
+        Adapt the inverse mass (else keep ``inverse_mass_matrix`` or unit mass).
+    parameters
+        The sampler's other arguments: ``num_integration_steps`` (HMC, fixes ``L``),
+        ``friction`` (Langevin, default 1), ``inverse_mass_matrix`` (the starting mass),
+        and ``build_kernel`` options (``adjusted``, ``divergence_threshold``).
+    """
+    if algorithm is magnetic_hmc:
+        if space is not None:
+            raise TypeError(
+                "magnetic_hmc samples on R^d and takes no space; call "
+                "window_adaptation(liesample.magnetic_hmc, logdensity_fn, **options)"
+            )
+        if target_acceptance_rate is not None:
+            parameters["target_acceptance_rate"] = target_acceptance_rate
+        return magnetic_window_adaptation(
+            logdensity_fn,
+            initial_step_size=initial_step_size,
+            integration_time=integration_time,
+            adapt_mass=adapt_mass,
+            **parameters,
+        )
+    if space is None:
+        raise TypeError(f"window_adaptation({algorithm}, logdensity_fn, space): give the space")
+    del progress_bar  # accepted for BlackJAX compatibility; the warm-up runs in one compiled loop
+    spaces._spaces(space)
+    finite_float("initial_step_size", initial_step_size, positive=True)
+    build_options = {
+        k: parameters.pop(k) for k in ("adjusted", "divergence_threshold") if k in parameters
+    }
+    kernel = algorithm.build_kernel(**build_options)
+    arguments = inspect.signature(kernel).parameters
+    is_hmc = "num_integration_steps" in arguments
+    fixed_steps = parameters.pop("num_integration_steps", None)
+    if is_hmc:
+        if fixed_steps is not None and integration_time is not None:
+            raise ValueError("give integration_time or num_integration_steps, not both")
+        if fixed_steps is None:
+            time = DEFAULT_INTEGRATION_TIME if integration_time is None else integration_time
+            integration_time = finite_float("integration_time", time, positive=True)
+        elif isinstance(fixed_steps, bool) or int(fixed_steps) != fixed_steps or fixed_steps < 1:
+            raise ValueError(f"num_integration_steps must be an integer >= 1, got {fixed_steps!r}")
+    elif fixed_steps is not None or integration_time is not None:
+        raise ValueError("num_integration_steps and integration_time are HMC parameters")
+    else:
+        parameters.setdefault("friction", 1.0)
+    if target_acceptance_rate is None:
+        target_acceptance_rate = 0.8 if is_hmc else 0.9
+    target = finite_float("target_acceptance_rate", target_acceptance_rate)
+    if not 0.0 < target < 1.0:
+        raise ValueError(f"target_acceptance_rate must be in (0, 1), got {target}")
+    if "step_size" in parameters:
+        raise TypeError("step_size is what window_adaptation tunes: give initial_step_size")
+    unknown = set(parameters) - (set(arguments) - {"rng_key", "state", "logdensity_fn", "space"})
+    if unknown:
+        raise TypeError(f"unknown parameters for {algorithm}: {sorted(unknown)}")
+    initial_mass = parameters.pop("inverse_mass_matrix", None)
+    pieces = warmup_pieces(space, target, adapt_mass)
+
+    def num_steps_for(step_size):
+        if not is_hmc:
+            return jnp.asarray(1)
+        if fixed_steps is not None:
+            return jnp.asarray(int(fixed_steps))
+        return integration_steps(step_size, integration_time)
+
+    def one_step(carry, xs):
+        state, warm = carry
+        key, (stage, window_end) = xs
+        steps = num_steps_for(warm.step_size)
+        extra = {"num_integration_steps": steps} if is_hmc else {}
+        state, info = kernel(
+            key,
+            state,
+            logdensity_fn,
+            space,
+            step_size=warm.step_size,
+            inverse_mass_matrix=warm.inverse_mass,
+            **extra,
+            **parameters,
+        )
+        warm = pieces.update(warm, state, info, stage, window_end)
+        record = AdaptationInfo(state, info, warm.step_size, steps)
+        return (state, warm), record
+
+    def run(rng_key, initial_position, num_steps: int = 1000):
+        """Warm up for ``num_steps`` transitions; ``((state, parameters), info)``."""
+        if isinstance(num_steps, bool) or int(num_steps) != num_steps or num_steps < 20:
+            raise ValueError(f"num_steps must be an integer >= 20, got {num_steps!r}")
+        state = algorithm.init(initial_position, logdensity_fn, space)
+        dtype = jnp.asarray(state.logdensity).dtype
+        inverse_mass = spaces.check_inverse_mass(space, initial_mass, dtype)
+        schedule = np.asarray(build_schedule(int(num_steps)))
+        stages = jnp.asarray(schedule[:, 0])
+        ends = jnp.asarray(schedule[:, 1].astype(bool))
+        carry = (state, pieces.init(state, initial_step_size, inverse_mass))
+        keys = jax.random.split(rng_key, int(num_steps))
+
+        @jit
+        def warmup(carry, keys, stages, ends):
+            return jax.lax.scan(one_step, carry, (keys, (stages, ends)))
+
+        (state, warm), info = warmup(carry, keys, stages, ends)
+        step_size = float(pieces.final_step_size(warm))
+        inverse_mass = warm.inverse_mass
+        tuned = dict(parameters)
+        tuned["step_size"] = step_size
+        tuned["inverse_mass_matrix"] = inverse_mass
+        if is_hmc:
+            tuned["num_integration_steps"] = int(num_steps_for(step_size))
+        tuned.update(build_options)
+        return (state, tuned), info
+
+    return GeometricAdaptation(run)
+
+
+# --------------------------------------------------------------------------- magnetic HMC
+
+DEFAULT_ANGLE = 0.0
+"""Default field of :func:`magnetic_window_adaptation`, as the angle (rad) per leapfrog step.
+
+Measured with the ChEES-type trajectory rule and jittered lengths (``benchmarks/euclidean.py``,
+4 chains x 2000 draws, min bulk ESS per gradient of angle 0.25 against angle 0): 0.61x on the
+100-d rotated Gaussian (κ = 100: the field slows its slowest directions further), 0.72x on the
+breast-cancer logistic regression, 1.3x on the 2-d Gaussian (ρ = 0.99), 2.2x on the banana
+(fewer divergences) and 3.4x on Neal's funnel (where every sampler is biased and angle 0 is
+7x behind NUTS). Angle 0 meets "ESS per gradient ≥ NUTS" on four of the five targets, angle
+0.25 on three, so no field by default; ``angle > 0`` turns it on, adapted jointly."""
+CHEES_TARGET_ACCEPTANCE_RATE = 0.651
+CHEES_LEARNING_RATE = 0.01
+CHEES_AVERAGING = 0.95  # running means of the ChEES estimates
+
+
+class MagneticAdaptationInfo(NamedTuple):
+    """Per warm-up step, every chain: state and info after the step; the shared step size,
+    leapfrog steps (jittered), trajectory length ``T`` (before jitter) and field strength."""
+
+    state: object
+    info: object
+    step_size: jax.Array
+    num_integration_steps: jax.Array
+    trajectory_length: jax.Array
+    strength: jax.Array
+
+
+def _van_der_corput(num: int) -> np.ndarray:
+    """The base-2 Halton sequence ``1/2, 1/4, 3/4, 1/8, …`` (``num`` points in ``(0, 1)``)."""
+    index = np.arange(1, num + 1)
+    out = np.zeros(num)
+    scale = 0.5
+    while np.any(index):
+        out += scale * (index & 1)
+        index >>= 1
+        scale *= 0.5
+    return out
+
+
+def _rotation(dimension: int) -> np.ndarray:
+    """``J̃`` of :func:`default_magnetic_field`: its field for unit mass and unit strength."""
+    return np.asarray(default_magnetic_field(np.ones(dimension), 1.0))
+
+
+def _field(rotation, inverse_mass, strength):
+    """``default_magnetic_field(M⁻¹, strength)`` for a diagonal ``M⁻¹``, traceable:
+    ``G = strength · M^{1/2} J̃ M^{1/2}``, i.e. ``G_ij = strength · J̃_ij / √(m⁻¹_i m⁻¹_j)``."""
+    scale = jax.lax.rsqrt(inverse_mass)
+    return strength * rotation * scale[:, None] * scale[None, :]
+
+
+def _chees_terms(before, after, momentum, accepted, acceptance, inverse_mass, time):
+    """Estimates of ``ChEES`` and of ``∂ ChEES / ∂ log T`` from a batch of chains.
+
+    ``ChEES = ¼ E[(‖x' − E x‖² − ‖x − E x‖²)²]`` (Hoffman, Radul & Sountsov 2021) in the
+    coordinates whitened by the mass (``x = M^{1/2} q``), the centre estimated by the mean
+    over chains. Its derivative along a trajectory of length ``t = u T`` is
+    ``Δ · (x' − x̄')·ẋ' · t`` with ``Δ`` the change of squared distance, and
+    ``(x' − x̄')·ẋ' = (q' − q̄')·p'`` (the mass cancels, and the field does not enter:
+    ``q̇ = M⁻¹p`` with or without it). The paper weights each chain's proposal by its
+    acceptance probability; here the chain's accepted move stands in for it (a rejected move
+    contributes 0, the same in expectation), normalised by the summed probabilities.
+    Returns ``(chees, gradient, spread)``, ``spread`` the chains' mean of ``‖x' − x̄'‖²`` and
+    of its square.
+    """
+    centred_before = before - jnp.mean(before, 0)
+    centred_after = after - jnp.mean(after, 0)
+    change = jnp.sum(centred_after**2 / inverse_mass, -1) - jnp.sum(
+        centred_before**2 / inverse_mass, -1
+    )
+    rate = jnp.sum(centred_after * momentum, -1)
+    total = jnp.sum(acceptance)
+    norm = jnp.where(total > 0, 1.0 / jnp.maximum(total, 1e-30), 0.0)
+    chees = norm * jnp.sum(jnp.where(accepted, 0.25 * change**2, 0.0))
+    gradient = norm * jnp.sum(jnp.where(accepted, time * change * rate, 0.0))
+    distance = jnp.sum(centred_after**2 / inverse_mass, -1)
+    spread = jnp.stack([jnp.mean(distance), jnp.mean(distance**2)])
+    return chees, gradient, spread
+
+
+def _chees_gradient(*args):
+    """``∂ ChEES / ∂ log T`` of :func:`_chees_terms`."""
+    return _chees_terms(*args)[1]
+
+
+def _log_efficiency_gradient(means, cost_slope):
+    """``∂/∂ log T`` of ``log[(1 − ρ)/((1 + ρ) E L)]`` from running means ``(Ĉ, ĝ, E s, E s²)``.
+
+    ``ρ`` is the one-transition autocorrelation of the squared distance ``s = ‖x − x̄‖²``, so
+    ``(1 − ρ)/(1 + ρ)`` is its effective sample size per transition and dividing by the mean
+    number of leapfrog steps, ``E L ≈ T/(2ε) + ½``, makes it per gradient evaluation
+    (``cost_slope = ∂ log E L / ∂ log T = T/(T + ε)``). ChEES is ``(1 − ρ)`` times its value for
+    independent draws, ``½ Var s``, so with ``r = Ĉ / (½ Var s)``, ``1 − ρ = r/2`` and the
+    gradient is ``(ĝ/Ĉ) · 4/(4 − r) − cost_slope``.
+    For one Gaussian direction of frequency ``ω`` its maximum is at ``T ≈ 1.8/ω`` (ChEES
+    alone first peaks at ``2.25/ω``, ChEES per unit length at ``π/(2ω)``).
+    """
+    chees, gradient, mean, square = means[0], means[1], means[2], means[3]
+    independent = 0.5 * (square - mean**2)
+    r = jnp.clip(chees / jnp.maximum(independent, 1e-300), 0.0, 3.0)
+    ratio = gradient / jnp.maximum(chees, 1e-300)
+    return jnp.where((chees > 0) & (independent > 0), ratio * 4.0 / (4.0 - r) - cost_slope, 0.0)
+
+
+def _harmonic_mean(rates):
+    """Harmonic mean of the chains' acceptance rates (0 if any is 0): one stuck chain is enough
+    to lower the step size, as in ChEES-HMC."""
+    rates = jnp.where(jnp.isfinite(rates), rates, 0.0)
+    return jnp.where(jnp.all(rates > 0), 1.0 / jnp.mean(1.0 / jnp.maximum(rates, 1e-30)), 0.0)
+
+
+def _welford_batch(welford, x):
+    """Chan et al.'s update of ``(mean, m2, count)`` with a batch ``x`` of shape ``(n, d)``."""
+    mean, m2, count = welford
+    n = x.shape[0]
+    batch_mean = jnp.mean(x, 0)
+    batch_m2 = jnp.sum((x - batch_mean) ** 2, 0)
+    total = count + n
+    delta = batch_mean - mean
+    new_mean = mean + delta * (n / total)
+    new_m2 = m2 + batch_m2 + delta**2 * (count * n / total)
+    return new_mean, new_m2, total
+
+
+def magnetic_window_adaptation(
+    logdensity_fn: Callable,
+    *,
+    angle: float = DEFAULT_ANGLE,
+    initial_step_size: float = 0.1,
+    target_acceptance_rate: float = CHEES_TARGET_ACCEPTANCE_RATE,
+    integration_time: float | None = None,
+    initial_integration_time: float = DEFAULT_INTEGRATION_TIME,
+    learning_rate: float = CHEES_LEARNING_RATE,
+    adapt_mass: bool = True,
+    divergence_threshold: float = 1000.0,
+    max_num_integration_steps: int = MAX_NUM_INTEGRATION_STEPS,
+    progress_bar: bool = False,
+) -> GeometricAdaptation:
+    """Tune ``liesample.magnetic_hmc`` on several chains at once: step size, diagonal mass, the
+    field (jointly with both) and the trajectory length (ChEES).
+
+    Also reached as ``liesample.window_adaptation(liesample.magnetic_hmc, logdensity_fn, ...)``.
+    ``.run(rng_key, initial_positions, num_steps=1000)`` takes positions with a leading chain
+    axis (``C >= 2`` chains; ChEES estimates the target's mean across them, 4 or more are
+    better) and returns ``((states, parameters), info)``: the chains' last states (leading
+    chain axis), ``parameters`` for ``liesample.magnetic_hmc(logdensity_fn, **parameters)``
+    (``step_size``, diagonal ``inverse_mass_matrix``, ``magnetic_field``,
+    ``num_integration_steps``) and :class:`MagneticAdaptationInfo` per step. The adapted
+    trajectory length ``T`` is ``info.trajectory_length[-1]``; ``num_integration_steps`` is the
+    mean of the jittered lengths, ``round(T / (2ε))``.
+
+    **Schedule.** Stan's windows (as :func:`window_adaptation`), all chains sharing one set of
+    parameters: the step size is dual-averaged towards ``target_acceptance_rate`` of the
+    harmonic mean of the chains' acceptance probabilities *with the field on*; the inverse mass
+    is the regularised variance of every chain's draws in a slow window; at every step the
+    field is ``default_magnetic_field(M⁻¹, angle / ε)`` for the current ``M⁻¹`` and ``ε``, so the
+    whitened velocity turns by ``angle`` rad per leapfrog step throughout the warm-up.
+
+    **Trajectory length (ChEES).** Each transition integrates for ``t = u T`` with ``u`` from the
+    base-2 Halton sequence (the same for every chain), ``L = ceil(t / ε)`` steps; ``log T`` is
+    moved by ``learning_rate`` times the estimated gradient (clipped to ``[−2, 2]``) of the log
+    of the squared distance's ESS per gradient, ``(1 − ρ)/((1 + ρ) T)``, with ``1 − ρ``
+    read off ChEES normalised by its value for independent draws
+    (:func:`_log_efficiency_gradient`, from running means of the estimates of
+    :func:`_chees_terms`). ChEES alone saturates once the trajectory outlasts the slowest
+    direction's decorrelation time, and its noisy gradient then lets ``T`` drift (measured on
+    the 100-d Gaussian of ``benchmarks/euclidean.py``: the adapted ``T`` fell anywhere in
+    5.5–15 between runs, ESS per gradient varying 2x with it); ChEES per unit length has a
+    maximum but favours the fast directions (``T = 2.2`` there, ESS per gradient 0.8x). The
+    gradient is dimensionless and bounded, so the step is plain stochastic ascent, not Adam
+    (Adam's normalised steps keep their size where the mean gradient vanishes: with 4 chains
+    ``T`` then wandered by a factor 3 around the optimum). The returned ``T`` is ``exp`` of the
+    mean of ``log T`` over the last slow window and the final fast window;
+    ``integration_time=T`` fixes ``T`` instead.
+
+    Parameters
+    ----------
+    logdensity_fn : callable
+        ``log π`` of a position (a pytree; flattened as the sampler flattens it).
+    angle : float
+        Rotation (rad) of the whitened velocity per leapfrog step; 0 (:data:`DEFAULT_ANGLE`,
+        measured) is plain HMC with the same rules.
+    initial_step_size, target_acceptance_rate
+        Dual averaging's start and target (0.651, ChEES-HMC's, by default).
+    integration_time, initial_integration_time, learning_rate
+        Fixed ``T`` (no ChEES), or the rule's starting ``T`` (``π/2``) and step on ``log T``.
+    adapt_mass : bool
+        Adapt the diagonal inverse mass (else unit mass).
+    divergence_threshold : float
+        As for the sampler.
+    max_num_integration_steps : int
+        Cap on ``L`` per transition (and on ``T / ε``).
+    """
+    del progress_bar  # accepted for BlackJAX compatibility; the warm-up is one compiled loop
+    angle = finite_float("angle", angle, nonnegative=True)
+    finite_float("initial_step_size", initial_step_size, positive=True)
+    target = finite_float("target_acceptance_rate", target_acceptance_rate)
+    if not 0.0 < target < 1.0:
+        raise ValueError(f"target_acceptance_rate must be in (0, 1), got {target}")
+    if integration_time is not None:
+        integration_time = finite_float("integration_time", integration_time, positive=True)
+    initial_time = finite_float("initial_integration_time", initial_integration_time, positive=True)
+    learning_rate = finite_float("learning_rate", learning_rate, positive=True)
+    if not isinstance(adapt_mass, bool):
+        raise TypeError(f"adapt_mass must be a bool, got {adapt_mass!r}")
+    max_steps = max_num_integration_steps
+    if isinstance(max_steps, bool) or int(max_steps) != max_steps or max_steps < 1:
+        raise ValueError(f"max_num_integration_steps must be an integer >= 1, got {max_steps!r}")
+    max_steps = int(max_steps)
+    divergence_threshold = finite_float("divergence_threshold", divergence_threshold, positive=True)
+    learn = integration_time is None
+    da_init, da_update, da_final = dual_averaging_adaptation(target)
+
+    def run(rng_key, initial_positions, num_steps: int = 1000):
+        """Warm up ``C`` chains for ``num_steps`` transitions; ``((states, parameters), info)``."""
+        if isinstance(num_steps, bool) or int(num_steps) != num_steps or num_steps < 20:
+            raise ValueError(f"num_steps must be an integer >= 20, got {num_steps!r}")
+        num_steps = int(num_steps)
+        flat = _flat_starts(initial_positions, logdensity_fn)
+        num_chains, dimension = flat.shape
+        dtype = flat.dtype
+        states = jax.vmap(lambda x: magnetic_hmc.init(x, logdensity_fn))(initial_positions)
+        rotation = jnp.asarray(_rotation(dimension), dtype)
+        zero_field = np.zeros((dimension, dimension))
+        schedule = np.asarray(build_schedule(num_steps))
+        stages = schedule[:, 0].astype(int)
+        ends = schedule[:, 1].astype(bool)
+        slow = np.flatnonzero(stages == 1)
+        last_window = np.flatnonzero(ends[: slow[-1]])  # ends before the last slow window's
+        average_from = int(last_window[-1]) + 1 if slow.size and last_window.size else 0
+        if not slow.size:
+            average_from = num_steps // 2
+        jitter = _van_der_corput(num_steps)
+        time0 = integration_time if integration_time is not None else initial_time
+
+        def one_step(carry, xs):
+            states, da_state, log_time, means, inverse_mass, welford = carry
+            key, u, stage, window_end, index = xs
+            step_size = jnp.exp(da_state.log_step_size)
+            strength = angle / step_size
+            # angle 0: a concrete zero field, so the sampler takes the free drift (no expm)
+            field = zero_field if angle == 0.0 else _field(rotation, inverse_mass, strength)
+            trajectory = jnp.exp(log_time)
+            steps = jnp.clip(jnp.ceil(u * trajectory / step_size), 1, max_steps).astype(int)
+
+            # The top-level API: the flows e^{±εGM⁻¹} are computed once per step for all chains.
+            sampler = magnetic_hmc(
+                logdensity_fn,
+                step_size,
+                inverse_mass,
+                steps,
+                field,
+                divergence_threshold=divergence_threshold,
+            )
+            new_states, info = jax.vmap(sampler.step)(jax.random.split(key, num_chains), states)
+            da_state = da_update(da_state, _harmonic_mean(info.acceptance_rate))
+            before = jax.vmap(_ravel)(states.position)
+            after = jax.vmap(_ravel)(new_states.position)
+            if learn:
+                chees, gradient, spread = _chees_terms(
+                    before,
+                    after,
+                    new_states.momentum,
+                    info.is_accepted,
+                    info.acceptance_rate,
+                    inverse_mass,
+                    u * trajectory,
+                )
+                # Running means of the estimates, then their ratios (not the mean of ratios:
+                # one batch's ChEES can be near 0).
+                terms = jnp.concatenate([jnp.stack([chees, gradient]), spread])
+                ok = jnp.all(jnp.isfinite(terms))
+                means = jnp.where(
+                    ok, CHEES_AVERAGING * means + (1.0 - CHEES_AVERAGING) * terms, means
+                )
+                gradient = _log_efficiency_gradient(means, trajectory / (trajectory + step_size))
+                # The gradient is dimensionless (≈ +1 for too short, ≥ −1 for too long a
+                # trajectory), so plain stochastic ascent on log T with a fixed step.
+                update = learning_rate * jnp.clip(gradient, -2.0, 2.0)
+                log_time = jnp.where(jnp.isfinite(update), log_time + update, log_time)
+                cap = jnp.log(max_steps * step_size)
+                log_time = jnp.minimum(log_time, cap)
+            in_slow = (stage == 1) & adapt_mass
+            welford = jax.tree.map(
+                lambda a, b: jnp.where(in_slow, a, b), _welford_batch(welford, after), welford
+            )
+
+            da_state, inverse_mass, welford = _close_window(
+                window_end & adapt_mass,
+                lambda mean, m2, count: _regularised_variance(
+                    m2 / jnp.maximum(count - 1, 1), count.astype(dtype)
+                ),
+                da_init,
+                da_final,
+                (da_state, inverse_mass, welford),
+            )
+            record = MagneticAdaptationInfo(
+                new_states, info, step_size, steps, trajectory, strength
+            )
+            return (new_states, da_state, log_time, means, inverse_mass, welford), record
+
+        welford = (jnp.zeros(dimension, dtype), jnp.zeros(dimension, dtype), jnp.asarray(0))
+        carry = (
+            states,
+            da_init(jnp.asarray(initial_step_size, dtype)),
+            jnp.log(jnp.asarray(time0, dtype)),
+            jnp.zeros(4, dtype),
+            jnp.ones(dimension, dtype),
+            welford,
+        )
+        xs = (
+            jax.random.split(rng_key, num_steps),
+            jnp.asarray(jitter, dtype),
+            jnp.asarray(stages),
+            jnp.asarray(ends),
+            jnp.arange(num_steps),
+        )
+
+        @jit
+        def warmup(carry, xs):
+            return jax.lax.scan(one_step, carry, xs)
+
+        (states, da_state, _, _, inverse_mass, _), info = warmup(carry, xs)
+        step_size = float(da_final(da_state))
+        times = np.asarray(info.trajectory_length)
+        trajectory = float(np.exp(np.mean(np.log(times[average_from:]))))
+        inverse_mass = np.asarray(inverse_mass)
+        if not (np.isfinite(step_size) and np.all(np.isfinite(inverse_mass))):
+            raise FloatingPointError(
+                "magnetic_window_adaptation ended with a non-finite step size or mass: the "
+                "chains diverged (check logdensity_fn and the starts)"
+            )
+        parameters = {
+            "step_size": step_size,
+            "inverse_mass_matrix": inverse_mass,
+            "num_integration_steps": int(np.clip(math.ceil(trajectory / step_size), 1, max_steps)),
+            "magnetic_field": default_magnetic_field(inverse_mass, angle / step_size),
+        }
+        info = info._replace(
+            trajectory_length=info.trajectory_length.at[-1].set(trajectory)
+        )
+        return (states, parameters), info
+
+    return GeometricAdaptation(run)
+
+
+def _ravel(tree):
+    return ravel_pytree(tree)[0]
+
+
+def _flat_starts(positions, logdensity_fn):
+    """``(C, d)`` flat starts; refuses fewer than 2 chains and non-finite ``log π`` there."""
+    leaves = jax.tree.leaves(positions)
+    if not leaves:
+        raise ValueError("initial_positions is an empty pytree")
+    sizes = {np.shape(leaf)[0] if np.ndim(leaf) else None for leaf in leaves}
+    if len(sizes) != 1 or None in sizes:
+        raise ValueError(
+            "initial_positions must have a leading chain axis of the same size on every leaf, "
+            f"got leaf shapes {[np.shape(leaf) for leaf in leaves]}"
+        )
+    (num_chains,) = sizes
+    if num_chains < 2:
+        raise ValueError(
+            f"magnetic_window_adaptation needs >= 2 chains (leading axis), got {num_chains}: "
+            "ChEES estimates the target's mean across chains"
+        )
+    flat = jax.vmap(_ravel)(positions)
+    if not jnp.issubdtype(flat.dtype, jnp.floating):
+        raise TypeError(f"initial_positions must be real floating point, got {flat.dtype}")
+    values = jax.vmap(jax.value_and_grad(logdensity_fn))(positions)
+    grads = jax.vmap(_ravel)(values[1])
+    ok = np.asarray(jnp.isfinite(values[0]) & jnp.all(jnp.isfinite(grads), -1))
+    chain = first_bad_chain(ok)
+    if chain is not None:
+        raise ValueError(
+            f"initial_positions[{chain}]: logdensity_fn or its gradient is not finite there; "
+            "start every chain where log π is finite"
+        )
+    return flat
+
+
+def jittered_magnetic_hmc(
+    logdensity_fn: Callable,
+    step_size,
+    inverse_mass_matrix,
+    num_integration_steps: int,
+    magnetic_field,
+    **options,
+) -> Sampler:
+    """``liesample.magnetic_hmc`` whose trajectory has ``L ~ Uniform{1, …, num_integration_steps}``
+    leapfrog steps, drawn afresh at every transition (the jitter ChEES tunes ``T`` for:
+    ``num_integration_steps = ceil(T / ε)`` from :func:`magnetic_window_adaptation`).
+
+    Jittering the length keeps the chain from locking onto a period of the target (a Gaussian
+    direction whose half-period divides ``Lε`` does not move under a fixed ``L``); each
+    transition is a ``magnetic_hmc`` transition, so the law is kept for every ``L``. Same
+    arguments and ``options`` as ``liesample.magnetic_hmc``; the flows ``e^{±εGM⁻¹}`` do not
+    depend on ``L`` and are computed once per compiled run.
+    """
+    base = magnetic_hmc(
+        logdensity_fn,
+        step_size,
+        inverse_mass_matrix,
+        num_integration_steps,
+        magnetic_field,
+        **options,
+    )
+
+    def step_fn(rng_key, state):
+        key_length, key_step = jax.random.split(rng_key)
+        u = jax.random.uniform(key_length, (), jnp.asarray(step_size).dtype)
+        steps = jnp.clip(jnp.ceil(u * num_integration_steps), 1, num_integration_steps)
+        sampler = magnetic_hmc(
+            logdensity_fn,
+            step_size,
+            inverse_mass_matrix,
+            steps.astype(int),
+            magnetic_field,
+            **options,
+        )
+        return sampler.step(key_step, state)
+
+    settings = dict(base.settings)
+    settings["sampler"] = "jittered_magnetic_hmc"
+    settings["max_num_integration_steps"] = settings.pop("num_integration_steps")
+    return Sampler(base.init, step_fn, settings=settings, check_positions=base.check_positions)
