@@ -295,8 +295,8 @@ def format_or_dash(x, digits=3) -> str:
     return f"{x:.{digits}g}"
 
 
-def format_signed(x, se) -> str:
-    return f"{x:+.4f} ± {se:.4f}".replace("-", "−")
+def format_signed(x, se, decimals=4) -> str:
+    return f"{x:+.{decimals}f} ± {se:.{decimals}f}".replace("-", "−")
 
 
 def format_seconds(x) -> str:
@@ -311,6 +311,11 @@ def format_seconds(x) -> str:
     if x < 7200:
         return f"{x / 60:.3g} min"
     return f"{x / 3600:.3g} h"
+
+
+def relative_link(path: Path, md_dir: Path) -> Path:
+    """``path`` relative to the report's folder when it lies below it, else as given."""
+    return path.relative_to(md_dir) if path.is_relative_to(md_dir) else path
 
 
 def save_figure(fig: Figure, path: Path) -> Path:

@@ -70,9 +70,9 @@ def _measure_here(quick: bool) -> dict:
             return jax.vmap(chain)(states, keys).position
 
         start = jnp.asarray(start, dtype=jnp.float64)
-        single = jax.jit(lambda state, key, n: run(
-            jax.tree.map(lambda x: x[None], state), key[None], n
-        )[0])
+        single = jax.jit(
+            lambda state, key, n: run(jax.tree.map(lambda x: x[None], state), key[None], n)[0]
+        )
         for num_chains in CHAINS:
             keys = jax.random.split(jax.random.key(0), num_chains)
             states = jax.vmap(algorithm.init)(jnp.broadcast_to(start, (num_chains, *start.shape)))
@@ -82,14 +82,16 @@ def _measure_here(quick: bool) -> dict:
             ):
                 compiled = compile_fn(run).lower(states, keys, 1).compile()
                 batched = np.asarray(compiled(states, keys, check_steps))
-                alone = np.stack([
-                    np.asarray(
-                        liesample.jit(single)(
-                            jax.tree.map(lambda x: x[c], states), keys[c], check_steps
+                alone = np.stack(
+                    [
+                        np.asarray(
+                            liesample.jit(single)(
+                                jax.tree.map(lambda x: x[c], states), keys[c], check_steps
+                            )
                         )
-                    )
-                    for c in sorted({0, num_chains - 1})
-                ])
+                        for c in sorted({0, num_chains - 1})
+                    ]
+                )
                 error = float(np.abs(batched[sorted({0, num_chains - 1})] - alone).max())
                 n = max(1, 2000 // num_chains)
                 while True:
@@ -105,13 +107,15 @@ def _measure_here(quick: bool) -> dict:
                     begin = time.perf_counter()
                     jax.block_until_ready(compiled(states, keys, n))
                     times.append(time.perf_counter() - begin)
-                rows.append({
-                    "system": name,
-                    "chains": num_chains,
-                    "compile_path": compile_path,
-                    "chain_steps_per_second": num_chains * n / min(times),
-                    "max_batched_minus_single": error,
-                })
+                rows.append(
+                    {
+                        "system": name,
+                        "chains": num_chains,
+                        "compile_path": compile_path,
+                        "chain_steps_per_second": num_chains * n / min(times),
+                        "max_batched_minus_single": error,
+                    }
+                )
     return {"jax": jax.__version__, "jaxlib": jaxlib.__version__, "rows": rows}
 
 
@@ -128,13 +132,16 @@ def run(out_dir: Path, quick: bool, log) -> None:
         log(f"compile_path: measuring with {python}")
         output = subprocess.run(
             [str(python), __file__, "--worker"] + (["--quick"] if quick else []),
-            check=True, capture_output=True, text=True, cwd=ROOT,
+            check=True,
+            capture_output=True,
+            text=True,
+            cwd=ROOT,
             env={**os.environ, "PYTHONPATH": str(ROOT)},
         ).stdout
         measurements.append(json.loads(output.strip().splitlines()[-1]))
     common.write_json(
-        out_dir / "compile_path.json", {"machine": common.machine_info(), "quick": quick,
-                                        "measurements": measurements},
+        out_dir / "compile_path.json",
+        {"machine": common.machine_info(), "quick": quick, "measurements": measurements},
     )
 
 
@@ -143,23 +150,30 @@ def report(out_dir: Path, md_dir: Path) -> str:
     if not path.exists():
         return ""
     data = json.loads(path.read_text())
-    by_version = {m["jax"]: {(r["system"], r["chains"], r["compile_path"]): r for r in m["rows"]}
-                  for m in data["measurements"]}
+    by_version = {
+        m["jax"]: {(r["system"], r["chains"], r["compile_path"]): r for r in m["rows"]}
+        for m in data["measurements"]
+    }
     versions = sorted(by_version, key=lambda v: tuple(int(p) for p in v.split(".")))
     oldest, newest = versions[0], versions[-1]
     lines = [
         f"## {SUITE['title']}",
         "",
-        "Every loop liesample compiles goes through `liesample.jit`: `jax.jit` with XLA:CPU's "
-        "`small-while-loop-hoisting` pass disabled, the pass that miscompiles vmapped sampler "
-        "loops (`tests/test_compile.py`). Chain-steps per second of `vmap` over chains of a "
-        "`fori_loop` of `lie_poisson_langevin` steps (splitting, β = 2, dt = 0.05, compilation "
-        "excluded, best of several calls), and the largest difference after 20 steps between "
-        "the batched chains and the same chains compiled alone (`err`: round-off when correct).",
+        (
+            "Every loop liesample compiles goes through `liesample.jit`: `jax.jit` with XLA:CPU's "
+            "`small-while-loop-hoisting` pass disabled, the pass that miscompiles vmapped sampler "
+            "loops (`tests/test_compile.py`). Chain-steps per second of `vmap` over chains of a "
+            "`fori_loop` of `lie_poisson_langevin` steps (splitting, β = 2, dt = 0.05, compilation "
+            "excluded, best of several calls), and the largest difference after 20 steps between "
+            "the batched chains and the same chains compiled alone (`err`: round-off when correct)."
+        ),
         "",
-        f"Measured with jax {', '.join(versions)}{' (quick mode)' if data.get('quick') else ''}. "
-        f"Ratio: `liesample.jit` on jax {newest} over plain `jax.jit` on jax {oldest} (the "
-        "previously pinned configuration).",
+        (
+            f"Measured with jax {', '.join(versions)}"
+            f"{' (quick mode)' if data.get('quick') else ''}. "
+            f"Ratio: `liesample.jit` on jax {newest} over plain `jax.jit` on jax {oldest} (the "
+            "previously pinned configuration)."
+        ),
         "",
     ]
     header = "| system | chains |"
@@ -179,11 +193,16 @@ def report(out_dir: Path, md_dir: Path) -> str:
                     r = by_version[version].get((system, chains, compile_path))
                     row += (
                         f" {r['chain_steps_per_second']:.3g}, {r['max_batched_minus_single']:.1e} |"
-                        if r else " – |"
+                        if r
+                        else " – |"
                     )
             base = by_version[oldest].get((system, chains, "jax.jit"))
             new = by_version[newest].get((system, chains, "liesample.jit"))
-            ratio = new["chain_steps_per_second"] / base["chain_steps_per_second"] if base and new else math.nan
+            ratio = (
+                new["chain_steps_per_second"] / base["chain_steps_per_second"]
+                if base and new
+                else math.nan
+            )
             lines.append(row + f" {ratio:.2f} |")
     lines.append("")
     return "\n".join(lines)

@@ -9,11 +9,11 @@ Writes ``euclidean.json`` and ``euclidean.png``. Every sampler gets the same num
 transitions per chain (``num_warmup``), then ``NUM_CHAINS`` chains draw ``num_draws`` each:
 
 - ``magnetic_hmc`` (``liesample``): ``liesample.window_adaptation(liesample.magnetic_hmc, …)``
-  (:func:`liesample.tuning.adaptation.magnetic_window_adaptation`) on the ``NUM_CHAINS`` chains at once
-  — step size, diagonal mass and the field ``default_magnetic_field(M⁻¹, angle / ε)`` adapted
-  jointly, the trajectory length by the ChEES-type rule — then
-  :func:`liesample.tuning.adaptation.jittered_magnetic_hmc` from the adapted states; one row per
-  angle in ``ANGLES`` (the default, and angle 0.25 or 0 beside it);
+  (:func:`liesample.tuning.adaptation.magnetic_window_adaptation`) on the ``NUM_CHAINS``
+  chains at once — step size, diagonal mass and the field
+  ``default_magnetic_field(M⁻¹, angle / ε)`` adapted jointly, the trajectory length by the
+  ChEES-type rule — then :func:`liesample.jittered_magnetic_hmc` from the adapted states; one
+  row per angle in ``ANGLES`` (the default, and angle 0.25 or 0 beside it);
 - ``blackjax nuts`` and ``blackjax hmc`` (``L = NUM_STEPS``): ``blackjax.window_adaptation``
   (diagonal mass, target acceptance 0.8) on one chain, all chains start from its state. Their
   warm-up costs ``NUM_CHAINS`` times fewer gradients than the multi-chain one (both are in the
@@ -207,7 +207,7 @@ def measure_magnetic(target, key, num_warmup, num_draws, angle):
     start = time.perf_counter()
     (states, parameters), info = warmup.run(key_warmup, starts, num_steps=num_warmup)
     warmup_seconds = time.perf_counter() - start
-    sampler = liesample.tuning.adaptation.jittered_magnetic_hmc(target.logdensity_fn, **parameters)
+    sampler = liesample.jittered_magnetic_hmc(target.logdensity_fn, **parameters)
     draws, logdensity, gradients, seconds, divergences = run_chains(
         sampler, states, key_run, num_draws
     )
@@ -388,11 +388,7 @@ def report(out_dir: Path, md_dir: Path) -> str:
     data = common.read_json(path)
     if "goals" not in data:  # written by the older suite (field tuned after a zero-field warm-up)
         return ""
-    plot_path = out_dir / "euclidean.png"
-    try:
-        rel = plot_path.relative_to(md_dir)
-    except ValueError:
-        rel = plot_path
+    rel = common.relative_link(out_dir / "euclidean.png", md_dir)
     lines = [
         "## Adapted magnetic HMC vs BlackJAX NUTS and HMC",
         "",

@@ -22,12 +22,12 @@ import numpy as np
 
 jax.config.update("jax_enable_x64", True)
 
-import arviz_stats  # noqa: E402
-from scipy.stats import vonmises_fisher  # noqa: E402
+import arviz_stats
+from scipy.stats import vonmises_fisher
 
-import liesample  # noqa: E402
-from liesample import spaces as S  # noqa: E402
-from liesample.targets.groups import VonMisesFisherPosterior  # noqa: E402
+import liesample
+from liesample import spaces as S
+from liesample.targets.groups import VonMisesFisherPosterior
 
 NUM_CHAINS = 8
 
@@ -43,13 +43,13 @@ def targets():
 
     def lattice(p):
         h, v = p["h"], p["v"]
-        dag = lambda u: jnp.conj(jnp.swapaxes(u, -1, -2))  # noqa: E731
+        dag = lambda u: jnp.conj(jnp.swapaxes(u, -1, -2))
         u = h[:, :-1] @ v[1:, :] @ dag(h[:, 1:]) @ dag(v[:-1, :])
         return 2.5 * jnp.sum(0.5 * jnp.real(jnp.trace(u, axis1=-2, axis2=-1)))
 
     def plaquette(p):
         h, v = p["h"], p["v"]
-        dag = lambda u: jnp.conj(jnp.swapaxes(u, -1, -2))  # noqa: E731
+        dag = lambda u: jnp.conj(jnp.swapaxes(u, -1, -2))
         u = h[:, :-1] @ v[1:, :] @ dag(h[:, 1:]) @ dag(v[:-1, :])
         return 0.5 * jnp.real(jnp.trace(u, axis1=-2, axis2=-1))[0, 0][None]
 
@@ -109,8 +109,10 @@ def main(argv=None):
     parser.add_argument("--quick", action="store_true", help="fewer draws and times")
     args = parser.parse_args(argv)
     num_draws = 300 if args.quick else 1000
-    times = (math.pi / 4, math.pi / 2, math.pi) if args.quick else (
-        math.pi / 8, math.pi / 4, math.pi / 2, math.pi, 2 * math.pi
+    times = (
+        (math.pi / 4, math.pi / 2, math.pi)
+        if args.quick
+        else (math.pi / 8, math.pi / 4, math.pi / 2, math.pi, 2 * math.pi)
     )
     print("| target | T | step size | L | acceptance | min ESS per 1000 gradients |")
     print("|---|---|---|---|---|---|")

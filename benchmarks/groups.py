@@ -32,8 +32,8 @@ Samplers, each given the same warm-up budget of ``warmup`` transitions per chain
   the uniform law on S³ modulo ±) and on ``y_i ∈ R³`` with ``x_i = y_i/|y_i|`` (Stan's
   ``unit_vector``), density ``π(x(y)) e^{−|y|²/2}`` (in polar coordinates ``y/|y|`` has
   density ``∝ π``), ``blackjax.window_adaptation`` on one chain, vmapped chains;
-- **exact i.i.d.**: ``liesample.interop.numpyro_distributions.MatrixFisher.sample`` (the quaternion's Bingham law,
-  angular-central-Gaussian rejection) and
+- **exact i.i.d.**: ``liesample.interop.numpyro_distributions.MatrixFisher.sample`` (the
+  quaternion's Bingham law, angular-central-Gaussian rejection) and
   ``liesample.targets.spins.von_mises_fisher`` (closed form), the ceiling; ESS = draws.
 
 The JAX chains start from dispersed (Haar/uniform) points, run ``burn_in`` tuned transitions
@@ -144,9 +144,9 @@ class MatrixFisherTarget:
     statistics = tuple(f"R{i + 1}{j + 1}" for i in range(3) for j in range(3))
 
     def __init__(self):
-        self.F = _rotation([0.3, -0.5, 0.8]) @ np.diag([4.0, 2.0, 0.5]) @ _rotation(
-            [-0.7, 0.2, 0.4]
-        ).T
+        self.F = (
+            _rotation([0.3, -0.5, 0.8]) @ np.diag([4.0, 2.0, 0.5]) @ _rotation([-0.7, 0.2, 0.4]).T
+        )
         self.reference = exact_groups.MatrixFisher(self.F)
         self.exact = self.reference.mean().ravel()
         self.space = spaces.SO(3)
@@ -420,6 +420,27 @@ def _chains(sampler, observe, keys, starts, burn_in, draws):
     }
 
 
+def _chains_row(target, key, out, settings, adaptation_seconds, log):
+    """The row of a sampler run by ``_chains`` after ``adaptation_seconds`` of adaptation."""
+    row = _row(
+        target,
+        key,
+        key,
+        out["observations"],
+        out["wall"],
+        out["gradients"],
+        cpu=out["cpu"],
+        settings=settings,
+        acceptance_rate=out["acceptance_rate"],
+        divergences=out["divergences"],
+        compile_seconds=out["compile_seconds"],
+        warmup_seconds=adaptation_seconds + out["burn_seconds"],
+    )
+    row.update(out["timing"], _adaptation=adaptation_seconds)
+    _log_row(log, row)
+    return row
+
+
 def run_liesample(target, cfg, log, which):
     hmc = which == "geometric_hmc"
     algorithm = liesample.geometric_hmc if hmc else liesample.geometric_langevin
@@ -443,26 +464,9 @@ def run_liesample(target, cfg, log, which):
     steps = parameters.get("num_integration_steps", 1)
     settings = (
         f"step {parameters['step_size']:.3g}, L = {steps}, M⁻¹ ∈ [{mass.min():.2g}, "
-        f"{mass.max():.2g}]"
-        + ("" if hmc else f", friction {parameters['friction']:g}")
+        f"{mass.max():.2g}]" + ("" if hmc else f", friction {parameters['friction']:g}")
     )
-    row = _row(
-        target,
-        which,
-        which,
-        out["observations"],
-        out["wall"],
-        out["gradients"],
-        cpu=out["cpu"],
-        settings=settings,
-        acceptance_rate=out["acceptance_rate"],
-        divergences=out["divergences"],
-        compile_seconds=out["compile_seconds"],
-        warmup_seconds=adaptation_seconds + out["burn_seconds"],
-    )
-    row.update(out["timing"], _adaptation=adaptation_seconds)
-    _log_row(log, row)
-    return row
+    return _chains_row(target, which, out, settings, adaptation_seconds, log)
 
 
 def run_nuts(target, cfg, log):
@@ -485,26 +489,11 @@ def run_nuts(target, cfg, log):
         cfg["draws"],
     )
     draws_total = cfg["chains"] * cfg["draws"]
-    row = _row(
-        target,
-        "nuts",
-        "nuts",
-        out["observations"],
-        out["wall"],
-        out["gradients"],
-        cpu=out["cpu"],
-        settings=(
-            f"step {float(parameters['step_size']):.3g}, "
-            f"{out['gradients'] / draws_total:.1f} leapfrog steps per draw, diagonal mass"
-        ),
-        acceptance_rate=out["acceptance_rate"],
-        divergences=out["divergences"],
-        compile_seconds=out["compile_seconds"],
-        warmup_seconds=adaptation_seconds + out["burn_seconds"],
+    settings = (
+        f"step {float(parameters['step_size']):.3g}, "
+        f"{out['gradients'] / draws_total:.1f} leapfrog steps per draw, diagonal mass"
     )
-    row.update(out["timing"], _adaptation=adaptation_seconds)
-    _log_row(log, row)
-    return row
+    return _chains_row(target, "nuts", out, settings, adaptation_seconds, log)
 
 
 def run_mici(target, cfg, log):
@@ -554,9 +543,10 @@ def run_mici(target, cfg, log):
     q = np.asarray(traces["q"])[:, warm:]
     n_step = np.asarray(stats["n_step"])[:, warm:]
     accept = np.asarray(stats["accept_stat"])[:, warm:]
-    failures = np.asarray(stats["convergence_error"])[:, warm:] | np.asarray(
-        stats["non_reversible_step"]
-    )[:, warm:]
+    failures = (
+        np.asarray(stats["convergence_error"])[:, warm:]
+        | np.asarray(stats["non_reversible_step"])[:, warm:]
+    )
     observations = q  # the flat ambient position: the statistics, in the same order
     step_size = np.asarray(stats["step_size"])[:, -1]
     row = _row(
@@ -711,8 +701,7 @@ def report(out_dir: Path, md_dir: Path) -> str:
     data = common.read_json(path)
     machine, cfg = data["machine"], data["config"]
     load = data.get("load_average", {"start": math.nan, "end": math.nan})
-    png = out_dir / f"{NAME}.png"
-    rel = Path(png).relative_to(md_dir) if png.is_relative_to(md_dir) else png
+    rel = common.relative_link(out_dir / f"{NAME}.png", md_dir)
     lines = [
         "## Lie groups and spheres: geometric HMC against mici, NUTS and i.i.d.",
         "",
@@ -758,11 +747,16 @@ def report(out_dir: Path, md_dir: Path) -> str:
                     extra += f", {r['divergences']} divergent"
             lines.append(
                 f"| {r['label']}{flag} | {r.get('settings', '')}{extra} | "
-                f"{common.format_or_dash(r['max_abs_z'], 2)} | {common.format_or_dash(r['max_r_hat'], 4)} | {common.format_or_dash(r['min_ess'])} | "
-                f"{common.format_or_dash(r['ess_per_second'])} | {common.format_or_dash(r['ess_per_cpu_second'])} | "
+                f"{common.format_or_dash(r['max_abs_z'], 2)} | "
+                f"{common.format_or_dash(r['max_r_hat'], 4)} | "
+                f"{common.format_or_dash(r['min_ess'])} | "
+                f"{common.format_or_dash(r['ess_per_second'])} | "
+                f"{common.format_or_dash(r['ess_per_cpu_second'])} | "
                 f"{common.format_or_dash(1000 * r['ess_per_gradient'])} | "
-                f"{common.format_or_dash(r['wall_seconds'])}, {common.format_or_dash(r['cpu_seconds'])} | "
-                f"{common.format_or_dash(r['warmup_seconds'])} | {common.format_or_dash(r['compile_seconds'], 2)} | "
+                f"{common.format_or_dash(r['wall_seconds'])}, "
+                f"{common.format_or_dash(r['cpu_seconds'])} | "
+                f"{common.format_or_dash(r['warmup_seconds'])} | "
+                f"{common.format_or_dash(r['compile_seconds'], 2)} | "
                 f"{common.format_or_dash(r['ess_per_second_over_best_peer'], 3)}, "
                 f"{common.format_or_dash(r['ess_per_cpu_second_over_best_peer'], 3)}, "
                 f"{common.format_or_dash(r['ess_per_gradient_over_best_peer'], 3)} |"
@@ -773,10 +767,10 @@ def report(out_dir: Path, md_dir: Path) -> str:
             (
                 f"Best liesample sampler ({ratios['best_liesample']}) over the best peer "
                 f"({ratios['best_peer']}) in ESS/s: "
-                f"{common.format_or_dash(ratios['best_liesample_over_best_peer'], 3)}× (target ≥ 3×: "
-                f"**{verdict}**; per CPU-second "
-                f"{common.format_or_dash(ratios['best_liesample_over_best_peer_cpu'], 3)}×); over exact i.i.d. "
-                f"draws: "
+                f"{common.format_or_dash(ratios['best_liesample_over_best_peer'], 3)}× "
+                f"(target ≥ 3×: **{verdict}**; per CPU-second "
+                f"{common.format_or_dash(ratios['best_liesample_over_best_peer_cpu'], 3)}×); "
+                f"over exact i.i.d. draws: "
                 f"{common.format_or_dash(ratios['best_liesample_over_iid'], 3)}×"
                 + (
                     f" (not a ceiling here: {IID_NOTES[t['name']]})."

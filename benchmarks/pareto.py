@@ -368,8 +368,7 @@ def report(out_dir: Path, md_dir: Path) -> str:
         cfg = system["config"]
         obs = system["observables"]
         exact = ", ".join(f"{o} = {v:.5f}" for o, v in zip(obs, system["exact"], strict=True))
-        rel = Path(out_dir / f"pareto_{name}.png")
-        rel = rel.relative_to(md_dir) if rel.is_relative_to(md_dir) else rel
+        rel = common.relative_link(out_dir / f"pareto_{name}.png", md_dir)
         lines += [
             f"### {TITLES[name]}",
             "",
@@ -379,8 +378,8 @@ def report(out_dir: Path, md_dir: Path) -> str:
             ),
             "",
             (
-                f"| setting | bias ({', '.join(obs)}) ± SE (×10⁻³) | max \\|z\\| | min ESS | wall (s) "
-                "| s per ESS |"
+                f"| setting | bias ({', '.join(obs)}) ± SE (×10⁻³) | max \\|z\\| | min ESS "
+                "| wall (s) | s per ESS |"
             ),
             "|---|---|---|---|---|---|",
         ]

@@ -1,8 +1,9 @@
 """``RESULTS.md`` assembled from the sections that each benchmark module writes from its JSON.
 
 The rigid-body core owns sections 1–3 (``benchmarks/throughput.py``: throughput and the exact
-sampler; ``benchmarks/accuracy.py``: accuracy against cost and the findings), and every suite
-that ``benchmarks/suites.py`` discovers owns its own section (``report(out_dir, md_dir)``).
+sampler; ``benchmarks/accuracy_report.py``: accuracy against cost and the findings, measured by
+``benchmarks/accuracy.py`` and drawn by ``benchmarks/accuracy_plots.py``), and every suite that
+``benchmarks/suites.py`` discovers owns its own section (``report(out_dir, md_dir)``).
 This module writes only the header (machine, problem) and puts the sections in order.
 """
 
@@ -13,14 +14,14 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks import accuracy, common, suites, throughput
+from benchmarks import accuracy_report, common, suites, throughput
 
 # The core sections, in order; each maps CoreResults -> Markdown.
 CORE_SECTIONS = (
     throughput.report_section,
-    accuracy.report_section,
+    accuracy_report.report_section,
     throughput.iid_report_section,
-    accuracy.findings_section,
+    accuracy_report.findings_section,
 )
 
 

@@ -108,9 +108,8 @@ def main(argv=None) -> int:
 
     written = report.write_report(out_dir, md_path)
     for path in written:
-        print(
-            f"wrote {path.relative_to(common.REPO_DIR) if path.is_relative_to(common.REPO_DIR) else path}"
-        )
+        shown = path.relative_to(common.REPO_DIR) if path.is_relative_to(common.REPO_DIR) else path
+        print(f"wrote {shown}")
     print(f"total {time.perf_counter() - _START:.1f} s", flush=True)
     return 0
 

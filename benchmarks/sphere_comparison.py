@@ -23,9 +23,10 @@ Contenders:
   time integral of ``μ_i²`` is carried as extra state), and liesample's splitting at the same
   step and chains: throughput, orbit drift, bias.
 - **liesample**: the unadjusted splitting sampler at the step (and σ) picked by
-  ``liesample.integrators.accuracy.choose_step_size`` for the tolerance; Richardson–Romberg extrapolation
-  (coupled ``h``, ``h/2``); the Metropolis-adjusted sampler ``liesample.adjusted_lie_poisson``
-  over a grid of steps (exact at every step; best ESS/s kept). Both draw their noise in blocks
+  ``liesample.integrators.accuracy.choose_step_size`` for the tolerance; Richardson–Romberg
+  extrapolation (coupled ``h``, ``h/2``); the Metropolis-adjusted sampler
+  ``liesample.adjusted_lie_poisson`` over a grid of steps (exact at every step; best ESS/s
+  kept). Both draw their noise in blocks
   of steps (``liesample.integrators.chain_loop``), as ``liesample.sample`` runs them.
 
 **Matched accuracy**: ``|bias| ≤ TOLERANCE`` on every ``E[μ_i²]``. Exact methods meet it by
@@ -472,6 +473,7 @@ def run_liesample(cfg, exact, log):
     # Metropolis-adjusted: exact at every step; σ = 1 (only σ²·dt matters).
     for dt in cfg["adjusted_step_sizes"]:
         sampler = liesample.adjusted_lie_poisson(system, beta=common.BETA, sigma=1.0, step_size=dt)
+
         def adjusted_run(sampler=sampler):
             return accuracy.ergodic_averages(
                 sampler,
@@ -629,14 +631,21 @@ def _plot(contenders, out_dir):
     plt.close(fig)
 
 
+def _bias_milli(r) -> str:
+    """The row's biases ± SE in units of 10⁻³."""
+    return ", ".join(
+        f"{1e3 * b:+.2f}±{1e3 * s:.2f}" if math.isfinite(b) else "nan"
+        for b, s in zip(r["bias"], r["se"], strict=True)
+    )
+
+
 def report(out_dir: Path, md_dir: Path) -> str:
     path = out_dir / f"{NAME}.json"
     if not path.exists():
         return ""
     data = common.read_json(path)
     machine = data["machine"]
-    png = out_dir / f"{NAME}.png"
-    rel = Path(png).relative_to(md_dir) if png.is_relative_to(md_dir) else png
+    rel = common.relative_link(out_dir / f"{NAME}.png", md_dir)
     iid = next(r for r in data["contenders"] if r["kind"] == "iid")
     nuts = next(r for r in data["contenders"] if r["kind"] == "nuts")
     lines = [
@@ -661,10 +670,7 @@ def report(out_dir: Path, md_dir: Path) -> str:
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in data["contenders"]:
-        bias = ", ".join(
-            f"{1e3 * b:+.2f}±{1e3 * s:.2f}" if math.isfinite(b) else "nan"
-            for b, s in zip(r["bias"], r["se"], strict=True)
-        )
+        bias = _bias_milli(r)
         z = ", ".join(f"{v:+.1f}" if math.isfinite(v) else "nan" for v in r["z"])
         matched = r["ess_per_second_matched"]
         extra = ""
@@ -672,7 +678,8 @@ def report(out_dir: Path, md_dir: Path) -> str:
             extra = f" (acceptance {r['acceptance_rate']:.2f})"
         lines.append(
             f"| {r['label']}{extra} | {r.get('settings', '')} | {bias} | {z} | "
-            f"{common.format_or_dash(r['min_ess'])} | {common.format_or_dash(r['wall_seconds'])} | {common.format_or_dash(r['ess_per_second'])} | "
+            f"{common.format_or_dash(r['min_ess'])} | {common.format_or_dash(r['wall_seconds'])} | "
+            f"{common.format_or_dash(r['ess_per_second'])} | "
             f"{common.format_or_dash(matched) if math.isfinite(matched) else 'not reached'} | "
             f"{common.format_or_dash(matched / iid['ess_per_second_matched'], 2)} | "
             f"{common.format_or_dash(matched / nuts['ess_per_second_matched'], 2)} |"
@@ -688,20 +695,20 @@ def report(out_dir: Path, md_dir: Path) -> str:
         ),
         "",
         (
-            "| method | h | chain-steps/s | finite chains | orbit drift median / max | chains > 10% "
-            "off | bias E[μ_i²] ± SE (×10⁻³) |"
+            "| method | h | chain-steps/s | finite chains | orbit drift median / max "
+            "| chains > 10% off | bias E[μ_i²] ± SE (×10⁻³) |"
         ),
         "|---|---|---|---|---|---|---|",
     ]
     for r in data["equal_step"]:
-        bias = ", ".join(
-            f"{1e3 * b:+.2f}±{1e3 * s:.2f}" if math.isfinite(b) else "nan"
-            for b, s in zip(r["bias"], r["se"], strict=True)
-        )
+        bias = _bias_milli(r)
         lines.append(
-            f"| {r['label']} | {r['step_size']} | {common.format_or_dash(r['chain_steps_per_second'])} | "
-            f"{r['chains_finite']}/{r['chains']} | {common.format_or_dash(r['orbit_drift_median'], 2)} / "
-            f"{common.format_or_dash(r['orbit_drift_max'], 2)} | {r['chains_off_orbit_10pct']} | {bias} |"
+            f"| {r['label']} | {r['step_size']} | "
+            f"{common.format_or_dash(r['chain_steps_per_second'])} | "
+            f"{r['chains_finite']}/{r['chains']} | "
+            f"{common.format_or_dash(r['orbit_drift_median'], 2)} / "
+            f"{common.format_or_dash(r['orbit_drift_max'], 2)} | "
+            f"{r['chains_off_orbit_10pct']} | {bias} |"
         )
     unadjusted = next(r for r in data["contenders"] if r["kind"] == "unadjusted")
     choice = unadjusted["choice"]

@@ -27,9 +27,9 @@ the budget; the first 20 % of the steps is warm-up and discarded. Samplers:
   discretised dynamics of all spins together (biased at O(dt²));
 - ``wolff``: ``liesample.heisenberg_wolff``, one step = one cluster reflection.
 
-ESS (bulk) and R-hat come from ``liesample.analysis.diagnostics.expectation_table`` (ArviZ) for the energy
-per spin and ``|m|``; ESS/s divides by the sampling wall time (compilation excluded, warm-up
-included). ``ess_per_sweep`` is the machine-independent ESS per sweep of all chains together
+ESS (bulk) and R-hat come from ``liesample.analysis.diagnostics.expectation_table`` (ArviZ) for
+the energy per spin and ``|m|``; ESS/s divides by the sampling wall time (compilation excluded,
+warm-up included). ``ess_per_sweep`` is the machine-independent ESS per sweep of all chains together
 (``steps × chains``; a Wolff step counts as ``cluster size / N`` sweeps).
 """
 
@@ -231,22 +231,34 @@ def plot(rows, path):
         for i, label in enumerate(labels):
             values = [
                 next(
-                    (r["ess_per_second"] for r in rows
-                     if r["sampler"] == label and r["beta"] == b and r["quantity"] == quantity),
+                    (
+                        r["ess_per_second"]
+                        for r in rows
+                        if r["sampler"] == label and r["beta"] == b and r["quantity"] == quantity
+                    ),
                     np.nan,
                 )
                 for b in betas
             ]
             hatch = [
-                "//" if next(
-                    (r["r_hat"] >= 1.01 for r in rows
-                     if r["sampler"] == label and r["beta"] == b and r["quantity"] == quantity),
+                "//"
+                if next(
+                    (
+                        r["r_hat"] >= 1.01
+                        for r in rows
+                        if r["sampler"] == label and r["beta"] == b and r["quantity"] == quantity
+                    ),
                     False,
-                ) else ""
+                )
+                else ""
                 for b in betas
             ]
-            bars = ax.bar(np.arange(len(betas)) + (i - len(labels) / 2 + 0.5) * width, values,
-                          width, label=label)
+            bars = ax.bar(
+                np.arange(len(betas)) + (i - len(labels) / 2 + 0.5) * width,
+                values,
+                width,
+                label=label,
+            )
             for bar, h in zip(bars, hatch):
                 bar.set_hatch(h)
         ax.set_yscale("log")

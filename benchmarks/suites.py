@@ -12,8 +12,12 @@ A suite is a module ``benchmarks/<name>.py`` that defines
 ``benchmarks/run.py`` runs every suite after the core sections and ``benchmarks/report.py``
 appends their sections, so a new system adds a benchmark without touching either file. The
 rigid-body core follows the same rule: ``benchmarks/throughput.py`` and
-``benchmarks/accuracy.py`` write their own sections (``report_section(results)``, from
+``benchmarks/accuracy_report.py`` write their own sections (``report_section(results)``, from
 ``common.CoreResults``), and ``report.py`` only assembles.
+
+A module without ``SUITE`` is not a suite: the core (``throughput``, ``accuracy``) and the
+helpers of a module (``accuracy_plots``, ``accuracy_report``) define none, and the runner's
+own modules (``NOT_SUITES``) are not even imported.
 """
 
 from __future__ import annotations
@@ -24,12 +28,15 @@ from pathlib import Path
 
 BENCH_DIR = Path(__file__).resolve().parent
 
+# The runner and its shared set-up: never suites, so ``discover`` does not import them.
+NOT_SUITES = frozenset({"run", "report", "suites", "common"})
+
 
 def discover() -> list:
     """The suite modules, sorted by ``SUITE["order"]``."""
     modules = []
     for path in sorted(BENCH_DIR.glob("*.py")):
-        if path.stem.startswith("_") or path.stem in {"run", "report", "suites", "common"}:
+        if path.stem.startswith("_") or path.stem in NOT_SUITES:
             continue
         module = importlib.import_module(f"benchmarks.{path.stem}")
         if hasattr(module, "SUITE"):

@@ -14,9 +14,9 @@ the hand-fused comparison below measures.
 **Library against a hand-fused step** (:func:`run_fused_comparison`; alone:
 ``benchmarks/throughput.py --fused [--quick]``, writes ``results/throughput_fused.json``). The
 Metropolis-adjusted orbit step of the rigid body and of the heavy top, in one run: the library
-(``liesample.adjusted_lie_poisson`` driven by ``liesample.integrators.chain_loop.run_steps``) with its
-noise drawn per step (``fold_in`` + draw) and in blocks, and a hand-written loop of the same
-scheme (closed-form gradients, brackets and coadjoint moves in plain ``jnp``, the same noise
+(``liesample.adjusted_lie_poisson`` driven by ``liesample.integrators.chain_loop.run_steps``)
+with its noise drawn per step (``fold_in`` + draw) and in blocks, and a hand-written loop of the
+same scheme (closed-form gradients, brackets and coadjoint moves in plain ``jnp``, the same noise
 blocks). The fused loop is checked to give the library's chain (same noise, max difference
 recorded); the ratio fused ÷ library is the cost of the library's abstractions.
 """
@@ -361,8 +361,7 @@ def run_fused_comparison(quick: bool = False, log=print) -> dict:
     hand-fused loop of the same scheme, rigid body and heavy top, measured side by side."""
     cfg = FUSED_QUICK if quick else FUSED_FULL
     rows = []
-    for name in FUSED_SETTINGS:
-        beta, step_size = FUSED_SETTINGS[name]
+    for name, (beta, step_size) in FUSED_SETTINGS.items():
         system, (energy_and_brackets, move) = _fused_case(name)
         algorithm = liesample.adjusted_lie_poisson(
             system, beta=beta, step_size=step_size, noise_block_size=cfg["block_size"]
@@ -558,7 +557,8 @@ def _throughput_tables(rows, iid_rows):
     iid_lines = ["| draws per call | samples/s (best of 3) | time per call |", "|---|---|---|"]
     for r in iid_rows:
         iid_lines.append(
-            f"| {r['samples']:,} | {common.format_rate(r['samples_per_second'])} | {common.format_seconds(r['seconds_best'])} |"
+            f"| {r['samples']:,} | {common.format_rate(r['samples_per_second'])} "
+            f"| {common.format_seconds(r['seconds_best'])} |"
         )
     return table, ratios, "\n".join(iid_lines)
 
@@ -581,7 +581,8 @@ Chain-steps per second of `liesample.lie_poisson_langevin(system, …, step_size
 `jax.lax.fori_loop` of `n` calls to `algorithm.step` carrying only the state (the same XLA
 While loop `lax.scan` lowers to, without stacked outputs; a traced trip count lets one
 compilation serve every `n`). Step `k` of chain `c` uses `fold_in(key_c, k)` (per-step
-keys; `liesample.sample` draws the noise in blocks, measured in the last table of this section). Chains start from exact Gibbs draws. Compilation is excluded; calls
+keys; `liesample.sample` draws the noise in blocks, measured in the last table of this
+section). Chains start from exact Gibbs draws. Compilation is excluded; calls
 are warmed up, `n` is chosen so that one call lasts ≈ {cfg["throughput_target_seconds"]:g} s,
 and the time is the best of {cfg["throughput_repeats"]}. Per-step `info` is not kept, so XLA
 drops the energy and Casimir diagnostics (the non-finite guard stays: it decides the state).
@@ -617,10 +618,10 @@ warmed up, best of {results.config["throughput_repeats"]}:
 __all__ = [
     "RNG_ONLY",
     "fused_report_section",
-    "run_fused_comparison",
     "iid_report_section",
     "plot_throughput",
     "report_section",
+    "run_fused_comparison",
     "run_iid_throughput",
     "run_sampler_throughput",
     "sanity_check_iid",

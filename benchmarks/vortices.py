@@ -13,9 +13,9 @@ Writes ``vortices.json``, ``vortices_throughput.png`` and ``vortices_accuracy.pn
 2. **Accuracy–cost**: bias of ``E[x₁·x₂]`` for ``Γ = (1, 1)``, ``β = 4π`` (exact ``−1/3``) against
    the step size and the wall time, per integrator; ``E`` over the final states of independent
    chains started uniformly (i.i.d. once mixed), so the standard error is exact.
-3. **All-modes variant** (``rkmk_heun``, dt = 0.01): the same pair with the paper's closed-form dissipation
-   (``dissipation="all_modes"``) against the derived truncated one, for ``L = 2, 4, 8``: stationary
-   ``E[x₁·x₂]`` and Kolmogorov–Smirnov distance from the exact pair law.
+3. **All-modes variant** (``rkmk_heun``, dt = 0.01): the same pair with the paper's closed-form
+   dissipation (``dissipation="all_modes"``) against the derived truncated one, for
+   ``L = 2, 4, 8``: stationary ``E[x₁·x₂]`` and Kolmogorov–Smirnov distance from the exact pair law.
 4. **Substeps**: for a like-signed pair with the drift on, at pair exponents 1, −0.5 and −0.9
    (near the −1 bound), the mean number of substeps per step, the fraction of steps that hit the
    cap, and the wall time against the plain integrator (``rkmk_heun``).
@@ -178,7 +178,8 @@ def all_modes_variant(quick, log):
                 }
             )
             log(
-                f"  L = {degree}, {dissipation:9s}: E[c] = {c.mean():+.4f} (exact {law.mean():+.4f}), "
+                f"  L = {degree}, {dissipation:9s}: E[c] = {c.mean():+.4f} "
+                f"(exact {law.mean():+.4f}), "
                 f"KS {ks.statistic:.3f} (p = {ks.pvalue:.2g})"
             )
     return rows
@@ -420,7 +421,10 @@ def report(out_dir: Path, md_dir: Path) -> str:
             ]
     lines += [
         "",
-        "**Substepping** (like-signed pair, drift on, rkmk_heun, dt = 0.02, safety 0.05, cap 1000):",
+        (
+            "**Substepping** (like-signed pair, drift on, rkmk_heun, dt = 0.02, safety 0.05, "
+            "cap 1000):"
+        ),
         "",
         "| pair exponent | substeps/step (mean, median) | steps capped | time vs plain step |",
         "|---|---|---|---|",

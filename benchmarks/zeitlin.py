@@ -153,9 +153,11 @@ def _numpy_cost(system, start, repeats):
     peer = NumpyIsospectralMidpoint(system.params["harmonics"])
     algebra = system.algebra
     w0 = np.asarray(algebra.to_matrix(jnp.asarray(start)))
-    assert np.allclose(peer.inverse_laplacian(w0),
-                       algebra.to_matrix(system.params["harmonics"].inverse_laplacian(start)),
-                       atol=1e-10)
+    assert np.allclose(
+        peer.inverse_laplacian(w0),
+        algebra.to_matrix(system.params["harmonics"].inverse_laplacian(start)),
+        atol=1e-10,
+    )
     best = math.inf
     for _ in range(2):
         w = w0
@@ -163,7 +165,7 @@ def _numpy_cost(system, start, repeats):
         for _ in range(repeats):
             w = peer.step(w, EULER_STEP)
         best = min(best, time.perf_counter() - begin)
-    spectrum = lambda m: np.linalg.eigvalsh(1j * m)  # noqa: E731
+    spectrum = lambda m: np.linalg.eigvalsh(1j * m)
     drift = np.max(np.abs(spectrum(w) - spectrum(w0))) / np.linalg.norm(w0)
     return best / repeats, float(drift), w
 
@@ -191,8 +193,14 @@ def cost_against_size(quick, log):
             rows.append({"N": size, "variant": label, "seconds": seconds, "casimir_drift": drift})
             log(f"  N = {size:4d}, {label:28s}: {seconds * 1e3:10.3f} ms/step, drift {drift:.1e}")
         seconds, drift, w_numpy = _numpy_cost(system, start, repeats)
-        rows.append({"N": size, "variant": "Euler, NumPy isospectral midpoint (own)",
-                     "seconds": seconds, "casimir_drift": drift})
+        rows.append(
+            {
+                "N": size,
+                "variant": "Euler, NumPy isospectral midpoint (own)",
+                "seconds": seconds,
+                "casimir_drift": drift,
+            }
+        )
         log(f"  N = {size:4d}, {'NumPy isospectral midpoint':28s}: {seconds * 1e3:10.3f} ms/step")
         # Same trajectory: the JAX midpoint after `repeats` steps equals the NumPy one.
         midpoint = variants["Euler, isospectral midpoint"]
@@ -233,9 +241,17 @@ def ess_per_second(quick, log):
         (_, energies), seconds = common.timed(compiled, states, timed_keys)
         energies = np.asarray(energies)
         ess = float(arviz.ess(energies))
-        rows.append({"N": size, "chains": num_chains, "steps": num_steps, "seconds": seconds,
-                     "ess": ess, "ess_per_second": ess / seconds,
-                     "mean_h": float(energies.mean())})
+        rows.append(
+            {
+                "N": size,
+                "chains": num_chains,
+                "steps": num_steps,
+                "seconds": seconds,
+                "ess": ess,
+                "ess_per_second": ess / seconds,
+                "mean_h": float(energies.mean()),
+            }
+        )
         log(f"  N = {size}: ESS(h) = {ess:.0f} in {seconds:.1f} s -> {ess / seconds:.2f} /s")
     return rows
 
@@ -245,8 +261,14 @@ def run(out_dir: Path, quick: bool, log) -> None:
     cost = cost_against_size(quick, log)
     log("Zeitlin su(N): ESS/s of h")
     ess = ess_per_second(quick, log)
-    results = {"mode": "quick" if quick else "full", "machine": common.machine_info(),
-               "euler_step": EULER_STEP, "ess_step": ESS_STEP, "cost": cost, "ess": ess}
+    results = {
+        "mode": "quick" if quick else "full",
+        "machine": common.machine_info(),
+        "euler_step": EULER_STEP,
+        "ess_step": ESS_STEP,
+        "cost": cost,
+        "ess": ess,
+    }
     common.write_json(out_dir / "zeitlin.json", results)
     _plot(results, out_dir / "zeitlin.png")
 
@@ -284,14 +306,17 @@ def report_section(results, plot_link: str | None = "zeitlin.png") -> str:
     lines = [
         "## Zeitlin su(N) Euler on the sphere",
         "",
-        f"From `benchmarks/zeitlin.py` ({results['mode']} mode, {machine['date_utc']}, "
-        f"{machine['cpu_model']}, {machine['usable_cpus']} CPUs, a shared and loaded machine: "
-        "absolute times are indicative). Seconds per step of one chain, compilation excluded; "
-        "`zeitlin_euler(N, noise_degree=2)` from a random vorticity with ‖W‖² = N. The sampler "
-        "row is `lie_poisson_langevin(beta=1, sigma=1, step_size=0.05)` (splitting: 18 "
-        f"coadjoint moves per step); the Euler rows advance `dt = {results['euler_step']}`. "
-        "The NumPy isospectral midpoint is this project's own (quflow is not on PyPI). The last "
-        "column is the local slope d log t / d log N over the two largest N (O(N³) expected).",
+        (
+            f"From `benchmarks/zeitlin.py` ({results['mode']} mode, {machine['date_utc']}, "
+            f"{machine['cpu_model']}, {machine['usable_cpus']} CPUs, a shared and loaded machine: "
+            "absolute times are indicative). Seconds per step of one chain, compilation excluded; "
+            "`zeitlin_euler(N, noise_degree=2)` from a random vorticity with ‖W‖² = N. The sampler "
+            "row is `lie_poisson_langevin(beta=1, sigma=1, step_size=0.05)` (splitting: 18 "
+            f"coadjoint moves per step); the Euler rows advance `dt = {results['euler_step']}`. "
+            "The NumPy isospectral midpoint is this project's own (quflow is not on PyPI). "
+            "The last column is the local slope d log t / d log N over the two largest N "
+            "(O(N³) expected)."
+        ),
         "",
         "| variant | " + " | ".join(f"N = {n}" for n in sizes) + " | slope | spectrum drift |",
         "|---|" + "---|" * len(sizes) + "---|---|",
@@ -300,22 +325,38 @@ def report_section(results, plot_link: str | None = "zeitlin.png") -> str:
         rows = {r["N"]: r for r in results["cost"] if r["variant"] == variant}
         cells = [common.format_seconds(rows[n]["seconds"]) if n in rows else "–" for n in sizes]
         drift = max(r["casimir_drift"] for r in rows.values())
-        lines.append(f"| {variant} | " + " | ".join(cells)
-                     + f" | {_slope(list(rows.values())):.2f} | {drift:.1e} |")
+        lines.append(
+            f"| {variant} | "
+            + " | ".join(cells)
+            + f" | {_slope(list(rows.values())):.2f} | {drift:.1e} |"
+        )
     gaps = [r["gap_to_jax"] for r in results["cost"] if "gap_to_jax" in r]
     if gaps:
-        lines += ["", f"The NumPy and JAX midpoint trajectories agree to {max(gaps):.1e} "
-                  "(largest entry difference after the timed steps)."]
-    lines += ["", "ESS per second of h: `lie_poisson_langevin(zeitlin_euler(N, noise_degree=2), "
-              f"beta=1, sigma=1, step_size={results.get('ess_step', 0.1)})`, 4 vmapped chains "
-              "from one start after "
-              "a warm-up; bulk ESS by ArviZ over the wall time of the timed run. Only the 8 modes "
-              "ℓ ≤ 2 are forced, so h decorrelates slowly.",
-              "", "| N | chains × steps | ESS(h) | seconds | ESS/s | mean h |",
-              "|---|---|---|---|---|---|"]
+        lines += [
+            "",
+            (
+                f"The NumPy and JAX midpoint trajectories agree to {max(gaps):.1e} "
+                "(largest entry difference after the timed steps)."
+            ),
+        ]
+    lines += [
+        "",
+        (
+            "ESS per second of h: `lie_poisson_langevin(zeitlin_euler(N, noise_degree=2), "
+            f"beta=1, sigma=1, step_size={results.get('ess_step', 0.1)})`, 4 vmapped chains "
+            "from one start after "
+            "a warm-up; bulk ESS by ArviZ over the wall time of the timed run. Only the 8 modes "
+            "ℓ ≤ 2 are forced, so h decorrelates slowly."
+        ),
+        "",
+        "| N | chains × steps | ESS(h) | seconds | ESS/s | mean h |",
+        "|---|---|---|---|---|---|",
+    ]
     for r in results["ess"]:
-        lines.append(f"| {r['N']} | {r['chains']} × {r['steps']} | {r['ess']:.0f} | "
-                     f"{r['seconds']:.1f} | {r['ess_per_second']:.2f} | {r['mean_h']:.3f} |")
+        lines.append(
+            f"| {r['N']} | {r['chains']} × {r['steps']} | {r['ess']:.0f} | "
+            f"{r['seconds']:.1f} | {r['ess_per_second']:.2f} | {r['mean_h']:.3f} |"
+        )
     if plot_link:
         lines += ["", f"![cost per step against N]({plot_link})"]
     lines.append("")
