@@ -171,7 +171,7 @@ def demo(args) -> int:
         f"non-finite steps: {count_nonfinite({'nonfinite': stats['diverging'].values})}"
     )
 
-    # Isotropic body: uniform law, exact autocorrelation r² exp(−σ² t) (MATH.md §2).
+    # Isotropic body: uniform law, exact autocorrelation r² exp(−σ² t).
     iso_algorithm = sampler_for(systems.rigid_body((2.0, 2.0, 2.0)))
     iso_draws = round(200.0 / args.step_size)
     iso = sample(

@@ -1,6 +1,10 @@
-"""The user-facing docs link only to files the project has, and never outside it."""
+"""The docs link only to files the project has; docstrings cite only what the package ships;
+matplotlib loads only to plot; the templates of docs/extending.md work."""
 
+import ast
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -48,3 +52,156 @@ def test_every_relative_link_resolves_inside_the_project(document):
 def test_no_reference_to_files_users_do_not_have(document):
     text = document.read_text()
     assert "../shared" not in text and "MATH.md" not in text and "ARCHITECTURE.md" not in text
+
+
+# --- Docstrings cite only what the package ships -------------------------------------------------
+
+PACKAGE = ROOT / "liesample"
+SHIPPED = {path.relative_to(ROOT).as_posix() for path in PACKAGE.rglob("*.py")}
+
+# A file the package does not ship: a Markdown/TeX/notebook file, anything under the project's
+# non-package folders, or the shared notes by their names (``MATH.md §2``, ``ARCHITECTURE:``).
+NOT_SHIPPED = re.compile(
+    r"(?<![\w/.-])(?:\.\./)*(?:docs|benchmarks|tests|examples|shared|paper)/(?:[\w./:-]*\w)?"
+    r"|[\w./-]+\.(?:md|tex|rst|ipynb)\b"
+    r"|\b(?:MATH|ARCHITECTURE|RESULTS)\b"
+)
+# A path to a Python file: fine only when it is one of the package's own modules.
+PYTHON_PATH = re.compile(r"(?<![\w/.-])[\w.-]+(?:/[\w.-]+)+\.py\b")
+
+
+def _docstrings(path: Path):
+    """``(line, text)`` of the module's docstring and of every class's and function's."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    for node in ast.walk(tree):
+        if not isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef):
+            continue
+        first = node.body[0] if node.body else None
+        value = first.value if isinstance(first, ast.Expr) else None
+        if isinstance(value, ast.Constant) and isinstance(value.value, str):
+            yield first.lineno, value.value
+
+
+def citations_of_unshipped_files(path: Path, root: Path = ROOT) -> list[str]:
+    """``file:line: cited`` for each docstring citation of a file the package does not ship."""
+    found = set()
+    for first_line, text in _docstrings(path):
+        for offset, line in enumerate(text.splitlines()):
+            cited = NOT_SHIPPED.findall(line) + [
+                p for p in PYTHON_PATH.findall(line) if p not in SHIPPED
+            ]
+            for name in cited:
+                found.add((first_line + offset, name))
+    relative = path.relative_to(root).as_posix()
+    return [f"{relative}:{line}: {name}" for line, name in sorted(found)]
+
+
+def test_docstrings_cite_only_shipped_files():
+    """A user reads docstrings without the repository: they may cite the package's own modules
+    and the seed paper's labels (``eq:poisson-langevin-eq``), never notes, tests or benchmarks."""
+    offenders = [
+        hit for path in sorted(PACKAGE.rglob("*.py")) for hit in citations_of_unshipped_files(path)
+    ]
+    assert not offenders, "docstrings cite files the package does not ship:\n" + "\n".join(
+        offenders
+    )
+
+
+def test_the_docstring_check_can_fail(tmp_path):
+    module = tmp_path / "liesample" / "fake.py"
+    module.parent.mkdir()
+    module.write_text(
+        '"""See MATH.md §1 and the paper, ``eq:poisson-langevin-eq``."""\n\n\n'
+        "class A:\n"
+        '    """Fine: :mod:`liesample.dynamics.system`, ``liesample/cli.py``."""\n\n'
+        "    def f(self):\n"
+        '        """Two lines.\n\n'
+        '        Measured in ``tests/test_x.py`` and docs/architecture.md."""\n'
+    )
+    assert citations_of_unshipped_files(module, root=tmp_path) == [
+        "liesample/fake.py:1: MATH.md",
+        "liesample/fake.py:10: docs/architecture.md",
+        "liesample/fake.py:10: tests/test_x.py",
+    ]
+
+
+# --- matplotlib only where a figure is drawn ---------------------------------------------------
+
+
+def test_matplotlib_is_imported_only_by_the_plots():
+    importers = set()
+    for path in sorted(PACKAGE.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+            names = (
+                [alias.name for alias in node.names]
+                if isinstance(node, ast.Import)
+                else [node.module or ""]
+                if isinstance(node, ast.ImportFrom)
+                else []
+            )
+            if any(name.split(".")[0] == "matplotlib" for name in names):
+                importers.add(path.relative_to(ROOT).as_posix())
+    assert importers <= {"liesample/analysis/plots.py"}, sorted(importers)
+
+
+def test_importing_liesample_does_not_import_matplotlib():
+    code = "import sys, liesample, liesample.cli; print('matplotlib' in sys.modules)"
+    result = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True
+    )
+    assert result.stdout.strip() == "False"
+
+
+# --- The templates of docs/extending.md work -------------------------------------------------
+
+
+def test_the_system_template_builds_and_samples_one_step():
+    import jax
+    import jax.numpy as jnp
+
+    import liesample
+    from liesample.integrators._template_integrator import group_midpoint
+    from liesample.samplers.contract import check_info
+    from liesample.systems._template_system import moment_in_field
+
+    system = moment_in_field((0.0, 0.0, 2.0))
+    start = jnp.array([1.0, 0.0, 0.0])
+    for integrator in ("splitting", group_midpoint):
+        sampler = liesample.lie_poisson_langevin(
+            system, beta=1.5, sigma=1.0, step_size=0.05, integrator=integrator
+        )
+        state, info = jax.jit(sampler.step)(jax.random.key(0), sampler.init(start))
+        check_info(info)
+        assert not bool(info.is_divergent)
+        assert abs(float(jnp.linalg.norm(state.position)) - 1.0) < 1e-12  # stays on the orbit
+    reference = system.reference(1.5, start)
+    assert reference.kappa == pytest.approx(1.5 * 1.0 * 2.0)
+    assert reference.mean()[2] > 0.0
+
+
+def test_the_sampler_and_space_templates_take_one_step():
+    import jax
+    import jax.numpy as jnp
+
+    import liesample
+    from liesample.geometry._template_space import PositiveReals
+    from liesample.samplers._template_sampler import orbit_metropolis
+    from liesample.samplers.contract import check_info
+    from liesample.systems._template_system import moment_in_field
+
+    sampler = orbit_metropolis(moment_in_field(), beta=1.0, scale=0.5)
+    state, info = jax.jit(sampler.step)(jax.random.key(0), sampler.init(jnp.array([0.0, 0.6, 0.8])))
+    check_info(info)
+    assert abs(float(jnp.linalg.norm(state.position)) - 1.0) < 1e-12
+
+    def gamma_logdensity(x):  # Gamma(3, 1) with respect to the Haar measure dx/x
+        return jnp.sum(3.0 * jnp.log(x) - x)
+
+    hmc = liesample.geometric_hmc(
+        gamma_logdensity, PositiveReals((2,)), step_size=0.3, num_integration_steps=5
+    )
+    state, info = jax.jit(hmc.step)(jax.random.key(1), hmc.init(jnp.array([1.0, 2.0])))
+    check_info(info)
+    assert bool(jnp.all(state.position > 0.0))
+    with pytest.raises(ValueError, match="> 0"):
+        hmc.init(jnp.array([1.0, -2.0]))

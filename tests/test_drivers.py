@@ -144,8 +144,18 @@ def test_ito_without_its_correction_is_wrong():
     assert np.max(np.abs(samples.mean(0) - mean) / se) > 10
 
 
-@pytest.mark.parametrize("name", sorted(DRIVERS))
-@pytest.mark.parametrize("integrator", ["splitting", "rkmk_heun", "lie_euler"])
+def _driver_cases():
+    """Every driver with the default integrator and every integrator under Brownian motion in the
+    default suite; the other pairs in ``make test-slow``."""
+    for integrator in ("splitting", "rkmk_heun", "lie_euler"):
+        for name in sorted(DRIVERS):
+            quick = integrator == "splitting" or name == "brownian"
+            yield pytest.param(
+                name, integrator, id=f"{integrator}-{name}", marks=() if quick else pytest.mark.slow
+            )
+
+
+@pytest.mark.parametrize(("name", "integrator"), _driver_cases())
 def test_casimirs_kept_pathwise_under_every_driver(name, integrator):
     """Hamiltonian + semimartingale noise: |μ|² (rigid body) and |Γ|², Π·Γ (heavy top) stay at
     their initial values to round-off along every path, whatever the driver."""

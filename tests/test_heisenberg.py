@@ -245,6 +245,7 @@ def test_metropolis_chain_correlations_match_fisher(proposal):
     assert_matches_fisher(averages)
 
 
+@pytest.mark.slow
 def test_langevin_and_metropolis_agree_on_a_periodic_lattice_with_field_and_anisotropy():
     """3×3 periodic lattice (an odd cycle: three colours), J = 1, B = 0.5 e_z, D = 0.8, β = 1.
 

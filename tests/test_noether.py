@@ -82,8 +82,12 @@ def test_joint_generator_keeps_it_to_integrator_accuracy():
 
 @pytest.mark.parametrize(
     "driver",
-    [DriftedBrownianMotion(drift=0.8, scale=1.2), TimeChangedBrownianMotion(lambda t: t + t**2)],
-    ids=["drifted", "time-changed"],
+    [
+        pytest.param(DriftedBrownianMotion(drift=0.8, scale=1.2), id="drifted"),
+        pytest.param(
+            TimeChangedBrownianMotion(lambda t: t + t**2), id="time-changed", marks=pytest.mark.slow
+        ),
+    ],
 )
 def test_kept_under_semimartingale_drivers(driver):
     """Without dissipation and with non-Brownian drivers the conservation law is the same."""

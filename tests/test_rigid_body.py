@@ -186,7 +186,10 @@ def stochastic_runner(integrator, beta, sigma=1.0, step_size=0.05):
     return algorithm, run
 
 
-@pytest.mark.parametrize("integrator", ORBIT_PRESERVING)
+@pytest.mark.parametrize(
+    "integrator",
+    [i if i == "splitting" else pytest.param(i, marks=pytest.mark.slow) for i in ORBIT_PRESERVING],
+)
 def test_million_steps_stay_on_the_orbit(integrator):
     """10⁶ steps (β = 3, σ = 1, dt = 0.05): each step rounds |μ|² by a few ulp; a random walk of
     10⁶ such errors is ~1e-13, a systematic one at most ~1e-10 — any O(dt^p) drift is far larger.

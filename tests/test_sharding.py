@@ -31,6 +31,7 @@ SCRIPT = textwrap.dedent(
     import numpy as np
     import liesample
 
+    FULL = __FULL__
     assert len(jax.devices()) == 2, jax.devices()
     key = jax.random.key(3)
     cases = {
@@ -43,11 +44,15 @@ SCRIPT = textwrap.dedent(
             np.tile(np.array([0.2, -0.1, 0.3, 0.0, 0.6, -0.8]), (4, 1)),
         ),
     }
+    if not FULL:  # the default suite: the rigid body over both devices, in device order
+        del cases["heavy top"]
     run = dict(num_warmup=3, thinning=2, chunk_draws=4, progress=False)
     for label, (system, starts) in cases.items():
         algorithm = liesample.lie_poisson_langevin(system, beta=2.0, sigma=1.0, step_size=0.05)
         plain = liesample.sample_chains(algorithm, key, starts, 12, **run)
         choices = ("all", jax.devices()[::-1]) if label == "rigid body" else (2,)
+        if not FULL:
+            choices = ("all",)
         for devices in choices:
             sharded = liesample.sample_chains(algorithm, key, starts, 12, devices=devices, **run)
             np.testing.assert_allclose(sharded.positions, plain.positions, rtol=0, atol=1e-13)
@@ -76,14 +81,14 @@ SCRIPT = textwrap.dedent(
 )
 
 
-def test_sharded_draws_equal_unsharded_on_two_cpu_devices():
+def _run_on_two_devices(full: bool):
     env = dict(os.environ)
     env["XLA_FLAGS"] = (
         env.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2"
     ).strip()
     env["JAX_PLATFORMS"] = "cpu"
     completed = subprocess.run(
-        [sys.executable, "-c", SCRIPT],
+        [sys.executable, "-c", SCRIPT.replace("__FULL__", str(full))],
         check=False,
         env=env,
         capture_output=True,
@@ -92,6 +97,17 @@ def test_sharded_draws_equal_unsharded_on_two_cpu_devices():
     )
     assert completed.returncode == 0, completed.stdout + completed.stderr
     assert "ALL OK" in completed.stdout
+
+
+def test_sharded_draws_equal_unsharded_on_two_cpu_devices():
+    """The rigid body over both devices ("all"), the DataTree path and the placement."""
+    _run_on_two_devices(full=False)
+
+
+@pytest.mark.slow
+def test_sharded_draws_equal_unsharded_every_device_choice():
+    """Also the heavy top, ``devices=2`` and the devices in reverse order."""
+    _run_on_two_devices(full=True)
 
 
 SYSTEM = liesample.systems.rigid_body()

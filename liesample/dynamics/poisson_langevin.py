@@ -1,15 +1,15 @@
 """The Poisson–Langevin SDE on a dual Lie algebra, assembled from declared effects.
 
-MATH.md §1 (paper, ``eq:poisson-langevin-eq`` and ``eq:stoch-diss-lie-poisson``): with unit-strength
-noise Hamiltonians ``ĥ_i``, noise strength ``σ`` and dissipation strength ``θ``,
+Paper, ``eq:poisson-langevin-eq`` and ``eq:stoch-diss-lie-poisson``: with unit-strength noise
+Hamiltonians ``ĥ_i``, noise strength ``σ`` and dissipation strength ``θ``,
 
     dμ = X_h dt  −  θ Σ_i {h, ĥ_i} X_{ĥ_i} dt  +  σ Σ_i X_{ĥ_i} ∘ dW_i          (Stratonovich)
 
 and ``exp(−βh)`` is invariant on every coadjoint orbit when ``θ = βσ²/2``. The dissipation is
 *derived* from the same ``ĥ_i`` and bracket as the noise; no system writes it by hand.
 
-On ``g*`` each term is ``ad*_ζ μ`` (MATH.md §2), so the dynamics hands integrators a single
-generator ``ζ ∈ g`` for a step ``(dt, dW)``:
+On ``g*`` each term is ``ad*_ζ μ`` (paper, ``eq:lie-poisson``), so the dynamics hands
+integrators a single generator ``ζ ∈ g`` for a step ``(dt, dW)``:
 
     ζ = ∇h dt  −  θ Σ_i {h, ĥ_i} ∇ĥ_i dt  +  σ Σ_i ∇ĥ_i dW_i .
 
@@ -81,7 +81,8 @@ def make_dynamics(system, *, beta=None, sigma=1.0, theta=None, hamiltonian=True)
             system.check_beta(beta)
         if theta is not None:
             raise ValueError(
-                "theta is derived from beta and sigma (theta = beta*sigma**2/2); pass beta, not theta"
+                "theta is derived from beta and sigma (theta = beta*sigma**2/2); "
+                "pass beta, not theta"
             )
         theta = 0.5 * beta * sigma**2
     else:
@@ -128,7 +129,8 @@ class PoissonLangevin:
 
     @property
     def sde(self) -> PoissonLangevinSDE:
-        """The structure-agnostic SDE (``liesample.geometry.poisson``) on ``g*``, ``J(μ)ζ = ad*_ζ μ``."""
+        """The structure-agnostic SDE (:mod:`liesample.dynamics.sde`) on ``g*``,
+        ``J(μ)ζ = ad*_ζ μ``."""
         system = self.system
         return PoissonLangevinSDE(
             LiePoissonStructure(system.algebra),
@@ -169,8 +171,9 @@ class PoissonLangevin:
         """The generator of one group of noise directions alone: ``Σ_{i∈group} c_i ∇ĥ_i``.
 
         Along one direction the SDE is a one-dimensional Langevin equation with additive noise
-        in the group coordinate ``φ`` of ``exp(φ ∇ĥ_i)`` (MATH.md §1: each direction leaves
-        ``exp(−βh)`` invariant on its own), which is what the splitting integrator exploits.
+        in the group coordinate ``φ`` of ``exp(φ ∇ĥ_i)`` (each direction leaves ``exp(−βh)``
+        invariant on its own: the paper's ``eq:poisson-langevin-eq`` with one noise
+        Hamiltonian), which is what the splitting integrator exploits.
         A system may group directions that commute and do not affect each other's
         coefficients (``LiePoissonSystem.noise_groups``); a group then moves as one piece.
         A system that declares ``LiePoissonSystem.single_noise_hamiltonian`` has each direction
@@ -205,8 +208,8 @@ class PoissonLangevin:
 
     def ito_correction(self, mu, quadratic_variation):
         """``½ σ² Σ_i d[S^i] (DX_i · X_i)(μ)``, ``X_i = X_{ĥ_i}``: the drift that turns the
-        Stratonovich noise into Itô form (paper, the Itô-form proposition of ``sec:stoch-ham``;
-        MATH.md §1). ``quadratic_variation`` holds ``d[S^i]`` over the step, shape ``(m,)`` or a
+        Stratonovich noise into Itô form (paper, the Itô-form proposition of ``sec:stoch-ham``).
+        ``quadratic_variation`` holds ``d[S^i]`` over the step, shape ``(m,)`` or a
         scalar. Only Itô-reading integrators add it; none does silently.
         """
 

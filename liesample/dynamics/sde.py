@@ -18,7 +18,8 @@ from liesample.geometry.poisson import PoissonStructure
 
 @dataclass(frozen=True, eq=False)
 class PoissonLangevinSDE:
-    """The Poisson–Langevin SDE of MATH.md §1 on any :class:`PoissonStructure`.
+    """The Poisson–Langevin SDE (paper, ``eq:poisson-langevin-eq``) on a
+    :class:`PoissonStructure`.
 
     Parameters
     ----------

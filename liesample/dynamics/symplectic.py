@@ -1,4 +1,5 @@
-"""Symplectic diffusions on ``T*Rⁿ`` and a pathwise-symplectic integrator (paper, ``sec:stoch-ham``).
+"""Symplectic diffusions on ``T*Rⁿ`` and a pathwise-symplectic integrator (paper,
+``sec:stoch-ham``).
 
 Bismut's symplectic diffusion (paper, ``eqn:ham_q``–``eqn:ham_p`` and
 ``eq:general-symplectic-diffusion``), the Hamiltonian side of the stochastic Hamilton–Pontryagin
@@ -6,9 +7,9 @@ principle, is
 
     dz = Σ_{i ≥ 0} X_{H_i}(z) ∘ dS^i,      X_H = (∂H/∂p, −∂H/∂q),      S^0 = t,
 
-driven by the semimartingales ``S^i`` (e.g. ``S^i = W^i``; MATH.md §1). Its stochastic flow is a
-symplectomorphism for every path. No dissipation is added here: this is item 4 of the design,
-the conservative skeleton under the Poisson–Langevin SDE.
+driven by the semimartingales ``S^i`` (e.g. ``S^i = W^i``; paper,
+``def:driving_semimartingale``). Its stochastic flow is a symplectomorphism for every path.
+No dissipation is added here: this is the conservative skeleton under the Poisson–Langevin SDE.
 
 **Integrator: the stochastic implicit midpoint rule** (Milstein, Repin & Tretyakov 2002)
 
@@ -85,7 +86,8 @@ def symplectic_diffusion(hamiltonians: Callable, dimension: int) -> SymplecticDi
     shape = getattr(probe, "shape", None)
     if shape is None or len(shape) != 1 or shape[0] < 1:
         raise ValueError(
-            f"hamiltonians must map a state of shape ({2 * dimension},) to a vector (H_0, ..., H_m) "
+            f"hamiltonians must map a state of shape ({2 * dimension},) "
+            "to a vector (H_0, ..., H_m) "
             f"of shape (m + 1,), got {shape}"
         )
     return SymplecticDiffusion(hamiltonians, int(dimension), int(shape[0]))
@@ -153,7 +155,8 @@ def symplectic_path(system: SymplecticDiffusion, initial_state, increments, *, s
         raise ValueError(f"scheme must be one of {SCHEMES}, got {scheme!r}")
     if jnp.shape(initial_state) != (2 * system.dimension,):
         raise ValueError(
-            f"initial_state must have shape ({2 * system.dimension},), got {jnp.shape(initial_state)}"
+            f"initial_state must have shape ({2 * system.dimension},), "
+            f"got {jnp.shape(initial_state)}"
         )
     if jnp.ndim(increments) != 2 or jnp.shape(increments)[1] != system.num_drivers:
         raise ValueError(

@@ -34,7 +34,8 @@ class LiePoissonSystem:
         ``μ ↦ h(μ)``, a scalar.
     noise_hamiltonians : callable
         ``μ ↦ (ĥ_1(μ), …, ĥ_m(μ))``, unit-strength noise Hamiltonians; the noise is ``σ ĥ_i`` and
-        the dissipation is derived from the same functions (MATH.md §1).
+        the dissipation is derived from the same functions (paper,
+        ``eq:poisson-langevin-eq``).
     num_noises : int
         ``m``.
     event_shape : tuple of int
@@ -70,8 +71,8 @@ class LiePoissonSystem:
         normalisable on the orbit (e.g. point vortices at strongly negative ``β``). ``None``
         (default): every finite ``β`` is admissible (compact orbit, continuous ``h``).
     curvature_bound : bool
-        Whether the generic step-size check of :mod:`liesample.integrators.stability` (curvature of ``h``
-        along the noise flows, sampled on the orbit) applies. ``False`` where ``h`` is
+        Whether the generic step-size check of :mod:`liesample.integrators.stability` (curvature of
+        ``h`` along the noise flows, sampled on the orbit) applies. ``False`` where ``h`` is
         singular on the orbit (point vortices: their integrator substeps instead).
     hamiltonian_pieces : tuple of callables or None
         Functions summing to ``h``, each exactly solved by one coadjoint move: its gradient is

@@ -2,10 +2,9 @@
 
 XLA:CPU's ``small-while-loop-hoisting`` pass miscompiles some small while loops once they are
 vmapped: ``jit(vmap(lax.scan(step)))`` then gives each chain different numbers from the same
-chain run alone (not round-off: up to 2e-2 after two heavy-top steps on jaxlib 0.12, and the
-same pass does it on 0.11 once its size threshold is raised). ``tests/test_compile.py`` holds a
-pure-JAX reproducer. Disabling that one pass removes the miscompile on every supported version;
-it only affects the CPU backend and costs little (``benchmarks/RESULTS.md``, "Compile path").
+chain run alone, by far more than round-off (the same pass does it on jaxlib 0.11 once its size
+threshold is raised). Disabling that one pass removes the miscompile on every supported version;
+it only affects the CPU backend and costs little.
 
 Every loop the library compiles goes through :func:`jit`. A user who writes their own
 ``jax.jit(jax.vmap(...))`` around ``algorithm.step`` gets the same protection with

@@ -26,7 +26,8 @@ def finite_float(name: str, value, *, positive: bool = False, nonnegative: bool 
 
 
 def principal_moments(inertia) -> tuple[float, float, float]:
-    """Three finite, positive principal moments of inertia, or a ``ValueError`` naming the bad one."""
+    """Three finite, positive principal moments of inertia, or a ``ValueError`` naming the bad
+    one."""
     if np.ndim(inertia) != 1 or len(inertia) != 3:
         raise ValueError(
             f"inertia must be a sequence of 3 principal moments (each finite and > 0), "
@@ -52,7 +53,8 @@ def nonzero_vector3(name: str, value) -> np.ndarray:
 
 
 def concrete_array(value):
-    """``np.asarray(value)``, or ``None`` when ``value`` is a tracer (checks then happen outside jit)."""
+    """``np.asarray(value)``, or ``None`` when ``value`` is a tracer (checks then happen outside
+    jit)."""
     try:
         return np.asarray(value)
     except jax.errors.TracerArrayConversionError:  # value checks are skipped under tracing

@@ -1,7 +1,7 @@
 """Lie algebras and their coadjoint actions: the pure mathematics under every system.
 
-Conventions (MATH.md §2): the (−) Lie–Poisson bracket ``{f, g}(μ) = −⟨μ, [∇f, ∇g]⟩`` and
-``⟨ad*_ξ μ, η⟩ = ⟨μ, [ξ, η]⟩``, so that ``X_f(μ) = ad*_{∇f(μ)} μ`` and the Lie–Poisson
+Conventions (paper, ``sec:lie-poisson``): the (−) Lie–Poisson bracket ``{f, g}(μ) = −⟨μ, [∇f, ∇g]⟩``
+and ``⟨ad*_ξ μ, η⟩ = ⟨μ, [ξ, η]⟩``, so that ``X_f(μ) = ad*_{∇f(μ)} μ`` and the Lie–Poisson
 equation is ``μ̇ = ad*_{∇h} μ`` (paper, ``eq:lie-poisson``).
 
 Every drift, dissipation and noise term on ``g*`` is a coadjoint action ``ad*_ζ μ`` for a
@@ -14,7 +14,7 @@ The algebras here:
   of shape ``(N, 3)`` *is* the product ``(so(3)*)^N`` (spins, point vortices): every operation
   acts copy by copy, vectorised, with no loop over the blocks.
 - :class:`SE3` (``se3``): ``se(3)* = so(3)* ⋉ R³``, the heavy top, state ``(Π, Γ)`` of shape
-  ``(..., 6)``; closed-form coadjoint action (MATH.md §2).
+  ``(..., 6)``; closed-form coadjoint action (paper, ``app:semidirect``).
 - :class:`Unitary` (``unitary(N)``): ``u(N)`` on real ``N × N`` coordinates, ``Ad*`` by unitary
   conjugation (``expm``), O(N³); Casimirs the spectrum. Zeitlin's model of 2-D Euler on the
   sphere (:mod:`liesample.systems.zeitlin`) lives on it.
@@ -167,7 +167,7 @@ class SE3(LieAlgebra):
     as one array with the first three entries the so(3) part. Leading axes broadcast.
 
     - bracket ``[(ξ, v), (η, w)] = (ξ×η, ξ×w − η×v)``;
-    - ``ad*_{(ξ,v)}(Π, Γ) = (Π×ξ + Γ×v, Γ×ξ)`` (MATH.md §2), from ``⟨ad*_ζ μ, η⟩ = ⟨μ, [ζ, η]⟩``;
+    - ``ad*_{(ξ,v)}(Π, Γ) = (Π×ξ + Γ×v, Γ×ξ)``, from ``⟨ad*_ζ μ, η⟩ = ⟨μ, [ζ, η]⟩``;
     - Casimirs ``(|Γ|², Π·Γ)`` (shape ``(..., 2)``); ``Π·Γ`` may be zero or negative.
     """
 
@@ -197,7 +197,8 @@ class SE3(LieAlgebra):
         so::
 
             Γ' = R Γ₀,    Π' = R Π₀ + Γ' × w,    w = R J v = ∫₀¹ exp(−u ξ̂) du · v
-                                                    = v − ((1−cos θ)/θ²) ξ×v + ((θ−sin θ)/θ³) ξ×(ξ×v)
+                                                    = v − ((1−cos θ)/θ²) ξ×v
+                                                        + ((θ−sin θ)/θ³) ξ×(ξ×v)
 
         with ``θ = |ξ|``. Both Casimirs are kept to round-off (``R`` is a rotation and
         ``Γ'·(Γ'×w) = 0``); smooth, derivatives included, at ``ξ = 0`` (where ``Π' = Π₀ + Γ₀×v``).
@@ -306,7 +307,8 @@ class StructureConstants(LieAlgebra):
         return jnp.einsum("...i,...j,ijk->...k", xi, eta, self.constants)
 
     def coadjoint_matrix(self, zeta):
-        """``M(ζ)_{jk} = Σ_i ζ_i c_{ij}^k``, the matrix of ``μ ↦ ad*_ζ μ``; shape ``(..., n, n)``."""
+        """``M(ζ)_{jk} = Σ_i ζ_i c_{ij}^k``, the matrix of ``μ ↦ ad*_ζ μ``; shape
+        ``(..., n, n)``."""
         return jnp.einsum("...i,ijk->...jk", zeta, self.constants)
 
     def ad_star(self, xi, mu):
@@ -402,11 +404,11 @@ class Unitary(LieAlgebra):
 
     **Pairing.** ``⟨W, Ξ⟩ = −tr(WΞ) = Re tr(W*Ξ)`` (the Frobenius inner product). In the real
     coordinates it is the plain sum ``Σ_ij x_ij y_ij`` (the cross terms ``A·T`` and ``S·B``
-    vanish), so it is :meth:`LieAlgebra.pairing` and ``jax.grad`` of a real function of ``x`` *is* the Riesz
-    representative of its differential: no conjugation convention enters. ``g*`` is identified with
-    ``g`` by this pairing.
+    vanish), so it is :meth:`LieAlgebra.pairing` and ``jax.grad`` of a real function of ``x`` *is*
+    the Riesz representative of its differential: no conjugation convention enters. ``g*`` is
+    identified with ``g`` by this pairing.
 
-    **Bracket and coadjoint action** (MATH.md §2 conventions, ``⟨ad*_Ξ W, H⟩ = ⟨W, [Ξ, H]⟩``):
+    **Bracket and coadjoint action** (the conventions above, ``⟨ad*_Ξ W, H⟩ = ⟨W, [Ξ, H]⟩``):
 
     - ``[Ξ, H] = ΞH − HΞ`` (matrix commutator);
     - ``ad*_Ξ W = [W, Ξ]`` (from ``−tr(W[Ξ, H]) = −tr([W, Ξ] H)``);

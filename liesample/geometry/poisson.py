@@ -1,12 +1,12 @@
-"""Poisson structures, and the Poisson–Langevin SDE written for any of them (MATH.md §1).
+"""Poisson structures: what the Poisson–Langevin SDE (paper, ``eq:poisson-langevin-eq``) needs.
 
 A Poisson structure is known through one linear map, the Poisson tensor applied to a covector,
 ``apply(z, ζ) = J(z) ζ``. Everything else follows from it:
 
 - ``X_f(z) = J(z) ∇f(z)`` (:meth:`PoissonStructure.hamiltonian_vector_field`);
 - ``{f, g}(z) = ∇f(z)ᵀ J(z) ∇g(z)`` (:meth:`PoissonStructure.bracket`);
-- the Poisson–Langevin SDE (:class:`PoissonLangevinSDE`), with unit-strength noise Hamiltonians
-  ``ĥ_i``, noise strength ``σ`` and dissipation strength ``θ`` (``θ = βσ²/2`` for
+- the Poisson–Langevin SDE (:class:`liesample.dynamics.sde.PoissonLangevinSDE`), with unit-strength
+  noise Hamiltonians ``ĥ_i``, noise strength ``σ`` and dissipation strength ``θ`` (``θ = βσ²/2`` for
   ``exp(−βh)``):
 
       dz = X_h dt − θ Σ_i {h, ĥ_i} X_{ĥ_i} dt + σ Σ_i X_{ĥ_i} ∘ dW_i        (Stratonovich)
@@ -19,9 +19,10 @@ A Poisson structure is known through one linear map, the Poisson tensor applied 
 The structures here:
 
 - :class:`CanonicalStructure`: ``T*Rⁿ`` with ``J(q) = [[0, I], [−I, G(q)]]`` and an
-  antisymmetric magnetic term ``G`` (MATH.md §3), constant or from a vector potential;
-- :class:`LiePoissonStructure`: ``g*`` with ``J(μ) ζ = ad*_ζ μ`` (MATH.md §2), the structure
-  that :class:`liesample.dynamics.PoissonLangevin` specialises (its generator *is* ``ζ``).
+  antisymmetric magnetic term ``G`` (paper, ``sec:brownian-particle``), constant or from a vector
+  potential;
+- :class:`LiePoissonStructure`: ``g*`` with ``J(μ) ζ = ad*_ζ μ`` (paper, ``eq:lie-poisson``), the
+  structure that :class:`liesample.dynamics.PoissonLangevin` specialises (its generator *is* ``ζ``).
 
 Magnetic conventions (physics, checked against the Lorentz force): the reduced symplectic form
 ``Σ dq^i ∧ dp_i − e dA`` with ``i_X ω = dh`` gives ``G_kj = e (∂_k A_j − ∂_j A_k)`` and, in
@@ -72,7 +73,7 @@ class PoissonStructure:
 
 @dataclass(frozen=True, eq=False)
 class LiePoissonStructure(PoissonStructure):
-    """``g*`` with the (−) Lie–Poisson bracket: ``J(μ) ζ = ad*_ζ μ`` (MATH.md §2)."""
+    """``g*`` with the (−) Lie–Poisson bracket: ``J(μ) ζ = ad*_ζ μ`` (paper, ``eq:lie-poisson``)."""
 
     algebra: LieAlgebra
 
@@ -140,7 +141,8 @@ def antisymmetric_matrix(name: str, value, dimension: int | None = None) -> np.n
 
 @dataclass(frozen=True, eq=False)
 class CanonicalStructure(PoissonStructure):
-    """``T*Rⁿ``, ``z = (q, p)``, with ``J(q) = [[0, I], [−I, G(q)]]`` (MATH.md §3).
+    """``T*Rⁿ``, ``z = (q, p)``, with ``J(q) = [[0, I], [−I, G(q)]]`` (paper,
+    ``sec:brownian-particle``).
 
     Parameters
     ----------
@@ -207,7 +209,7 @@ def _dimension(dimension) -> int:
 def magnetic_structure(
     *, magnetic_field=None, vector_potential=None, charge=1.0, dimension=None
 ) -> CanonicalStructure:
-    """``T*Rⁿ`` with the magnetic term ``G = e F`` of a field (MATH.md §3).
+    """``T*Rⁿ`` with the magnetic term ``G = e F`` of a field (paper, ``sec:brownian-particle``).
 
     Exactly one of:
 
@@ -254,7 +256,8 @@ def magnetic_structure(
         field = np.array(magnetic_field, dtype=float)
         if field.shape != (3,) or not np.all(np.isfinite(field)):
             raise ValueError(
-                f"magnetic_field as a vector must be a finite 3-vector B (R^3); got {magnetic_field!r}"
+                "magnetic_field as a vector must be a finite 3-vector B (R^3); "
+                f"got {magnetic_field!r}"
                 "; in other dimensions pass an antisymmetric (n, n) matrix"
             )
         if dimension is not None and dimension != 3:
@@ -272,7 +275,7 @@ def kinetic_magnetic_exponential(generator, time):
 
     ``φ₁(X) = Σ_k X^k/(k+1)!``, so ``t φ₁(tB) = ∫₀^t e^{sB} ds``: the exact flow of
     ``q̇ = M⁻¹p, ṗ = G M⁻¹ p`` is ``p ← e^{tB} p``, ``q ← q + M⁻¹ t φ₁(tB) p``. Valid for
-    singular ``G`` (``G = 0`` gives ``(I, tI)``); never from a symmetric eigensolver (MATH.md §3).
+    singular ``G`` (``G = 0`` gives ``(I, tI)``); never from a symmetric eigensolver.
     """
     generator = jnp.asarray(generator)
     n = generator.shape[0]

@@ -1,6 +1,6 @@
 """Real orthonormal spherical harmonics in JAX, as polynomials in Cartesian coordinates.
 
-The transport noise of point vortices (MATH.md §2, "Point vortices on the sphere"; paper,
+The transport noise of point vortices (paper, ``sec:stoch-diss-point-vortices`` and
 ``eq:stoch-diss-point-vortex``) needs ``Y_ℓ^m`` and its gradient at every vortex. Here
 
     Y_ℓ^0 = q_ℓ0(z),   Y_ℓ^m = √2 q_ℓm(z) Re (x + iy)^m,   Y_ℓ^{−m} = √2 q_ℓm(z) Im (x + iy)^m
@@ -66,8 +66,8 @@ def _recurrence_coefficients(max_degree):
     """Coefficient vectors (over ``m = 0 … L``) of the degree recurrence, one row per ``ℓ``.
 
     ``q_ℓ = A_ℓ z q_{ℓ−1} − B_ℓ q_{ℓ−2} + C_ℓ (q_{ℓ−1} shifted by one order)``, which packs
-    ``q_ℓm = a_ℓm (z q_{ℓ−1,m} − b_ℓm q_{ℓ−2,m})`` (``m ≤ ℓ−2``), ``q_{ℓ,ℓ−1} = √(2ℓ+1) z q_{ℓ−1,ℓ−1}``
-    and ``q_ℓℓ = √((2ℓ+1)/(2ℓ)) q_{ℓ−1,ℓ−1}``.
+    ``q_ℓm = a_ℓm (z q_{ℓ−1,m} − b_ℓm q_{ℓ−2,m})`` (``m ≤ ℓ−2``),
+    ``q_{ℓ,ℓ−1} = √(2ℓ+1) z q_{ℓ−1,ℓ−1}`` and ``q_ℓℓ = √((2ℓ+1)/(2ℓ)) q_{ℓ−1,ℓ−1}``.
     """
     size = max_degree + 1
     a = np.zeros((size, size))
@@ -238,7 +238,8 @@ def transport_mode(x, max_degree: int, index):
         columns.append(columns[-1] * u)
     powers = jnp.stack(columns, axis=-1)  # (..., 3, L+1)
     legendre = powers[..., 2, :] @ jnp.asarray(coefficients, dtype=x.dtype)[ell, jnp.abs(m)]
-    # Re / Im (x + iy)^{|m|} = Σ_a B_a x^a y^{|m|−a} (binomial expansion, :func:`_angular_binomials`)
+    # Re / Im (x + iy)^{|m|} = Σ_a B_a x^a y^{|m|−a}
+    # (binomial expansion, :func:`_angular_binomials`)
     binomials = jnp.asarray(_angular_binomials(max_degree), dtype=x.dtype)[max_degree + m]
     # y^{|m|−a} for each a, by a 0/1 matrix rather than a gather (batched gathers and their
     # scatter-add transposes are slow on CPU)

@@ -2,7 +2,7 @@
 
 The unadjusted samplers' ergodic averages carry a discretisation bias ``A(h) − A(0) ≈ C h^q``
 (``q`` → the integrator's weak order, ``liesample.integrators.INTEGRATORS[name].weak_order``,
-as ``h → 0``; MATH.md §2). This module measures it instead of guessing:
+as ``h → 0``). This module measures it instead of guessing:
 
 - :func:`coupled_ergodic_averages` runs independent chains, each at several step sizes
   ``h, h/2, h/4, …`` driven by *the same* Brownian path (the coarse increments are sums of the
@@ -18,8 +18,8 @@ as ``h → 0``; MATH.md §2). This module measures it instead of guessing:
   :func:`liesample.adjusted_lie_poisson`) as vmapped chains keeping only running sums.
 
 Without Lévy areas the schemes are strong order 1/2 under non-commuting noise, so coupled levels
-drift apart by ``O(√h)``: the coupling shrinks the variance of the differences (measured in
-``tests/test_accuracy_knob.py``) but does not remove it; every SE here comes from the spread of
+drift apart by ``O(√h)``: the coupling shrinks the variance of the differences but
+does not remove it; every SE here comes from the spread of
 independent chains, coupling included.
 """
 
@@ -769,8 +769,8 @@ def default_step_size(
     :func:`choose_step_size` on the coordinates of ``μ`` with ``relative_tolerance`` (bias at
     most 0.05 posterior sd by default), with pilots scaled to the problem: the coarsest pilot
     step is ``min(0.4/σ², 1/s)`` with ``s = θ·max_i|h''_i|`` the stiffness on the orbit
-    (:mod:`liesample.integrators.stability`), i.e. half the stability bound ``κ ≤ 2``, so every level of
-    the pilot and the chosen step are stable; the pilot runs ``min(50, 2000 h)`` time units
+    (:mod:`liesample.integrators.stability`), i.e. half the stability bound ``κ ≤ 2``, so every
+    level of the pilot and the chosen step are stable; the pilot runs ``min(50, 2000 h)`` time units
     (10 % burn-in) on 16 chains started from ``initial_positions`` (cycled; default: the
     system's default position), ``rng_key`` default ``jax.random.key(0)``.
     """

@@ -8,9 +8,9 @@ continuous, with a nonzero martingale part, and ``[S^i, S^j] = 0`` for ``i ≠ j
     dμ = X_h dt + σ Σ_i X_{ĥ_i} ∘ dS^i .
 
 Every term is a Hamiltonian vector field, so Casimirs are kept pathwise by any orbit-preserving
-integrator, whatever the driver (MATH.md §1), and a momentum map is kept when every ``H_i`` is
-invariant (stochastic Noether, ``prop:stoch-noether``). The integrators of
-:mod:`liesample.integrators` take the increments ``dS`` of a step, so a driver only has to
+integrator, whatever the driver (paper, ``eq:stochastic-poisson-system``), and a momentum map is
+kept when every ``H_i`` is invariant (stochastic Noether, ``prop:stoch-noether``). The integrators
+of :mod:`liesample.integrators` take the increments ``dS`` of a step, so a driver only has to
 supply them. The derived dissipation balances Brownian noise (``d[S^i] = dt``) only, so
 :func:`simulate` adds it only with a standard Brownian driver.
 
@@ -80,7 +80,8 @@ class DriftedBrownianMotion(_Driver):
         drift = np.asarray(self.drift, dtype=float)
         if drift.ndim > 1 or not np.all(np.isfinite(drift)):
             raise ValueError(
-                f"drift must be a finite scalar or a 1-D sequence (one per noise), got {self.drift!r}"
+                "drift must be a finite scalar or a 1-D sequence (one per noise), "
+                f"got {self.drift!r}"
             )
         object.__setattr__(self, "drift", float(drift) if drift.ndim == 0 else tuple(drift))
         object.__setattr__(self, "scale", finite_float("scale", self.scale, positive=True))
@@ -205,8 +206,9 @@ def simulate(
     driver : BrownianMotion, DriftedBrownianMotion or TimeChangedBrownianMotion
         Default: standard Brownian motion.
     beta : float, optional
-        Add the derived dissipation ``θ = βσ²/2`` (MATH.md §1), which makes ``exp(−βh)``
-        invariant; only with a standard Brownian driver, the case the balance holds for.
+        Add the derived dissipation ``θ = βσ²/2`` (paper, ``eq:poisson-langevin-eq``), which makes
+        ``exp(−βh)`` invariant; only with a standard Brownian driver, the case the balance holds
+        for.
     hamiltonian : bool
         Whether the Hamiltonian drift ``X_h`` is in the scene.
     integrator : str or Integrator
@@ -245,8 +247,8 @@ def simulate(
             )
         if not (isinstance(driver, BrownianMotion) and driver.is_standard):
             raise ValueError(
-                "the derived dissipation balances standard Brownian noise only (d[S] = dt, "
-                f"MATH.md §1); got driver {driver!r} with beta — drop beta or the driver"
+                "the derived dissipation balances standard Brownian noise only (d[S] = dt); "
+                f"got driver {driver!r} with beta — drop beta or the driver"
             )
         if system.check_beta is not None:
             system.check_beta(beta)
@@ -279,7 +281,8 @@ def simulate(
         return carry, carry[0]
 
     start = jnp.asarray(position, dtype=jnp.result_type(float))
-    # Compiled by liesample.jit even when called eagerly or under an eager vmap (liesample.foundation.compile).
+    # Compiled by liesample.jit even when called eagerly or under an eager vmap
+    # (liesample.foundation.compile).
     (_, nonfinite), saved = jit(
         lambda start: jax.lax.scan(
             block, (start, jnp.asarray(False)), save_every * jnp.arange(num_steps // save_every)

@@ -2,12 +2,12 @@
 
 Each integrator consumes generators ``ζ ∈ g`` from :meth:`PoissonLangevin.generator` and, except
 for the ambient baseline, moves only by ``Ad*_{exp ζ}`` (``coadjoint_exp``), so the state stays on
-its coadjoint orbit to round-off (MATH.md §2). All read the SDE in the Stratonovich sense; none
-adds an Itô correction. Each :class:`Integrator` declares what it guarantees — its weak order
-(the order of the bias of ergodic averages in the step size, measured in
-``tests/test_sampling.py`` and ``benchmarks/``), whether that order needs linear noise
-Hamiltonians, whether it preserves the orbit, its stability limit and its stochastic form — and
-:mod:`liesample.integrators.stability`, the samplers and the benchmark report read these attributes.
+its coadjoint orbit to round-off (paper, ``rmk:symplectic-leaf-preservation``). All read the SDE in
+the Stratonovich sense; none adds an Itô correction. Each :class:`Integrator` declares what it
+guarantees — its weak order (the order of the bias of ergodic averages in the step size), whether
+that order needs linear noise Hamiltonians, whether it preserves the orbit, its stability limit and
+its stochastic form — and :mod:`liesample.integrators.stability`, the samplers and the benchmark
+report read these attributes.
 """
 
 from __future__ import annotations
@@ -46,8 +46,9 @@ class Integrator:
         step, so with non-linear ``ĥ_i`` it misses the Stratonovich correction and is
         inconsistent (it converges to another SDE).
     stability_limit : float or None
-        Largest stable stability number ``κ = dt·θ·max_i |h''_i|`` (:mod:`liesample.integrators.stability`),
-        or ``None`` where no bound is claimed (the check is skipped).
+        Largest stable stability number ``κ = dt·θ·max_i |h''_i|``
+        (:mod:`liesample.integrators.stability`), or ``None`` where no bound is claimed (the check
+        is skipped).
     form : {"stratonovich", "ito"}
         The reading of the noise that the one-step map is consistent with.
     """
@@ -105,15 +106,14 @@ def _splitting(dynamics, mu, dt, dW):
 
     The pieces are the Hamiltonian flow and, one after another, each group of noise directions
     (by default each direction; ``LiePoissonSystem.noise_groups``) with its own share of the
-    derived dissipation (MATH.md §1: the generator is a sum over ``i`` of
-    operators self-adjoint in ``L²(exp(−βh))``). Each piece is advanced by Heun on the group,
+    derived dissipation (paper, ``eq:poisson-langevin-eq``: the generator is a sum over ``i``
+    of operators self-adjoint in ``L²(exp(−βh))``). Each piece is advanced by Heun on the group,
     which has one-step weak error ``O(dt³)`` against its exact, ``π``-preserving flow: along a
     single noise direction the noise is additive in the group coordinate. So every piece
     preserves ``π`` up to ``O(dt³)`` per step and the composition's invariant law is within
     ``O(dt²)`` of ``π`` — unlike Heun on the joint generator, whose non-commuting noise
-    directions leave an ``O(dt)`` bias. The ``dt³`` term is large and of opposite sign: on the
-    rigid body at ``β = 3`` the observed slope is ~1.3–1.7 for ``dt ≥ 0.1`` and reaches 2 below
-    (``tests/test_sampling.py::test_splitting_bias_is_second_order``, ``benchmarks/RESULTS.md``).
+    directions leave an ``O(dt)`` bias. The ``dt³`` term is large and of opposite sign, so the
+    second order shows only once the step is small enough.
     """
     move = dynamics.algebra.coadjoint_exp
     scene = dynamics.scene

@@ -1,8 +1,8 @@
 """The step-size stability bound of the Lie–Poisson–Langevin integrators.
 
-The stiff part of the Poisson–Langevin SDE (MATH.md §1) is the derived dissipation. Along one
-noise direction ``i`` the SDE is a one-dimensional Langevin equation in the group coordinate
-``φ`` of ``exp(φ ∇ĥ_i)`` (``PoissonLangevin.group_generator``),
+The stiff part of the Poisson–Langevin SDE (paper, ``eq:poisson-langevin-eq``) is the derived
+dissipation. Along one noise direction ``i`` the SDE is a one-dimensional Langevin equation in the
+group coordinate ``φ`` of ``exp(φ ∇ĥ_i)`` (``PoissonLangevin.group_generator``),
 
     dφ = −θ ∂_φ h dt + σ dW,
 
@@ -21,11 +21,10 @@ over the orbit. Explicit Euler (``lie_euler``) and Heun (``rkmk_heun``, each pie
 
       κ = θ · step_size · r² · (1/I_min − 1/I_max) ≤ 2,     θ = βσ²/2.
 
-  Measured (``tests/stability/test_stability.py``): the pure dissipative flow from near the
-  minimum converges for ``κ = 1.95`` and settles on a spurious 2-cycle for ``κ = 2.05``, with
-  ``splitting``, ``rkmk_heun`` and ``lie_euler`` alike (the Hamiltonian drift does not move the
-  bound). The orbit is compact, so beyond the bound the chain stays finite but samples a wrong
-  law. Isotropic inertia has ``h'' ≡ 0``: no bound.
+  The pure dissipative flow from near the minimum converges just below ``κ = 2`` and
+  settles on a spurious 2-cycle just above it, with ``splitting``, ``rkmk_heun`` and ``lie_euler``
+  alike (the Hamiltonian drift does not move the bound). The orbit is compact, so beyond the bound
+  the chain stays finite but samples a wrong law. Isotropic inertia has ``h'' ≡ 0``: no bound.
 - **Heavy top**: the translation noise ``ĥ_{3+j} = ⟨Γ, e_j⟩`` shifts ``Π`` by ``φ Γ×e_j``, with
   ``h'' = (Γ×e_j)·I⁻¹(Γ×e_j) ≤ r²/I_min`` on any orbit; the rotations add
   ``|mgl| r |χ|`` and kinetic terms ``∝ |Π|²``. The orbit is not compact: beyond the bound
@@ -36,10 +35,11 @@ over the orbit. Explicit Euler (``lie_euler``) and Heun (``rkmk_heun``, each pie
 :func:`stiffness` estimates ``θ · max |h''_i|`` on the orbit generically, by autodiff at the
 initial point and at 32 fixed pseudo-random points ``Ad*_{exp ζ_k} μ₀`` of its orbit (``ζ_k``
 standard normal), over every noise direction (a fixed subset of 12 when there are more, e.g.
-spin lattices, whose directions are alike): on compact orbits (so(3)ⁿ) this finds the maximum to a few per cent; on the
-heavy top's non-compact orbit it measures the ``Π`` of those points, ``|Π| ≲ |Π₀| + 2|Γ|``, so
-a chain whose ``Π`` wanders much further (high temperature) may be stiffer than estimated.
-``euler_heun`` leaves the orbit, and the growing radius raises its ``κ`` over long runs.
+spin lattices, whose directions are alike): on compact orbits (so(3)ⁿ) this finds the maximum to a
+few per cent; on the heavy top's non-compact orbit it measures the ``Π`` of those points,
+``|Π| ≲ |Π₀| + 2|Γ|``, so a chain whose ``Π`` wanders much further (high temperature) may be
+stiffer than estimated. ``euler_heun`` leaves the orbit, and the growing radius raises its ``κ``
+over long runs.
 """
 
 from __future__ import annotations
@@ -55,8 +55,8 @@ from liesample.foundation.compile import jit
 from liesample.integrators.orbit import INTEGRATORS, Integrator
 
 __all__ = [
-    "FLOAT32_MIN_STABLE_STEP",
     "FLOAT32_MIN_RELATIVE_SPREAD",
+    "FLOAT32_MIN_STABLE_STEP",
     "STABILITY_LIMITS",
     "check_precision",
     "check_step_size",
@@ -204,7 +204,8 @@ def check_step_size(system, integrator, step_size, theta, position, mode="warn")
         f"integrator on this orbit of the {system.name}: "
         f"κ = step_size·θ·max_i|h''_i| = {kappa:.3g} > {limit:g} (θ = {theta:.3g}), i.e. "
         f"step_size must be <= {largest:.3g}; reduce step_size (or leave it unset: the sampler "
-        "then chooses one below the bound), sigma or beta (see liesample.integrators.stability), or pass "
+        "then chooses one below the bound), sigma or beta "
+        "(see liesample.integrators.stability), or pass "
         "stability='warn' or 'off' to run anyway (the chain then samples a wrong law)"
     )
     if mode == "raise":
@@ -269,7 +270,8 @@ def check_precision(system, beta, theta, position, dtype) -> bool:
         warnings.warn(
             f"the {system.name} is sampled in float32, but {' and '.join(reasons)}: float32 "
             "round-off will show in the Casimirs and the averages. Call "
-            'jax.config.update("jax_enable_x64", True) at start-up (see liesample.integrators.stability)',
+            'jax.config.update("jax_enable_x64", True) at start-up '
+            "(see liesample.integrators.stability)",
             UserWarning,
             stacklevel=4,
         )

@@ -9,9 +9,9 @@ where ``rate`` (1/time) is a system-supplied bound on how fast the drift turns t
 :func:`liesample.systems.point_vortices.collision_rate`). The base integrator advances each
 substep with the Brownian increments scaled in proportion, ``dW · h/dt``: this integrates the
 step's piecewise-linear (Wong–Zakai) noise path more finely, which converges to the
-Stratonovich SDE (MATH.md §1) as ``dt → 0`` like the base scheme, while the stiff drift is
-resolved at the scale ``safety/rate``. Every substep is a coadjoint move of the base integrator,
-so an orbit-preserving base stays on the orbit to round-off.
+Stratonovich SDE (paper, ``eq:poisson-langevin-eq``) as ``dt → 0`` like the base scheme, while the
+stiff drift is resolved at the scale ``safety/rate``. Every substep is a coadjoint move of the base
+integrator, so an orbit-preserving base stays on the orbit to round-off.
 
 A state far from stiffness costs one substep (one ``rate`` evaluation extra). A step that would
 need more than ``max_substeps`` stops there and *drops the rest of its time* (the remaining

@@ -1,7 +1,7 @@
 """NumPyro distributions on spheres and SO(3): ``VonMisesFisher``, ``Bingham``, ``MatrixFisher``.
 
 An optional integration module (NumPyro is not a dependency of the core: install it with
-``pip install numpyro``). Use these distributions in a NumPyro model sampled by
+``pip install 'liesample[numpyro]'``). Use these distributions in a NumPyro model sampled by
 :class:`liesample.interop.numpyro_kernel.GeometricHMC` (NumPyro's own samplers move in unconstrained
 ``Rᵈ`` and cannot stay on a sphere or a group), or their ``log_prob`` inside a ``logdensity_fn``
 for :func:`liesample.geometric_hmc`, or their exact ``sample`` to simulate data. Their supports
@@ -37,8 +37,8 @@ try:
     from numpyro.distributions import Distribution, constraints
 except ImportError as error:  # an optional integration module
     raise ImportError(
-        "liesample.interop.numpyro_distributions needs NumPyro: pip install numpyro (or the 'test' extras of "
-        "liesample)"
+        "liesample.interop.numpyro_distributions needs NumPyro: "
+        "pip install 'liesample[numpyro]' (or pip install numpyro)"
     ) from error
 
 import functools

@@ -4,8 +4,7 @@ Chains are independent, so the runner splits the leading (chain) axis of the sta
 per-chain keys over a one-dimensional device mesh and lets ``jax.jit`` partition the vmapped
 step (GSPMD): no chain ever talks to another, so there is no communication until the draws are
 copied back to the host. Each chain runs the same operations on the same key
-``fold_in(key_c, step)`` as in the unsharded run, so the draws agree (bitwise on CPU, see
-``tests/test_sharding.py``).
+``fold_in(key_c, step)`` as in the unsharded run, so the draws agree (bitwise on CPU).
 
 Several hosts (``jax.distributed``)
 -----------------------------------

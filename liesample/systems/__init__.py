@@ -16,11 +16,11 @@ __all__ = [
     "charged_particle_path",
     "heavy_top",
     "heisenberg",
+    "isospectral_midpoint",
     "lie_poisson_system",
     "point_vortex_integrator",
     "point_vortices",
     "rigid_body",
     "stochastic_pendulum",
-    "isospectral_midpoint",
     "zeitlin_euler",
 ]

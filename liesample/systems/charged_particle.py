@@ -1,8 +1,9 @@
-"""The charged Brownian particle in a magnetic field (paper, ``sec:brownian-particle``; MATH.md §3).
+"""The charged Brownian particle in a magnetic field (paper, ``sec:brownian-particle``).
 
-On ``T*Rⁿ`` with ``J(q) = [[0, I], [−I, G(q)]]`` (:class:`liesample.geometry.poisson.CanonicalStructure`),
-``h = |p|²/2m + V(q)`` and unit noise Hamiltonians ``ĥ_i = −q_i`` (noise ``σ ĥ_i``), the generic
-Poisson–Langevin SDE (:class:`liesample.dynamics.sde.PoissonLangevinSDE`) is
+On ``T*Rⁿ`` with ``J(q) = [[0, I], [−I, G(q)]]``
+(:class:`liesample.geometry.poisson.CanonicalStructure`), ``h = |p|²/2m + V(q)`` and unit noise
+Hamiltonians ``ĥ_i = −q_i`` (noise ``σ ĥ_i``), the generic Poisson–Langevin SDE
+(:class:`liesample.dynamics.sde.PoissonLangevinSDE`) is
 
     dq = p/m dt,     dp = (−∇V + G(q) p/m − θ p/m) dt + σ dW,       θ = βσ²/2,
 
@@ -14,15 +15,15 @@ The system runs as a simulation (:func:`charged_particle_path`, or
 :func:`charged_particle_dynamics` for a pure, vmappable step). Integrators:
 
 - ``"baoab"`` (default): Strang splitting ``B(ε/2) A(ε/2) O(ε) A(ε/2) B(ε/2)``, the scheme
-  :data:`liesample.geometry.cotangent.BAOAB` of the one-effect steps the samplers use: ``B`` the potential
-  kick, ``A`` the kinetic + magnetic flow (exact ``e^{εG/m}`` rotation and ``φ₁`` displacement
-  for a constant field; implicit midpoint, solved by fixed-point iteration, for ``G(q)``, which
-  conserves ``|p|`` to the solver tolerance), ``O`` the exact Ornstein–Uhlenbeck flow of the
-  derived dissipation plus noise. Weak order 2.
+  :data:`liesample.geometry.cotangent.BAOAB` of the one-effect steps the samplers use: ``B`` the
+  potential kick, ``A`` the kinetic + magnetic flow (exact ``e^{εG/m}`` rotation and ``φ₁``
+  displacement for a constant field; implicit midpoint, solved by fixed-point iteration, for
+  ``G(q)``, which conserves ``|p|`` to the solver tolerance), ``O`` the exact Ornstein–Uhlenbeck
+  flow of the derived dissipation plus noise. Weak order 2.
 - ``"heun"``: stochastic Heun on the structure-agnostic SDE (baseline; weak order 1).
 
-Which effects exist is a :class:`MagneticScene` (the flags of :class:`liesample.dynamics.Scene` plus a
-``magnetic`` flag); a disabled effect is never traced and draws no random numbers.
+Which effects exist is a :class:`MagneticScene` (the flags of :class:`liesample.dynamics.Scene` plus
+a ``magnetic`` flag); a disabled effect is never traced and draws no random numbers.
 """
 
 from __future__ import annotations
@@ -94,7 +95,8 @@ class MagneticScene:
 
 @dataclass(frozen=True, eq=False)
 class ChargedParticleSystem:
-    """What the charged particle declares: structure, ``h``, noise; built by :func:`charged_particle`.
+    """What the charged particle declares: structure, ``h``, noise; built by
+    :func:`charged_particle`.
 
     Attributes
     ----------
@@ -164,7 +166,7 @@ def charged_particle(
     charge: float = 1.0,
     dimension: int | None = None,
 ) -> ChargedParticleSystem:
-    """A charged particle on ``T*Rⁿ`` in a magnetic field (MATH.md §3).
+    """A charged particle on ``T*Rⁿ`` in a magnetic field (paper, ``sec:brownian-particle``).
 
     Parameters
     ----------
@@ -262,7 +264,8 @@ class ChargedParticleDynamics:
         return self.sde.structure
 
     def make_step(self, step_size) -> Callable:
-        """``step(rng_key, z) -> (z', converged)`` for a fixed ``step_size`` (matrices built once)."""
+        """``step(rng_key, z) -> (z', converged)`` for a fixed ``step_size`` (matrices built
+        once)."""
         if self.integrator == "heun":
             return self._heun_step(step_size)
         return self._baoab_step(step_size)
@@ -302,8 +305,9 @@ class ChargedParticleDynamics:
         return step
 
     def _baoab_step(self, step_size):
-        """``B A O A B`` from the one-effect steps of :mod:`liesample.geometry.cotangent`; the carry is
-        ``(point, converged)`` (``converged`` tracks the implicit midpoint of a ``G(q)``)."""
+        """``B A O A B`` from the one-effect steps of :mod:`liesample.geometry.cotangent`; the
+        carry is ``(point, converged)`` (``converged`` tracks the implicit midpoint of a
+        ``G(q)``)."""
         system, scene, structure = self.system, self.scene, self.structure
         effects = {}
         if scene.hamiltonian:
@@ -381,7 +385,8 @@ class ChargedParticleDynamics:
 
 
 def _carrying(effect):
-    """An effect on a :class:`~liesample.geometry.cotangent.PhasePoint` lifted to ``(point, converged)``."""
+    """An effect on a :class:`~liesample.geometry.cotangent.PhasePoint` lifted to
+    ``(point, converged)``."""
 
     def lifted(carry, fraction, key):
         point, converged = carry

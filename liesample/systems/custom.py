@@ -23,7 +23,7 @@ def lie_poisson_system(
     name: str = "Lie–Poisson system",
     **options,
 ) -> LiePoissonSystem:
-    """A user-defined system from the three things the equation needs (ARCHITECTURE: *systems*).
+    """A user-defined system from the three things the equation needs.
 
     Parameters
     ----------
@@ -41,10 +41,12 @@ def lie_poisson_system(
         ``noise_groups``, ``positive_casimirs``, …).
 
     Everything else (the dissipation, Casimir checks, every integrator and sampler) comes from
-    the engine; ``examples/custom_system.py`` builds a planar pendulum on ``se(2)*`` this way.
+    the engine; a planar pendulum on ``se(2)*`` is built this way from ``se2``.
     """
     if not isinstance(algebra, LieAlgebra):
-        raise TypeError(f"algebra must be a liesample.geometry.algebras.LieAlgebra, got {algebra!r}")
+        raise TypeError(
+            f"algebra must be a liesample.geometry.algebras.LieAlgebra, got {algebra!r}"
+        )
     if not callable(hamiltonian):
         raise TypeError(f"hamiltonian must be a callable μ ↦ h(μ), got {hamiltonian!r}")
     position = _real_position(position)

@@ -1,15 +1,16 @@
 """The stochastic-dissipative heavy top on se(3)* = so(3)* ⋉ R³ (paper, ``app:semidirect``).
 
 State ``μ = (Π, Γ)`` (body angular momentum, body-frame direction of gravity), Lie–Poisson with
-``ad*_{(ξ,v)}(Π, Γ) = (Π×ξ + Γ×v, Γ×ξ)`` (MATH.md §2), so ``X_h`` gives
+``ad*_{(ξ,v)}(Π, Γ) = (Π×ξ + Γ×v, Γ×ξ)`` (paper, ``app:semidirect``), so ``X_h`` gives
 
     Π̇ = Π×∇_Π h + Γ×∇_Γ h,    Γ̇ = Γ×∇_Π h,    h = ½ Π·I⁻¹Π + mgl Γ·χ.
 
 The Casimirs ``|Γ|² = r²`` and ``Π·Γ = c`` fix the orbit (``T*S²``). The default noise is the
 six unit-strength Hamiltonians ``ĥ_i = ⟨Π, e_i⟩`` (fields ``(Π×e_i, Γ×e_i)``, rotations) and
 ``ĥ_{3+j} = ⟨Γ, e_j⟩`` (fields ``(Γ×e_j, 0)``), which together span the orbit's tangent space;
-the dissipation is derived from them (MATH.md §1), so ``exp(−βh)`` on the orbit is invariant
-(the paper's printed ``exp(−(β/2)h)`` is erratum 2).
+the dissipation is derived from them (paper, ``eq:poisson-langevin-eq``), so ``exp(−βh)`` on
+the orbit is invariant (the paper's ``app:semidirect-noise-dissipation`` prints
+``exp(−(β/2)h)``, a slip).
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 The state is a stack of unit spins ``s`` of shape ``(*shape, 3)`` on the product
 ``(so(3)*)^N`` (``so3`` acts copy by copy), ``N = prod(shape)``: ``shape = (N,)`` is a chain and
-``shape = (L₁, L₂)`` a square lattice. The Hamiltonian (MATH.md §2, "Classical spins") is
+``shape = (L₁, L₂)`` a square lattice. The Hamiltonian (classical Heisenberg model) is
 
     h(s) = −J Σ_⟨jk⟩ s_j·s_k  −  B·Σ_k s_k  −  D Σ_k (s_k·e_z)²
 

@@ -1,10 +1,13 @@
-"""Point vortices on the sphere with spherical-harmonic transport noise (MATH.md §2).
+"""Point vortices on the sphere with spherical-harmonic transport noise.
+
+Paper, ``sec:stoch-diss-point-vortices`` and ``app:point-vortex-derivation``.
 
 **State.** The positions ``x_k`` of ``N`` vortices on the sphere of radius ``R``, shape
 ``(N, 3)``, with circulations ``Γ_k ≠ 0``.
 
-**Structure.** Lie–Poisson on ``(so(3)*)^N`` through ``μ_k = −RΓ_k x_k`` (MATH.md §2: "``X_f``
-on ``x_k`` equals ``(1/Γ_k) x_k × ∇_{x_k} f``, up to the global sign"). Rather than carry ``μ``,
+**Structure.** Lie–Poisson on ``(so(3)*)^N`` through ``μ_k = −RΓ_k x_k`` (paper,
+``eq:lie-poisson-so3-vortex``: ``X_f`` on ``x_k`` is ``(1/Γ_k) x_k × ∇_{x_k} f`` up to the global
+sign). Rather than carry ``μ``,
 the state *is* ``x`` and the algebra is so(3)^N with each copy's bracket scaled by
 ``w_k = −1/(RΓ_k)`` (:class:`ScaledSO3Product`): ``[ξ, η]_k = w_k ξ_k × η_k``,
 ``ad*_ξ x = x × (w ξ)``, ``Ad*_{exp ζ}`` = the so(3) rotation by ``w_k ζ_k``. This is the
@@ -14,24 +17,25 @@ are the Casimirs. The sign ``−`` picks the classical orientation: the Hamilton
 
     ẋ_k = (1/4πR) Σ_{j≠k} Γ_j (x_j × x_k) / (R² − x_j·x_k)      (paper, eq:stoch-diss-point-vortex)
 
-(MATH.md §1: either sign is valid when it is used for all three terms, as here).
+(either sign of the bracket is valid when it is used for all three terms, as here).
 
 **Hamiltonian.** ``h = −Σ_{j<k} (Γ_jΓ_k/2π) log |x_j − x_k|`` (chordal distance), vectorised over
 all pairs (``O(N²)`` memory and time, no Python loop over vortices).
 
 **Noise.** ``ĥ_ℓm = Σ_k Γ_k ψ_ℓm(x_k/R)``, ``ψ_ℓm = Y_ℓ^m/√(ℓ(ℓ+1))`` (real orthonormal
-harmonics, :mod:`liesample.geometry.spherical_harmonics`), ``1 ≤ ℓ ≤ L``: ``L(L+2)`` directions. Each
-moves every vortex with the same divergence-free velocity ``−(1/R) u × ∇ψ_ℓm(u)``, ``u = x/R``
+harmonics, :mod:`liesample.geometry.spherical_harmonics`), ``1 ≤ ℓ ≤ L``: ``L(L+2)`` directions.
+Each moves every vortex with the same divergence-free velocity ``−(1/R) u × ∇ψ_ℓm(u)``, ``u = x/R``
 (transport noise; the ``Γ_k`` cancel). The **dissipation** is the engine's, derived from these
-same truncated modes, so ``exp(−βh)`` is exactly invariant for every ``L`` (MATH.md §1). With
+same truncated modes, so ``exp(−βh)`` is exactly invariant for every ``L`` (paper,
+``eq:poisson-langevin-eq``). With
 ``L = 1`` the modes are rigid rotations, which commute with ``h``: no dissipation and no change
 of the vortices' relative positions, so sampling needs ``L ≥ 2``.
 
 **The paper's closed form** (:func:`all_modes_dissipation`, the labelled variant
 ``point_vortex_integrator(..., dissipation="all_modes")``): the dissipation of
 ``eq:stoch-diss-point-vortex`` as printed, derived for *all* modes ``ℓ ≥ 1`` with the divergent
-self-interaction (``k = i``) dropped. Paired with truncated noise it is not balanced (MATH.md §5
-erratum 3); ``benchmarks/vortices.py`` measures how far its stationary law is from the Gibbs law.
+self-interaction (``k = i``) dropped. Paired with truncated noise it is not balanced, so its
+stationary law differs from the Gibbs law.
 
 **Gibbs law** and its exact references: :mod:`liesample.targets.vortices` (pair law for
 ``N = 2``; ``β`` bounds for normalisability, enforced by ``check_beta``).
@@ -149,10 +153,11 @@ def all_modes_dissipation(x, circulations, radius=1.0):
 
     As printed, with ``u_k`` the classical velocity (:func:`vortex_velocity`):
 
-        D_i = − Σ_{k≠i} Γ_k [ u_k × x_i / (4πR(R² − x_i·x_k)) + (x_i·u_k) (x_k × x_i) / (4πR(R² − x_i·x_k)²) ],
+        D_i = − Σ_{k≠i} Γ_k [ u_k × x_i / (4πR(R² − x_i·x_k))
+                              + (x_i·u_k) (x_k × x_i) / (4πR(R² − x_i·x_k)²) ],
 
     so ``dx_i = θ D_i dt``. Derived for the infinite set of modes ``ℓ ≥ 1`` with the (divergent)
-    self term ``k = i`` dropped; not the dissipation of any truncated noise (MATH.md §5).
+    self term ``k = i`` dropped; not the dissipation of any truncated noise.
     """
     x = jnp.asarray(x)
     gamma = jnp.asarray(circulations, dtype=x.dtype)
@@ -406,7 +411,8 @@ def point_vortex_integrator(
     safety : float
         Largest rotation of the closest pair per substep, in radians (roughly).
     max_substeps : int
-        Cap per step (beyond it the rest of the step is dropped; :mod:`liesample.integrators.substeps`).
+        Cap per step (beyond it the rest of the step is dropped;
+        :mod:`liesample.integrators.substeps`).
     """
     if not isinstance(system, PointVortexSystem):
         raise TypeError(f"system must be a PointVortexSystem, got {type(system).__name__}")

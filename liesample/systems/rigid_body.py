@@ -1,11 +1,12 @@
 """The stochastic-dissipative rigid body on so(3)* (paper, ``sec:stoch-diss-rigid-body``).
 
-``h = ½ μ·I⁻¹μ`` and noise ``ĥ_i = e_i·μ``; with ``θ = βσ²/2`` the engine produces (MATH.md §2)
+``h = ½ μ·I⁻¹μ`` and noise ``ĥ_i = e_i·μ``; with ``θ = βσ²/2`` the engine produces (paper,
+``eq:stoch-diss-rb`` with the dissipation's sign corrected)
 
     dμ = μ×Ω dt + θ μ×(μ×Ω) dt + σ Σ_i μ×e_i ∘ dW_i,     Ω = I⁻¹μ,
 
 whose invariant law on ``|μ| = r`` is the restricted Gaussian ``∝ exp(−(β/2) μ·I⁻¹μ)``
-(the paper's printed ``eq:stoch-diss-rb`` has the opposite, anti-dissipative sign: erratum 1).
+(the paper's printed ``eq:stoch-diss-rb`` has the opposite, anti-dissipative sign).
 """
 
 from __future__ import annotations

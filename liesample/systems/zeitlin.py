@@ -4,8 +4,9 @@ The paper's dissipative SALT-Euler equation (``eq:salt-euler-with-dissipation``)
 infinite dimensions; Zeitlin's quantisation is its structure-preserving finite model. The
 vorticity is a skew-Hermitian trace-free matrix ``W ∈ su(N)``, stored as the real ``N × N``
 coordinates of :class:`liesample.geometry.algebras.Unitary` (``x = Re W + Im W``; pairing
-``⟨W, Ξ⟩ = −tr(WΞ)``, the Frobenius product). With the engine's conventions (MATH.md §2)
-``Ẇ = ad*_{∇h} W = [W, ∇h]``; ``∇h = −P`` below, so this is Zeitlin's ``Ẇ = [P, W]``.
+``⟨W, Ξ⟩ = −tr(WΞ)``, the Frobenius product). With the engine's conventions (paper,
+``eq:lie-poisson``) ``Ẇ = ad*_{∇h} W = [W, ∇h]``; ``∇h = −P`` below, so this is Zeitlin's
+``Ẇ = [P, W]``.
 
 **Quantised harmonics** (Hoppe–Yau). ``S₁, S₂, S₃`` are the spin-``s = (N−1)/2`` matrices
 (``S₃ = diag(s, s−1, …, −s)``, ``S₊ = S₁ + iS₂`` upper bidiagonal). The quantised Laplacian is
@@ -16,8 +17,9 @@ eigenvalues are ``ℓ(ℓ+1)``, ``ℓ = |m| … N−1``. Its eigenvectors ``T_�
 Condon–Shortley phases of spherical tensor operators: ``T_ℓ0`` has a positive leading
 coefficient as a polynomial in ``S₃`` (so its value at the north pole ``μ = s`` is positive) and
 ``[S₊, T_ℓm] = √(ℓ(ℓ+1) − m(m+1)) T_ℓ,m+1``, which makes the coherent-state symbol of ``T_ℓm``
-a positive multiple of ``Y_ℓm`` (``tests/test_zeitlin.py`` checks it). The real orthonormal basis
-``E_ℓm`` of ``u(N)`` matches :mod:`liesample.geometry.spherical_harmonics` (no Condon–Shortley phase)::
+a positive multiple of ``Y_ℓm``. The real orthonormal basis
+``E_ℓm`` of ``u(N)`` matches :mod:`liesample.geometry.spherical_harmonics` (no Condon–Shortley
+phase)::
 
     E_ℓ0 = i T_ℓ0,   E_ℓm = (−1)^m i (T_ℓm + T_ℓmᵀ)/√2,   E_ℓ,−m = (−1)^m (T_ℓm − T_ℓmᵀ)/√2,
 
@@ -78,8 +80,9 @@ def _check_size(size):
 class QuantisedHarmonics:
     """The quantised spherical harmonics of su(N) and the operators built on them.
 
-    Every method takes real ``(..., N, N)`` coordinates (:class:`liesample.geometry.algebras.Unitary`) and
-    broadcasts over leading axes. Build with :func:`quantised_harmonics` (cached per ``N``).
+    Every method takes real ``(..., N, N)`` coordinates
+    (:class:`liesample.geometry.algebras.Unitary`) and broadcasts over leading axes. Build with
+    :func:`quantised_harmonics` (cached per ``N``).
     """
 
     def __init__(self, size: int):
@@ -139,7 +142,8 @@ class QuantisedHarmonics:
         self._solve_bands = (lo, d, up)
         ell = index[:, None] + index[None, :]  # [m, k] -> ℓ = m + k
         self._ell = np.where(valid, ell, 0)
-        # Coefficient vector order: ℓ = 0 … N−1, m = −ℓ … ℓ (liesample.geometry.spherical_harmonics).
+        # Coefficient vector order: ℓ = 0 … N−1, m = −ℓ … ℓ
+        # (liesample.geometry.spherical_harmonics).
         ell_c, m_c = degrees_and_orders(n - 1)
         am = np.abs(m_c)
         sign = (-1.0) ** am

@@ -1,4 +1,4 @@
-"""Exact references for tests, reports and benchmarks (ARCHITECTURE: *targets*).
+"""Exact references for tests, reports and benchmarks: the layer beside the geometry.
 
 One module per family of laws; everything public is re-exported here.
 """

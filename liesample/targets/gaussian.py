@@ -1,4 +1,4 @@
-"""Exact Gaussian references for the magnetic samplers (MATH.md §3).
+"""Exact Gaussian references for the magnetic samplers (paper, ``sec:brownian-particle``).
 
 - :class:`Gaussian`: a target ``N(mean, covariance)`` with its ``logdensity_fn`` and exact
   moments; :func:`correlated_gaussian` builds test/benchmark instances.

@@ -30,7 +30,7 @@ from liesample.targets import orbits
 
 __all__ = [
     "MatrixFisher",
-    "VonMisesFisher",
+    "VonMisesFisherLaw",
     "VonMisesFisherPosterior",
     "quaternion_to_rotation",
     "su2_plaquette_mean",
@@ -70,8 +70,12 @@ def _unit_vector(name, value) -> np.ndarray:
 
 
 @dataclasses.dataclass(frozen=True)
-class VonMisesFisher:
-    """``p(x) ∝ exp(κ μ·x)`` on ``S^{d−1}`` with respect to the uniform law."""
+class VonMisesFisherLaw:
+    """The exact von Mises–Fisher law ``p(x) ∝ exp(κ μ·x)`` on ``S^{d−1}`` (uniform base law).
+
+    A reference for tests, with closed-form moments; the NumPyro distribution of the same law
+    is :class:`liesample.interop.numpyro_distributions.VonMisesFisher`.
+    """
 
     mean_direction: np.ndarray
     kappa: float

@@ -1,4 +1,5 @@
-"""Exact references: the restricted Gaussian (Bingham law) on the sphere (MATH.md §2, §4), and
+"""Exact references: the restricted Gaussian (Bingham law) on the sphere (paper,
+``eq:lie-poisson-gibbs-measure`` for the rigid body), and
 the heavy top's Gibbs law on an orbit of se(3)* (:class:`HeavyTopGibbs`).
 
 The rigid-body Gibbs law on ``|μ| = r`` is ``∝ exp(−(β/2) μ·I⁻¹μ)`` w.r.t. area. With
@@ -373,7 +374,7 @@ class RestrictedGaussian:
 
 
 # ---------------------------------------------------------------------------------------------
-# The heavy top on se(3)*: exact Gibbs law on a coadjoint orbit (MATH.md §2)
+# The heavy top on se(3)*: exact Gibbs law on a coadjoint orbit
 # ---------------------------------------------------------------------------------------------
 
 
@@ -383,7 +384,7 @@ class HeavyTopGibbs:
 
     ``h = ½ Π·I⁻¹Π + mgl Γ·χ`` and the orbit is ``T*S²`` with Liouville measure
     ``dA(Γ) dΠ_⊥`` (area on the sphere of radius ``r`` times Lebesgue measure on the plane
-    ``Π·n = s``), ``n = Γ/r``, ``s = c/r`` (MATH.md §2). With ``q = nᵀIn``:
+    ``Π·n = s``), ``n = Γ/r``, ``s = c/r``. With ``q = nᵀIn``:
 
     - ``Γ`` has density ``∝ exp(−β mgl Γ·χ) q^{−1/2} exp(−β s²/(2q))`` w.r.t. area;
     - ``Π | Γ`` is Gaussian on the plane, mean ``I n s/q``, covariance ``(I − I n nᵀ I/q)/β``
@@ -391,8 +392,8 @@ class HeavyTopGibbs:
 
     Expectations over ``Γ`` are 2-D quadrature on the sphere with the polar axis along ``χ``:
     Gauss–Legendre in ``t = cos θ`` times the (spectrally accurate, periodic) trapezoid rule in
-    ``φ``. The default node counts give ~1e-12 relative for ``β|mgl| r|χ| ≲ 50`` and moderate
-    anisotropy (checked in ``tests/test_heavy_top.py`` by doubling them).
+    ``φ``. The default node counts suit moderate fields ``β|mgl| r|χ|`` and anisotropy; raise
+    them for stronger ones.
 
     Parameters
     ----------
@@ -422,7 +423,8 @@ class HeavyTopGibbs:
         beta = finite_float("beta", self.beta)
         if not beta > 0:
             raise ValueError(
-                f"beta must be > 0 for the heavy top's Gibbs law (Π is Gaussian given Γ), got {beta}"
+                "beta must be > 0 for the heavy top's Gibbs law (Π is Gaussian given Γ), "
+                f"got {beta}"
             )
         object.__setattr__(self, "beta", beta)
         object.__setattr__(self, "radius", finite_float("radius", self.radius, positive=True))
@@ -534,7 +536,8 @@ class HeavyTopGibbs:
         )
 
     def logdensity(self, mu):
-        """Normalised log density of ``μ = (Π, Γ)`` (``(..., 6)``, on the orbit) w.r.t. Liouville."""
+        """Normalised log density of ``μ = (Π, Γ)`` (``(..., 6)``, on the orbit) w.r.t.
+        Liouville."""
         mu = np.asarray(mu, dtype=float)
         pi, gamma = mu[..., :3], mu[..., 3:]
         energy = 0.5 * np.sum(pi * pi / np.asarray(self.inertia), axis=-1) + self.mgl * (

@@ -1,10 +1,11 @@
-"""Exact references for point vortices on the sphere (MATH.md §2, "Point vortices on the sphere").
+"""Exact references for point vortices on the sphere (paper, ``sec:stoch-diss-point-vortices``).
 
 With ``h = −Σ_{j<k} (Γ_jΓ_k/2π) log|x_j − x_k|`` the Gibbs law is
 
     ∝ Π_{j<k} |x_j − x_k|^{βΓ_jΓ_k/(2π)} = Π_{j<k} (|x_j − x_k|²)^{p_jk},   p_jk = βΓ_jΓ_k/(4π),
 
-times the area measure on ``(S²)^N`` (MATH.md §5 erratum 2: the paper prints ``exp(−(β/2)h)``).
+times the area measure on ``(S²)^N`` (the paper's ``eq:gibbs-point-vortex`` prints
+``exp(−(β/2)h)``, a slip: the equations as written leave ``exp(−βh)`` invariant).
 It depends on the positions only through the unit vectors, so it is the same on a sphere of
 any radius.
 
@@ -88,13 +89,15 @@ def beta_bounds(circulations) -> tuple[float, float]:
 
 
 def check_vortex_beta(circulations, beta) -> None:
-    """``ValueError`` naming the bound when ``exp(−βh)`` is not normalisable (see :func:`beta_bounds`)."""
+    """``ValueError`` naming the bound when ``exp(−βh)`` is not normalisable (see
+    :func:`beta_bounds`)."""
     beta = finite_float("beta", beta)
     beta_min, beta_max = beta_bounds(circulations)
     if not beta_min < beta < beta_max:
         raise ValueError(
             f"beta = {beta:g} makes the point-vortex Gibbs law non-normalisable: it needs "
-            f"{beta_min:.6g} < beta < {beta_max:.6g} for circulations {list(map(float, np.ravel(circulations)))} "
+            f"{beta_min:.6g} < beta < {beta_max:.6g} "
+            f"for circulations {list(map(float, np.ravel(circulations)))} "
             "(every cluster S of n >= 2 vortices must have Σ_{j<k in S} βΓ_jΓ_k/(4π) > −(n−1); "
             "for a pair, the exponent βΓ_jΓ_k/(4π) must be > −1)"
         )

@@ -8,7 +8,8 @@ matrix with the phases of ``R``'s diagonal divided out, Mezzadri's recipe). The 
 with its delta-method standard error, so a test compares a chain against it with the two
 errors combined. Exact up to that Monte-Carlo error, for any ``h``; meant for small ``N``.
 
-States are the real coordinates of :class:`liesample.geometry.algebras.Unitary` (``x = Re W + Im W``).
+States are the real coordinates of :class:`liesample.geometry.algebras.Unitary`
+(``x = Re W + Im W``).
 """
 
 from __future__ import annotations

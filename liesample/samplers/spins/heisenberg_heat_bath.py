@@ -11,8 +11,8 @@ A BlackJAX-shaped module (``init``, ``build_kernel``, ``as_top_level_api``). One
    precession about ``F_k`` by ``precession_angle`` (``π``: the classical over-relaxation
    ``s ↦ 2(s·F̂)F̂ − s``), which keeps ``h``.
 
-Each colour-class move keeps ``exp(−βh)`` exactly (:mod:`liesample.samplers.spins.lattice`), so their
-composition does: there is no step size and no discretisation bias. Heat bath alone is
+Each colour-class move keeps ``exp(−βh)`` exactly (:mod:`liesample.samplers.spins.lattice`), so
+their composition does: there is no step size and no discretisation bias. Heat bath alone is
 ergodic; over-relaxation alone is microcanonical (it never changes ``h``), and the pair is the
 physicists' standard sampler for O(3) models. Isotropic systems only (``anisotropy = 0``); any
 coupling sign, field, boundary and finite ``β``.

@@ -1,10 +1,11 @@
 """What the classical-spin samplers share: state, info, local fields and the exact moves.
 
 The samplers (:mod:`~liesample.samplers.spins.heisenberg_heat_bath`,
-:mod:`~liesample.samplers.spins.heisenberg_metropolis`, :mod:`~liesample.samplers.spins.heisenberg_wolff`) act on a
-:func:`liesample.systems.heisenberg` system. Spins of one colour class of the lattice's proper
-colouring (:func:`liesample.systems.heisenberg.colouring`) are never neighbours, so given the
-other classes each feels a fixed local field
+:mod:`~liesample.samplers.spins.heisenberg_metropolis`,
+:mod:`~liesample.samplers.spins.heisenberg_wolff`) act on a :func:`liesample.systems.heisenberg`
+system. Spins of one colour class of the lattice's proper colouring
+(:func:`liesample.systems.heisenberg.colouring`) are never neighbours, so given the other classes
+each feels a fixed local field
 
     ``F_k = J Σ_{j~k} s_j + B``      (``h = −s_k·F_k + …`` in ``s_k``, when ``D = 0``),
 
