@@ -21,18 +21,14 @@ from liesample.run import sharding
 from liesample.run.runner import load_chains, sample, sample_chains
 from liesample.samplers.cotangent.geometric_hmc import geometric_hmc
 from liesample.samplers.cotangent.geometric_langevin import geometric_langevin
-from liesample.samplers.cotangent.magnetic_hmc import magnetic_hmc
+from liesample.samplers.cotangent.magnetic_hmc import jittered_magnetic_hmc, magnetic_hmc
 from liesample.samplers.cotangent.magnetic_langevin import magnetic_langevin
 from liesample.samplers.orbit.adjusted_lie_poisson import adjusted_lie_poisson
 from liesample.samplers.orbit.lie_poisson_langevin import lie_poisson_langevin
 from liesample.samplers.spins.heisenberg_heat_bath import heisenberg_heat_bath
 from liesample.samplers.spins.heisenberg_metropolis import heisenberg_metropolis
 from liesample.samplers.spins.heisenberg_wolff import heisenberg_wolff
-from liesample.tuning.adaptation import (
-    jittered_magnetic_hmc,
-    magnetic_window_adaptation,
-    window_adaptation,
-)
+from liesample.tuning.adaptation import magnetic_window_adaptation, window_adaptation
 
 # The public sub-modules also import by their short names (``from liesample.spaces import
 # Sphere``), as the README writes them.

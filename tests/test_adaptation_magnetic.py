@@ -14,12 +14,12 @@ import pytest
 
 import liesample
 from liesample.samplers.cotangent.magnetic import default_magnetic_field
+from liesample.samplers.cotangent.magnetic_hmc import jittered_magnetic_hmc
 from liesample.targets import correlated_gaussian
 from liesample.tuning.adaptation import (
     MagneticAdaptationInfo,
     _chees_gradient,
     _van_der_corput,
-    jittered_magnetic_hmc,
     magnetic_window_adaptation,
 )
 

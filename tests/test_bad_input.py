@@ -9,13 +9,14 @@ owned elsewhere, each with its proposed fix in the reason.
 
 import math
 
+import cases
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
 import liesample
-from liesample import algebras, systems, targets
+from liesample import algebras, spaces, systems, targets
 from liesample.geometry.algebras import StructureConstants
 
 NAN, INF = math.nan, math.inf
@@ -634,6 +635,105 @@ ROWS = [
         ValueError,
         "magnetic_field must be antisymmetric",
     ),
+    # ---- liesample.jittered_magnetic_hmc
+    (
+        "jittered_magnetic_hmc steps zero",
+        lambda: liesample.jittered_magnetic_hmc(_logdensity, 0.1, np.ones(2), 0, _FIELD),
+        ValueError,
+        "num_integration_steps.*>= 1",
+    ),
+    (
+        "jittered_magnetic_hmc step_size nan",
+        lambda: liesample.jittered_magnetic_hmc(_logdensity, NAN, np.ones(2), 3, _FIELD),
+        ValueError,
+        "step_size.*finite",
+    ),
+    # ---- liesample.geometric_hmc, liesample.geometric_langevin
+    (
+        "geometric_hmc step_size zero",
+        lambda: liesample.geometric_hmc(_logdensity, spaces.Euclidean((2,)), 0.0, 3),
+        ValueError,
+        "step_size.*> 0",
+    ),
+    (
+        "geometric_hmc steps zero",
+        lambda: liesample.geometric_hmc(_logdensity, spaces.Euclidean((2,)), 0.1, 0),
+        ValueError,
+        "num_integration_steps.*>= 1",
+    ),
+    (
+        "geometric_hmc space",
+        lambda: liesample.geometric_hmc(_logdensity, "sphere", 0.1, 3),
+        TypeError,
+        "space must be a Space",
+    ),
+    (
+        "geometric_hmc init off the sphere",
+        lambda: liesample.geometric_hmc(_logdensity, spaces.Sphere(2), 0.1, 3).init(
+            np.array([0.0, 0.0, 2.0])
+        ),
+        ValueError,
+        "position is off Sphere",
+    ),
+    (
+        "geometric_langevin friction negative",
+        lambda: liesample.geometric_langevin(_logdensity, spaces.Euclidean((2,)), 0.1, -1.0),
+        ValueError,
+        "friction must be > 0",
+    ),
+    (
+        "geometric_langevin step_size nan",
+        lambda: liesample.geometric_langevin(_logdensity, spaces.Euclidean((2,)), NAN, 1.0),
+        ValueError,
+        "step_size.*finite",
+    ),
+    # ---- liesample.heisenberg_heat_bath, liesample.heisenberg_wolff
+    (
+        "heisenberg_heat_bath anisotropy",
+        lambda: liesample.heisenberg_heat_bath(systems.heisenberg((4,), anisotropy=0.3), beta=1.0),
+        ValueError,
+        "isotropic.*anisotropy",
+    ),
+    (
+        "heisenberg_heat_bath beta nan",
+        lambda: liesample.heisenberg_heat_bath(CHAIN, beta=NAN),
+        ValueError,
+        "beta.*finite",
+    ),
+    (
+        "heisenberg_heat_bath overrelaxation negative",
+        lambda: liesample.heisenberg_heat_bath(CHAIN, beta=1.0, overrelaxation=-1),
+        ValueError,
+        "overrelaxation",
+    ),
+    (
+        "heisenberg_wolff field",
+        lambda: liesample.heisenberg_wolff(
+            systems.heisenberg((4,), field=(0.0, 0.0, 1.0)), beta=1.0
+        ),
+        ValueError,
+        "field",
+    ),
+    (
+        "heisenberg_wolff beta negative",
+        lambda: liesample.heisenberg_wolff(CHAIN, beta=-1.0),
+        ValueError,
+        "beta must be >= 0",
+    ),
+    # ---- systems.zeitlin_euler
+    ("zeitlin_euler size", lambda: systems.zeitlin_euler(1), ValueError, "N must be an int >= 2"),
+    (
+        "zeitlin_euler noise_degree",
+        lambda: systems.zeitlin_euler(3, noise_degree=3),
+        ValueError,
+        r"noise_degree must be in 1 … 2",
+    ),
+    (
+        "zeitlin_euler position nan",
+        lambda: systems.zeitlin_euler(3, position=np.full((3, 3), NAN)),
+        ValueError,
+        "position must be finite",
+    ),
     # ---- systems.lie_poisson_system
     (
         "lie_poisson_system algebra",
@@ -879,12 +979,17 @@ def test_bad_input_is_refused_naming_the_parameter(call, error, match):
 
 
 def test_the_table_covers_every_public_system_and_sampler():
-    """A new public constructor must get rows here (names as they appear in the row ids)."""
-    covered = " ".join(row[0] for row in ROWS)
-    expected = {
-        "rigid_body", "heavy_top", "heisenberg", "metropolis", "langevin", "adjusted",
-        "sample", "RestrictedGaussian", "HeavyTopGibbs", "StructureConstants", "point_vortices",
-        "charged_particle", "magnetic_hmc", "magnetic_langevin", "lie_poisson_system", "simulate",
+    """Every sampler and system of the registry (``tests/cases.py``), and the other public
+    constructors, get rows here: a row id starts with the name (or its short form)."""
+    first_words = {row[0].split()[0] for row in ROWS}
+    short = {
+        "lie_poisson_langevin": "langevin",
+        "adjusted_lie_poisson": "adjusted",
+        "heisenberg_metropolis": "metropolis",
+    }
+    others = {
+        "sample", "simulate", "charged_particle", "RestrictedGaussian", "HeavyTopGibbs",
+        "StructureConstants",
     }  # fmt: skip
-    assert all(name in covered for name in expected)
-    assert algebras.so3 is not None
+    expected = {short.get(name, name) for name in cases.SAMPLER_NAMES + cases.SYSTEM_NAMES}
+    assert sorted((expected | others) - first_words) == []

@@ -11,7 +11,6 @@ first — must be acyclic, so a function-level import is never a way round a cyc
 from __future__ import annotations
 
 import ast
-import fnmatch
 from pathlib import Path
 
 import pytest

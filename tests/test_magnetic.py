@@ -436,7 +436,7 @@ def test_bad_sampler_options_raise():
     with pytest.raises(ValueError, match="friction"):
         liesample.magnetic_langevin(*base, 0.0, J2)
     with pytest.raises(ValueError, match="integrator"):
-        liesample.magnetic_hmc.build_kernel(blackjax.mcmc.integrators.mclachlan)
+        liesample.magnetic_hmc.build_kernel(blackjax.mcmc.integrators.yoshida)
     with pytest.raises(ValueError, match="strength"):
         default_magnetic_field(np.ones(2), -1.0)
     # A position of the wrong dimension for the field.

@@ -22,6 +22,7 @@ from liesample.samplers.orbit import adjusted_lie_poisson as adjusted_module
 from liesample.samplers.orbit import lie_poisson_langevin as unadjusted_module
 from liesample.systems import heavy_top, rigid_body
 from liesample.targets import RestrictedGaussian
+from liesample.tuning.warmup import warm_up
 
 RIGID = rigid_body((1.0, 2.0, 4.0))
 START = jnp.array([0.3, -1.2, 0.84])
@@ -143,7 +144,7 @@ def test_a_divergent_unadjusted_step_keeps_the_state_and_its_energy():
 def test_noise_free_sampler_has_no_blocks():
     """Without noise nothing is drawn, so there is nothing to block."""
     algorithm = liesample.lie_poisson_langevin(RIGID, sigma=0.0, theta=0.0, step_size=0.1)
-    assert getattr(algorithm, "noise_blocks", None) is None
+    assert algorithm.noise_blocks is None
     state, _ = run_steps(algorithm, jax.random.key(0), algorithm.init(START), 0, 5)
     assert np.all(np.isfinite(np.asarray(state.position)))
 
@@ -159,9 +160,9 @@ def test_block_size_is_recorded_and_kept_by_the_warm_up():
     algorithm = liesample.adjusted_lie_poisson(RIGID, beta=BETA, noise_block_size=5)
     assert algorithm.settings["noise_block_size"] == 5
     starts = jnp.stack([START, -START])
-    tuned, states = algorithm.adapt(
-        jax.random.key(0), jax.random.split(jax.random.key(1), 2), jax.vmap(algorithm.init)(starts),
-        starts, 23,
+    tuned, states = warm_up(
+        algorithm, jax.random.key(0), jax.random.split(jax.random.key(1), 2),
+        jax.vmap(algorithm.init)(starts), starts, 23,
     )
     assert tuned.noise_blocks.size == 5 and tuned.settings["noise_block_size"] == 5
     assert np.all(np.isfinite(np.asarray(states.position)))

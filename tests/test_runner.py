@@ -3,6 +3,7 @@ warm-up as exact sub-sequences of the plain run, and argument checks."""
 
 import math
 
+import blackjax
 import jax
 import numpy as np
 import pytest
@@ -185,3 +186,38 @@ def test_every_distinct_start_is_checked_concretely():
     starts = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
     with pytest.raises(ValueError, match=r"initial_positions\[1\].*degenerate"):
         sample_chains(ALGORITHM, KEY, starts, 4, progress=False)
+
+
+def test_a_plain_blackjax_algorithm_runs_as_a_sampler_with_the_defaults(plain):
+    """The runner reads a plain ``SamplingAlgorithm`` as a ``Sampler`` with the declared
+    defaults (no start check, no tuning, no noise blocks): one key per step."""
+    bare = liesample.samplers.contract.as_sampler(
+        blackjax.base.SamplingAlgorithm(ALGORITHM.init, ALGORITHM.step)
+    )
+    assert bare.settings == {} and bare.check_positions is None
+    assert bare.tuning is None and bare.noise_blocks is None
+    result = sample_chains(bare, KEY, POSITIONS, 4, progress=False)
+    assert result.positions.shape == (3, 4, 3) and result.settings == {
+        "num_warmup": 0,
+        "adapted": False,
+    }
+    with pytest.raises(ValueError, match="has no warm-up adaptation"):
+        sample_chains(bare, KEY, POSITIONS, 2, num_warmup=2, adapt=True, progress=False)
+
+
+@pytest.mark.parametrize("name", ["adjusted_lie_poisson", "lie_poisson_langevin"])
+def test_the_warm_up_tunes_a_new_sampler_and_leaves_the_given_one(name):
+    """The step size the sampler declares tunable is chosen by the tuning layer into a new
+    sampler (recorded in its settings); the sampler passed in is not changed, and its step
+    never changes its settings."""
+    sampler = getattr(liesample, name)(SYSTEM, beta=3.0)
+    assert sampler.tuning is not None and not sampler.tuning.given
+    before = dict(sampler.settings)
+    result = sample_chains(sampler, KEY, POSITIONS, 4, num_warmup=20, progress=False)
+    assert result.settings["adapted"] and result.settings["step_size"] > 0
+    assert result.settings["step_size_source"].startswith("warm-up ")
+    assert sampler.settings == before
+    state = sampler.init(POSITIONS[0])
+    settings = dict(sampler.settings)
+    sampler.step(KEY, state)
+    assert sampler.settings == settings

@@ -1,7 +1,7 @@
 """The Info contract, safe defaults and loud failures, end to end through ``liesample.sample``.
 
-- every sampler's ``info`` has ``is_divergent``, ``acceptance_rate`` and ``energy``, and the
-  runner writes them under ArviZ's names (a magnetic divergence reaches ``diverging``);
+- the Info contract (every sampler meets it: ``tests/test_registry.py``); the runner writes its
+  fields under ArviZ's names (a magnetic divergence reaches ``diverging``);
 - a run beyond the stability bound is refused naming the largest step; ``"warn"`` is recorded;
 - stuck chains are named; a start whose energy is NaN is refused naming the chain; many starts
   are checked in one vectorised call;
@@ -17,6 +17,7 @@ import warnings
 from collections import namedtuple
 
 import arviz_stats as azs
+import cases
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -56,36 +57,12 @@ def vmf_moments():
     return mean, np.sqrt(np.diag(second) - mean**2)
 
 
-def _logdensity(q):
-    return -0.5 * jnp.sum(q * q)
-
-
-def _magnetic_samplers():
-    field = np.array([[0.0, 1.0], [-1.0, 0.0]])
-    return {
-        "magnetic_hmc": liesample.magnetic_hmc(_logdensity, 0.3, np.ones(2), 5, field),
-        "magnetic_langevin": liesample.magnetic_langevin(_logdensity, 0.1, np.ones(2), 1.0, field),
-    }
-
-
 # --------------------------------------------------------------------------- the contract
 
 
-def test_every_sampler_reports_the_contract_fields():
-    orbit = {
-        "lie_poisson_langevin": liesample.lie_poisson_langevin(
-            RIGID, beta=1.0, step_size=0.05, integrator="lie_euler"
-        ),
-        "adjusted_lie_poisson": liesample.adjusted_lie_poisson(RIGID, beta=1.0, step_size=0.05),
-    }
-    cases = [(s, STARTS[0]) for s in orbit.values()]
-    cases += [(s, jnp.ones(2)) for s in _magnetic_samplers().values()]
-    for sampler, start in cases:
-        _, info = sampler.step(jax.random.key(0), sampler.init(start))
-        check_info(info)
-        assert info.is_divergent.dtype == jnp.bool_ and not bool(info.is_divergent)
-        assert 0.0 <= float(info.acceptance_rate) <= 1.0
-        assert np.isfinite(float(info.energy))
+def test_check_info_names_the_missing_contract_fields():
+    """The contract itself; every sampler's ``info`` is checked against it over the registry
+    (``tests/test_registry.py``, rows in ``tests/cases.py``)."""
     with pytest.raises(TypeError, match=r"lacks the Info contract's fields \['is_divergent', 'acc"):
         check_info(namedtuple("OldInfo", ["energy", "nonfinite"]))
     assert CONTRACT_FIELDS == ("is_divergent", "acceptance_rate", "energy")
@@ -113,12 +90,10 @@ def test_both_key_styles_give_the_same_draws():
 
 
 def test_help_shows_the_real_docstring():
-    for api in (
-        liesample.lie_poisson_langevin,
-        liesample.adjusted_lie_poisson,
-        liesample.magnetic_hmc,
-        liesample.magnetic_langevin,
-    ):
+    apis = [getattr(liesample, name) for name in cases.SAMPLER_NAMES]
+    apis = [api for api in apis if hasattr(api, "differentiable")]  # GenerateSamplingAPI objects
+    assert len(apis) >= len(cases.SAMPLER_NAMES) - 1  # all but jittered_magnetic_hmc
+    for api in apis:
         text = pydoc.render_doc(api, renderer=pydoc.plaintext)
         assert api.differentiable.__doc__.strip().splitlines()[0] in text
         assert "jax_enable_x64" in text and "GenerateSamplingAPI(differentiable" not in text

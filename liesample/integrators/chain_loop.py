@@ -2,16 +2,18 @@
 
 **The key scheme.** Step ``s`` of a chain with key ``k`` uses ``step(fold_in(k, s), state)``:
 one key derivation and one small draw per step. A sampler that declares
-:class:`NoiseBlocks` (``sampler.noise_blocks``: the orbit samplers) instead gets its noise in
+:class:`NoiseBlocks` (its ``noise_blocks`` attribute, :class:`DeclaresNoiseBlocks`: the orbit
+samplers) instead gets its noise in
 blocks of ``B`` steps: block ``b = s // B`` is drawn at once from ``fold_in(k, b)`` and step ``s``
 uses its row ``s % B``. The block structure is fixed by the step index, not by the range being
 run, so a run split into any ranges (warm-up, chunks, a resumed run) draws the same noise as the
 run in one piece. Only the block size changes the draws; the law of the chain is the same
 (each row has the law of one step's draw). One draw per block replaces a key derivation and a
-draw per step, which on the rigid body is most of the cost of a step (``benchmarks/throughput.py``).
+draw per step, which on the rigid body is most of the cost of a step.
 
-:func:`run_steps` is the loop every driver uses (:func:`liesample.integrators.accuracy.ergodic_averages`,
-the adjusted sampler's warm-up, the benchmarks): ``num_steps`` steps from ``first_step``, with
+:func:`run_steps` is the loop every driver uses
+(:func:`liesample.integrators.accuracy.ergodic_averages`, the dual-averaging warm-up of
+:mod:`liesample.tuning.dual_averaging`, the runner): ``num_steps`` steps from ``first_step``, with
 an optional ``update`` of the caller's accumulators after each step; :func:`run_draws` keeps
 every ``thinning``-th state and the info reduced over each thinning window (what
 :func:`liesample.sample` stores). For the blocked scheme it
@@ -30,8 +32,10 @@ import jax.numpy as jnp
 
 __all__ = [
     "DEFAULT_NOISE_BLOCK_SIZE",
+    "DeclaresNoiseBlocks",
     "NoiseBlocks",
     "check_block_size",
+    "declared_noise_blocks",
     "run_draws",
     "run_steps",
 ]
@@ -56,6 +60,20 @@ class NoiseBlocks(NamedTuple):
     step: Callable
 
 
+class DeclaresNoiseBlocks:
+    """What a sampler declares to this loop: ``noise_blocks``, a :class:`NoiseBlocks` or
+    ``None`` (default: one key per step). :class:`liesample.samplers.contract.Sampler` has it;
+    any other algorithm (a plain BlackJAX ``SamplingAlgorithm``) is stepped with per-step keys.
+    """
+
+    noise_blocks: NoiseBlocks | None = None
+
+
+def declared_noise_blocks(algorithm) -> NoiseBlocks | None:
+    """The :class:`NoiseBlocks` that ``algorithm`` declares (``None`` for one key per step)."""
+    return algorithm.noise_blocks if isinstance(algorithm, DeclaresNoiseBlocks) else None
+
+
 def check_block_size(value) -> int:
     """``value`` as a block size (an integer ≥ 1), or ``ValueError``."""
     if isinstance(value, bool) or not isinstance(value, int) or value < 1:
@@ -67,10 +85,11 @@ def run_steps(algorithm, key, state, first_step, num_steps, update=None, extra=N
     """Steps ``first_step … first_step + num_steps − 1`` of one chain; returns
     ``(state, extra)``.
 
-    ``algorithm`` has ``step(key, state) -> (state, info)`` and optionally ``noise_blocks``
-    (:class:`NoiseBlocks`; module docstring for the key scheme). ``update(step, state, info,
-    extra) -> extra``, if given, is called after every step with the step's index, the new
-    state and its info (what ``update`` does not use is not computed: XLA drops it).
+    ``algorithm`` has ``step(key, state) -> (state, info)`` and, if it is a
+    :class:`DeclaresNoiseBlocks`, ``noise_blocks`` (module docstring for the key scheme).
+    ``update(step, state, info, extra) -> extra``, if given, is called after every step with
+    the step's index, the new state and its info (what ``update`` does not use is not
+    computed: XLA drops it).
     ``first_step`` and ``num_steps`` may be traced (one compilation for every range).
     """
 
@@ -82,7 +101,7 @@ def run_steps(algorithm, key, state, first_step, num_steps, update=None, extra=N
         return state, extra
 
     end = first_step + num_steps
-    blocks = getattr(algorithm, "noise_blocks", None)
+    blocks = declared_noise_blocks(algorithm)
     if blocks is None:
 
         def one(step, carry):

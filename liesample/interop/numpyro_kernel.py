@@ -7,7 +7,8 @@ its support names:
 
 - ``constraints.sphere`` (``VonMisesFisher``, ``Bingham``, NumPyro's ``ProjectedNormal``):
   :class:`liesample.geometry.spaces.Sphere`, one copy per batch element;
-- :data:`liesample.interop.numpyro_distributions.rotation` (``MatrixFisher``): :class:`liesample.geometry.spaces.SO` ``(3)``;
+- :data:`liesample.interop.numpyro_distributions.rotation` (``MatrixFisher``):
+  :class:`liesample.geometry.spaces.SO` ``(3)``;
 - ``constraints.circular`` (NumPyro's ``VonMises``): :class:`liesample.geometry.spaces.U1` (angles);
 - any other continuous support with a bijection to ``Rᵈ`` (``numpyro.distributions.biject_to``):
   ``Euclidean``, in the unconstrained coordinates NumPyro's HMC uses, with the log-Jacobian of
@@ -20,12 +21,14 @@ measure in the unconstrained coordinates: these differ from the samplers' refere
 constants only.
 
 **Warm-up.** During NumPyro's ``num_warmup`` iterations the kernel adapts exactly as
-:func:`liesample.window_adaptation` does, sharing its code (:func:`liesample.tuning.adaptation.
-warmup_pieces`): Stan's windows, dual averaging of the step size towards
+:func:`liesample.window_adaptation` does, sharing its code
+(:func:`liesample.tuning.adaptation.warmup_pieces` and
+:func:`liesample.tuning.adaptation.window_schedule`) and reading what to adapt from
+``liesample.geometric_hmc.adaptation``: Stan's windows, dual averaging of the step size towards
 ``target_accept_prob``, the inverse mass from Welford moments in algebra coordinates, and a
-fixed integration time ``T = π/2`` (``L = ceil(T/ε)`` leapfrog steps) unless
-``num_integration_steps`` is given. At the last warm-up iteration the step size becomes dual
-averaging's average; after that nothing changes.
+fixed integration time ``T = π/2`` (``L = ceil(T/ε)`` steps of the ``integrator`` scheme)
+unless ``num_integration_steps`` is given. At the last warm-up iteration the step size becomes
+dual averaging's average; after that nothing changes.
 
 **State and diagnostics.** The sample field is ``z``: the manifold sites' points and the other
 sites' unconstrained values (``init_params`` takes the same form); ``postprocess_fn`` maps it to
@@ -37,8 +40,8 @@ counts divergences), ``accept_prob``, ``potential_energy``, ``num_steps`` and ``
 **Chains.** ``chain_method="vectorized"`` vmaps init and transition over chains;
 ``"sequential"`` works as well. NumPyro compiles its loop with plain ``jax.jit``, not
 :func:`liesample.jit`; the vmapped chains were checked against the same chains run alone (equal
-to round-off, a slow test), as XLA:CPU's vmapped-loop miscompile (:mod:`liesample.foundation.compile`)
-would show there.
+to round-off, a slow test), as XLA:CPU's vmapped-loop miscompile
+(:mod:`liesample.foundation.compile`) would show there.
 """
 
 from __future__ import annotations
@@ -55,14 +58,13 @@ try:
     from numpyro.util import is_prng_key
 except ImportError as error:  # an optional integration module
     raise ImportError(
-        "liesample.interop.numpyro_kernel needs NumPyro: pip install numpyro (or the 'test' extras of "
-        "liesample)"
+        "liesample.interop.numpyro_kernel needs NumPyro: pip install numpyro (or the 'test' "
+        "extras of liesample)"
     ) from error
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-from blackjax.adaptation.window_adaptation import build_schedule
 
 from liesample.foundation.compile import jit
 from liesample.foundation.validation import concrete_array, finite_float
@@ -74,14 +76,16 @@ from liesample.tuning.adaptation import (
     WarmupState,
     integration_steps,
     warmup_pieces,
+    window_schedule,
 )
 
 __all__ = ["GeometricHMC", "GeometricHMCState"]
 
 MAX_INIT_ATTEMPTS = 100
 SUPPORTED = (
-    "constraints.sphere (Sphere), liesample.interop.numpyro_distributions.rotation (SO(3)), constraints.circular "
-    "(U1), or a continuous support with a bijection to R^d (numpyro.distributions.biject_to)"
+    "constraints.sphere (Sphere), liesample.interop.numpyro_distributions.rotation (SO(3)), "
+    "constraints.circular (U1), or a continuous support with a bijection to R^d "
+    "(numpyro.distributions.biject_to)"
 )
 
 
@@ -235,11 +239,14 @@ class GeometricHMC(MCMCKernel):
         :func:`liesample.geometric_hmc` takes it (one value per copy of a sphere or group, one
         per coordinate of ``Euclidean`` and ``U1`` sites).
     adapt_step_size, adapt_mass_matrix : bool
-        What the warm-up adapts.
-    target_accept_prob : float
-        Dual averaging's target Metropolis rate (0.8).
+        What the warm-up adapts (of what ``liesample.geometric_hmc.adaptation`` declares).
+    target_accept_prob : float, optional
+        Dual averaging's target Metropolis rate (by default the declared one, 0.8).
     divergence_threshold : float
         ``ΔH`` above which a transition is flagged divergent.
+    integrator : str or sequence of (effect, fraction) pairs
+        The integration scheme, as for :func:`liesample.geometric_hmc` (``"leapfrog"`` by
+        default, ``"minimal_norm"``, or a palindromic coefficient list).
     """
 
     sample_field = "z"
@@ -254,8 +261,9 @@ class GeometricHMC(MCMCKernel):
         inverse_mass_matrix=None,
         adapt_step_size: bool = True,
         adapt_mass_matrix: bool = True,
-        target_accept_prob: float = 0.8,
+        target_accept_prob: float | None = None,
         divergence_threshold: float = 1000.0,
+        integrator="leapfrog",
     ):
         if not callable(model):
             raise TypeError(f"model must be a NumPyro model (a callable), got {model!r}")
@@ -277,13 +285,16 @@ class GeometricHMC(MCMCKernel):
         self._integration_time = finite_float("integration_time", time, positive=True)
         self._num_integration_steps = num_integration_steps
         self._initial_mass = inverse_mass_matrix
-        self._adapt_step_size = bool(adapt_step_size)
-        self._adapt_mass = bool(adapt_mass_matrix)
+        adapted = geometric_hmc.adaptation["adapted"]
+        self._adapt_step_size = bool(adapt_step_size) and "step_size" in adapted
+        self._adapt_mass = bool(adapt_mass_matrix) and "inverse_mass_matrix" in adapted
+        if target_accept_prob is None:
+            target_accept_prob = geometric_hmc.adaptation["target_acceptance_rate"]
         target = finite_float("target_accept_prob", target_accept_prob)
         if not 0.0 < target < 1.0:
             raise ValueError(f"target_accept_prob must be in (0, 1), got {target}")
         self._target = target
-        self._kernel = geometric_hmc.build_kernel(divergence_threshold)
+        self._kernel = geometric_hmc.build_kernel(divergence_threshold, integrator=integrator)
         self._sites = None
         self._pieces = None
         self._sample_fn = None
@@ -345,9 +356,7 @@ class GeometricHMC(MCMCKernel):
         self._setup(rng_key[0] if batched else rng_key, model_args, model_kwargs)
         self._num_warmup = int(num_warmup)
         if self._num_warmup > 0:
-            with jax.ensure_compile_time_eval():  # Stan's windows, a constant (also under jit)
-                schedule = build_schedule(self._num_warmup)
-            self._schedule = np.asarray(schedule).astype(np.int32)
+            self._schedule = window_schedule(self._num_warmup)  # constants (also under jit)
         logdensity = self._logdensity_fn(model_args, model_kwargs)
         if init_params is not None:
             self._check_init_params(init_params, batched)
@@ -452,9 +461,9 @@ class GeometricHMC(MCMCKernel):
             inverse_mass_matrix=warm.inverse_mass,
         )
         if self._num_warmup > 0:
-            schedule = jnp.asarray(self._schedule)
-            stage, window_end = schedule[jnp.minimum(state.i, self._num_warmup - 1)]
-            updated = self._pieces.update(warm, inner, info, stage, window_end.astype(bool))
+            index = jnp.minimum(state.i, self._num_warmup - 1)
+            stage, window_end = (jnp.asarray(column)[index] for column in self._schedule)
+            updated = self._pieces.update(warm, inner, info, stage, window_end)
             final = jnp.where(
                 state.i == self._num_warmup - 1,
                 self._pieces.final_step_size(updated),

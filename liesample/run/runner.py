@@ -1,7 +1,8 @@
 """Run many chains of a BlackJAX-style sampler, vmapped, in chunks with a progress bar.
 
 Draw ``d`` of chain ``c`` uses the key ``fold_in(key_c, step)`` (a sampler that draws its noise
-in blocks, as the orbit samplers do, ``fold_in(key_c, block)``: :mod:`liesample.integrators.chain_loop`),
+in blocks, as the orbit samplers do, ``fold_in(key_c, block)``:
+:mod:`liesample.integrators.chain_loop`),
 so the draws do not depend on the chunk size and a run can be split or resumed without changing
 them.
 
@@ -36,7 +37,8 @@ from liesample.foundation.compile import jit
 from liesample.foundation.validation import finite_float, is_single_array, prng_key
 from liesample.integrators.chain_loop import run_draws, run_steps
 from liesample.run.sharding import chain_sharding, shard_chains, to_host
-from liesample.samplers.contract import reduce_over_thinning
+from liesample.samplers.contract import Sampler, as_sampler, reduce_over_thinning
+from liesample.tuning.warmup import choose_from_starts, warm_up
 
 DEFAULT_MIN_ACCEPTANCE_RATE = 0.05
 """A chain whose mean acceptance rate over the run is below this is reported as stuck."""
@@ -125,31 +127,29 @@ def _check_run_arguments(num_draws, num_warmup, thinning, on_nonfinite, chunk_dr
         raise ValueError("adapt=True needs warm-up steps: pass num_warmup > 0")
 
 
-def _wants_adaptation(algorithm, adapt, num_warmup) -> bool:
-    """``adapt=None``: adapt what the user left unset (a sampler built without ``step_size``)
-    when there is a warm-up; ``True``: adapt (the sampler must support it); ``False``: never."""
-    hook = getattr(algorithm, "adapt", None)
-    if adapt is True and hook is None:
+def _wants_adaptation(sampler: Sampler, adapt, num_warmup, name: str) -> bool:
+    """``adapt=None``: adapt what the user left unset (a sampler declaring a ``tuning`` whose
+    step size was not given) when there is a warm-up; ``True``: adapt (the sampler must declare
+    a ``tuning``); ``False``: never."""
+    if adapt is True and sampler.tuning is None:
         raise ValueError(
-            f"adapt=True: {type(algorithm).__name__} has no warm-up adaptation; the orbit "
+            f"adapt=True: {name} has no warm-up adaptation; the orbit "
             "samplers (liesample.lie_poisson_langevin, liesample.adjusted_lie_poisson) have one, "
             "the magnetic samplers are tuned with blackjax.window_adaptation"
         )
     if adapt is None:
-        settings = getattr(algorithm, "settings", {})
-        return hook is not None and num_warmup > 0 and settings.get("step_size_source") not in (
-            None,
-            "given",
-        )
+        return sampler.tuning is not None and num_warmup > 0 and not sampler.tuning.given
     return bool(adapt)
 
 
-def _check_starts(algorithm, initial_positions, num_chains, step_size_checks=True):
-    """Every start checked: in one vectorised call when the sampler has ``check_positions``,
-    else its ``init`` on each distinct start; errors name the first bad chain."""
-    hook = getattr(algorithm, "check_positions", None)
-    if hook is not None:
-        hook(jax.tree.map(np.asarray, initial_positions), step_size_checks=step_size_checks)
+def _check_starts(sampler: Sampler, initial_positions, num_chains, step_size_checks=True):
+    """Every start checked: in one vectorised call when the sampler declares
+    ``check_positions``, else its ``init`` on each distinct start; errors name the first bad
+    chain."""
+    if sampler.check_positions is not None:
+        sampler.check_positions(
+            jax.tree.map(np.asarray, initial_positions), step_size_checks=step_size_checks
+        )
         return
     flat = np.concatenate(
         [
@@ -161,7 +161,7 @@ def _check_starts(algorithm, initial_positions, num_chains, step_size_checks=Tru
     _, first_chains = np.unique(flat, axis=0, return_index=True)
     for chain in np.sort(first_chains):
         try:
-            algorithm.init(_take_chain(initial_positions, chain))
+            sampler.init(_take_chain(initial_positions, chain))
         except (ValueError, TypeError) as error:
             raise type(error)(f"initial_positions[{chain}]: {error}") from None
 
@@ -190,7 +190,10 @@ def sample_chains(
     algorithm : blackjax.base.SamplingAlgorithm
         ``init(position)`` and ``step(rng_key, state) -> (state, info)``; ``state.position``
         is recorded. liesample's samplers (:class:`liesample.samplers.contract.Sampler`) also
-        check every start in one vectorised call, record their settings, and adapt.
+        declare a vectorised check of every start, their settings, how their step size is
+        tuned (run by :mod:`liesample.tuning.warmup`) and their noise blocks; any other
+        algorithm is read as a ``Sampler`` with the defaults
+        (:func:`liesample.samplers.contract.as_sampler`).
     rng_key : jax.random.key or jax.random.PRNGKey
     initial_positions : array ``(chains, *event_shape)``, or a pytree of such arrays
         A pytree (dict, tuple, named tuple; e.g. the positions of ``liesample.geometric_hmc``
@@ -201,10 +204,13 @@ def sample_chains(
     num_warmup : int
         Steps run and discarded before the first draw; the adaptation happens there.
     adapt : None, True or False
-        Warm-up adaptation of the step size. ``None`` (default): adapt a sampler built without
-        ``step_size`` when ``num_warmup > 0`` (the unadjusted sampler then chooses its step
-        from the bias model on the run's starts, the adjusted one tunes it by dual averaging to
-        its target acceptance); ``True``: adapt even a given step size; ``False``: never.
+        Warm-up adaptation of the step size, as the sampler declares it (``tuning``, run by
+        :func:`liesample.tuning.warmup.warm_up`). ``None`` (default): adapt a sampler built
+        without ``step_size`` when ``num_warmup > 0`` (the unadjusted sampler then chooses its
+        step from the bias model on the run's starts, the adjusted one tunes it by dual
+        averaging to its target acceptance); ``True``: adapt even a given step size; ``False``:
+        never. A step size left unset and not adapted is the sampler's own choice for the
+        run's starts (:func:`liesample.tuning.warmup.choose_from_starts`).
     progress : bool
         Show a progress bar (tqdm) over the draws (on a resumed run it starts at the draws
         already saved).
@@ -251,10 +257,18 @@ def sample_chains(
     if not finite.all():
         raise ValueError(f"initial_positions[{int(np.argmin(finite))}] must be finite")
     sharding = chain_sharding(devices, num_chains)
-    adapting = _wants_adaptation(algorithm, adapt, num_warmup)
+    sampler = as_sampler(algorithm)
+    adapting = _wants_adaptation(sampler, adapt, num_warmup, type(algorithm).__name__)
+    # The step size left unset and not adapted: the sampler's own choice for these starts.
+    choosing = not adapting and sampler.tuning is not None and not sampler.tuning.given
     # Concrete checks (shape, orbit, constraints, energy, step size) of every start.
-    _check_starts(algorithm, initial_positions, num_chains, step_size_checks=not adapting)
-    states = jax.vmap(algorithm.init)(initial_positions)
+    _check_starts(
+        sampler, initial_positions, num_chains, step_size_checks=not (adapting or choosing)
+    )
+    if choosing:
+        sampler = choose_from_starts(sampler, initial_positions)
+        _check_starts(sampler, initial_positions, num_chains)
+    states = jax.vmap(sampler.init)(initial_positions)
     chain_keys = jax.random.split(rng_key, num_chains)
 
     states, chain_keys = shard_chains((states, chain_keys), sharding)
@@ -262,10 +276,10 @@ def sample_chains(
     if adapting:
         # From the initial states and deterministic given rng_key: a resumed run re-derives
         # the same parameters.
-        algorithm, adapted = algorithm.adapt(
-            rng_key, chain_keys, states, initial_positions, num_warmup
+        sampler, adapted = warm_up(
+            sampler, rng_key, chain_keys, states, initial_positions, num_warmup
         )
-        _check_starts(algorithm, initial_positions, num_chains)
+        _check_starts(sampler, initial_positions, num_chains)
         if adapted is not None:
             run_warmup = False
             states = adapted
@@ -292,12 +306,12 @@ def sample_chains(
     # for the samplers that declare them.
     @jit
     def warmup(states, keys, first_step):
-        return jax.vmap(lambda s, k: run_steps(algorithm, k, s, first_step, num_warmup)[0])(
+        return jax.vmap(lambda s, k: run_steps(sampler, k, s, first_step, num_warmup)[0])(
             states, keys
         )
 
     def draws(state, key, first_step, count):
-        return run_draws(algorithm, key, state, first_step, count, thinning, reduce_over_thinning)
+        return run_draws(sampler, key, state, first_step, count, thinning, reduce_over_thinning)
 
     chunk = chunk_draws if chunk_draws is not None else max(1, math.ceil(num_draws / 20))
     run_chunk = jit(
@@ -352,7 +366,7 @@ def sample_chains(
         info,
         wall_time,
         num_warmup + num_draws * thinning,
-        dict(getattr(algorithm, "settings", {}), num_warmup=num_warmup, adapted=adapting),
+        dict(sampler.settings, num_warmup=num_warmup, adapted=adapting),
     )
     _report_divergences(result, on_nonfinite)
     _report_stuck_chains(result, min_acceptance_rate)
@@ -698,7 +712,8 @@ def sample(
     Pytree positions (dicts, tuples) give one posterior variable per leaf, named from its key
     path (``mu``, ``log_kappa``; tuple entries ``x0``, ``x1``…; nested keys joined with ``.``),
     with dims ``<name>_dim_k`` (``event_dims`` may map a leaf's name to other dims); a complex
-    leaf ``U`` is split into ``U.real`` and ``U.imag`` (:func:`liesample.analysis.diagnostics.to_datatree`).
+    leaf ``U`` is split into ``U.real`` and ``U.imag``
+    (:func:`liesample.analysis.diagnostics.to_datatree`).
     ArviZ's ESS and R-hat of these variables are those of the ambient coordinates (vector
     components, matrix entries), not of intrinsic coordinates on the group or sphere.
 

@@ -23,23 +23,31 @@ drift, the last step otherwise) and ArviZ's ``sample_stats`` names in
 :data:`SAMPLE_STATS_NAMES`. :func:`check_info` verifies a sampler against the contract.
 
 **The sampler object.** ``as_top_level_api`` returns a :class:`Sampler`: BlackJAX's
-``SamplingAlgorithm`` (``init``, ``step``; unpacks and duck-types as one) with three optional
-hooks the runner uses: ``settings`` (recorded in the ``DataTree`` attributes),
-``check_positions`` (checks every start in one vectorised call) and ``adapt`` (warm-up tuning).
+``SamplingAlgorithm`` (``init``, ``step``; unpacks and duck-types as one) that declares, as
+attributes with defaults, what the runner and the step loop read: ``settings`` (recorded in
+the ``DataTree`` attributes), ``check_positions`` (checks every start in one vectorised call),
+``tuning`` (a :class:`StepSizeTuning`: what the warm-up tunes and by which procedure of
+:mod:`liesample.tuning`) and ``noise_blocks``
+(:class:`liesample.integrators.chain_loop.NoiseBlocks`).
+:func:`as_sampler` reads a plain BlackJAX ``SamplingAlgorithm`` as a :class:`Sampler` with the
+defaults. ``step`` is pure: a sampler's parameters are fixed when it is built (a tuned value
+gives a new sampler, built by its declared ``tuning.rebuild``).
 
 **help().** :func:`sampling_api` builds the module-level ``liesample.<sampler>`` object, a
 ``blackjax.GenerateSamplingAPI`` whose ``help()`` is the top-level docstring.
 
 **Precision.** Samplers run in the precision of their inputs: JAX's default is float32; call
 ``jax.config.update("jax_enable_x64", True)`` at start-up for float64 (what every test and
-benchmark here uses). :func:`liesample.integrators.stability.check_precision` states when float32 is not
-enough and warns once.
+benchmark here uses). :func:`liesample.integrators.stability.check_precision` states when float32
+is not enough and warns once.
 """
 
 from __future__ import annotations
 
 import functools
 import inspect
+from collections.abc import Callable, Mapping
+from types import MappingProxyType
 from typing import NamedTuple, Protocol, runtime_checkable
 
 import blackjax
@@ -47,12 +55,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from liesample.integrators.chain_loop import DeclaresNoiseBlocks
+
 __all__ = [
     "CONTRACT_FIELDS",
     "REDUCE_OVER_THINNING",
     "SAMPLE_STATS_NAMES",
     "Sampler",
     "SamplerInfo",
+    "StepSizeTuning",
+    "as_sampler",
     "check_info",
     "first_bad_chain",
     "sampling_api",
@@ -116,29 +128,88 @@ def check_info(info) -> None:
         )
 
 
-class Sampler(blackjax.base.SamplingAlgorithm):
-    """``SamplingAlgorithm(init, step)`` plus the runner's hooks (all optional).
+class StepSizeTuning(NamedTuple):
+    """How a sampler's step size is chosen when the user left it unset, and tuned in warm-up.
+
+    Declared by the sampler (``Sampler.tuning``); the procedures that use it are in
+    :mod:`liesample.tuning` (a higher layer), called by the runner.
+
+    method : str
+        The warm-up procedure: ``"dual_averaging"`` (the shared step of all chains tuned to a
+        mean acceptance rate, :mod:`liesample.tuning.dual_averaging`) or ``"rule"`` (the step
+        computed from the run's starts by ``choose``, no tuning loop).
+    given : bool
+        The user gave the step size: without ``adapt=True`` the warm-up keeps it.
+    choose : callable
+        ``(positions, rng_key) -> (step_size, source)``: the sampler's automatic step for the
+        starts ``positions`` (chains first) and a description of how it was chosen.
+        ``rng_key=None`` is the choice without warm-up; a key, the warm-up's choice.
+    rebuild : callable
+        ``(step_size, source) -> Sampler``: the same sampler with this step (a float),
+        ``source`` recorded as its ``settings["step_size_source"]``.
+    at : callable or None
+        ``(step_size, **parameters) -> Sampler`` whose step uses ``step_size`` and the values
+        of ``parameters``, all of which may be traced (the warm-up loop of
+        ``"dual_averaging"``); ``None`` for ``"rule"``.
+    parameters : dict
+        The sampler's other numeric parameters (name -> float), which the warm-up passes to
+        ``at`` as arrays of the positions' dtype: one compiled warm-up serves every value.
+    target_acceptance_rate : float or None
+        What ``"dual_averaging"`` aims at.
+    """
+
+    method: str
+    given: bool
+    choose: Callable
+    rebuild: Callable
+    at: Callable | None = None
+    parameters: dict | None = None
+    target_acceptance_rate: float | None = None
+
+
+class Sampler(blackjax.base.SamplingAlgorithm, DeclaresNoiseBlocks):
+    """``SamplingAlgorithm(init, step)`` plus what the runner and the step loop read.
+
+    Every attribute below is declared, with its default; a sampler sets those it has.
 
     Attributes
     ----------
     settings : dict
         What the sampler was built with (name, step size, how it was chosen, …), recorded in
-        the attributes of the ``DataTree`` that :func:`liesample.sample` returns.
+        the attributes of the ``DataTree`` that :func:`liesample.sample` returns. Default: empty
+        (``Sampler(...)`` gives each sampler its own dict).
     check_positions : callable or None
-        ``positions (chains, ...) -> None``: every start checked in one vectorised call, raising
-        an error that names the first bad chain (``initial_positions[c]: …``).
-    adapt : callable or None
-        ``(rng_key, chain_keys, states, initial_positions, num_warmup) -> (sampler, states)``:
-        warm-up tuning; ``states`` is ``None`` when the runner should run the plain warm-up
-        with the returned sampler.
+        ``positions (chains, ...), *, step_size_checks=True -> None``: every start checked in
+        one vectorised call, raising an error that names the first bad chain
+        (``initial_positions[c]: …``). ``None`` (default): the runner calls ``init`` on every
+        distinct start.
+    tuning : StepSizeTuning or None
+        How the step size is chosen and tuned in warm-up; ``None`` (default): nothing to tune.
+    noise_blocks : liesample.integrators.chain_loop.NoiseBlocks or None
+        How ``step`` consumes noise drawn in blocks; ``None`` (default): one key per step.
     """
 
-    def __new__(cls, init, step, *, settings=None, check_positions=None, adapt=None):
+    settings: Mapping = MappingProxyType({})
+    check_positions: Callable | None = None
+    tuning: StepSizeTuning | None = None
+
+    def __new__(
+        cls, init, step, *, settings=None, check_positions=None, tuning=None, noise_blocks=None
+    ):
         self = super().__new__(cls, init, step)
         self.settings = {} if settings is None else settings
         self.check_positions = check_positions
-        self.adapt = adapt
+        self.tuning = tuning
+        self.noise_blocks = noise_blocks
         return self
+
+
+def as_sampler(algorithm) -> Sampler:
+    """``algorithm`` as a :class:`Sampler`: itself if it is one, else a ``Sampler`` with its
+    ``init`` and ``step`` and the defaults (a plain BlackJAX ``SamplingAlgorithm``)."""
+    if isinstance(algorithm, Sampler):
+        return algorithm
+    return Sampler(algorithm.init, algorithm.step)
 
 
 def setting(value):
@@ -168,11 +239,24 @@ Low-level pieces: ``{name}.init``, ``{name}.build_kernel`` (BlackJAX-shaped).
 """
 
 
-def sampling_api(as_top_level_api, init, build_kernel, name: str, module: str):
+def sampling_api(
+    as_top_level_api, init, build_kernel, name: str, module: str, *, adaptation=None
+):
     """``blackjax.GenerateSamplingAPI(as_top_level_api, init, build_kernel)`` whose ``help()``
     and ``__doc__`` are ``as_top_level_api``'s docstring (plus the precision rule) and whose
-    call signature is that of ``as_top_level_api``."""
-    doc = inspect.cleandoc(as_top_level_api.__doc__ or "") + "\n" + _PRECISION_NOTE.format(name=name)
+    call signature is that of ``as_top_level_api``.
+
+    ``adaptation``, stored as the object's ``.adaptation`` (``None``: none), declares how
+    :func:`liesample.window_adaptation` (and the NumPyro kernel) tunes the sampler: a mapping
+    with ``"schedule"`` (``"window"``: Stan's windows on one chain; ``"chees"``: chains tuned
+    together, trajectory length by ChEES), ``"adapted"`` (the parameters it sets:
+    ``step_size``, ``inverse_mass_matrix``, ``num_integration_steps``, ``magnetic_field``),
+    ``"parameters"`` (the kernel's arguments a caller may give), ``"options"``
+    (``build_kernel``'s keywords, e.g. ``integrator``), ``"defaults"`` (values used for
+    parameters not given, e.g. ``friction``) and ``"target_acceptance_rate"`` (dual
+    averaging's default target)."""
+    doc = inspect.cleandoc(as_top_level_api.__doc__ or "")
+    doc = doc + "\n" + _PRECISION_NOTE.format(name=name)
 
     @functools.wraps(as_top_level_api)
     def __call__(self, *args, **kwargs):
@@ -191,7 +275,9 @@ def sampling_api(as_top_level_api, init, build_kernel, name: str, module: str):
             "__signature__": inspect.signature(as_top_level_api),
         },
     )
-    return cls(as_top_level_api, init, build_kernel)
+    api = cls(as_top_level_api, init, build_kernel)
+    api.adaptation = None if adaptation is None else dict(adaptation)
+    return api
 
 
 class PositionCheck(NamedTuple):

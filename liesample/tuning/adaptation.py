@@ -3,8 +3,11 @@
 ``liesample.window_adaptation(algorithm, logdensity_fn, space, **parameters)`` mirrors
 ``blackjax.window_adaptation``: ``.run(rng_key, initial_position, num_steps)`` returns
 ``((state, parameters), info)`` and ``algorithm(logdensity_fn, space, **parameters)`` is the
-tuned sampler. Stan's schedule (``blackjax.adaptation.window_adaptation.build_schedule``): a
-fast window (step size only), doubling slow windows (step size and mass; the step size is
+tuned sampler. What is tuned, and how, the sampler declares: ``algorithm.adaptation``
+(:func:`liesample.samplers.contract.sampling_api`) names the schedule, the adapted parameters,
+the kernel's parameters and ``build_kernel`` options (the integration scheme ``integrator``
+among them, passed through) and the default target. Stan's schedule (:func:`window_schedule`):
+a fast window (step size only), doubling slow windows (step size and mass; the step size is
 restarted at the end of each), a final fast window. The step size is tuned by dual averaging
 (``blackjax.adaptation.step_size.dual_averaging_adaptation``) towards a target Metropolis rate
 (``info.metropolis_rate``: for unadjusted Langevin the rate the step *would* have).
@@ -25,19 +28,18 @@ the mass (a quarter period of a whitened Gaussian, whose position after ``T`` is
 of its start), with ``num_integration_steps = ceil(T / step_size)`` re-derived at every step
 of the warm-up and for the tuned sampler. Pass ``integration_time`` to change ``T`` or
 ``num_integration_steps`` to fix ``L`` instead (then the integration time follows the step
-size, as in ``blackjax.window_adaptation``). Measured in ``docs/groups.md``.
+size, as in ``blackjax.window_adaptation``).
 
 **Magnetic HMC** (``liesample.window_adaptation(liesample.magnetic_hmc, logdensity_fn)``, i.e.
 :func:`magnetic_window_adaptation`): several chains tuned together on the same schedule; the
 field is re-derived from the current mass and step size at every step (a fixed rotation angle
 per leapfrog step), so the step size is dual-averaged with the field on, and the trajectory
 length is learnt by a ChEES-type rule over jittered lengths; sample with
-:func:`jittered_magnetic_hmc`.
+:func:`liesample.samplers.cotangent.magnetic_hmc.jittered_magnetic_hmc`.
 """
 
 from __future__ import annotations
 
-import inspect
 import math
 from collections.abc import Callable
 from typing import NamedTuple
@@ -52,7 +54,7 @@ from jax.flatten_util import ravel_pytree
 from liesample.foundation.compile import jit
 from liesample.foundation.validation import finite_float
 from liesample.geometry import spaces
-from liesample.samplers.contract import Sampler, first_bad_chain
+from liesample.samplers.contract import first_bad_chain
 from liesample.samplers.cotangent.magnetic import default_magnetic_field
 from liesample.samplers.cotangent.magnetic_hmc import magnetic_hmc
 
@@ -60,9 +62,9 @@ __all__ = [
     "DEFAULT_ANGLE",
     "DEFAULT_INTEGRATION_TIME",
     "MagneticAdaptationInfo",
-    "jittered_magnetic_hmc",
     "magnetic_window_adaptation",
     "window_adaptation",
+    "window_schedule",
 ]
 
 DEFAULT_INTEGRATION_TIME = 0.5 * math.pi
@@ -120,6 +122,16 @@ def _inverse_mass(space, mean, m2, count, dtype):
         out.append(1.0 / (squared + 1.0))
     structure = jax.tree.structure(space, is_leaf=spaces.is_space)
     return structure.unflatten(out)
+
+
+def window_schedule(num_steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """Stan's warm-up windows for ``num_steps`` transitions: ``(stage, window_end)`` per step,
+    ``stage`` 0 in a fast window and 1 in a slow one, ``window_end`` true at the last step of a
+    slow window (``blackjax.adaptation.window_adaptation.build_schedule``; constants, also when
+    called under ``jit``)."""
+    with jax.ensure_compile_time_eval():
+        schedule = np.asarray(build_schedule(int(num_steps)))
+    return schedule[:, 0].astype(np.int32), schedule[:, 1].astype(bool)
 
 
 def integration_steps(step_size, integration_time):
@@ -216,20 +228,22 @@ def window_adaptation(
     progress_bar: bool = False,
     **parameters,
 ) -> GeometricAdaptation:
-    """Tune ``algorithm`` (``liesample.geometric_hmc`` or ``liesample.geometric_langevin``).
+    """Tune ``algorithm`` (``liesample.geometric_hmc``, ``liesample.geometric_langevin``, or
+    ``liesample.magnetic_hmc``: then :func:`magnetic_window_adaptation`, without ``space``).
 
     Parameters
     ----------
     algorithm
-        The sampler's API object; its ``build_kernel`` takes the options in ``parameters`` that
-        are not kernel arguments (e.g. ``adjusted=True`` for Langevin).
+        The sampler's API object; its ``adaptation`` declaration (module docstring) says what is
+        adapted, and its ``build_kernel`` takes the declared options in ``parameters`` (e.g.
+        ``adjusted=True`` for Langevin, ``integrator``).
     logdensity_fn, space
         As for the sampler.
     initial_step_size : float
         Starting point of dual averaging.
     target_acceptance_rate : float, optional
-        Target Metropolis rate: 0.8 for HMC, 0.9 for Langevin (one step per transition;
-        unadjusted chains are biased by the step size) by default.
+        Target Metropolis rate; by default the sampler's declared one (0.8 for HMC, 0.9 for
+        Langevin: one step per transition, unadjusted chains are biased by the step size).
     integration_time : float, optional
         HMC only: ``T`` of the trajectory (default ``π/2``) unless ``num_integration_steps`` is
         given.
@@ -238,13 +252,19 @@ def window_adaptation(
     parameters
         The sampler's other arguments: ``num_integration_steps`` (HMC, fixes ``L``),
         ``friction`` (Langevin, default 1), ``inverse_mass_matrix`` (the starting mass),
-        and ``build_kernel`` options (``adjusted``, ``divergence_threshold``).
+        and ``build_kernel`` options (``adjusted``, ``divergence_threshold``, ``integrator``).
     """
-    if algorithm is magnetic_hmc:
+    name = type(algorithm).__name__
+    declared = getattr(algorithm, "adaptation", None)
+    if declared is None:
+        raise TypeError(
+            f"{name} declares no window adaptation (no adaptation= in its sampling_api)"
+        )
+    if declared["schedule"] == "chees":
         if space is not None:
             raise TypeError(
-                "magnetic_hmc samples on R^d and takes no space; call "
-                "window_adaptation(liesample.magnetic_hmc, logdensity_fn, **options)"
+                f"{name} samples on R^d and takes no space; call "
+                f"window_adaptation(liesample.{name}, logdensity_fn, **options)"
             )
         if target_acceptance_rate is not None:
             parameters["target_acceptance_rate"] = target_acceptance_rate
@@ -253,19 +273,17 @@ def window_adaptation(
             initial_step_size=initial_step_size,
             integration_time=integration_time,
             adapt_mass=adapt_mass,
+            algorithm=algorithm,
             **parameters,
         )
     if space is None:
-        raise TypeError(f"window_adaptation({algorithm}, logdensity_fn, space): give the space")
+        raise TypeError(f"window_adaptation({name}, logdensity_fn, space): give the space")
     del progress_bar  # accepted for BlackJAX compatibility; the warm-up runs in one compiled loop
     spaces._spaces(space)
     finite_float("initial_step_size", initial_step_size, positive=True)
-    build_options = {
-        k: parameters.pop(k) for k in ("adjusted", "divergence_threshold") if k in parameters
-    }
+    build_options = {k: parameters.pop(k) for k in declared["options"] if k in parameters}
     kernel = algorithm.build_kernel(**build_options)
-    arguments = inspect.signature(kernel).parameters
-    is_hmc = "num_integration_steps" in arguments
+    is_hmc = "num_integration_steps" in declared["adapted"]
     fixed_steps = parameters.pop("num_integration_steps", None)
     if is_hmc:
         if fixed_steps is not None and integration_time is not None:
@@ -277,18 +295,21 @@ def window_adaptation(
             raise ValueError(f"num_integration_steps must be an integer >= 1, got {fixed_steps!r}")
     elif fixed_steps is not None or integration_time is not None:
         raise ValueError("num_integration_steps and integration_time are HMC parameters")
-    else:
-        parameters.setdefault("friction", 1.0)
+    for key, value in declared["defaults"].items():
+        parameters.setdefault(key, value)
     if target_acceptance_rate is None:
-        target_acceptance_rate = 0.8 if is_hmc else 0.9
+        target_acceptance_rate = declared["target_acceptance_rate"]
     target = finite_float("target_acceptance_rate", target_acceptance_rate)
     if not 0.0 < target < 1.0:
         raise ValueError(f"target_acceptance_rate must be in (0, 1), got {target}")
     if "step_size" in parameters:
         raise TypeError("step_size is what window_adaptation tunes: give initial_step_size")
-    unknown = set(parameters) - (set(arguments) - {"rng_key", "state", "logdensity_fn", "space"})
+    unknown = set(parameters) - set(declared["parameters"])
     if unknown:
-        raise TypeError(f"unknown parameters for {algorithm}: {sorted(unknown)}")
+        raise TypeError(
+            f"unknown parameters for {name}: {sorted(unknown)}; it takes "
+            f"{sorted(declared['parameters'])} and the options {sorted(declared['options'])}"
+        )
     initial_mass = parameters.pop("inverse_mass_matrix", None)
     pieces = warmup_pieces(space, target, adapt_mass)
 
@@ -325,9 +346,7 @@ def window_adaptation(
         state = algorithm.init(initial_position, logdensity_fn, space)
         dtype = jnp.asarray(state.logdensity).dtype
         inverse_mass = spaces.check_inverse_mass(space, initial_mass, dtype)
-        schedule = np.asarray(build_schedule(int(num_steps)))
-        stages = jnp.asarray(schedule[:, 0])
-        ends = jnp.asarray(schedule[:, 1].astype(bool))
+        stages, ends = window_schedule(num_steps)
         carry = (state, pieces.init(state, initial_step_size, inverse_mass))
         keys = jax.random.split(rng_key, int(num_steps))
 
@@ -352,16 +371,10 @@ def window_adaptation(
 # --------------------------------------------------------------------------- magnetic HMC
 
 DEFAULT_ANGLE = 0.0
-"""Default field of :func:`magnetic_window_adaptation`, as the angle (rad) per leapfrog step.
-
-Measured with the ChEES-type trajectory rule and jittered lengths (``benchmarks/euclidean.py``,
-4 chains x 2000 draws, min bulk ESS per gradient of angle 0.25 against angle 0): 0.61x on the
-100-d rotated Gaussian (κ = 100: the field slows its slowest directions further), 0.72x on the
-breast-cancer logistic regression, 1.3x on the 2-d Gaussian (ρ = 0.99), 2.2x on the banana
-(fewer divergences) and 3.4x on Neal's funnel (where every sampler is biased and angle 0 is
-7x behind NUTS). Angle 0 meets "ESS per gradient ≥ NUTS" on four of the five targets, angle
-0.25 on three, so no field by default; ``angle > 0`` turns it on, adapted jointly."""
-CHEES_TARGET_ACCEPTANCE_RATE = 0.651
+"""Default field of :func:`magnetic_window_adaptation`, as the angle (rad) per step: no field.
+A field helps on some targets (strongly correlated or curved ones) and slows the slowest
+directions of others, so it is opt-in; ``angle > 0`` turns it on, adapted jointly."""
+CHEES_TARGET_ACCEPTANCE_RATE = magnetic_hmc.adaptation["target_acceptance_rate"]
 CHEES_LEARNING_RATE = 0.01
 CHEES_AVERAGING = 0.95  # running means of the ChEES estimates
 
@@ -488,6 +501,8 @@ def magnetic_window_adaptation(
     divergence_threshold: float = 1000.0,
     max_num_integration_steps: int = MAX_NUM_INTEGRATION_STEPS,
     progress_bar: bool = False,
+    integrator=None,
+    algorithm=magnetic_hmc,
 ) -> GeometricAdaptation:
     """Tune ``liesample.magnetic_hmc`` on several chains at once: step size, diagonal mass, the
     field (jointly with both) and the trajectory length (ChEES).
@@ -515,24 +530,23 @@ def magnetic_window_adaptation(
     of the squared distance's ESS per gradient, ``(1 − ρ)/((1 + ρ) T)``, with ``1 − ρ``
     read off ChEES normalised by its value for independent draws
     (:func:`_log_efficiency_gradient`, from running means of the estimates of
-    :func:`_chees_terms`). ChEES alone saturates once the trajectory outlasts the slowest
-    direction's decorrelation time, and its noisy gradient then lets ``T`` drift (measured on
-    the 100-d Gaussian of ``benchmarks/euclidean.py``: the adapted ``T`` fell anywhere in
-    5.5–15 between runs, ESS per gradient varying 2x with it); ChEES per unit length has a
-    maximum but favours the fast directions (``T = 2.2`` there, ESS per gradient 0.8x). The
-    gradient is dimensionless and bounded, so the step is plain stochastic ascent, not Adam
-    (Adam's normalised steps keep their size where the mean gradient vanishes: with 4 chains
-    ``T`` then wandered by a factor 3 around the optimum). The returned ``T`` is ``exp`` of the
-    mean of ``log T`` over the last slow window and the final fast window;
-    ``integration_time=T`` fixes ``T`` instead.
+    :func:`_chees_terms`). Every step of a scheme costs the same number of gradients, so the
+    rule is the same per gradient for every ``integrator``. ChEES alone saturates once the
+    trajectory outlasts the slowest direction's decorrelation time, and its noisy gradient
+    then lets ``T`` drift; ChEES per unit length has a maximum but favours the fast
+    directions. The gradient is dimensionless and bounded, so the step is plain stochastic
+    ascent, not Adam (Adam's normalised steps keep their size where the mean gradient
+    vanishes, so ``T`` wanders around the optimum). The returned ``T`` is ``exp`` of the mean
+    of ``log T`` over the last slow window and the final fast window; ``integration_time=T``
+    fixes ``T`` instead.
 
     Parameters
     ----------
     logdensity_fn : callable
         ``log π`` of a position (a pytree; flattened as the sampler flattens it).
     angle : float
-        Rotation (rad) of the whitened velocity per leapfrog step; 0 (:data:`DEFAULT_ANGLE`,
-        measured) is plain HMC with the same rules.
+        Rotation (rad) of the whitened velocity per step; 0 (:data:`DEFAULT_ANGLE`) is plain
+        HMC with the same rules.
     initial_step_size, target_acceptance_rate
         Dual averaging's start and target (0.651, ChEES-HMC's, by default).
     integration_time, initial_integration_time, learning_rate
@@ -543,8 +557,15 @@ def magnetic_window_adaptation(
         As for the sampler.
     max_num_integration_steps : int
         Cap on ``L`` per transition (and on ``T / ε``).
+    integrator : str or sequence of (effect, fraction) pairs, optional
+        The sampler's integration scheme (``liesample.magnetic_hmc``'s ``integrator``), used in
+        the warm-up and returned in ``parameters`` when given.
+    algorithm
+        The sampler tuned: ``liesample.magnetic_hmc`` or one with its signature.
     """
     del progress_bar  # accepted for BlackJAX compatibility; the warm-up is one compiled loop
+    scheme = {} if integrator is None else {"integrator": integrator}
+    algorithm.build_kernel(**scheme)  # validates the scheme now
     angle = finite_float("angle", angle, nonnegative=True)
     finite_float("initial_step_size", initial_step_size, positive=True)
     target = finite_float("target_acceptance_rate", target_acceptance_rate)
@@ -572,12 +593,10 @@ def magnetic_window_adaptation(
         flat = _flat_starts(initial_positions, logdensity_fn)
         num_chains, dimension = flat.shape
         dtype = flat.dtype
-        states = jax.vmap(lambda x: magnetic_hmc.init(x, logdensity_fn))(initial_positions)
+        states = jax.vmap(lambda x: algorithm.init(x, logdensity_fn))(initial_positions)
         rotation = jnp.asarray(_rotation(dimension), dtype)
         zero_field = np.zeros((dimension, dimension))
-        schedule = np.asarray(build_schedule(num_steps))
-        stages = schedule[:, 0].astype(int)
-        ends = schedule[:, 1].astype(bool)
+        stages, ends = window_schedule(num_steps)
         slow = np.flatnonzero(stages == 1)
         last_window = np.flatnonzero(ends[: slow[-1]])  # ends before the last slow window's
         average_from = int(last_window[-1]) + 1 if slow.size and last_window.size else 0
@@ -588,7 +607,7 @@ def magnetic_window_adaptation(
 
         def one_step(carry, xs):
             states, da_state, log_time, means, inverse_mass, welford = carry
-            key, u, stage, window_end, index = xs
+            key, u, stage, window_end, _ = xs
             step_size = jnp.exp(da_state.log_step_size)
             strength = angle / step_size
             # angle 0: a concrete zero field, so the sampler takes the free drift (no expm)
@@ -597,13 +616,14 @@ def magnetic_window_adaptation(
             steps = jnp.clip(jnp.ceil(u * trajectory / step_size), 1, max_steps).astype(int)
 
             # The top-level API: the flows e^{±εGM⁻¹} are computed once per step for all chains.
-            sampler = magnetic_hmc(
+            sampler = algorithm(
                 logdensity_fn,
                 step_size,
                 inverse_mass,
                 steps,
                 field,
                 divergence_threshold=divergence_threshold,
+                **scheme,
             )
             new_states, info = jax.vmap(sampler.step)(jax.random.split(key, num_chains), states)
             da_state = da_update(da_state, _harmonic_mean(info.acceptance_rate))
@@ -688,6 +708,7 @@ def magnetic_window_adaptation(
             "inverse_mass_matrix": inverse_mass,
             "num_integration_steps": int(np.clip(math.ceil(trajectory / step_size), 1, max_steps)),
             "magnetic_field": default_magnetic_field(inverse_mass, angle / step_size),
+            **scheme,
         }
         info = info._replace(
             trajectory_length=info.trajectory_length.at[-1].set(trajectory)
@@ -732,49 +753,3 @@ def _flat_starts(positions, logdensity_fn):
         )
     return flat
 
-
-def jittered_magnetic_hmc(
-    logdensity_fn: Callable,
-    step_size,
-    inverse_mass_matrix,
-    num_integration_steps: int,
-    magnetic_field,
-    **options,
-) -> Sampler:
-    """``liesample.magnetic_hmc`` whose trajectory has ``L ~ Uniform{1, …, num_integration_steps}``
-    leapfrog steps, drawn afresh at every transition (the jitter ChEES tunes ``T`` for:
-    ``num_integration_steps = ceil(T / ε)`` from :func:`magnetic_window_adaptation`).
-
-    Jittering the length keeps the chain from locking onto a period of the target (a Gaussian
-    direction whose half-period divides ``Lε`` does not move under a fixed ``L``); each
-    transition is a ``magnetic_hmc`` transition, so the law is kept for every ``L``. Same
-    arguments and ``options`` as ``liesample.magnetic_hmc``; the flows ``e^{±εGM⁻¹}`` do not
-    depend on ``L`` and are computed once per compiled run.
-    """
-    base = magnetic_hmc(
-        logdensity_fn,
-        step_size,
-        inverse_mass_matrix,
-        num_integration_steps,
-        magnetic_field,
-        **options,
-    )
-
-    def step_fn(rng_key, state):
-        key_length, key_step = jax.random.split(rng_key)
-        u = jax.random.uniform(key_length, (), jnp.asarray(step_size).dtype)
-        steps = jnp.clip(jnp.ceil(u * num_integration_steps), 1, num_integration_steps)
-        sampler = magnetic_hmc(
-            logdensity_fn,
-            step_size,
-            inverse_mass_matrix,
-            steps.astype(int),
-            magnetic_field,
-            **options,
-        )
-        return sampler.step(key_step, state)
-
-    settings = dict(base.settings)
-    settings["sampler"] = "jittered_magnetic_hmc"
-    settings["max_num_integration_steps"] = settings.pop("num_integration_steps")
-    return Sampler(base.init, step_fn, settings=settings, check_positions=base.check_positions)

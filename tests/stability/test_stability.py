@@ -54,6 +54,7 @@ The 10⁷-step runs (``lax.fori_loop``, nothing stored, moments accumulated on t
 import math
 import warnings
 
+import cases
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -302,39 +303,19 @@ def test_hard_case_is_stable_and_gibbs_exact(case, dtype):
     assert np.all(z < 5.0), f"{case} {dtype}: estimate {estimate}, exact {exact}, z {z}"
 
 
-BATCH_SYSTEMS = {
-    "rigid body": (
-        lambda: liesample.systems.rigid_body((1.0, 2.0, 4.0)),
-        np.array([0.3, 0.4, math.sqrt(0.75)]),
-    ),
-    "heavy top": (  # the configuration plain jax.jit miscompiles on jaxlib 0.12 (module notes)
-        lambda: liesample.systems.heavy_top((1.0, 1.5, 2.5), mgl=1.0, chi=(0.2, 0.0, 1.0)),
-        np.array([0.6, -1.0, 0.8, 0.3, 0.5, -0.9]),
-    ),
-    "spins": (
-        lambda: liesample.systems.heisenberg((4, 4), periodic=True),
-        np.tile(np.array([0.0, 0.6, 0.8]), (4, 4, 1)),
-    ),
-    "vortices": (
-        lambda: liesample.systems.point_vortices((1.0, 1.0, -0.5, 2.0), max_degree=2),
-        np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.6, 0.0, -0.8]]),
-    ),
-}
-
-
-@pytest.mark.parametrize("system_name", sorted(BATCH_SYSTEMS))
+@pytest.mark.parametrize("system_name", cases.SYSTEM_NAMES)
 @pytest.mark.parametrize("integrator", sorted(INTEGRATORS))
 def test_batched_step_equals_one_chain(integrator, system_name):
     """Twenty steps vmapped over 8 chains give each chain exactly the single-chain steps
-    (round-off): the runner and every statistical test rely on it. This caught an XLA CPU
-    miscompile of XLA:CPU (module notes); it runs through ``liesample.jit``, the compile path of
-    the runner, the accuracy knob and ``simulate``."""
-    make_system, position = BATCH_SYSTEMS[system_name]
-    system = make_system()
-    algorithm = liesample.lie_poisson_langevin(
-        system, beta=2.0, step_size=0.05, integrator=integrator, stability="off"
-    )
-    position = jnp.asarray(position)
+    (round-off), for every integrator and every system of ``tests/cases.py``: the runner and
+    every statistical test rely on it. This caught a miscompile of XLA:CPU (module notes; the
+    heavy-top row is the configuration it hit); it runs through ``liesample.jit``, the compile
+    path of the runner, the accuracy knob and ``simulate``. ``tests/test_registry.py`` guards
+    every sampler the same way."""
+    case = next(case for case in cases.SYSTEMS if case.name == system_name)
+    algorithm = cases.system_sampler(case, integrator)
+    starts = jnp.asarray(case.starts())
+    positions = starts[np.arange(8) % cases.NUM_CHAINS]  # chain c starts at starts[c % 2]
     keys = jax.random.split(jax.random.key(0), 8)
 
     def twenty_steps(key, state):
@@ -343,11 +324,11 @@ def test_batched_step_equals_one_chain(integrator, system_name):
 
         return jax.lax.scan(one, state, jnp.arange(20))[0].position
 
-    states = jax.vmap(algorithm.init)(jnp.broadcast_to(position, (8, *position.shape)))
+    states = jax.vmap(algorithm.init)(positions)
     batched = liesample.jit(jax.vmap(twenty_steps))(keys, states)
     single_chain = liesample.jit(twenty_steps)  # jit alone compiles correctly (checked against eager)
     for chain in (0, 5):
-        single = single_chain(keys[chain], algorithm.init(position))
+        single = single_chain(keys[chain], algorithm.init(positions[chain]))
         np.testing.assert_allclose(batched[chain], single, rtol=0, atol=1e-12)
 
 

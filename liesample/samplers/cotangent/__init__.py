@@ -1,1 +1,2 @@
-"""Samplers on ``T*G``: geometric HMC and Langevin; the magnetic samplers are their ``Rᵈ`` fronts."""
+"""Samplers on ``T*G``: geometric HMC and Langevin, and the magnetic samplers, their ``Rᵈ``
+fronts."""

@@ -9,14 +9,18 @@ one-effect steps of :mod:`liesample.geometry.cotangent` (kick ``B``, exact kinet
 ``A``, exact OU refresh ``O``) composed by coefficient lists:
 
 - :func:`hamiltonian_transition`: a momentum (fresh, partially refreshed or OU-refreshed),
-  ``L`` leapfrog steps ``B A B``, the Metropolis test and the flip. With a field the proposal
+  ``L`` steps of a palindromic scheme of ``B`` and ``A`` (the leapfrog ``B A B`` by default;
+  :func:`hamiltonian_scheme`), the Metropolis test and the flip. With a field the proposal
   ``(g, p, s) ↦ (g', −p', −s)`` (``s = ±1`` the sign of ``G``) is an involution that preserves
   the Liouville measure (running the flow of ``−sG`` from ``(g', −p')`` retraces the path), so
   the test keeps ``exp(−H)`` exactly at any step size; the flip ``(p, s) ↦ (−p, −s)`` after it
   (Horowitz 1991) keeps the direction of motion on acceptance. Without a field ``s`` is inert.
   Geometric HMC, adjusted geometric Langevin and magnetic HMC are this transition.
 - :func:`unadjusted_transition`: one step of a scheme containing ``O`` (``OBAB`` for geometric
-  Langevin, ``BAOAB`` for magnetic Langevin), every finite step taken.
+  Langevin, ``BAOAB`` for magnetic Langevin by default), every finite step taken.
+
+The scheme travels in the :class:`Move` (:func:`make_move`): the samplers' ``integrator=``
+argument, a name of :data:`liesample.geometry.cotangent.SCHEMES` or a coefficient list.
 """
 
 from __future__ import annotations
@@ -32,14 +36,15 @@ from jax.flatten_util import ravel_pytree
 from liesample.foundation.validation import concrete_array
 from liesample.geometry import spaces
 from liesample.geometry.cotangent import (
-    LEAPFROG,
     CotangentBundle,
     PhasePoint,
+    check_scheme,
     compose,
     cotangent_bundle,
     drift,
     evaluated,
     fractions,
+    gradient_evaluations,
     kick,
     refresh,
 )
@@ -47,16 +52,21 @@ from liesample.geometry.cotangent import (
 __all__ = [
     "GeometricInfo",
     "GeometricState",
-    "Integrator",
+    "Move",
+    "check_positive_step_size",
     "check_starts",
     "drift_flows",
     "energy",
+    "hamiltonian_scheme",
     "hamiltonian_transition",
     "init",
-    "make_integrator",
-    "ravelled",
+    "make_move",
     "metropolis",
+    "ravelled",
+    "scheme_setting",
+    "scheme_step",
     "select",
+    "trajectory_cost",
     "unadjusted_transition",
 ]
 
@@ -91,10 +101,13 @@ class GeometricInfo(NamedTuple):
         divergence threshold.
     energy : ``H`` of the proposal for HMC (as in BlackJAX), of the new state for Langevin
         (``inf`` when non-finite).
-    num_integration_steps : leapfrog steps (gradient evaluations) of the transition.
+    num_integration_steps : steps of the integration scheme in the transition.
     metropolis_rate : ``min(1, e^{−ΔH})`` of the proposal, also for unadjusted chains (what
         step-size adaptation targets; there ``ΔH`` leaves out the energy the ``O`` step
         exchanged with the heat bath, so it measures the error of the Hamiltonian pieces).
+    num_gradient_evaluations : gradients of ``log π`` the transition evaluated (its cost:
+        ``num_integration_steps`` times the scheme's
+        :func:`~liesample.geometry.cotangent.gradient_evaluations`).
     """
 
     acceptance_rate: jax.Array
@@ -103,6 +116,7 @@ class GeometricInfo(NamedTuple):
     energy: jax.Array
     num_integration_steps: jax.Array
     metropolis_rate: jax.Array
+    num_gradient_evaluations: jax.Array
 
 
 def init(position, logdensity_fn: Callable, space) -> GeometricState:
@@ -130,10 +144,40 @@ def check_starts(space):
         leaves = jax.tree.leaves(positions)
         num_chains = np.shape(leaves[0])[0] if leaves and np.ndim(leaves[0]) else 0
         for chain in range(num_chains):
-            start = jax.tree.map(lambda a: a[chain], positions)
+            start = jax.tree.map(lambda a, chain=chain: a[chain], positions)
             spaces.check_position(space, start, f"initial_positions[{chain}]")
 
     return check_positions
+
+
+def check_positive_step_size(step_size):
+    """``step_size`` must be a scalar, finite and > 0 (checked when concrete)."""
+    if np.ndim(step_size) != 0:
+        raise ValueError(f"step_size must be a scalar, got shape {np.shape(step_size)}")
+    value = concrete_array(step_size)
+    if value is not None and not (np.isfinite(value) and value > 0):
+        raise ValueError(f"step_size must be finite and > 0, got {float(value)}")
+
+
+def hamiltonian_scheme(integrator) -> tuple:
+    """The scheme of an HMC trajectory from ``integrator=``: a name of
+    :data:`liesample.geometry.cotangent.SCHEMES` or a coefficient list of ``B`` and ``A`` only,
+    palindromic (the proposal must be an involution for the Metropolis test to be exact)."""
+    scheme = check_scheme(integrator, "AB")
+    if scheme != scheme[::-1]:
+        raise ValueError(
+            "integrator must be palindromic (the same read backwards) for the Metropolis test "
+            f"to be exact, got {scheme}; e.g. 'leapfrog' or 'minimal_norm'"
+        )
+    return scheme
+
+
+def scheme_setting(integrator, default: str = "leapfrog") -> dict:
+    """``{"integrator": …}`` for :attr:`~liesample.samplers.contract.Sampler.settings` (a name,
+    or the coefficient list as text); empty for the sampler's default scheme."""
+    if isinstance(integrator, str):
+        return {} if integrator == default else {"integrator": integrator}
+    return {"integrator": repr(check_scheme(integrator))}
 
 
 def check_divergence_threshold(divergence_threshold):
@@ -207,15 +251,16 @@ def drift_flows(bundle: CotangentBundle, step_size, scheme, precompute: bool = T
     return lambda sign: select(sign > 0, plus, minus)
 
 
-class Integrator(NamedTuple):
+class Move(NamedTuple):
     """What a move needs at fixed parameters: ``value_and_grad`` (trivialised), the
-    :class:`~liesample.geometry.cotangent.CotangentBundle`, ``flows`` (:func:`drift_flows`) and the
-    step size."""
+    :class:`~liesample.geometry.cotangent.CotangentBundle`, ``flows`` (:func:`drift_flows`), the
+    step size and the scheme one step follows (``((effect, fraction), …)``)."""
 
     value_and_grad: Callable
     bundle: CotangentBundle
     flows: Callable
     step_size: object
+    scheme: tuple
 
     def effects(self, sign, friction=None):
         """The one-effect steps ``B``, ``A`` (field sign ``sign``) and, with a friction, ``O``."""
@@ -226,14 +271,20 @@ class Integrator(NamedTuple):
         return effects
 
 
-def make_integrator(logdensity_fn, space, step_size, inverse_mass_matrix, magnetic_field, scheme,
-                    dtype=None, precompute=True):  # fmt: skip
-    """:class:`Integrator` of a sampler on ``space``; ``precompute=False`` in kernels (traced
-    parameters)."""
+def make_move(logdensity_fn, space, step_size, inverse_mass_matrix, magnetic_field, scheme,
+              dtype=None, precompute=True):  # fmt: skip
+    """:class:`Move` of a sampler on ``space`` (``scheme`` already checked);
+    ``precompute=False`` in kernels (traced parameters)."""
     bundle = cotangent_bundle(space, inverse_mass_matrix, magnetic_field, dtype)
     flows = drift_flows(bundle, step_size, scheme, precompute)
     value_and_grad = spaces.trivialised_value_and_grad(logdensity_fn, space)
-    return Integrator(value_and_grad, bundle, flows, step_size)
+    return Move(value_and_grad, bundle, flows, step_size, tuple(scheme))
+
+
+def scheme_step(move: Move, sign, friction=None) -> Callable:
+    """One step of ``move.scheme`` (field sign ``sign``) ending at an evaluated point."""
+    step = compose(move.scheme, move.effects(sign, friction))
+    return lambda point, rng_key=None: evaluated(step(point, rng_key), move.value_and_grad)
 
 
 def _point(state: GeometricState, momentum) -> PhasePoint:
@@ -244,13 +295,13 @@ def hamiltonian_transition(
     rng_key,
     state: GeometricState,
     momentum,
-    integrator: Integrator,
+    move: Move,
     num_integration_steps,
     divergence_threshold,
     persistent: bool = True,
 ):
-    """``L`` leapfrog steps from ``(state.position, momentum)``, the Metropolis test and the
-    flip. Returns ``(state, (is_accepted, acceptance_rate, is_divergent, initial energy,
+    """``L`` steps of ``move.scheme`` from ``(state.position, momentum)``, the Metropolis test
+    and the flip. Returns ``(state, (is_accepted, acceptance_rate, is_divergent, initial energy,
     proposal energy))``.
 
     The involution ``(g, p, s) ↦ (g', −p', −s)`` then, if ``persistent``, the flip
@@ -258,12 +309,12 @@ def hamiltonian_transition(
     ``persistent=False``: accepted ``(g', −p', −s)``, rejected ``(g, p, s)``.
     """
     sign = state.magnetic_sign
-    step = compose(LEAPFROG, integrator.effects(sign))
+    step = scheme_step(move, sign)
     initial = _point(state, momentum)
     proposal = jax.lax.fori_loop(0, num_integration_steps, lambda _, point: step(point), initial)
-    outcome = metropolis(rng_key, integrator.bundle, initial, proposal, divergence_threshold)
+    outcome = metropolis(rng_key, move.bundle, initial, proposal, divergence_threshold)
     is_accepted = outcome[0]
-    negate = lambda tree: jax.tree.map(jnp.negative, tree)  # noqa: E731
+    negate = lambda tree: jax.tree.map(jnp.negative, tree)
     new_momentum = select(is_accepted, proposal.momentum, negate(momentum))
     new_sign = jnp.where(is_accepted, sign, -sign)
     if not persistent:
@@ -279,18 +330,18 @@ def hamiltonian_transition(
 
 
 def unadjusted_transition(
-    rng_key, state: GeometricState, integrator: Integrator, friction, scheme, divergence_threshold
+    rng_key, state: GeometricState, move: Move, friction, divergence_threshold
 ):
-    """One step of ``scheme`` (``B``, ``A`` and ``O`` pieces), taken when finite; a non-finite
+    """One step of ``move.scheme`` (``B``, ``A`` and ``O`` pieces), taken when finite; a non-finite
     step keeps the state. Returns ``(state, (is_accepted, metropolis_rate, is_divergent,
     energy of the new state))``; ``metropolis_rate`` is ``min(1, e^{−(ΔH − heat)})``, the rate
     the step's Hamiltonian pieces would be accepted at (what step-size adaptation targets)."""
-    step = compose(scheme, integrator.effects(state.magnetic_sign, friction))
+    step = scheme_step(move, state.magnetic_sign, friction)
     initial = _point(state, state.momentum)._replace(heat=jnp.zeros_like(state.logdensity))
-    proposal = evaluated(step(initial, rng_key), integrator.value_and_grad)
+    proposal = step(initial, rng_key)
     is_accepted, rate, is_divergent, start, final = metropolis(
         None,
-        integrator.bundle,
+        move.bundle,
         initial,
         proposal,
         divergence_threshold,
@@ -307,8 +358,8 @@ def unadjusted_transition(
     return new_state, (is_accepted, rate, is_divergent, jnp.where(is_accepted, final, start))
 
 
-def ravelled(state, logdensity_fn, integrator: Integrator, transition: Callable):
-    """Run ``transition(flat_state, integrator)`` on the raveled position of ``state`` (any
+def ravelled(state, logdensity_fn, move: Move, transition: Callable):
+    """Run ``transition(flat_state, move)`` on the raveled position of ``state`` (any
     state with ``position``, ``logdensity``, ``logdensity_grad`` and a flat ``momentum``):
     ``(flat new state, info, unravel)``. How the magnetic samplers run on ``Euclidean((d,))``."""
     flat_q, unravel = ravel_pytree(state.position)
@@ -320,8 +371,13 @@ def ravelled(state, logdensity_fn, integrator: Integrator, transition: Callable)
         state.momentum,
         getattr(state, "magnetic_sign", 1.0),
     )
-    new, info = transition(flat_state, integrator._replace(value_and_grad=value_and_grad))
+    new, info = transition(flat_state, move._replace(value_and_grad=value_and_grad))
     return new, info, unravel
+
+
+def trajectory_cost(move: Move, num_integration_steps):
+    """Gradient evaluations of ``num_integration_steps`` steps of ``move.scheme``."""
+    return jnp.asarray(num_integration_steps) * gradient_evaluations(move.scheme)
 
 
 def partial_refresh(fresh, momentum, momentum_persistence):

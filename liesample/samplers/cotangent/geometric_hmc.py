@@ -5,19 +5,21 @@ A BlackJAX-shaped module (``init``, ``build_kernel``, ``as_top_level_api``). One
 
 1. draw ``p ~ N(0, M)`` in algebra coordinates (tangent on spheres), or refresh it partially,
    ``p ← α p + √(1 − α²) ξ`` (``momentum_persistence = α``);
-2. ``L`` leapfrog steps ``B A B`` (:mod:`liesample.geometry.cotangent`): half kick by the trivialised
-   gradient, exact exp-map drift ``g ← g exp(ε M⁻¹p)`` (geodesic flow on spheres; on the
-   ``Euclidean`` coordinates with a magnetic field ``G`` the exact kinetic–magnetic flow of
-   ``q̇ = M⁻¹p, ṗ = sGM⁻¹p``), half kick;
+2. ``L`` steps of the ``integrator`` scheme (:mod:`liesample.geometry.cotangent`; by default
+   the leapfrog ``B A B``): half kick by the trivialised gradient, exact exp-map drift
+   ``g ← g exp(ε M⁻¹p)`` (geodesic flow on spheres; on the ``Euclidean`` coordinates with a
+   magnetic field ``G`` the exact kinetic–magnetic flow of ``q̇ = M⁻¹p, ṗ = sGM⁻¹p``), half
+   kick;
 3. accept with probability ``min(1, e^{−ΔH})``, then flip ``(p, s) ↦ (−p, −s)`` (``s`` the
-   sign of the field; ``persistent=True``). The leapfrog is symplectic and reversible on
+   sign of the field; ``persistent=True``). Every palindromic scheme of these exact flows
+   (the leapfrog, the two-stage ``minimal_norm``, one's own) is symplectic and reversible on
    ``T*G ≅ G × g*`` (with ``G ↦ −G``), so the chain leaves ``π(g) dHaar(g)`` exactly invariant
    at any step size (the HMC of lattice gauge theory, Duane et al. 1987; magnetic HMC,
    Tripuraneni et al. 2017, on ``Rᵈ``).
 
 The drift is exact only for a bi-invariant kinetic energy (``M ∝ I`` on every copy of a
-non-abelian group: see :mod:`liesample.geometry.spaces`), which is why the inverse mass is one scalar
-per copy of a group or sphere; ``Euclidean`` blocks take a diagonal or a dense ``M⁻¹``. A
+non-abelian group: see :mod:`liesample.geometry.spaces`), which is why the inverse mass is one
+scalar per copy of a group or sphere; ``Euclidean`` blocks take a diagonal or a dense ``M⁻¹``. A
 rejected or non-finite proposal keeps the state; a non-finite one is flagged ``is_divergent``.
 """
 
@@ -30,22 +32,34 @@ import jax.numpy as jnp
 import numpy as np
 
 from liesample.foundation.validation import concrete_array
-from liesample.geometry.cotangent import LEAPFROG
 from liesample.samplers.contract import Sampler, sampling_api, setting
 from liesample.samplers.cotangent.geometric import (
     GeometricInfo,
     GeometricState,
-    Integrator,
+    Move,
     check_divergence_threshold,
+    check_positive_step_size,
     check_starts,
+    hamiltonian_scheme,
     hamiltonian_transition,
     init,
-    make_integrator,
+    make_move,
     partial_refresh,
+    scheme_setting,
+    trajectory_cost,
 )
-from liesample.samplers.cotangent.magnetic import check_step_size
 
-__all__ = ["as_top_level_api", "build_kernel", "geometric_hmc", "init"]
+__all__ = ["ADAPTATION", "as_top_level_api", "build_kernel", "geometric_hmc", "init"]
+
+ADAPTATION = {
+    "schedule": "window",
+    "adapted": ("step_size", "inverse_mass_matrix", "num_integration_steps"),
+    "parameters": ("num_integration_steps", "inverse_mass_matrix", "magnetic_field"),
+    "options": ("divergence_threshold", "momentum_persistence", "persistent", "integrator"),
+    "defaults": {},
+    "target_acceptance_rate": 0.8,
+}
+"""How :func:`liesample.window_adaptation` tunes geometric HMC (``sampling_api(adaptation=)``)."""
 
 
 def check_integer(name, value):
@@ -74,22 +88,22 @@ def check_options(momentum_persistence, divergence_threshold, persistent):
 def transition(
     rng_key,
     state: GeometricState,
-    integrator: Integrator,
+    move: Move,
     num_integration_steps,
     divergence_threshold,
     momentum_persistence=0.0,
     persistent=True,
 ):
-    """One geometric HMC transition (``integrator`` from
-    :func:`liesample.samplers.cotangent.geometric.make_integrator` for the leapfrog)."""
+    """One geometric HMC transition (``move`` from
+    :func:`liesample.samplers.cotangent.geometric.make_move` for a palindromic scheme)."""
     key_momentum, key_accept = jax.random.split(rng_key)
-    fresh = integrator.bundle.sample_momentum(key_momentum, state.position)
+    fresh = move.bundle.sample_momentum(key_momentum, state.position)
     momentum = partial_refresh(fresh, state.momentum, momentum_persistence)
     new_state, outcome = hamiltonian_transition(
         key_accept,
         state,
         momentum,
-        integrator,
+        move,
         num_integration_steps,
         divergence_threshold,
         persistent,
@@ -102,6 +116,7 @@ def transition(
         proposal_energy,
         jnp.asarray(num_integration_steps),
         acceptance_rate,
+        trajectory_cost(move, num_integration_steps),
     )
     return new_state, info
 
@@ -111,10 +126,12 @@ def build_kernel(
     *,
     momentum_persistence: float = 0.0,
     persistent: bool = True,
+    integrator="leapfrog",
 ):
     """``kernel(rng_key, state, logdensity_fn, space, step_size, num_integration_steps,
     inverse_mass_matrix=None, magnetic_field=None) -> (state, info)``; parameters may be
     traced (adaptation): the kinetic–magnetic exponential is then computed per transition."""
+    scheme = hamiltonian_scheme(integrator)
     check_options(momentum_persistence, divergence_threshold, persistent)
     options = (divergence_threshold, momentum_persistence, persistent)
 
@@ -128,19 +145,19 @@ def build_kernel(
         inverse_mass_matrix=None,
         magnetic_field=None,
     ):
-        check_step_size(step_size)
+        check_positive_step_size(step_size)
         check_integer("num_integration_steps", num_integration_steps)
-        integrator = make_integrator(
+        move = make_move(
             logdensity_fn,
             space,
             step_size,
             inverse_mass_matrix,
             magnetic_field,
-            LEAPFROG,
+            scheme,
             jnp.asarray(state.logdensity).dtype,
             precompute=False,
         )
-        return transition(rng_key, state, integrator, num_integration_steps, *options)
+        return transition(rng_key, state, move, num_integration_steps, *options)
 
     return kernel
 
@@ -156,6 +173,7 @@ def as_top_level_api(
     divergence_threshold: float = 1000.0,
     momentum_persistence: float = 0.0,
     persistent: bool = True,
+    integrator="leapfrog",
 ) -> Sampler:
     """Geometric HMC on Lie groups, spheres and products with ``Rᵈ`` (Metropolis-adjusted).
 
@@ -170,9 +188,9 @@ def as_top_level_api(
     space : Space or pytree of spaces
         From :mod:`liesample.geometry.spaces` (``Euclidean``, ``Sphere``, ``SO``, ``SU``, ``U1``).
     step_size : float
-        Leapfrog step ``ε > 0``.
+        Step ``ε > 0`` of the integration scheme.
     num_integration_steps : int
-        Leapfrog steps per transition.
+        Steps of the scheme per transition.
     inverse_mass_matrix : None, float or pytree
         ``M⁻¹``: unit by default; a positive scalar; or a pytree like ``space`` with one value
         per copy of a group or sphere and one per coordinate of ``Euclidean`` and ``U1``
@@ -190,13 +208,19 @@ def as_top_level_api(
     persistent : bool
         Apply the flip ``(p, s) ↦ (−p, −s)`` after each Metropolis test (default); with
         ``False`` the field's sign flips on acceptance instead (Tripuraneni et al. 2017).
+    integrator : str or sequence of (effect, fraction) pairs
+        The scheme of one step (BlackJAX's ``integrator=``): ``"leapfrog"`` (default, one
+        gradient per step), ``"minimal_norm"`` (two), or one's own palindromic coefficient
+        list of kicks ``"B"`` and drifts ``"A"`` whose fractions of each sum to 1, e.g.
+        ``(("B", 0.5), ("A", 1.0), ("B", 0.5))`` (:mod:`liesample.geometry.cotangent`).
+        ``info.num_gradient_evaluations`` counts what it costs (a scheme that ends with a
+        drift also evaluates the gradient at the end of every step).
     """
-    check_step_size(step_size)
+    check_positive_step_size(step_size)
     check_integer("num_integration_steps", num_integration_steps)
     check_options(momentum_persistence, divergence_threshold, persistent)
-    integrator = make_integrator(
-        logdensity_fn, space, step_size, inverse_mass_matrix, magnetic_field, LEAPFROG
-    )
+    scheme = hamiltonian_scheme(integrator)
+    move = make_move(logdensity_fn, space, step_size, inverse_mass_matrix, magnetic_field, scheme)
     options = (divergence_threshold, momentum_persistence, persistent)
 
     settings = {
@@ -212,15 +236,18 @@ def as_top_level_api(
     if momentum_persistence != 0:
         settings["momentum_persistence"] = setting(momentum_persistence)
         settings["persistent"] = persistent
+    settings.update(scheme_setting(integrator))
 
     def init_fn(position, rng_key=None):
         del rng_key
         return init(position, logdensity_fn, space)
 
     def step_fn(rng_key, state):
-        return transition(rng_key, state, integrator, num_integration_steps, *options)
+        return transition(rng_key, state, move, num_integration_steps, *options)
 
     return Sampler(init_fn, step_fn, settings=settings, check_positions=check_starts(space))
 
 
-geometric_hmc = sampling_api(as_top_level_api, init, build_kernel, "geometric_hmc", __name__)
+geometric_hmc = sampling_api(
+    as_top_level_api, init, build_kernel, "geometric_hmc", __name__, adaptation=ADAPTATION
+)

@@ -8,14 +8,16 @@ coordinates). Its invariant law is ``exp(−H)`` for every antisymmetric ``G``, 
 ``G``-marginal is ``π dHaar``. One transition (BlackJAX-shaped: ``init``, ``build_kernel``,
 ``as_top_level_api``), from the one-effect steps of :mod:`liesample.geometry.cotangent`:
 
-- ``adjusted=False`` (default): one step of the scheme ``O B A B`` (``O`` the exact
+- ``adjusted=False`` (default): one step of the ``integrator`` scheme, by default
+  ``O B A B`` (``O`` the exact
   Ornstein–Uhlenbeck step ``p ← e^{−γm⁻¹h} p + √(1 − e^{−2γm⁻¹h}) ξ``, ``ξ ~ N(0, M)``;
   ``B A B`` a geometric leapfrog step), every finite step taken: the irreversible kinetic
   Langevin chain, biased by ``O(h²)`` in the position law (the sequence ``O B A B O B A B …``
   has the position marginal of ``O_{h/2} BAB O_{h/2}``, which is second order).
-  (:func:`liesample.magnetic_langevin` runs the scheme ``B A O A B`` instead.)
+  (:func:`liesample.magnetic_langevin` runs the scheme ``B A O A B`` by default.)
 - ``adjusted=True``: the ``O`` step, then one-step HMC with the momentum (and the field's
-  sign) flipped on rejection (Horowitz's generalised HMC): the proposal
+  sign) flipped on rejection (Horowitz's generalised HMC); a scheme whose ``O`` steps stand at
+  its ends (``obab``, ``obabo``) puts them before and after the one-step HMC. The proposal
   ``(g, p, s) ↦ (g', −p', −s)`` is an involution preserving the Liouville measure, so the
   Metropolis test followed by the flip ``(p, s) ↦ (−p, −s)`` keeps ``exp(−H)`` exactly, at any
   step size.
@@ -31,22 +33,71 @@ import jax
 import jax.numpy as jnp
 
 from liesample.foundation.validation import concrete_array, finite_float
-from liesample.geometry.cotangent import LEAPFROG, OBAB
+from liesample.geometry.cotangent import check_scheme
 from liesample.samplers.contract import Sampler, sampling_api, setting
 from liesample.samplers.cotangent.geometric import (
     GeometricInfo,
     GeometricState,
-    Integrator,
+    Move,
     check_divergence_threshold,
+    check_positive_step_size,
     check_starts,
+    energy,
+    hamiltonian_scheme,
     hamiltonian_transition,
     init,
-    make_integrator,
+    make_move,
+    scheme_setting,
+    trajectory_cost,
     unadjusted_transition,
 )
-from liesample.samplers.cotangent.magnetic import check_step_size
 
-__all__ = ["as_top_level_api", "build_kernel", "geometric_langevin", "init"]
+__all__ = ["ADAPTATION", "as_top_level_api", "build_kernel", "geometric_langevin", "init"]
+
+ADAPTATION = {
+    "schedule": "window",
+    "adapted": ("step_size", "inverse_mass_matrix"),
+    "parameters": ("friction", "inverse_mass_matrix", "magnetic_field"),
+    "options": ("adjusted", "divergence_threshold", "integrator"),
+    "defaults": {"friction": 1.0},
+    "target_acceptance_rate": 0.9,
+}
+"""How :func:`liesample.window_adaptation` tunes geometric Langevin (``adaptation=``)."""
+
+
+def langevin_scheme(integrator, adjusted: bool = False) -> tuple:
+    """The checked scheme of ``integrator=`` (a name of
+    :data:`liesample.geometry.cotangent.SCHEMES` or a coefficient list of ``B``, ``A`` and
+    ``O``, each present). With ``adjusted`` its ``O`` steps must stand at its ends, around a
+    palindromic ``B``/``A`` core (the one-step HMC that the Metropolis test adjusts)."""
+    scheme = check_scheme(integrator, "ABO")
+    missing = sorted({"A", "B", "O"} - {effect for effect, _ in scheme})
+    if missing:
+        raise ValueError(
+            f"integrator of a Langevin sampler needs the effects A, B and O; {scheme} lacks "
+            f"{missing}; e.g. 'obab', 'baoab' or 'obabo'"
+        )
+    if adjusted:
+        core = split_refresh(scheme)[1]
+        if any(effect == "O" for effect, _ in core):
+            raise ValueError(
+                f"adjusted=True needs the O steps at the ends of the scheme, got {scheme}; "
+                "e.g. 'obab' or 'obabo'"
+            )
+        hamiltonian_scheme(core)
+    return scheme
+
+
+def split_refresh(scheme) -> tuple:
+    """``(fraction of O before, core, fraction of O after)`` of a scheme ``O… core O…``."""
+    start, stop = 0, len(scheme)
+    while start < stop and scheme[start][0] == "O":
+        start += 1
+    while stop > start and scheme[stop - 1][0] == "O":
+        stop -= 1
+    before = sum(fraction for _, fraction in scheme[:start])
+    after = sum(fraction for _, fraction in scheme[stop:])
+    return before, tuple(scheme[start:stop]), after
 
 
 def check_friction(friction):
@@ -56,35 +107,40 @@ def check_friction(friction):
         finite_float("friction", friction, positive=True)
 
 
+def _refreshed(rng_key, move: Move, state: GeometricState, friction, fraction):
+    """``state`` with its momentum moved by the exact OU step over ``fraction`` of the step."""
+    time = move.step_size if fraction == 1.0 else fraction * move.step_size
+    momentum = move.bundle.ornstein_uhlenbeck(
+        rng_key, state.position, state.momentum, friction, time
+    )
+    return state._replace(momentum=momentum)
+
+
 def transition(
-    rng_key,
-    state: GeometricState,
-    integrator: Integrator,
-    friction,
-    adjusted,
-    divergence_threshold,
-    scheme=OBAB,
+    rng_key, state: GeometricState, move: Move, friction, adjusted, divergence_threshold
 ):
-    """One geometric Langevin transition (``integrator`` from
-    :func:`liesample.samplers.cotangent.geometric.make_integrator` for ``scheme``, or for the leapfrog
-    when ``adjusted``)."""
+    """One geometric Langevin transition (``move`` from
+    :func:`liesample.samplers.cotangent.geometric.make_move` for a :func:`langevin_scheme`)."""
     if not adjusted:
         new_state, outcome = unadjusted_transition(
-            rng_key, state, integrator, friction, scheme, divergence_threshold
+            rng_key, state, move, friction, divergence_threshold
         )
         is_accepted, metropolis_rate, is_divergent, new_energy = outcome
         acceptance_rate = is_accepted.astype(metropolis_rate.dtype)
     else:
-        key_noise, key_accept = jax.random.split(rng_key)
-        momentum = integrator.bundle.ornstein_uhlenbeck(
-            key_noise, state.position, state.momentum, friction, integrator.step_size
-        )
+        before, core, after = split_refresh(move.scheme)
+        keys = jax.random.split(rng_key, 3 if after else 2)
+        if before:
+            state = _refreshed(keys[0], move, state, friction, before)
         new_state, outcome = hamiltonian_transition(
-            key_accept, state, momentum, integrator, 1, divergence_threshold
+            keys[1], state, state.momentum, move._replace(scheme=core), 1, divergence_threshold
         )
         is_accepted, metropolis_rate, is_divergent, initial_energy, proposal_energy = outcome
         acceptance_rate = metropolis_rate
         new_energy = jnp.where(is_accepted, proposal_energy, initial_energy)
+        if after:
+            new_state = _refreshed(keys[2], move, new_state, friction, after)
+            new_energy = energy(move.bundle, new_state.logdensity, new_state.momentum)
     info = GeometricInfo(
         acceptance_rate,
         is_accepted,
@@ -92,18 +148,26 @@ def transition(
         new_energy,
         jnp.asarray(1),
         metropolis_rate,
+        trajectory_cost(move, 1),
     )
     return new_state, info
 
 
-def build_kernel(adjusted: bool = False, divergence_threshold: float = 1000.0):
-    """``kernel(rng_key, state, logdensity_fn, space, step_size, friction,
-    inverse_mass_matrix=None, magnetic_field=None) -> (state, info)``; parameters may be traced
-    (adaptation)."""
+def check_options(adjusted, divergence_threshold, integrator) -> tuple:
+    """Validate the options; the checked scheme."""
     if not isinstance(adjusted, bool):
         raise TypeError(f"adjusted must be a bool, got {adjusted!r}")
     check_divergence_threshold(divergence_threshold)
-    scheme = LEAPFROG if adjusted else OBAB
+    return langevin_scheme(integrator, adjusted)
+
+
+def build_kernel(
+    adjusted: bool = False, divergence_threshold: float = 1000.0, *, integrator="obab"
+):
+    """``kernel(rng_key, state, logdensity_fn, space, step_size, friction,
+    inverse_mass_matrix=None, magnetic_field=None) -> (state, info)``; parameters may be traced
+    (adaptation)."""
+    scheme = check_options(adjusted, divergence_threshold, integrator)
 
     def kernel(
         rng_key,
@@ -115,9 +179,9 @@ def build_kernel(adjusted: bool = False, divergence_threshold: float = 1000.0):
         inverse_mass_matrix=None,
         magnetic_field=None,
     ):
-        check_step_size(step_size)
+        check_positive_step_size(step_size)
         check_friction(friction)
-        integrator = make_integrator(
+        move = make_move(
             logdensity_fn,
             space,
             step_size,
@@ -127,7 +191,7 @@ def build_kernel(adjusted: bool = False, divergence_threshold: float = 1000.0):
             jnp.asarray(state.logdensity).dtype,
             precompute=False,
         )
-        return transition(rng_key, state, integrator, friction, adjusted, divergence_threshold)
+        return transition(rng_key, state, move, friction, adjusted, divergence_threshold)
 
     return kernel
 
@@ -142,6 +206,7 @@ def as_top_level_api(
     *,
     adjusted: bool = False,
     divergence_threshold: float = 1000.0,
+    integrator="obab",
 ) -> Sampler:
     """Geometric kinetic Langevin on Lie groups, spheres and products with ``Rᵈ``.
 
@@ -158,16 +223,16 @@ def as_top_level_api(
         Metropolis-adjust each step (exact law) instead of taking it unadjusted.
     divergence_threshold : float
         ``ΔH`` above which a step is flagged divergent.
+    integrator : str or sequence of (effect, fraction) pairs
+        The splitting of one step: ``"obab"`` (default), ``"baoab"``, ``"obabo"``, or one's own
+        coefficient list of kicks ``"B"``, drifts ``"A"`` and OU steps ``"O"``, the fractions
+        of each summing to 1 (:mod:`liesample.geometry.cotangent`). With ``adjusted=True`` the
+        ``O`` steps must stand at the ends, around a palindromic ``B``/``A`` core.
     """
-    check_step_size(step_size)
+    check_positive_step_size(step_size)
     check_friction(friction)
-    if not isinstance(adjusted, bool):
-        raise TypeError(f"adjusted must be a bool, got {adjusted!r}")
-    check_divergence_threshold(divergence_threshold)
-    scheme = LEAPFROG if adjusted else OBAB
-    integrator = make_integrator(
-        logdensity_fn, space, step_size, inverse_mass_matrix, magnetic_field, scheme
-    )
+    scheme = check_options(adjusted, divergence_threshold, integrator)
+    move = make_move(logdensity_fn, space, step_size, inverse_mass_matrix, magnetic_field, scheme)
 
     settings = {
         "sampler": "geometric_langevin",
@@ -180,17 +245,18 @@ def as_top_level_api(
     }
     if magnetic_field is not None:
         settings["magnetic"] = True
+    settings.update(scheme_setting(integrator, "obab"))
 
     def init_fn(position, rng_key=None):
         del rng_key
         return init(position, logdensity_fn, space)
 
     def step_fn(rng_key, state):
-        return transition(rng_key, state, integrator, friction, adjusted, divergence_threshold)
+        return transition(rng_key, state, move, friction, adjusted, divergence_threshold)
 
     return Sampler(init_fn, step_fn, settings=settings, check_positions=check_starts(space))
 
 
 geometric_langevin = sampling_api(
-    as_top_level_api, init, build_kernel, "geometric_langevin", __name__
+    as_top_level_api, init, build_kernel, "geometric_langevin", __name__, adaptation=ADAPTATION
 )

@@ -1,14 +1,16 @@
-"""Shared pieces of the magnetic samplers on T*Rⁿ (MATH.md §3).
+"""Shared pieces of the magnetic samplers on T*Rⁿ (paper, ``sec:brownian-particle``).
 
 The chain state is ``z = (q, p)`` with the Poisson tensor ``J = [[0, I], [−I, G]]``, ``G`` a
 constant antisymmetric matrix (the *magnetic field*), and ``h = −log π(q) + ½ pᵀM⁻¹p``.
-:mod:`liesample.samplers.cotangent.magnetic_hmc` and :mod:`liesample.samplers.cotangent.magnetic_langevin` are the
-geometric samplers on ``spaces.Euclidean((d,))`` (the raveled position) with that field: the
-exact kinetic–magnetic flow, the momentum law ``N(0, M)`` (:class:`Metric`, diagonal or dense
-``M⁻¹``) and its exact Ornstein–Uhlenbeck step are those of :mod:`liesample.geometry.cotangent`
-(re-exported here as :func:`magnetic_flow`, :func:`make_metric`). This module holds what the
-two wrappers share: parameter validation, pytree raveling, start checks, and
-:func:`default_magnetic_field`, the default field and its tuning rule.
+:mod:`liesample.samplers.cotangent.magnetic_hmc` and
+:mod:`liesample.samplers.cotangent.magnetic_langevin` are the geometric samplers on
+``spaces.Euclidean((d,))`` (the raveled position) with that field: the exact kinetic–magnetic
+flow, the momentum law ``N(0, M)`` (:class:`Metric`, diagonal or dense ``M⁻¹``) and its exact
+Ornstein–Uhlenbeck step are those of :mod:`liesample.geometry.cotangent` (re-exported here as
+:func:`magnetic_flow`, :func:`make_metric`). This module holds what the two fronts share:
+parameter validation, pytree raveling, start checks, and :func:`default_magnetic_field`, the
+default field and its tuning rule. The fronts import the geometric implementation; nothing
+there imports them.
 """
 
 from __future__ import annotations
@@ -29,16 +31,16 @@ from liesample.geometry.cotangent import (
 )
 from liesample.geometry.spaces import Euclidean, check_inverse_mass_matrix
 from liesample.samplers.contract import first_bad_chain
-from liesample.samplers.cotangent.geometric import make_integrator
+from liesample.samplers.cotangent.geometric import make_move
 
 __all__ = [
     "MagneticFlow",
     "Metric",
     "check_inverse_mass_matrix",
     "check_magnetic_field",
-    "default_magnetic_field",
     "check_starts",
-    "euclidean_integrator",
+    "default_magnetic_field",
+    "euclidean_move",
     "initial_values",
     "magnetic_flow",
     "make_metric",
@@ -50,23 +52,14 @@ magnetic_flow = kinetic_magnetic_flow
 (:func:`liesample.geometry.cotangent.kinetic_magnetic_flow`)."""
 
 
-def check_step_size(step_size):
-    """``step_size`` must be a scalar, finite and > 0 (checked when concrete)."""
-    if np.ndim(step_size) != 0:
-        raise ValueError(f"step_size must be a scalar, got shape {np.shape(step_size)}")
-    value = concrete_array(step_size)
-    if value is not None and not (np.isfinite(value) and value > 0):
-        raise ValueError(f"step_size must be finite and > 0, got {float(value)}")
-
-
-def euclidean_integrator(
+def euclidean_move(
     step_size, inverse_mass_matrix, magnetic_field, scheme, dtype=None, precompute=True
 ):
-    """The geometric samplers' :class:`~liesample.samplers.cotangent.geometric.Integrator` on
-    ``Euclidean((d,))`` with ``M⁻¹`` and ``G`` (its gradient is set per move by
-    :func:`liesample.samplers.cotangent.geometric.ravelled`)."""
+    """The geometric samplers' :class:`~liesample.samplers.cotangent.geometric.Move` on
+    ``Euclidean((d,))`` with ``M⁻¹``, ``G`` and a checked ``scheme`` (its gradient is set per
+    move by :func:`liesample.samplers.cotangent.geometric.ravelled`)."""
     d = np.shape(inverse_mass_matrix)[0]
-    return make_integrator(
+    return make_move(
         None, Euclidean((d,)), step_size, inverse_mass_matrix, magnetic_field, scheme, dtype,
         precompute,
     )  # fmt: skip
@@ -148,18 +141,10 @@ def default_magnetic_field(inverse_mass_matrix, strength, covariance=None):
     window adaptation the step size is set by the fastest direction, so a field with a fixed
     angle per step scales with the target's stiffest frequency. Rule: take
     ``strength = angle / step_size`` with ``angle = 0.25`` rad as the default, then compare
-    ESS per gradient over a few angles ``{0, 0.25, 0.5, 1}`` on a short run and keep the best
-    (``benchmarks/euclidean.py`` does exactly this; ``benchmarks/results/euclidean.json``). Measured
-    there (L = 10, diagonal mass from window adaptation, 4 × 2000 draws): on a strongly
-    correlated 2-d Gaussian (ρ = 0.99) the best angle, 1, gave 1.5x the ESS per gradient of
-    the same kernel without field and 1.8x BlackJAX HMC's; on the rotated 100-d Gaussian
-    (κ = 100) and the logistic regression the best angle, 0.25, is within ±20 % of HMC; on the
-    banana two runs at 0.25 on different keys gave 1.24x and 0.20x HMC (divergent transitions
-    in the stiff tails; the step size is adapted without the field); on Neal's funnel no angle
-    helped. Angles ≥ 0.5 cost a factor
-    2–100 on the 100-d Gaussian and the logistic regression: a strong field slows the slowest
-    modes (the product of the two frequencies of a coupled pair is fixed, their spread grows).
-    ``angle = 0`` (plain HMC) is always a safe fallback.
+    ESS per gradient over a few angles ``{0, 0.25, 0.5, 1}`` on a short run and keep the best.
+    A field helps most on strongly correlated targets the mass matrix cannot whiten; a strong
+    field slows the slowest modes (the product of the two frequencies of a coupled pair is
+    fixed, their spread grows). ``angle = 0`` (plain HMC) is always a safe fallback.
 
     Parameters
     ----------

@@ -4,14 +4,15 @@ A BlackJAX-shaped module (``MagneticHMCState``/``MagneticHMCInfo``, ``init``, ``
 ``as_top_level_api``): geometric HMC (:mod:`liesample.samplers.cotangent.geometric_hmc`) on
 ``spaces.Euclidean((d,))``, the position raveled with ``ravel_pytree``, with the magnetic field.
 The extended target is ``π(q) · N(p; 0, M) · ½`` over ``(q, p, s)``, ``s = ±1`` the sign of the
-field. One transition (MATH.md §3):
+field. One transition (paper, ``sec:brownian-particle``):
 
 1. momentum refreshment ``p ← α p + √(1 − α²) ξ``, ``ξ ~ N(0, M)`` (``α`` =
    ``momentum_persistence``; ``α = 0``, the default, is full refreshment as in ``blackjax.hmc``);
-2. ``L`` magnetic leapfrog steps: half kick ``p += ε/2 ∇log π(q)``, the *exact* kinetic+magnetic
-   flow of ``q̇ = M⁻¹p, ṗ = sG M⁻¹p`` over ``ε`` (:func:`liesample.geometry.cotangent.kinetic_magnetic_flow`,
-   computed once per sign, valid for singular ``G``), half kick. Each piece preserves
-   volume (``tr(GM⁻¹) = 0``), the composition is symmetric;
+2. ``L`` steps of the ``integrator`` scheme, by default the magnetic leapfrog: half kick
+   ``p += ε/2 ∇log π(q)``, the *exact* kinetic+magnetic flow of ``q̇ = M⁻¹p, ṗ = sG M⁻¹p``
+   over ``ε`` (:func:`liesample.geometry.cotangent.kinetic_magnetic_flow`, computed once per
+   sign, valid for singular ``G``), half kick. Each piece preserves volume
+   (``tr(GM⁻¹) = 0``), the composition is symmetric;
 3. the proposal ``(q, p, s) ↦ (q', −p', −s)`` is an involution (running the flow of ``−sG`` from
    ``(q', −p')`` retraces the path), so it is accepted with probability ``min(1, e^{−ΔH})``,
    ``H = −log π(q) + ½pᵀM⁻¹p`` (the field does no work);
@@ -23,6 +24,7 @@ field. One transition (MATH.md §3):
    (valid, but slow: use ``persistent=True`` with ``momentum_persistence > 0``).
 
 Non-finite energies are rejected and flagged ``is_divergent``; the state is then kept.
+:func:`jittered_magnetic_hmc` draws the number of steps afresh at every transition.
 """
 
 from __future__ import annotations
@@ -37,28 +39,52 @@ import numpy as np
 
 from liesample.geometry.cotangent import LEAPFROG, PhasePoint, compose, drift, kick
 from liesample.samplers.contract import Sampler, sampling_api, setting
-from liesample.samplers.cotangent.geometric import ravelled
+from liesample.samplers.cotangent.geometric import (
+    check_positive_step_size,
+    hamiltonian_scheme,
+    ravelled,
+    scheme_setting,
+)
 from liesample.samplers.cotangent.geometric_hmc import check_integer, check_options, transition
 from liesample.samplers.cotangent.magnetic import (
     MagneticFlow,
     check_inverse_mass_matrix,
     check_magnetic_field,
     check_starts,
-    check_step_size,
-    euclidean_integrator,
+    euclidean_move,
     initial_values,
     ravel,
 )
 
 __all__ = [
+    "ADAPTATION",
     "MagneticHMCInfo",
     "MagneticHMCState",
     "as_top_level_api",
     "build_kernel",
     "init",
+    "jittered_magnetic_hmc",
     "magnetic_hmc",
     "magnetic_leapfrog",
 ]
+
+ADAPTATION = {
+    "schedule": "chees",
+    "adapted": ("step_size", "inverse_mass_matrix", "num_integration_steps", "magnetic_field"),
+    "parameters": (),
+    "options": ("divergence_threshold", "integrator"),
+    "defaults": {},
+    "target_acceptance_rate": 0.651,
+}
+"""How window adaptation tunes magnetic HMC: several chains together, the trajectory length by ChEES
+(:func:`liesample.tuning.adaptation.magnetic_window_adaptation`)."""
+
+BLACKJAX_SCHEMES = {
+    blackjax.mcmc.integrators.velocity_verlet: "leapfrog",
+    blackjax.mcmc.integrators.mclachlan: "minimal_norm",
+}
+"""BlackJAX integrators and the schemes with the same coefficients (the drift here is the
+exact kinetic+magnetic flow)."""
 
 
 class MagneticHMCState(NamedTuple):
@@ -87,8 +113,9 @@ class MagneticHMCInfo(NamedTuple):
     is_divergent : ``ΔH`` above ``divergence_threshold``, or a non-finite proposal (rejected).
     energy : ``H`` of the proposal (``-log π + kinetic``; ``inf`` for a non-finite one), as in
         BlackJAX's HMC.
-    num_integration_steps : leapfrog steps (gradient evaluations) of the trajectory.
+    num_integration_steps : steps of the integration scheme in the trajectory.
     magnetic_sign : sign of the field used for this trajectory.
+    num_gradient_evaluations : gradients of ``log π`` the trajectory evaluated.
     """
 
     acceptance_rate: jax.Array
@@ -97,6 +124,7 @@ class MagneticHMCInfo(NamedTuple):
     energy: jax.Array
     num_integration_steps: jax.Array
     magnetic_sign: jax.Array
+    num_gradient_evaluations: jax.Array
 
 
 def init(position, logdensity_fn: Callable, rng_key=None) -> MagneticHMCState:
@@ -109,11 +137,11 @@ def init(position, logdensity_fn: Callable, rng_key=None) -> MagneticHMCState:
 def magnetic_leapfrog(flat_logdensity_fn, metric, flow: MagneticFlow, step_size):
     """One magnetic leapfrog step ``(q, p, ∇log π) -> (q, p, log π, ∇log π)`` on flat ``q``.
 
-    The scheme ``B A B`` of :mod:`liesample.geometry.cotangent` with the exact kinetic+magnetic ``flow``
-    as the drift (with ``G = 0`` this *is* velocity Verlet).
+    The scheme ``B A B`` of :mod:`liesample.geometry.cotangent` with the exact kinetic+magnetic
+    ``flow`` as the drift (with ``G = 0`` this *is* velocity Verlet).
     """
     value_and_grad = jax.value_and_grad(flat_logdensity_fn)
-    bundle = euclidean_integrator(step_size, metric.inverse_mass_matrix, None, LEAPFROG).bundle
+    bundle = euclidean_move(step_size, metric.inverse_mass_matrix, None, LEAPFROG).bundle
     drift_flow = bundle.kinetic_flow(step_size)._replace(euclidean=flow)
     effects = {"B": kick(value_and_grad, step_size), "A": drift(bundle, {1.0: drift_flow})}
     step = compose(LEAPFROG, effects)
@@ -125,14 +153,14 @@ def magnetic_leapfrog(flat_logdensity_fn, metric, flow: MagneticFlow, step_size)
     return one
 
 
-def _transition(rng_key, state: MagneticHMCState, logdensity_fn, integrator, num_steps, options):
+def _transition(rng_key, state: MagneticHMCState, logdensity_fn, move, num_steps, options):
     """Geometric HMC on the raveled position (``options``: divergence threshold, momentum
     persistence, persistent)."""
 
-    def move(flat_state, flat_integrator):
-        return transition(rng_key, flat_state, flat_integrator, num_steps, *options)
+    def flat_transition(flat_state, flat_move):
+        return transition(rng_key, flat_state, flat_move, num_steps, *options)
 
-    new, info, unravel = ravelled(state, logdensity_fn, integrator, move)
+    new, info, unravel = ravelled(state, logdensity_fn, move, flat_transition)
     new_state = MagneticHMCState(
         unravel(new.position),
         new.logdensity,
@@ -147,13 +175,14 @@ def _transition(rng_key, state: MagneticHMCState, logdensity_fn, integrator, num
         info.energy,
         info.num_integration_steps,
         state.magnetic_sign,
+        info.num_gradient_evaluations,
     )
     return new_state, info
 
 
 def _check_parameters(state_or_position, step_size, inverse_mass_matrix, magnetic_field):
     d = ravel(state_or_position).shape[0]
-    check_step_size(step_size)
+    check_positive_step_size(step_size)
     check_inverse_mass_matrix(inverse_mass_matrix, d)
     check_magnetic_field(magnetic_field, d)
 
@@ -168,16 +197,11 @@ def build_kernel(
     """Build ``kernel(rng_key, state, logdensity_fn, step_size, inverse_mass_matrix,
     num_integration_steps, magnetic_field) -> (state, info)``.
 
-    ``integrator`` exists so that ``blackjax.window_adaptation`` (which calls
-    ``build_kernel(blackjax.mcmc.integrators.velocity_verlet)``) can build this kernel: ``None``
-    or velocity Verlet both mean the magnetic leapfrog (velocity Verlet whose drift is the
-    exact kinetic+magnetic flow); anything else is an error.
+    ``integrator`` is a scheme as for :func:`as_top_level_api` (``None``: the leapfrog), or
+    BlackJAX's ``velocity_verlet`` or ``mclachlan`` (what ``blackjax.window_adaptation`` passes),
+    which mean the schemes with their coefficients and the exact kinetic+magnetic drift.
     """
-    if integrator not in (None, "magnetic_leapfrog", blackjax.mcmc.integrators.velocity_verlet):
-        raise ValueError(
-            "magnetic_hmc integrates with the magnetic leapfrog only; integrator must be None "
-            f"(or blackjax's velocity_verlet, which it generalises), got {integrator!r}"
-        )
+    scheme = _scheme(integrator)
     check_options(momentum_persistence, divergence_threshold, persistent)
     options = (divergence_threshold, momentum_persistence, persistent)
 
@@ -194,14 +218,26 @@ def build_kernel(
         check_integer("num_integration_steps", num_integration_steps)
         dtype = ravel(state.logdensity_grad).dtype
         # One expm per transition, for the sign this trajectory uses.
-        integrator = euclidean_integrator(
-            step_size, inverse_mass_matrix, magnetic_field, LEAPFROG, dtype, precompute=False
+        move = euclidean_move(
+            step_size, inverse_mass_matrix, magnetic_field, scheme, dtype, precompute=False
         )
-        return _transition(
-            rng_key, state, logdensity_fn, integrator, num_integration_steps, options
-        )
+        return _transition(rng_key, state, logdensity_fn, move, num_integration_steps, options)
 
     return kernel
+
+
+def _scheme(integrator) -> tuple:
+    """The checked scheme of ``integrator=`` (module docstring of :func:`build_kernel`)."""
+    if integrator is None or integrator == "magnetic_leapfrog":
+        return hamiltonian_scheme("leapfrog")
+    if callable(integrator):
+        if integrator not in BLACKJAX_SCHEMES:
+            raise ValueError(
+                "of BlackJAX's integrators magnetic_hmc takes velocity_verlet and mclachlan "
+                f"(their coefficients with the exact kinetic+magnetic drift), got {integrator!r}"
+            )
+        return hamiltonian_scheme(BLACKJAX_SCHEMES[integrator])
+    return hamiltonian_scheme(integrator)
 
 
 def as_top_level_api(
@@ -214,6 +250,7 @@ def as_top_level_api(
     divergence_threshold: float = 1000.0,
     momentum_persistence: float = 0.0,
     persistent: bool = True,
+    integrator="leapfrog",
 ) -> Sampler:
     """Magnetic HMC: the arguments of ``blackjax.hmc`` plus ``magnetic_field``.
 
@@ -222,11 +259,11 @@ def as_top_level_api(
     logdensity_fn : callable
         ``log π`` of a pytree position (flattened internally with ``ravel_pytree``).
     step_size : float
-        Leapfrog step ``ε > 0``.
+        Step ``ε > 0`` of the integration scheme.
     inverse_mass_matrix : array, (d,) or (d, d)
         Diagonal (> 0) or dense (symmetric positive definite) ``M⁻¹``.
     num_integration_steps : int
-        Leapfrog steps per transition (= gradient evaluations).
+        Steps of the scheme per transition (gradient evaluations for the leapfrog).
     magnetic_field : array, (d, d)
         Antisymmetric ``G`` (any rank, ``0`` allowed), in the order of the raveled position;
         see :func:`liesample.samplers.cotangent.magnetic.default_magnetic_field`.
@@ -237,6 +274,10 @@ def as_top_level_api(
     persistent : bool
         Apply the ``(p, s) ↦ (−p, −s)`` flip after each Metropolis step (default ``True``; see
         the module docstring).
+    integrator : str or sequence of (effect, fraction) pairs
+        The scheme of one step, as for :func:`liesample.geometric_hmc`: ``"leapfrog"``
+        (default), ``"minimal_norm"``, a palindromic coefficient list of ``"B"`` and ``"A"``,
+        or BlackJAX's ``velocity_verlet`` / ``mclachlan``.
 
     Returns
     -------
@@ -245,12 +286,13 @@ def as_top_level_api(
         flows ``e^{±εGM⁻¹}`` are computed once here, not per step. Tune ``step_size`` and
         ``inverse_mass_matrix`` with ``blackjax.window_adaptation(liesample.magnetic_hmc, …)``.
     """
-    check_step_size(step_size)
+    check_positive_step_size(step_size)
     check_inverse_mass_matrix(inverse_mass_matrix)
     check_magnetic_field(magnetic_field, np.shape(inverse_mass_matrix)[0])
     check_integer("num_integration_steps", num_integration_steps)
     check_options(momentum_persistence, divergence_threshold, persistent)
-    integrator = euclidean_integrator(step_size, inverse_mass_matrix, magnetic_field, LEAPFROG)
+    scheme = _scheme(integrator)
+    move = euclidean_move(step_size, inverse_mass_matrix, magnetic_field, scheme)
     options = (divergence_threshold, momentum_persistence, persistent)
 
     def init_fn(position, rng_key=None):
@@ -259,9 +301,7 @@ def as_top_level_api(
         return state
 
     def step_fn(rng_key, state):
-        return _transition(
-            rng_key, state, logdensity_fn, integrator, num_integration_steps, options
-        )
+        return _transition(rng_key, state, logdensity_fn, move, num_integration_steps, options)
 
     def check_positions(positions, **_):
         check_starts(positions, logdensity_fn, np.shape(inverse_mass_matrix)[0])
@@ -275,7 +315,59 @@ def as_top_level_api(
         "momentum_persistence": setting(momentum_persistence),
         "persistent": persistent,
     }
+    if not callable(integrator):
+        settings.update(scheme_setting(integrator))
     return Sampler(init_fn, step_fn, settings=settings, check_positions=check_positions)
 
 
-magnetic_hmc = sampling_api(as_top_level_api, init, build_kernel, "magnetic_hmc", __name__)
+magnetic_hmc = sampling_api(
+    as_top_level_api, init, build_kernel, "magnetic_hmc", __name__, adaptation=ADAPTATION
+)
+
+
+def jittered_magnetic_hmc(
+    logdensity_fn: Callable,
+    step_size,
+    inverse_mass_matrix,
+    num_integration_steps: int,
+    magnetic_field,
+    **options,
+) -> Sampler:
+    """``liesample.magnetic_hmc`` whose trajectory has ``L ~ Uniform{1, …, num_integration_steps}``
+    steps, drawn afresh at every transition (the jitter ChEES tunes ``T`` for:
+    ``num_integration_steps = ceil(T / ε)`` from
+    :func:`liesample.tuning.adaptation.magnetic_window_adaptation`).
+
+    Jittering the length keeps the chain from locking onto a period of the target (a Gaussian
+    direction whose half-period divides ``Lε`` does not move under a fixed ``L``); each
+    transition is a ``magnetic_hmc`` transition, so the law is kept for every ``L``. Same
+    arguments and ``options`` (``integrator`` included) as ``liesample.magnetic_hmc``; the flows
+    ``e^{±εGM⁻¹}`` do not depend on ``L`` and are computed once per compiled run.
+    """
+    base = magnetic_hmc(
+        logdensity_fn,
+        step_size,
+        inverse_mass_matrix,
+        num_integration_steps,
+        magnetic_field,
+        **options,
+    )
+
+    def step_fn(rng_key, state):
+        key_length, key_step = jax.random.split(rng_key)
+        u = jax.random.uniform(key_length, (), jnp.asarray(step_size).dtype)
+        steps = jnp.clip(jnp.ceil(u * num_integration_steps), 1, num_integration_steps)
+        sampler = magnetic_hmc(
+            logdensity_fn,
+            step_size,
+            inverse_mass_matrix,
+            steps.astype(int),
+            magnetic_field,
+            **options,
+        )
+        return sampler.step(key_step, state)
+
+    settings = dict(base.settings)
+    settings["sampler"] = "jittered_magnetic_hmc"
+    settings["max_num_integration_steps"] = settings.pop("num_integration_steps")
+    return Sampler(base.init, step_fn, settings=settings, check_positions=base.check_positions)

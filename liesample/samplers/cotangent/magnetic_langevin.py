@@ -1,23 +1,26 @@
 """Unadjusted magnetic (underdamped) Langevin: the charged Brownian particle as a sampler.
 
 A BlackJAX-shaped module (``MagneticLangevinState``/``MagneticLangevinInfo``, ``init``,
-``build_kernel``, ``as_top_level_api``). The SDE is MATH.md §3 with ``β = 1``,
-``V = −log π``, ``θ`` = ``friction`` and ``σ = √(2θ)``::
+``build_kernel``, ``as_top_level_api``). The SDE is the charged Brownian particle (paper,
+``sec:brownian-particle``) with ``β = 1``, ``V = −log π``, ``θ`` = ``friction`` and
+``σ = √(2θ)``::
 
     dq = M⁻¹p dt,   dp = (∇log π(q) + G M⁻¹p − θ M⁻¹p) dt + √(2θ) dW,
 
 whose invariant law is ``π(q) · N(p; 0, M)`` for every antisymmetric ``G``.
 
-**Integrator.** Unadjusted geometric Langevin (:mod:`liesample.samplers.cotangent.geometric_langevin`)
-on ``spaces.Euclidean((d,))`` (the raveled position) with the field, run with the symmetric
-Strang splitting ``B A O A B`` of :mod:`liesample.geometry.cotangent` (BAOAB of Leimkuhler & Matthews
-with the drift ``A`` replaced by the exact kinetic+magnetic flow): ``B`` = half kick
-``p += ε/2 ∇log π``, ``A`` = exact flow of ``q̇ = M⁻¹p, ṗ = GM⁻¹p`` over ``ε/2``
-(:func:`liesample.geometry.cotangent.kinetic_magnetic_flow`), ``O`` = exact OU step of the friction and
-noise over ``ε``. Every piece is solved exactly, so the scheme is weak order 2 (its
-stationary law differs from ``π ⊗ N(0, M)`` by ``O(ε²)``); one gradient per step. On a Gaussian
-target the step is affine, and :func:`liesample.targets.gaussian.linear_step_moments` gives the
-exact stationary law of the discretisation itself (used by the tests).
+**Integrator.** Unadjusted geometric Langevin
+(:mod:`liesample.samplers.cotangent.geometric_langevin`) on ``spaces.Euclidean((d,))`` (the
+raveled position) with the field, run by default with the symmetric Strang splitting
+``B A O A B`` of :mod:`liesample.geometry.cotangent` (``integrator=`` picks another:
+``"obabo"``, ``"obab"`` or a coefficient list; BAOAB of Leimkuhler & Matthews with the drift
+``A`` replaced by the exact kinetic+magnetic flow): ``B`` = half kick ``p += ε/2 ∇log π``,
+``A`` = exact flow of ``q̇ = M⁻¹p, ṗ = GM⁻¹p`` over ``ε/2``
+(:func:`liesample.geometry.cotangent.kinetic_magnetic_flow`), ``O`` = exact OU step of the
+friction and noise over ``ε``. Every piece is solved exactly, so the scheme is weak order 2
+(its stationary law differs from ``π ⊗ N(0, M)`` by ``O(ε²)``); one gradient per step. On a
+Gaussian target the step is affine, and :func:`liesample.targets.gaussian.linear_step_moments`
+gives the exact stationary law of the discretisation itself (used by the tests).
 
 A step that produces a non-finite state is flagged ``is_divergent`` (with
 ``acceptance_rate = 0``; 1 for every other step: the Info contract's rule for unadjusted
@@ -33,16 +36,22 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from liesample.geometry.cotangent import BAOAB
 from liesample.samplers.contract import Sampler, sampling_api, setting
-from liesample.samplers.cotangent.geometric import ravelled
-from liesample.samplers.cotangent.geometric_langevin import check_friction, transition
+from liesample.samplers.cotangent.geometric import (
+    check_positive_step_size,
+    ravelled,
+    scheme_setting,
+)
+from liesample.samplers.cotangent.geometric_langevin import (
+    check_friction,
+    langevin_scheme,
+    transition,
+)
 from liesample.samplers.cotangent.magnetic import (
     check_inverse_mass_matrix,
     check_magnetic_field,
     check_starts,
-    check_step_size,
-    euclidean_integrator,
+    euclidean_move,
     initial_values,
     ravel,
 )
@@ -72,11 +81,13 @@ class MagneticLangevinInfo(NamedTuple):
     is_divergent : the step produced NaN/inf; the previous state was kept.
     acceptance_rate : 1.0 for a step taken, 0.0 for a divergent (rejected) one (unadjusted).
     energy : ``H = −log π(q) + ½pᵀM⁻¹p`` at the chain's state after the step.
+    num_gradient_evaluations : gradients of ``log π`` the step evaluated.
     """
 
     is_divergent: jax.Array
     acceptance_rate: jax.Array
     energy: jax.Array
+    num_gradient_evaluations: jax.Array
 
 
 def init(position, logdensity_fn: Callable, rng_key=None) -> MagneticLangevinState:
@@ -89,22 +100,26 @@ def init(position, logdensity_fn: Callable, rng_key=None) -> MagneticLangevinSta
     return MagneticLangevinState(position, momentum, logdensity, grad)
 
 
-def _step(rng_key, state, logdensity_fn, integrator, friction):
-    """One ``B A O A B`` step: unadjusted geometric Langevin on the raveled position."""
+def _step(rng_key, state, logdensity_fn, move, friction):
+    """One step of the scheme: unadjusted geometric Langevin on the raveled position."""
 
-    def move(flat_state, flat_integrator):
-        return transition(rng_key, flat_state, flat_integrator, friction, False, jnp.inf, BAOAB)
+    def flat_transition(flat_state, flat_move):
+        return transition(rng_key, flat_state, flat_move, friction, False, jnp.inf)
 
-    new, info, unravel = ravelled(state, logdensity_fn, integrator, move)
+    new, info, unravel = ravelled(state, logdensity_fn, move, flat_transition)
     new_state = MagneticLangevinState(
         unravel(new.position), new.momentum, new.logdensity, unravel(new.logdensity_grad)
     )
-    return new_state, MagneticLangevinInfo(info.is_divergent, info.acceptance_rate, info.energy)
+    info = MagneticLangevinInfo(
+        info.is_divergent, info.acceptance_rate, info.energy, info.num_gradient_evaluations
+    )
+    return new_state, info
 
 
-def build_kernel():
+def build_kernel(integrator="baoab"):
     """Build ``kernel(rng_key, state, logdensity_fn, step_size, inverse_mass_matrix, friction,
     magnetic_field) -> (state, info)``; the flow ``e^{εGM⁻¹/2}`` is recomputed per call."""
+    scheme = langevin_scheme(integrator)
 
     def kernel(
         rng_key,
@@ -116,20 +131,26 @@ def build_kernel():
         magnetic_field,
     ):
         d = state.momentum.shape[0]
-        check_step_size(step_size)
+        check_positive_step_size(step_size)
         check_inverse_mass_matrix(inverse_mass_matrix, d)
         check_magnetic_field(magnetic_field, d)
         check_friction(friction)
-        integrator = euclidean_integrator(
-            step_size, inverse_mass_matrix, magnetic_field, BAOAB, state.momentum.dtype, False
+        move = euclidean_move(
+            step_size, inverse_mass_matrix, magnetic_field, scheme, state.momentum.dtype, False
         )
-        return _step(rng_key, state, logdensity_fn, integrator, friction)
+        return _step(rng_key, state, logdensity_fn, move, friction)
 
     return kernel
 
 
 def as_top_level_api(
-    logdensity_fn: Callable, step_size, inverse_mass_matrix, friction, magnetic_field
+    logdensity_fn: Callable,
+    step_size,
+    inverse_mass_matrix,
+    friction,
+    magnetic_field,
+    *,
+    integrator="baoab",
 ) -> Sampler:
     """Unadjusted magnetic Langevin sampler (weak order 2; bias ``O(ε²)``, not corrected).
 
@@ -142,21 +163,27 @@ def as_top_level_api(
     inverse_mass_matrix : array, (d,) or (d, d)
         Diagonal (> 0) or dense (symmetric positive definite) ``M⁻¹``.
     friction : float
-        ``θ > 0``; the noise is ``σ = √(2θ)`` (MATH.md §3, ``θ = βσ²/2`` at ``β = 1``).
+        ``θ > 0``; the noise is ``σ = √(2θ)`` (``θ = βσ²/2`` at ``β = 1``).
     magnetic_field : array, (d, d)
-        Antisymmetric ``G``; see :func:`liesample.samplers.cotangent.magnetic.default_magnetic_field`.
+        Antisymmetric ``G``; see
+        :func:`liesample.samplers.cotangent.magnetic.default_magnetic_field`.
+    integrator : str or sequence of (effect, fraction) pairs
+        The splitting of one step: ``"baoab"`` (default), ``"obabo"``, ``"obab"``, or a
+        coefficient list of ``"B"``, ``"A"`` and ``"O"`` as for
+        :func:`liesample.geometric_langevin`.
 
     Returns
     -------
     liesample.samplers.contract.Sampler
         ``init(position, rng_key=None)`` and ``step(rng_key, state) -> (state, info)``.
     """
-    check_step_size(step_size)
+    check_positive_step_size(step_size)
     check_inverse_mass_matrix(inverse_mass_matrix)
     d = np.shape(inverse_mass_matrix)[0]
     check_magnetic_field(magnetic_field, d)
     check_friction(friction)
-    integrator = euclidean_integrator(step_size, inverse_mass_matrix, magnetic_field, BAOAB)
+    scheme = langevin_scheme(integrator)
+    move = euclidean_move(step_size, inverse_mass_matrix, magnetic_field, scheme)
 
     def init_fn(position, rng_key=None):
         dimension = ravel(position).shape[0]
@@ -168,7 +195,7 @@ def as_top_level_api(
         return init(position, logdensity_fn, rng_key)
 
     def step_fn(rng_key, state):
-        return _step(rng_key, state, logdensity_fn, integrator, friction)
+        return _step(rng_key, state, logdensity_fn, move, friction)
 
     def check_positions(positions, **_):
         check_starts(positions, logdensity_fn, d)
@@ -178,6 +205,7 @@ def as_top_level_api(
         "step_size": setting(step_size),
         "step_size_source": "given",
         "friction": setting(friction),
+        **scheme_setting(integrator, "baoab"),
     }
     return Sampler(init_fn, step_fn, settings=settings, check_positions=check_positions)
 

@@ -2,7 +2,8 @@
 
 A BlackJAX-shaped module (``State``/``Info``, ``init``, ``build_kernel``, ``as_top_level_api``),
 the orbit analogue of MALA. One step proposes the coadjoint Lie–Euler move of the
-noise + dissipation part of the Poisson–Langevin SDE (MATH.md §1–§2) and accepts it with a
+noise + dissipation part of the Poisson–Langevin SDE (paper, ``eq:poisson-langevin-eq`` and
+``eq:lie-poisson-langevin``) and accepts it with a
 Metropolis–Hastings ratio, so the chain's stationary law is the Gibbs law on the orbit of the
 initial state with no discretisation bias.
 
@@ -28,18 +29,22 @@ directions, which holds for the systems above.
 
 The Hamiltonian drift is not part of the move: it preserves ``exp(−βh)`` by itself but is not
 reversible, and alone the noise + dissipation dynamics already has ``exp(−βh)`` as its
-reversible invariant law (its generator is self-adjoint in ``L²(exp(−βh))``, MATH.md §1).
+reversible invariant law (its generator is self-adjoint in ``L²(exp(−βh))``; paper,
+``eq:lie-poisson-gibbs-measure``).
 As ``dt → 0`` the acceptance rate tends to 1 and the chain is the unadjusted Lie–Euler chain of
 that scene; at large ``dt`` rejections remove the bias instead of leaving it in the averages.
 
 **Step size.** Any step is exact, but a too large one is rejected nearly always (a *stuck*
-chain, which :func:`liesample.sample` reports). Under ``liesample.sample(..., num_warmup=N)``
-the step is tuned in the warm-up by dual averaging (Hoffman & Gelman 2014, as in
-``blackjax.window_adaptation``) so that the mean acceptance rate over the chains reaches
-``target_acceptance_rate`` (default 0.574, MALA's optimal rate, Roberts & Rosenthal 1998). Without
-warm-up and without ``step_size`` the step is ``κ = 1.3 m^{−1/3}`` in units of the stiffness
-(``κ = dt·θ·max|h''|``, :mod:`liesample.integrators.stability`; ``m`` noise directions), MALA's optimal
-scaling for a near-Gaussian target.
+chain, which :func:`liesample.sample` reports). Without ``step_size`` the step is
+``κ = 1.3 m^{−1/3}`` in units of the stiffness (``κ = dt·θ·max|h''|``,
+:mod:`liesample.integrators.stability`; ``m`` noise directions), MALA's optimal scaling for a
+near-Gaussian target: on the orbit of the system's default position when the sampler is built,
+on the orbit of the first start in :func:`liesample.sample`. The sampler declares its step
+tunable by dual averaging (``tuning``, :class:`liesample.samplers.contract.StepSizeTuning`):
+under ``liesample.sample(..., num_warmup=N)`` the warm-up of :mod:`liesample.tuning` tunes it
+(Hoffman & Gelman 2014, as in ``blackjax.window_adaptation``) so that the mean acceptance rate
+over the chains reaches ``target_acceptance_rate`` (default 0.574, MALA's optimal rate, Roberts
+& Rosenthal 1998). ``step`` itself never changes the step size.
 """
 
 from __future__ import annotations
@@ -49,21 +54,19 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-from blackjax.adaptation.step_size import dual_averaging_adaptation
 
 from liesample.dynamics.poisson_langevin import PoissonLangevin, Scene
 from liesample.dynamics.system import LiePoissonSystem
-from liesample.foundation.compile import jit
 from liesample.foundation.validation import concrete_array, finite_float
 from liesample.integrators.chain_loop import DEFAULT_NOISE_BLOCK_SIZE, NoiseBlocks, check_block_size
 from liesample.integrators.stability import check_precision, stiffness
-from liesample.samplers.contract import Sampler, sampling_api
+from liesample.samplers.contract import Sampler, StepSizeTuning, sampling_api
 from liesample.samplers.orbit.starts import check_orbit_starts, check_start_energy, distinct_orbits
 
 __all__ = [
+    "DEFAULT_TARGET_ACCEPTANCE_RATE",
     "AdjustedLiePoissonInfo",
     "AdjustedLiePoissonState",
-    "DEFAULT_TARGET_ACCEPTANCE_RATE",
     "adjusted_lie_poisson",
     "as_top_level_api",
     "build_kernel",
@@ -234,7 +237,8 @@ def build_noise_kernel(system: LiePoissonSystem):
 
 
 def _draw_noise(system, rng_key, shape, dtype):
-    """The draws of ``shape`` steps: standard normals ``(*shape, m + 1)`` (proposal, acceptance)."""
+    """The draws of ``shape`` steps: standard normals ``(*shape, m + 1)`` (proposal,
+    acceptance)."""
     return jax.random.normal(rng_key, (*shape, system.num_noises + 1), dtype=dtype)
 
 
@@ -257,6 +261,10 @@ def _keyed(system, noise_kernel):
     return kernel
 
 
+_DEFAULT_SOURCE = "default: kappa = 1.3 m^(-1/3) (no warm-up adaptation)"
+_ON_DEFAULT = "; on the orbit of the system's default position"
+
+
 def _default_step_size(system, beta, sigma, position) -> float:
     """``κ = 1.3 m^{−1/3}`` in units of the stiffness on the orbit of ``position`` (module
     docstring), or ``0.4/σ²`` where ``h`` is flat along the noise (no stiffness)."""
@@ -265,45 +273,6 @@ def _default_step_size(system, beta, sigma, position) -> float:
     if stiff == 0.0:
         return 0.4 / sigma**2
     return 1.3 * system.num_noises ** (-1.0 / 3.0) / stiff
-
-
-def dual_averaging_warmup(noise_kernel, draw, block_size, target_acceptance_rate):
-    """``run(chain_keys, states, initial_step, sigma, beta, num_steps) -> (states, step_size,
-    mean_acceptance)``: ``num_steps`` vmapped steps whose shared step size is tuned by dual
-    averaging (``blackjax.adaptation.step_size.dual_averaging_adaptation``) on the mean
-    acceptance over the chains. The noise is drawn in blocks of ``block_size`` steps with the
-    key scheme of :mod:`liesample.integrators.chain_loop` (``draw(key, state)``, one block per chain
-    from ``fold_in(key_c, b)``). The final step is the dual-averaging average
-    ``exp(log_step_size_avg)``."""
-    da_init, da_update, da_final = dual_averaging_adaptation(target_acceptance_rate)
-    steps = jax.vmap(noise_kernel, in_axes=(0, 0, None, None, None))
-    draws = jax.vmap(
-        lambda key, block, state: draw(jax.random.fold_in(key, block), state), in_axes=(0, None, 0)
-    )
-
-    def run(chain_keys, states, initial_step, sigma, beta, num_steps):
-        first_kept = num_steps // 2
-
-        def one_block(block, carry):
-            noise = draws(chain_keys, block, carry[0])
-            start = block * block_size
-
-            def one(row, carry):
-                states, da, total = carry
-                states, infos = steps(noise[:, row], states, jnp.exp(da.log_step_size), sigma, beta)
-                rate = jnp.mean(infos.acceptance_rate)
-                total = total + jnp.where(start + row >= first_kept, rate, 0.0)
-                return states, da_update(da, rate), total
-
-            high = jnp.minimum(num_steps - start, block_size)
-            return jax.lax.fori_loop(0, high, one, carry)
-
-        num_blocks = -(-num_steps // block_size)
-        carry = (states, da_init(initial_step), jnp.zeros((), initial_step.dtype))
-        states, da, total = jax.lax.fori_loop(0, num_blocks, one_block, carry)
-        return states, da_final(da), total / (num_steps - first_kept)
-
-    return jit(run, static_argnums=5)
 
 
 def as_top_level_api(
@@ -330,9 +299,11 @@ def as_top_level_api(
     step_size : float or None
         Time step ``dt > 0``; any value gives the exact law, larger ones lower acceptance.
         ``None`` (default): tuned in the warm-up of ``liesample.sample(..., num_warmup=N)`` by
-        dual averaging to ``target_acceptance_rate``; used directly (no warm-up), the step is
-        ``κ = 1.3 m^{−1/3}`` in units of the stiffness on the first start's orbit (module
-        docstring). A given step is kept unless ``liesample.sample(..., adapt=True)``.
+        dual averaging to ``target_acceptance_rate``; without warm-up, ``κ = 1.3 m^{−1/3}`` in
+        units of the stiffness on the first start's orbit, and used directly (``init``,
+        ``step``) on the orbit of the system's default position, chosen when the sampler is
+        built (module docstring). A given step is kept unless
+        ``liesample.sample(..., adapt=True)``.
     target_acceptance_rate : float in (0, 1)
         What the warm-up's dual averaging aims at (default 0.574).
     noise_block_size : int
@@ -346,7 +317,8 @@ def as_top_level_api(
     liesample.samplers.contract.Sampler
         ``init(position)`` and ``step(rng_key, state) -> (state, info)`` (``info``: the Info
         contract plus ``is_accepted`` and ``casimir_error``); ``rng_key`` may be
-        ``jax.random.key`` or ``jax.random.PRNGKey``.
+        ``jax.random.key`` or ``jax.random.PRNGKey``. It declares ``tuning`` (dual averaging)
+        and ``noise_blocks``.
     """
     if not isinstance(system, LiePoissonSystem):
         raise TypeError(f"system must be a LiePoissonSystem, got {type(system).__name__}")
@@ -368,26 +340,31 @@ def as_top_level_api(
         "beta": beta,
         "sigma": sigma,
         "step_size": step_size,
-        "step_size_source": "given" if step_size is not None else "automatic (not yet chosen)",
+        "step_size_source": "given",
         "target_acceptance_rate": target,
         "noise_block_size": noise_block_size,
     }
-    chosen = [step_size]
+    given = step_size is not None
+    if not given:
+        step_size = _default_step_size(system, beta, sigma, system.default_position)
+        settings.update(step_size=step_size, step_size_source=_DEFAULT_SOURCE + _ON_DEFAULT)
 
-    def draw_block(rng_key, state):
-        return _draw_noise(system, rng_key, (noise_block_size,), state.position.dtype)
+    def choose(positions, rng_key=None):
+        del rng_key  # the rule needs no pilot run
+        first = np.asarray(positions, dtype=jnp.result_type(float))[0]
+        return _default_step_size(system, beta, sigma, first), _DEFAULT_SOURCE
 
-    # One compilation per sampler and shape.
-    warmup = dual_averaging_warmup(noise_kernel, draw_block, noise_block_size, target)
-
-    def resolve(position):
-        if chosen[0] is None:
-            chosen[0] = _default_step_size(system, beta, sigma, position)
-            settings.update(
-                step_size=chosen[0],
-                step_size_source="default: kappa = 1.3 m^(-1/3) (no warm-up adaptation)",
-            )
-        return chosen[0]
+    def rebuild(value, source):
+        tuned = as_top_level_api(
+            system,
+            beta=beta,
+            sigma=sigma,
+            step_size=value,
+            target_acceptance_rate=target,
+            noise_block_size=noise_block_size,
+        )
+        tuned.settings["step_size_source"] = source
+        return tuned
 
     def check_orbits(positions, representatives):
         for chain in representatives:
@@ -398,57 +375,46 @@ def as_top_level_api(
         state = init(position, system, rng_key)
         value = concrete_array(position)
         if value is not None:
-            value = np.asarray(value, dtype=jnp.result_type(float))
-            resolve(value)
-            check_orbits(value[None], [0])
+            check_orbits(np.asarray(value, dtype=jnp.result_type(float))[None], [0])
         return state
-
-    def step_fn(rng_key, state):
-        return kernel(rng_key, state, resolve(system.default_position), sigma, beta)
-
-    def block_step(noise, state):
-        return noise_kernel(noise, state, resolve(system.default_position), sigma, beta)
 
     def check_positions(positions, *, step_size_checks=True):
         positions = np.asarray(positions, dtype=jnp.result_type(float))
         casimirs = check_orbit_starts(system, positions)
         if step_size_checks:
-            resolve(positions[0])
             check_orbits(positions, distinct_orbits(casimirs))
 
-    def adapt(rng_key, chain_keys, states, initial_positions, num_warmup):
-        del rng_key
-        initial = chosen[0]
-        if initial is None:
-            initial = _default_step_size(system, beta, sigma, np.asarray(initial_positions[0]))
-        dtype = states.position.dtype
-        states, tuned_step, rate = warmup(
-            chain_keys,
-            states,
-            jnp.asarray(initial, dtype),
-            jnp.asarray(sigma, dtype),
-            jnp.asarray(beta, dtype),
-            num_warmup,
-        )
-        tuned = as_top_level_api(
-            system,
-            beta=beta,
-            sigma=sigma,
-            step_size=float(tuned_step),
-            target_acceptance_rate=target,
-            noise_block_size=noise_block_size,
-        )
-        tuned.settings["step_size_source"] = (
-            f"warm-up dual averaging to mean acceptance {target:g} over chains, from "
-            f"{initial:.4g}; mean acceptance in the second half of the warm-up {float(rate):.3f}"
-        )
-        return tuned, states
+    def at(value, sigma=sigma, beta=beta, settings=None, tuning=None):
+        """The sampler with step ``value`` (floats, or traced in the warm-up)."""
 
-    sampler = Sampler(
-        init_fn, step_fn, settings=settings, check_positions=check_positions, adapt=adapt
+        def step_fn(rng_key, state):
+            return kernel(rng_key, state, value, sigma, beta)
+
+        def block_step(noise, state):
+            return noise_kernel(noise, state, value, sigma, beta)
+
+        def draw_block(rng_key, state):
+            return _draw_noise(system, rng_key, (noise_block_size,), state.position.dtype)
+
+        return Sampler(
+            init_fn,
+            step_fn,
+            settings=settings,
+            check_positions=check_positions,
+            tuning=tuning,
+            noise_blocks=NoiseBlocks(noise_block_size, draw_block, block_step),
+        )
+
+    tuning = StepSizeTuning(
+        "dual_averaging",
+        given,
+        choose,
+        rebuild,
+        at=at,
+        parameters={"sigma": sigma, "beta": beta},
+        target_acceptance_rate=target,
     )
-    sampler.noise_blocks = NoiseBlocks(noise_block_size, draw_block, block_step)
-    return sampler
+    return at(step_size, settings=settings, tuning=tuning)
 
 
 adjusted_lie_poisson = sampling_api(

@@ -1,23 +1,27 @@
 """The Lie–Poisson–Langevin sampler: Gibbs-exact sampling on a coadjoint orbit.
 
 A BlackJAX-shaped module (``State``/``Info``, ``init``, ``build_kernel``, ``as_top_level_api``).
-The chain is the Poisson–Langevin SDE of MATH.md §1 with ``θ = βσ²/2`` (paper,
-``eq:lie-poisson-langevin``), whose invariant law on the orbit of the initial state is
+The chain is the Poisson–Langevin SDE (paper, ``eq:poisson-langevin-eq``) with ``θ = βσ²/2``
+(paper, ``eq:lie-poisson-langevin``), whose invariant law on the orbit of the initial state is
 ``∝ exp(−βh)``; the discretisation bias is that of the chosen integrator.
 
-Safe defaults: a step size beyond the measured stability bound (:mod:`liesample.integrators.stability`) is
-refused, and without a step size the sampler picks one below the bound whose predicted bias is
-at most :data:`DEFAULT_BIAS_TOLERANCE` posterior standard deviations
-(:func:`liesample.integrators.accuracy.default_step_size`).
+Safe defaults: a step size beyond the measured stability bound
+(:mod:`liesample.integrators.stability`) is refused, and without a step size the sampler picks
+one below the bound whose predicted bias is at most :data:`DEFAULT_BIAS_TOLERANCE` posterior
+standard deviations (:func:`liesample.integrators.accuracy.default_step_size`). The sampler
+declares that choice as its ``tuning`` (method ``"rule"``,
+:class:`liesample.samplers.contract.StepSizeTuning`), which :func:`liesample.sample` runs on the
+run's starts (:mod:`liesample.tuning.warmup`); ``step`` never changes the step size.
 
 The Brownian increments of a run are drawn in blocks of ``noise_block_size`` steps
-(:mod:`liesample.integrators.chain_loop`); ``step(rng_key, state)`` alone draws one step's increments
-from ``rng_key``. The state carries ``h(μ)``, so a step evaluates ``h`` once (at the proposal,
-for the divergence test).
+(:mod:`liesample.integrators.chain_loop`); ``step(rng_key, state)`` alone draws one step's
+increments from ``rng_key``. The state carries ``h(μ)``, so a step evaluates ``h`` once (at the
+proposal, for the divergence test).
 """
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
 import jax
@@ -36,7 +40,7 @@ from liesample.integrators.stability import (
     check_step_size,
     stiffness_on_orbits,
 )
-from liesample.samplers.contract import Sampler, sampling_api
+from liesample.samplers.contract import Sampler, StepSizeTuning, sampling_api
 from liesample.samplers.orbit.starts import check_orbit_starts, check_start_energy, distinct_orbits
 
 __all__ = [
@@ -162,31 +166,18 @@ def build_kernel(
     return kernel
 
 
+_UNCHOSEN = (
+    "automatic: the bias model, on the starts in liesample.sample, else on the orbit of the "
+    "system's default position"
+)
+
+
 def _source(choice) -> str:
     return (
         f"predicted |bias| <= {choice.relative_tolerance:g} posterior sd for the mean of each "
         f"coordinate, and its sd within {choice.relative_tolerance:g} of itself "
         "(liesample.integrators.accuracy.default_step_size)"
     )
-
-
-class _StepSize:
-    """The step size, given or chosen once on first need (from the first concrete starts)."""
-
-    def __init__(self, value, choose, settings):
-        self.value = value
-        self._choose = choose
-        self._settings = settings
-
-    def resolve(self, positions):
-        if self.value is None:
-            choice = self._choose(positions)
-            self.value = choice.step_size
-            self._settings.update(
-                step_size=choice.step_size,
-                step_size_source="bias model: " + _source(choice),
-            )
-        return self.value
 
 
 def as_top_level_api(
@@ -215,12 +206,13 @@ def as_top_level_api(
         Noise strength ``σ ≥ 0`` (default 1): trades mixing against stiffness at fixed ``β``.
     step_size : float or None
         Time step ``dt > 0``. ``None`` (default): chosen below the stability bound from the bias
-        model of :func:`liesample.integrators.accuracy.default_step_size` (short coupled pilot runs), so
-        that the predicted bias of the mean of every coordinate of ``μ`` is at most
+        model of :func:`liesample.integrators.accuracy.default_step_size` (short coupled pilot
+        runs), so that the predicted bias of the mean of every coordinate of ``μ`` is at most
         ``bias_tolerance`` posterior standard deviations, and of its sd at most
-        ``bias_tolerance`` of itself. The choice is made once, from the first concrete starts
-        the sampler sees (``init`` or :func:`liesample.sample`); under
-        ``liesample.sample(..., num_warmup=N)`` it is made in the warm-up from the run's starts.
+        ``bias_tolerance`` of itself. :func:`liesample.sample` chooses it from the run's starts
+        (in the warm-up under ``num_warmup=N``, with a key of the run) and records it in the
+        run's attributes; used directly (``init``, ``step``), the sampler chooses it once, on
+        the orbit of the system's default position.
     integrator : str or Integrator
         One of ``liesample.integrators.INTEGRATORS``; default ``"splitting"``.
     theta : float, optional
@@ -229,9 +221,9 @@ def as_top_level_api(
         Whether the scene has the Hamiltonian drift (it does not change the invariant law).
     stability : {"raise", "warn", "off"}
         What happens when ``step_size`` is beyond the integrator's stable bound on the orbit of
-        a start, ``κ = step_size·θ·max_i |h''_i| > 2`` (:mod:`liesample.integrators.stability`; rigid body:
-        ``θ·step_size·r²(1/I_min − 1/I_max) ≤ 2``): ``"raise"`` (default) a ``ValueError``
-        naming the largest allowed step; ``"warn"`` a ``UserWarning`` (the chain then samples a
+        a start, ``κ = step_size·θ·max_i |h''_i| > 2`` (:mod:`liesample.integrators.stability`;
+        rigid body: ``θ·step_size·r²(1/I_min − 1/I_max) ≤ 2``): ``"raise"`` (default) a
+        ``ValueError`` naming the largest allowed step; ``"warn"`` a ``UserWarning`` (the chain then samples a
         wrong law); ``"off"`` no check. The mode is recorded in the run's attributes.
     bias_tolerance : float
         Relative bias tolerance of the automatic step size (default
@@ -268,16 +260,17 @@ def as_top_level_api(
     integrator = get_integrator(integrator)
     kernel = build_kernel(system, integrator, scene)
     noise_kernel = build_noise_kernel(system, integrator, scene)
-    options = dict(
-        beta=beta,
-        sigma=sigma,
-        integrator=integrator,
-        theta=None if sigma > 0 else theta,
-        hamiltonian=hamiltonian,
-        stability=stability,
-        bias_tolerance=bias_tolerance,
-        noise_block_size=noise_block_size,
-    )
+    options = {
+        "beta": beta,
+        "sigma": sigma,
+        "integrator": integrator,
+        "theta": None if sigma > 0 else theta,
+        "hamiltonian": hamiltonian,
+        "stability": stability,
+        "bias_tolerance": bias_tolerance,
+        "noise_block_size": noise_block_size,
+    }
+    given = step_size is not None
     settings = {
         "sampler": "lie_poisson_langevin",
         "system": system.name,
@@ -287,12 +280,19 @@ def as_top_level_api(
         "integrator": integrator.name,
         "stability": stability,
         "step_size": step_size,
-        "step_size_source": "given" if step_size is not None else "automatic (not yet chosen)",
+        "step_size_source": "given" if given else _UNCHOSEN,
         "noise_block_size": noise_block_size,
     }
 
     def choose(positions, rng_key=None):
-        return accuracy.default_step_size(
+        """The bias model's step for the starts ``positions``: without a key (no warm-up) on
+        one start per distinct orbit with ``key(0)``, with a key (warm-up) on all of them."""
+        positions = np.asarray(positions)
+        if rng_key is None:
+            positions = positions.astype(jnp.result_type(float))
+            orbits = distinct_orbits(check_orbit_starts(system, positions))
+            positions = positions[np.asarray(orbits)]
+        choice = accuracy.default_step_size(
             system,
             beta,
             sigma=sigma,
@@ -301,13 +301,26 @@ def as_top_level_api(
             rng_key=jax.random.key(0) if rng_key is None else rng_key,
             relative_tolerance=bias_tolerance,
         )
+        return choice.step_size, "bias model: " + _source(choice)
 
-    step = _StepSize(step_size, choose, settings)
+    def rebuild(value, source):
+        tuned = as_top_level_api(system, **options, step_size=value)
+        tuned.settings["step_size_source"] = source
+        return tuned
+
+    @functools.cache
+    def automatic():
+        """The step used directly without ``liesample.sample``: the bias model on the orbit of
+        the system's default position, a function of the construction arguments only."""
+        return choose(np.asarray(system.default_position)[None])[0]
+
+    def current_step():
+        return step_size if given else automatic()
 
     def check_orbits(positions, representatives, prefix=False):
         """Stability (one vectorised stiffness call for all orbits) and precision checks."""
         representatives = np.asarray(representatives)
-        dt = step.resolve(positions[representatives])
+        dt = current_step()
         limit = integrator.stability_limit
         if stability != "off" and limit is not None and theta != 0.0 and system.curvature_bound:
             kappas = dt * stiffness_on_orbits(system, theta, positions[representatives])
@@ -333,12 +346,10 @@ def as_top_level_api(
         return state
 
     def step_fn(rng_key, state):
-        dt = step.resolve(np.asarray(system.default_position)[None])
-        return kernel(rng_key, state, dt, sigma, theta)
+        return kernel(rng_key, state, current_step(), sigma, theta)
 
     def block_step(noise, state):
-        dt = step.resolve(np.asarray(system.default_position)[None])
-        return noise_kernel(noise, state, dt, sigma, theta)
+        return noise_kernel(noise, state, current_step(), sigma, theta)
 
     def draw_block(rng_key, state):
         return _draw_noise(system, scene, rng_key, (noise_block_size,), state.position.dtype)
@@ -350,19 +361,15 @@ def as_top_level_api(
             dtype = jnp.result_type(float)
             check_orbits(np.asarray(positions, dtype), distinct_orbits(casimirs), prefix=True)
 
-    def adapt(rng_key, chain_keys, states, initial_positions, num_warmup):
-        del chain_keys, states, num_warmup
-        choice = choose(np.asarray(initial_positions), jax.random.fold_in(rng_key, 1))
-        tuned = as_top_level_api(system, **options, step_size=choice.step_size)
-        tuned.settings["step_size_source"] = "warm-up bias model: " + _source(choice)
-        return tuned, None
-
-    sampler = Sampler(
-        init_fn, step_fn, settings=settings, check_positions=check_positions, adapt=adapt
+    return Sampler(
+        init_fn,
+        step_fn,
+        settings=settings,
+        check_positions=check_positions,
+        tuning=StepSizeTuning("rule", given, choose, rebuild),
+        # Without noise nothing is drawn: the per-step loop is already lean.
+        noise_blocks=NoiseBlocks(noise_block_size, draw_block, block_step) if scene.noise else None,
     )
-    if scene.noise:  # without noise nothing is drawn: the per-step loop is already lean
-        sampler.noise_blocks = NoiseBlocks(noise_block_size, draw_block, block_step)
-    return sampler
 
 
 lie_poisson_langevin = sampling_api(

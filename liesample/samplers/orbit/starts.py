@@ -1,6 +1,7 @@
 """Checks of many starting points on coadjoint orbits in one vectorised call.
 
-Shared by the orbit samplers' ``check_positions`` hook (:class:`~liesample.samplers.contract.Sampler`):
+Shared by the orbit samplers' ``check_positions``
+(:class:`~liesample.samplers.contract.Sampler`):
 shape, finiteness, non-degenerate orbit and finite energy of every start are computed by one
 compiled ``vmap``; only the first failing chain is re-checked by ``system.check_position`` so
 that the error is the system's own message, prefixed by ``initial_positions[c]``.
