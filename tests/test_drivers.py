@@ -155,7 +155,7 @@ def _driver_cases():
             )
 
 
-@pytest.mark.parametrize(("name", "integrator"), _driver_cases())
+@pytest.mark.parametrize(("name", "integrator"), list(_driver_cases()))
 def test_casimirs_kept_pathwise_under_every_driver(name, integrator):
     """Hamiltonian + semimartingale noise: |μ|² (rigid body) and |Γ|², Π·Γ (heavy top) stay at
     their initial values to round-off along every path, whatever the driver."""

@@ -1,8 +1,6 @@
 """Point vortices on the sphere (MATH.md §2): structure, exact laws, scenes, collisions, bad input."""
 
 import math
-import subprocess
-import sys
 from pathlib import Path
 
 import jax
@@ -442,21 +440,8 @@ def test_bad_input_is_refused_with_a_clear_message():
 # --------------------------------------------------------------------------- example
 
 
-def test_scenes_example_runs(tmp_path):
-    result = subprocess.run(
-        [
-            sys.executable,
-            str(ROOT / "examples" / "vortex_scenes.py"),
-            "--quick",
-            "--out",
-            str(tmp_path),
-        ],
-        check=False,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert result.returncode == 0, result.stderr
+def test_scenes_example_runs(tmp_path, run_example):
+    assert run_example("vortex_scenes", ["--quick", "--out", str(tmp_path)]) == 0
     for name in ("vortex_dissipation.png", "vortex_scenes.png"):
         assert (tmp_path / name).stat().st_size > 10_000
 

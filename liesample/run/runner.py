@@ -321,13 +321,22 @@ def sample_chains(
         static_argnums=3,
     )
     remaining = num_draws - done
-    # Compile outside the timed region (one chunk shape, plus the last partial one).
+    # Compile outside the timed region (one chunk shape, plus the last partial one), once per
+    # sampler and chain shapes: running the same sampler again (a resumed run, more draws)
+    # reuses the executables.
+    signature = _signature((states, chain_keys))
     if run_warmup:
-        warmup = warmup.lower(states, chain_keys, 0).compile()
+        warmup = _compiled_once(
+            ("warmup", sampler, num_warmup, signature),
+            lambda: warmup.lower(states, chain_keys, 0).compile(),
+        )
     compiled = {}
     if remaining:
         for count in {min(chunk, remaining), remaining % chunk or chunk}:
-            compiled[count] = run_chunk.lower(states, chain_keys, 0, count).compile()
+            compiled[count] = _compiled_once(
+                ("draws", sampler, thinning, count, signature),
+                lambda count=count: run_chunk.lower(states, chain_keys, 0, count).compile(),
+            )
 
     positions, infos = [], []
     if previous is not None:
@@ -371,6 +380,31 @@ def sample_chains(
     _report_divergences(result, on_nonfinite)
     _report_stuck_chains(result, min_acceptance_rate)
     return result
+
+
+_COMPILED_LIMIT = 16
+_compiled: dict = {}  # key -> executable, least recently used first
+
+
+def _compiled_once(key, compile_now):
+    """The executable for ``key``, compiled by ``compile_now()`` the first time it is asked for
+    (the ``_COMPILED_LIMIT`` most recently used are kept). ``key`` names the sampler (its
+    ``init`` and ``step`` functions), every static argument and the chains' shapes."""
+    if key in _compiled:
+        _compiled[key] = _compiled.pop(key)
+        return _compiled[key]
+    executable = _compiled[key] = compile_now()
+    while len(_compiled) > _COMPILED_LIMIT:
+        del _compiled[next(iter(_compiled))]
+    return executable
+
+
+def _signature(tree):
+    """What a compiled executable is specialised to: the tree's structure and each leaf's shape,
+    dtype and sharding."""
+    return jax.tree.structure(tree), tuple(
+        (leaf.shape, leaf.dtype, getattr(leaf, "sharding", None)) for leaf in jax.tree.leaves(tree)
+    )
 
 
 def _chain_list(chains, limit=10) -> str:

@@ -42,6 +42,11 @@ def main(argv):
         except (AttributeError, ImportError) as error:  # newer than the reference tree
             missing.append(f"{label} ({error})")
     np.savez_compressed(HERE / "reference_draws.npz", **arrays)
+    import json
+
+    from test_draws_unchanged import host
+
+    (HERE / "reference_draws_host.json").write_text(json.dumps(host(), indent=1) + "\n")
     print(f"wrote {len(arrays)} arrays; left out: {missing or 'none'}")
 
 

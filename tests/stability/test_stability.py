@@ -62,7 +62,7 @@ import pytest
 
 import liesample
 from liesample.dynamics import PoissonLangevin, Scene
-from liesample.integrators import INTEGRATORS
+from liesample.integrators import DEFAULT_INTEGRATOR, INTEGRATORS
 from liesample.integrators.stability import STABILITY_LIMITS, stiffness
 from liesample.run.runner import NonFiniteStateError
 from liesample.targets import HeavyTopGibbs, RestrictedGaussian
@@ -184,7 +184,8 @@ def test_overflow_is_flagged_and_reported():
     with pytest.warns(RuntimeWarning, match="non-finite state"):
         result = liesample.sample_chains(algorithm, jax.random.key(1), starts, 30, thinning=10)
     assert np.all(np.isfinite(result.positions))
-    assert np.all(result.info["is_divergent"][:, -1])
+    # Every chain overflows (when, along a chaotic path, depends on the last bit of round-off).
+    assert np.all(np.any(result.info["is_divergent"], axis=1))
     with pytest.raises(NonFiniteStateError, match="Reduce step_size"):
         liesample.sample_chains(
             algorithm, jax.random.key(1), starts, 30, thinning=10, on_nonfinite="raise"
@@ -303,8 +304,22 @@ def test_hard_case_is_stable_and_gibbs_exact(case, dtype):
     assert np.all(z < 5.0), f"{case} {dtype}: estimate {estimate}, exact {exact}, z {z}"
 
 
-@pytest.mark.parametrize("system_name", cases.SYSTEM_NAMES)
-@pytest.mark.parametrize("integrator", sorted(INTEGRATORS))
+def _batched_cases():
+    """The default integrator on every system, and every integrator on the rigid body and the
+    heavy top (the configuration that once miscompiled, module notes); the rest in
+    ``make test-slow``."""
+    for integrator in sorted(INTEGRATORS):
+        for system_name in cases.SYSTEM_NAMES:
+            quick = integrator == DEFAULT_INTEGRATOR or system_name in ("rigid_body", "heavy_top")
+            yield pytest.param(
+                integrator,
+                system_name,
+                id=f"{integrator}-{system_name}",
+                marks=() if quick else pytest.mark.slow,
+            )
+
+
+@pytest.mark.parametrize(("integrator", "system_name"), list(_batched_cases()))
 def test_batched_step_equals_one_chain(integrator, system_name):
     """Twenty steps vmapped over 8 chains give each chain exactly the single-chain steps
     (round-off), for every integrator and every system of ``tests/cases.py``: the runner and
