@@ -10,7 +10,7 @@ Targets (exact references from :mod:`liesample.targets.groups`):
 
 - **matrix Fisher on SO(3)**, ``p(R) ∝ exp(tr(FᵀR))`` (Haar), ``F = Q diag(4, 2, 0.5) Pᵀ``
   with two fixed rotations ``Q, P``; statistics: the 9 entries of ``R`` (exact ``E[R]`` from
-  the 1-D Bessel integral of ``MatrixFisher.mean``);
+  the 1-D Bessel integral of ``MatrixFisherLaw.mean``);
 - **vMF product on (S²)⁸**: 8 independent von Mises–Fisher directions with ``κ`` from 0.5
   to 50 and fixed mean directions ``μ_i``; statistics: the 24 coordinates (exact
   ``E[x_i] = A₃(κ_i) μ_i``).
@@ -72,7 +72,7 @@ import numpy as np
 import liesample
 from liesample import spaces
 from liesample.analysis.diagnostics import expectation_table
-from liesample.interop.numpyro_distributions import MatrixFisher as MatrixFisherLaw
+from liesample.interop.numpyro_distributions import MatrixFisher
 from liesample.targets import groups as exact_groups
 from liesample.targets.groups import quaternion_to_rotation
 from liesample.targets.spins import von_mises_fisher
@@ -147,12 +147,12 @@ class MatrixFisherTarget:
         self.F = (
             _rotation([0.3, -0.5, 0.8]) @ np.diag([4.0, 2.0, 0.5]) @ _rotation([-0.7, 0.2, 0.4]).T
         )
-        self.reference = exact_groups.MatrixFisher(self.F)
+        self.reference = exact_groups.MatrixFisherLaw(self.F)
         self.exact = self.reference.mean().ravel()
         self.space = spaces.SO(3)
         self._F = jnp.asarray(self.F)
         self._flat = self.F.ravel()
-        self._law = MatrixFisherLaw(self.F)  # its normaliser once, outside the timed calls
+        self._law = MatrixFisher(self.F)  # its normaliser once, outside the timed calls
 
     # liesample: positions are rotation matrices
     def logdensity(self, R):

@@ -126,6 +126,7 @@ def demo(args) -> int:
     algorithm = sampler_for(system)
     target = system.reference(args.beta, [args.radius, 0.0, 0.0])
     key_start, key_run, key_iso = jax.random.split(jax.random.key(args.seed), 3)
+    starts = _random_points_on_sphere(key_start, args.chains, args.radius)  # both runs
     thinning = max(1, round(0.5 / args.step_size))  # a draw every ~half time unit
     num_draws = max(10, round(args.time / (args.step_size * thinning)))
     num_warmup = round(20.0 / args.step_size)  # 20 time units: many relaxation times
@@ -137,7 +138,7 @@ def demo(args) -> int:
     tree = sample(
         algorithm,
         key_run,
-        _random_points_on_sphere(key_start, args.chains, args.radius),
+        starts,
         num_draws,
         num_warmup=num_warmup,
         thinning=thinning,
@@ -177,7 +178,7 @@ def demo(args) -> int:
     iso = sample(
         iso_algorithm,
         key_iso,
-        _random_points_on_sphere(key_start, args.chains, args.radius),
+        starts,
         iso_draws,
         progress=False,
     )

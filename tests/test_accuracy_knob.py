@@ -213,6 +213,7 @@ HT_INERTIA, HT_CHI, HT_BETA = (1.0, 1.5, 2.5), (0.2, 0.0, 1.0), 2.0
 HT_MU0 = np.array([0.5, 0.0, 0.0, 1.0, 0.0, 0.0])
 
 
+@pytest.mark.slow  # the rigid-body case runs by default
 def test_chosen_step_delivers_the_tolerance_on_the_heavy_top():
     """Heavy top (observables Γ·χ and Π_i²), tolerance 0.01, σ = 1: pilot 128 chains × 40 time
     units; production 128 chains × 200 time units from exact draws: |error| ≤ 0.01 + 4 MCSE."""

@@ -142,6 +142,7 @@ def test_exact_on_the_rigid_body_where_the_unadjusted_chain_is_biased():
     assert not np.any(result.info_means["is_divergent"])
 
 
+@pytest.mark.slow  # the rigid-body case runs by default
 def test_exact_on_the_heavy_top_where_the_unadjusted_chain_is_biased():
     """Heavy top (I = (1, 1.5, 2.5), χ = (0.2, 0, 1), β = 2, orbit |Γ| = 1, Π·Γ = 0.5), dt = 0.8,
     256 chains × 250 steps from exact draws (``HeavyTopGibbs.sample``); observables Γ·χ, Π_i².

@@ -12,7 +12,7 @@ from scipy.stats import vonmises_fisher
 import liesample
 from liesample import spaces as S
 from liesample.targets.groups import (
-    MatrixFisher,
+    MatrixFisherLaw,
     VonMisesFisherPosterior,
     su2_plaquette_mean,
     u1_plaquette_mean,
@@ -94,7 +94,7 @@ BLOCKS = {
     "fisher": (
         lambda R: jnp.sum(F * R),
         jnp.diagonal,
-        lambda: np.diag(MatrixFisher(F).mean()),
+        lambda: np.diag(MatrixFisherLaw(F).mean()),
     ),
     "top": (
         lambda R: KAPPA_E3 * jnp.dot(M_E3, R[:, 2]),
@@ -239,6 +239,7 @@ def lattice_logdensity(p):
     )
 
 
+@pytest.mark.slow  # a long statistical run
 def test_hmc_on_2d_u1_and_su2_lattice_gauge_theories_matches_bessel_ratios():
     sampler = liesample.geometric_hmc(lattice_logdensity, LATTICE, step_size=0.2,
                                       num_integration_steps=8)

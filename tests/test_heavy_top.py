@@ -360,7 +360,9 @@ def ergodic_averages(system, beta, step_size, num_chains, total_time, seed):
     return np.asarray(liesample.jit(jax.vmap(chain))(keys, starts))
 
 
-@pytest.mark.parametrize("split_hamiltonian", [False, True])
+@pytest.mark.parametrize(
+    "split_hamiltonian", [pytest.param(False, marks=pytest.mark.slow), True]
+)
 def test_sampler_matches_exact_gibbs_law(split_hamiltonian):
     """E[Γ·χ] and E[Π_i²] from 32 independent chains (T = 400 each) match HeavyTopGibbs, |z| < 3.5
     (Bonferroni over 4 observables; MCSE ≈ 2.5e-3 for Γ·χ and Π₁², 1.2e-2 for Π₃²).

@@ -238,7 +238,7 @@ def test_langevin_chain_correlations_match_fisher():
     assert_matches_fisher(averages)
 
 
-@pytest.mark.parametrize("proposal", ["uniform", "rotation"])
+@pytest.mark.parametrize("proposal", ["uniform", pytest.param("rotation", marks=pytest.mark.slow)])
 def test_metropolis_chain_correlations_match_fisher(proposal):
     algorithm = heisenberg_metropolis(heisenberg(CHAIN), beta=BETA, proposal=proposal)
     averages = per_chain_averages(algorithm, num_chains=64, num_warmup=200, num_steps=3000, seed=22)

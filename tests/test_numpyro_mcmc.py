@@ -24,7 +24,7 @@ from numpyro.infer import MCMC  # noqa: E402
 from liesample.geometry.spaces import SO  # noqa: E402
 from liesample.interop.numpyro_distributions import Bingham, MatrixFisher, VonMisesFisher  # noqa: E402
 from liesample.interop.numpyro_kernel import GeometricHMC  # noqa: E402
-from liesample.targets.groups import MatrixFisher as MatrixFisherReference  # noqa: E402
+from liesample.targets.groups import MatrixFisherLaw  # noqa: E402
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "numpyro_directional.py"
 
@@ -91,7 +91,7 @@ def test_prior_only_matrix_fisher_and_bingham_match_exact_moments():
     samples = mcmc.get_samples(group_by_chain=True)
     R, x = np.asarray(samples["R"]), np.asarray(samples["axis"])
     assert np.allclose(np.swapaxes(R, -1, -2) @ R, np.eye(3), atol=1e-10)
-    mean = MatrixFisherReference(F).mean()  # exact E[R]
+    mean = MatrixFisherLaw(F).mean()  # exact E[R]
     for i in range(3):
         for j in range(3):
             _within(R[..., i, j], mean[i, j], f"R[{i},{j}]")

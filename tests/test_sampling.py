@@ -56,7 +56,7 @@ def exact_second_moments(beta):
     return np.diag(np.asarray(rigid_body(INERTIA).reference(beta, [RADIUS, 0, 0]).second_moments()))
 
 
-@pytest.mark.parametrize("beta", [3.0, -2.0])
+@pytest.mark.parametrize("beta", [pytest.param(3.0, marks=pytest.mark.slow), -2.0])
 def test_second_moments_match_exact_law(beta):
     """E[μ_iμ_j] from several chains matches the exact moments (anisotropic body, β of both
     signs). At dt = 0.05 the splitting's bias (~5e-4, benchmarks/RESULTS.md) is far below the

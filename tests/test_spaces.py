@@ -11,7 +11,7 @@ import liesample
 from liesample import spaces as S
 from liesample.geometry.cotangent import cotangent_bundle
 from liesample.targets.groups import (
-    MatrixFisher,
+    MatrixFisherLaw,
     VonMisesFisherPosterior,
     su2_plaquette_mean,
     u1_plaquette_mean,
@@ -248,23 +248,23 @@ def test_plaquette_references_match_quadrature_over_the_class_angle():
 
 def test_matrix_fisher_reference():
     # F = κ e3 e3ᵀ: R e3 is vMF(e3, κ) on S², so E[R33] = A_3(κ).
-    assert MatrixFisher(np.diag([0.0, 0.0, 2.5])).mean()[2, 2] == pytest.approx(
+    assert MatrixFisherLaw(np.diag([0.0, 0.0, 2.5])).mean()[2, 2] == pytest.approx(
         vmf_mean_resultant_length(2.5, 3), rel=1e-10
     )
-    assert MatrixFisher(np.zeros((3, 3))).log_normalizer() == pytest.approx(0.0, abs=1e-14)
+    assert MatrixFisherLaw(np.zeros((3, 3))).log_normalizer() == pytest.approx(0.0, abs=1e-14)
     # Against Haar draws (importance weights), for a diagonal and a general F (with det < 0).
     n = 100000
     R = np.asarray(S.SO(3, shape=(n,)).uniform(jax.random.key(4)))
     rng = np.random.default_rng(0)
     for F in (np.diag([2.0, 1.0, -0.5]), rng.normal(size=(3, 3))):
-        law = MatrixFisher(F)
+        law = MatrixFisherLaw(F)
         w = np.exp(np.einsum("ij,nij->n", F, R))
         z, se_z = w.mean(), w.std() / np.sqrt(n)
         assert abs(np.exp(law.log_normalizer()) - z) < 5 * se_z
         ratio = (w[:, None, None] * R).mean(0) / z  # delta-method MCSE of a ratio estimator
         resid = w[:, None, None] * (R - ratio) / z
         assert np.all(np.abs(law.mean() - ratio) < 5 * resid.std(0) / np.sqrt(n) + 1e-12)
-    u, s, v = MatrixFisher(np.diag([2.0, 1.0, -0.5])).proper_svd()
+    u, s, v = MatrixFisherLaw(np.diag([2.0, 1.0, -0.5])).proper_svd()
     assert np.allclose(u @ np.diag(s) @ v.T, np.diag([2.0, 1.0, -0.5]))
     assert np.linalg.det(u) > 0 and np.linalg.det(v) > 0 and s[2] < 0
 

@@ -440,6 +440,7 @@ def _check_against_orbit_law(system, beta, means, num_samples=100_000):
 GIBBS_START = random_vorticity(3, seed=2, enstrophy=16.0)
 
 
+@pytest.mark.slow  # the adjusted sampler's N = 3 check runs by default
 def test_sampler_matches_the_exact_orbit_law_n3():
     system = zeitlin_euler(3, noise_degree=2, position=GIBBS_START)
     beta = 1.0

@@ -19,7 +19,7 @@ and draws no random numbers (it is *not* a zero coefficient).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import jax
 import jax.numpy as jnp
@@ -49,18 +49,20 @@ class Scene:
     noise: bool = True
 
     def __post_init__(self):
-        for name in ("hamiltonian", "dissipation", "noise"):
-            if not isinstance(getattr(self, name), bool):
-                raise TypeError(f"Scene.{name} must be a bool, got {getattr(self, name)!r}")
+        kind = type(self).__name__  # subclasses add flags (every field is one)
+        for item in fields(self):
+            value = getattr(self, item.name)
+            if not isinstance(value, bool):
+                raise TypeError(f"{kind}.{item.name} must be a bool, got {value!r}")
         if not (self.hamiltonian or self.dissipation or self.noise):
             raise ValueError(
-                "Scene has no effect enabled: enable hamiltonian, dissipation or noise"
+                f"{kind} has no effect enabled: enable hamiltonian, dissipation or noise"
             )
 
     @property
     def effects(self) -> tuple[str, ...]:
-        """Names of the enabled effects, in a fixed order."""
-        return tuple(n for n in ("hamiltonian", "dissipation", "noise") if getattr(self, n))
+        """Names of the enabled effects, in a fixed order (the order of the fields)."""
+        return tuple(item.name for item in fields(self) if getattr(self, item.name))
 
 
 def make_dynamics(system, *, beta=None, sigma=1.0, theta=None, hamiltonian=True):

@@ -8,6 +8,15 @@ import jax
 import numpy as np
 
 
+def float_array(value, requirement: str, error: type[Exception] = ValueError) -> np.ndarray:
+    """``np.array(value, dtype=float)``, or ``error("<requirement>, got <value>")`` when ``value``
+    is not an array of real numbers."""
+    try:
+        return np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise error(f"{requirement}, got {value!r}") from None
+
+
 def finite_float(name: str, value, *, positive: bool = False, nonnegative: bool = False) -> float:
     """``value`` as a Python float, or a ``ValueError``/``TypeError`` that says what is allowed."""
     if isinstance(value, bool) or np.ndim(value) != 0:
@@ -38,10 +47,7 @@ def principal_moments(inertia) -> tuple[float, float, float]:
 
 def nonzero_vector3(name: str, value) -> np.ndarray:
     """A finite, nonzero, read-only float array of shape (3,), or a ``ValueError`` naming it."""
-    try:
-        vector = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a 3-vector of finite reals, got {value!r}") from None
+    vector = float_array(value, f"{name} must be a 3-vector of finite reals")
     if vector.shape != (3,):
         raise ValueError(f"{name} must be a 3-vector, got shape {vector.shape}")
     if not np.all(np.isfinite(vector)):
@@ -63,12 +69,9 @@ def concrete_array(value):
 
 def nonzero_circulations(circulations) -> np.ndarray:
     """Point-vortex circulations ``(Γ_1, …, Γ_N)``: a read-only 1-D array, finite and nonzero."""
-    try:
-        gamma = np.array(circulations, dtype=float)
-    except (TypeError, ValueError):
-        raise TypeError(
-            f"circulations must be a 1-D sequence of nonzero finite reals, got {circulations!r}"
-        ) from None
+    gamma = float_array(
+        circulations, "circulations must be a 1-D sequence of nonzero finite reals", TypeError
+    )
     if gamma.ndim != 1 or gamma.size < 1:
         raise ValueError(
             f"circulations must be a 1-D sequence (Γ_1, …, Γ_N) with N >= 1, got shape "

@@ -33,6 +33,8 @@ import jax.numpy as jnp
 import jax.scipy.linalg
 import numpy as np
 
+from liesample.foundation.validation import float_array
+
 
 @dataclass(frozen=True)
 class LieAlgebra:
@@ -263,12 +265,7 @@ class StructureConstants(LieAlgebra):
     casimir_function: Callable | None = None
 
     def __init__(self, constants, casimirs: Callable | None = None, name: str = "g"):
-        try:
-            c = np.array(constants, dtype=float)
-        except (TypeError, ValueError):
-            raise ValueError(
-                f"structure constants must be a real array of shape (n, n, n), got {constants!r}"
-            ) from None
+        c = float_array(constants, "structure constants must be a real array of shape (n, n, n)")
         if c.ndim != 3 or not (c.shape[0] == c.shape[1] == c.shape[2]) or c.shape[0] == 0:
             raise ValueError(
                 f"structure constants must have shape (n, n, n) with n >= 1, got shape {c.shape}"

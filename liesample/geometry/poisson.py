@@ -41,7 +41,7 @@ import jax.numpy as jnp
 import jax.scipy.linalg
 import numpy as np
 
-from liesample.foundation.validation import finite_float
+from liesample.foundation.validation import finite_float, float_array
 from liesample.geometry.algebras import LieAlgebra
 
 # A constant magnetic term must be antisymmetric to this relative accuracy (round-off of a
@@ -115,10 +115,7 @@ def field_strength_from_vector_potential(vector_potential: Callable) -> Callable
 
 def antisymmetric_matrix(name: str, value, dimension: int | None = None) -> np.ndarray:
     """A finite, antisymmetric, read-only ``(n, n)`` float array, or a ``ValueError`` naming it."""
-    try:
-        matrix = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be an array of finite reals, got {value!r}") from None
+    matrix = float_array(value, f"{name} must be an array of finite reals")
     if matrix.ndim != 2 or matrix.shape[0] != matrix.shape[1] or matrix.shape[0] == 0:
         raise ValueError(f"{name} must be a square (n, n) matrix, got shape {matrix.shape}")
     if dimension is not None and matrix.shape[0] != dimension:

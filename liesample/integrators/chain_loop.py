@@ -11,7 +11,7 @@ run in one piece. Only the block size changes the draws; the law of the chain is
 (each row has the law of one step's draw). One draw per block replaces a key derivation and a
 draw per step, which on the rigid body is most of the cost of a step.
 
-:func:`run_steps` is the loop every driver uses
+:func:`run_steps` is the loop every chain runner uses
 (:func:`liesample.integrators.accuracy.ergodic_averages`, the dual-averaging warm-up of
 :mod:`liesample.tuning.dual_averaging`, the runner): ``num_steps`` steps from ``first_step``, with
 an optional ``update`` of the caller's accumulators after each step; :func:`run_draws` keeps

@@ -22,7 +22,7 @@ are NumPyro's ``constraints.sphere`` (shared with ``ProjectedNormal``) and :data
   envelope (:func:`liesample.targets.orbits.sample_bingham`).
 - ``MatrixFisher(F)`` on SO(3): density ``exp(tr(FᵀR)) / c(F)`` with respect to the Haar
   probability measure; ``c(F)`` by the 1-D Bessel integral of
-  :class:`liesample.targets.groups.MatrixFisher`, so ``F`` must be concrete (not a traced model
+  :class:`liesample.targets.groups.MatrixFisherLaw`, so ``F`` must be concrete (not a traced model
   parameter). ``sample``: exact; the quaternion of ``R`` follows a Bingham law on ``S³``, drawn
   by the same angular-central-Gaussian rejection (acceptance ≳ 45 % for any ``F``).
 
@@ -285,7 +285,7 @@ class MatrixFisher(Distribution):
 
     def __init__(self, F, *, validate_args=None):
         F = np.asarray(F, dtype=float)
-        self._reference = groups.MatrixFisher(F)  # validates: a finite 3x3 matrix
+        self._reference = groups.MatrixFisherLaw(F)  # validates: a finite 3x3 matrix
         self.F = jnp.asarray(F)
         self._log_c = self._reference.log_normalizer()
         super().__init__((), (3, 3), validate_args=validate_args)
@@ -298,7 +298,7 @@ class MatrixFisher(Distribution):
         return jnp.asarray(self._reference.mean())
 
     def sample(self, key, sample_shape=()):
-        """Exact draws: the quaternion's Bingham law on S³ (``targets.groups.MatrixFisher``)."""
+        """Exact draws: the quaternion's Bingham law on S³ (``targets.groups.MatrixFisherLaw``)."""
         shape = tuple(sample_shape)
         n = max(int(np.prod(shape)), 1)
         draws = self._reference.sample(key, n)

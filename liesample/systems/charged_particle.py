@@ -37,7 +37,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from liesample.dynamics.poisson_langevin import make_dynamics
+from liesample.dynamics.poisson_langevin import Scene, make_dynamics
 from liesample.dynamics.sde import PoissonLangevinSDE, stratonovich_heun_step
 from liesample.foundation.compile import jit
 from liesample.foundation.validation import concrete_array, finite_float
@@ -63,34 +63,15 @@ _MIDPOINT_MAX_ITERATIONS = 100
 
 
 @dataclass(frozen=True)
-class MagneticScene:
-    """The effects of :class:`liesample.dynamics.Scene` plus a ``magnetic`` flag.
+class MagneticScene(Scene):
+    """The effects of :class:`liesample.dynamics.poisson_langevin.Scene` plus a ``magnetic``
+    flag (checked and listed in ``effects`` by the base class).
 
     ``magnetic=False`` drops ``G`` from the Poisson tensor (the canonical structure): the field
     is never evaluated. ``G`` enters only through ``X_h``, so it acts only with ``hamiltonian``.
-    (A separate class rather than a subclass: ``liesample.dynamics`` imports the systems
-    package, so this module does not import it.)
     """
 
-    hamiltonian: bool = True
-    dissipation: bool = True
-    noise: bool = True
     magnetic: bool = True
-
-    def __post_init__(self):
-        for name in ("hamiltonian", "dissipation", "noise", "magnetic"):
-            if not isinstance(getattr(self, name), bool):
-                raise TypeError(f"MagneticScene.{name} must be a bool, got {getattr(self, name)!r}")
-        if not (self.hamiltonian or self.dissipation or self.noise):
-            raise ValueError(
-                "MagneticScene has no effect enabled: enable hamiltonian, dissipation or noise"
-            )
-
-    @property
-    def effects(self) -> tuple[str, ...]:
-        """Names of the enabled effects, in a fixed order."""
-        names = ("hamiltonian", "dissipation", "noise", "magnetic")
-        return tuple(name for name in names if getattr(self, name))
 
 
 @dataclass(frozen=True, eq=False)

@@ -29,7 +29,7 @@ from liesample.foundation.validation import finite_float
 from liesample.targets import orbits
 
 __all__ = [
-    "MatrixFisher",
+    "MatrixFisherLaw",
     "VonMisesFisherLaw",
     "VonMisesFisherPosterior",
     "quaternion_to_rotation",
@@ -110,8 +110,12 @@ def _matrix_fisher_kernel(s, k, u):
 
 
 @dataclasses.dataclass(frozen=True)
-class MatrixFisher:
-    """``p(R) ∝ exp(tr(FᵀR))`` on ``SO(3)`` with respect to Haar measure."""
+class MatrixFisherLaw:
+    """The exact matrix Fisher law ``p(R) ∝ exp(tr(FᵀR))`` on ``SO(3)`` (Haar base measure).
+
+    A reference for tests; the NumPyro distribution of the same law is
+    :class:`liesample.interop.numpyro_distributions.MatrixFisher`.
+    """
 
     F: np.ndarray
 

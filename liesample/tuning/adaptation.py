@@ -152,7 +152,7 @@ class WarmupState(NamedTuple):
 
 class WarmupPieces(NamedTuple):
     """One warm-up step's bookkeeping, shared by :func:`window_adaptation` and samplers that
-    adapt inside another driver's loop (``liesample.interop.numpyro_kernel``)."""
+    adapt inside another library's chain loop (``liesample.interop.numpyro_kernel``)."""
 
     init: Callable  # (sampler state, initial step size, inverse mass) -> WarmupState
     update: Callable  # (WarmupState, new state, info, stage, window_end) -> WarmupState

@@ -48,6 +48,7 @@ from liesample.geometry.cotangent import (
     kick,
     refresh,
 )
+from liesample.samplers.contract import Sampler, setting
 
 __all__ = [
     "GeometricInfo",
@@ -60,12 +61,15 @@ __all__ = [
     "hamiltonian_scheme",
     "hamiltonian_transition",
     "init",
+    "kernel_move",
     "make_move",
     "metropolis",
     "ravelled",
     "scheme_setting",
     "scheme_step",
     "select",
+    "space_sampler",
+    "space_settings",
     "trajectory_cost",
     "unadjusted_transition",
 ]
@@ -279,6 +283,46 @@ def make_move(logdensity_fn, space, step_size, inverse_mass_matrix, magnetic_fie
     flows = drift_flows(bundle, step_size, scheme, precompute)
     value_and_grad = spaces.trivialised_value_and_grad(logdensity_fn, space)
     return Move(value_and_grad, bundle, flows, step_size, tuple(scheme))
+
+
+def kernel_move(state: GeometricState, logdensity_fn, space, step_size, inverse_mass_matrix,
+                magnetic_field, scheme) -> Move:  # fmt: skip
+    """:class:`Move` of one kernel call, in the dtype of ``state``: the parameters may be traced
+    (adaptation), so the kinetic–magnetic exponential is computed per transition."""
+    dtype = jnp.asarray(state.logdensity).dtype
+    return make_move(
+        logdensity_fn,
+        space,
+        step_size,
+        inverse_mass_matrix,
+        magnetic_field,
+        scheme,
+        dtype,
+        precompute=False,
+    )
+
+
+def space_settings(sampler: str, space, step_size, **parameters) -> dict:
+    """The :attr:`~liesample.samplers.contract.Sampler.settings` that every sampler on ``space``
+    records (its name, the space, the given step), then ``parameters`` in order."""
+    return {
+        "sampler": sampler,
+        "space": repr(space),
+        "step_size": setting(step_size),
+        "step_size_source": "given",
+        **parameters,
+    }
+
+
+def space_sampler(logdensity_fn, space, step_fn: Callable, settings: dict) -> Sampler:
+    """The :class:`~liesample.samplers.contract.Sampler` of ``step_fn`` on ``space``: keyless
+    :func:`init` and :func:`check_starts`."""
+
+    def init_fn(position, rng_key=None):
+        del rng_key
+        return init(position, logdensity_fn, space)
+
+    return Sampler(init_fn, step_fn, settings=settings, check_positions=check_starts(space))
 
 
 def scheme_step(move: Move, sign, friction=None) -> Callable:

@@ -39,13 +39,15 @@ from liesample.samplers.cotangent.geometric import (
     Move,
     check_divergence_threshold,
     check_positive_step_size,
-    check_starts,
     hamiltonian_scheme,
     hamiltonian_transition,
     init,
+    kernel_move,
     make_move,
     partial_refresh,
     scheme_setting,
+    space_sampler,
+    space_settings,
     trajectory_cost,
 )
 
@@ -147,15 +149,8 @@ def build_kernel(
     ):
         check_positive_step_size(step_size)
         check_integer("num_integration_steps", num_integration_steps)
-        move = make_move(
-            logdensity_fn,
-            space,
-            step_size,
-            inverse_mass_matrix,
-            magnetic_field,
-            scheme,
-            jnp.asarray(state.logdensity).dtype,
-            precompute=False,
+        move = kernel_move(
+            state, logdensity_fn, space, step_size, inverse_mass_matrix, magnetic_field, scheme
         )
         return transition(rng_key, state, move, num_integration_steps, *options)
 
@@ -223,14 +218,13 @@ def as_top_level_api(
     move = make_move(logdensity_fn, space, step_size, inverse_mass_matrix, magnetic_field, scheme)
     options = (divergence_threshold, momentum_persistence, persistent)
 
-    settings = {
-        "sampler": "geometric_hmc",
-        "space": repr(space),
-        "step_size": setting(step_size),
-        "step_size_source": "given",
-        "num_integration_steps": setting(num_integration_steps),
-        "divergence_threshold": setting(divergence_threshold),
-    }
+    settings = space_settings(
+        "geometric_hmc",
+        space,
+        step_size,
+        num_integration_steps=setting(num_integration_steps),
+        divergence_threshold=setting(divergence_threshold),
+    )
     if magnetic_field is not None:
         settings["magnetic"] = True
     if momentum_persistence != 0:
@@ -238,14 +232,10 @@ def as_top_level_api(
         settings["persistent"] = persistent
     settings.update(scheme_setting(integrator))
 
-    def init_fn(position, rng_key=None):
-        del rng_key
-        return init(position, logdensity_fn, space)
-
     def step_fn(rng_key, state):
         return transition(rng_key, state, move, num_integration_steps, *options)
 
-    return Sampler(init_fn, step_fn, settings=settings, check_positions=check_starts(space))
+    return space_sampler(logdensity_fn, space, step_fn, settings)
 
 
 geometric_hmc = sampling_api(

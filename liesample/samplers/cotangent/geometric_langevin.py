@@ -41,13 +41,15 @@ from liesample.samplers.cotangent.geometric import (
     Move,
     check_divergence_threshold,
     check_positive_step_size,
-    check_starts,
     energy,
     hamiltonian_scheme,
     hamiltonian_transition,
     init,
+    kernel_move,
     make_move,
     scheme_setting,
+    space_sampler,
+    space_settings,
     trajectory_cost,
     unadjusted_transition,
 )
@@ -181,15 +183,8 @@ def build_kernel(
     ):
         check_positive_step_size(step_size)
         check_friction(friction)
-        move = make_move(
-            logdensity_fn,
-            space,
-            step_size,
-            inverse_mass_matrix,
-            magnetic_field,
-            scheme,
-            jnp.asarray(state.logdensity).dtype,
-            precompute=False,
+        move = kernel_move(
+            state, logdensity_fn, space, step_size, inverse_mass_matrix, magnetic_field, scheme
         )
         return transition(rng_key, state, move, friction, adjusted, divergence_threshold)
 
@@ -234,27 +229,22 @@ def as_top_level_api(
     scheme = check_options(adjusted, divergence_threshold, integrator)
     move = make_move(logdensity_fn, space, step_size, inverse_mass_matrix, magnetic_field, scheme)
 
-    settings = {
-        "sampler": "geometric_langevin",
-        "space": repr(space),
-        "step_size": setting(step_size),
-        "step_size_source": "given",
-        "friction": setting(friction),
-        "adjusted": adjusted,
-        "divergence_threshold": setting(divergence_threshold),
-    }
+    settings = space_settings(
+        "geometric_langevin",
+        space,
+        step_size,
+        friction=setting(friction),
+        adjusted=adjusted,
+        divergence_threshold=setting(divergence_threshold),
+    )
     if magnetic_field is not None:
         settings["magnetic"] = True
     settings.update(scheme_setting(integrator, "obab"))
 
-    def init_fn(position, rng_key=None):
-        del rng_key
-        return init(position, logdensity_fn, space)
-
     def step_fn(rng_key, state):
         return transition(rng_key, state, move, friction, adjusted, divergence_threshold)
 
-    return Sampler(init_fn, step_fn, settings=settings, check_positions=check_starts(space))
+    return space_sampler(logdensity_fn, space, step_fn, settings)
 
 
 geometric_langevin = sampling_api(

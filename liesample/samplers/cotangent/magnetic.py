@@ -31,13 +31,15 @@ from liesample.geometry.cotangent import (
 )
 from liesample.geometry.spaces import Euclidean, check_inverse_mass_matrix
 from liesample.samplers.contract import first_bad_chain
-from liesample.samplers.cotangent.geometric import make_move
+from liesample.samplers.cotangent.geometric import check_positive_step_size, make_move
 
 __all__ = [
     "MagneticFlow",
     "Metric",
+    "check_euclidean_starts",
     "check_inverse_mass_matrix",
     "check_magnetic_field",
+    "check_parameters",
     "check_starts",
     "default_magnetic_field",
     "euclidean_move",
@@ -50,6 +52,17 @@ MagneticFlow = KineticMagneticFlow
 magnetic_flow = kinetic_magnetic_flow
 """``magnetic_flow(G, metric, ε)``: the exact flow of ``q̇ = M⁻¹p, ṗ = G M⁻¹p`` over ``ε``
 (:func:`liesample.geometry.cotangent.kinetic_magnetic_flow`)."""
+
+
+def check_parameters(step_size, inverse_mass_matrix, magnetic_field, dimension=None) -> int:
+    """Check ``ε``, ``M⁻¹`` and ``G`` of a sampler on ``dimension`` raveled coordinates (by
+    default as many as ``M⁻¹`` has); that dimension."""
+    check_positive_step_size(step_size)
+    check_inverse_mass_matrix(inverse_mass_matrix, dimension)
+    if dimension is None:
+        dimension = np.shape(inverse_mass_matrix)[0]
+    check_magnetic_field(magnetic_field, dimension)
+    return dimension
 
 
 def euclidean_move(
@@ -89,7 +102,17 @@ def initial_values(position, logdensity_fn):
     return logdensity, grad, jnp.zeros_like(ravel(position), dtype=flat_grad.dtype)
 
 
-def check_starts(positions, logdensity_fn, dimension=None):
+def check_starts(logdensity_fn, dimension=None):
+    """The runner's ``check_positions`` hook of a sampler on ``dimension`` raveled coordinates
+    (:func:`check_euclidean_starts`)."""
+
+    def check_positions(positions, **_):
+        check_euclidean_starts(positions, logdensity_fn, dimension)
+
+    return check_positions
+
+
+def check_euclidean_starts(positions, logdensity_fn, dimension=None):
     """Check every start (a pytree whose leaves have a leading chain axis) in one vectorised
     call: ``log π`` and its gradient finite, ``dimension`` coordinates; the error names the
     first bad chain."""

@@ -35,21 +35,14 @@ from typing import NamedTuple
 import blackjax
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from liesample.geometry.cotangent import LEAPFROG, PhasePoint, compose, drift, kick
 from liesample.samplers.contract import Sampler, sampling_api, setting
-from liesample.samplers.cotangent.geometric import (
-    check_positive_step_size,
-    hamiltonian_scheme,
-    ravelled,
-    scheme_setting,
-)
+from liesample.samplers.cotangent.geometric import hamiltonian_scheme, ravelled, scheme_setting
 from liesample.samplers.cotangent.geometric_hmc import check_integer, check_options, transition
 from liesample.samplers.cotangent.magnetic import (
     MagneticFlow,
-    check_inverse_mass_matrix,
-    check_magnetic_field,
+    check_parameters,
     check_starts,
     euclidean_move,
     initial_values,
@@ -180,13 +173,6 @@ def _transition(rng_key, state: MagneticHMCState, logdensity_fn, move, num_steps
     return new_state, info
 
 
-def _check_parameters(state_or_position, step_size, inverse_mass_matrix, magnetic_field):
-    d = ravel(state_or_position).shape[0]
-    check_positive_step_size(step_size)
-    check_inverse_mass_matrix(inverse_mass_matrix, d)
-    check_magnetic_field(magnetic_field, d)
-
-
 def build_kernel(
     integrator=None,
     *,
@@ -214,7 +200,8 @@ def build_kernel(
         num_integration_steps,
         magnetic_field,
     ):
-        _check_parameters(state.position, step_size, inverse_mass_matrix, magnetic_field)
+        d = ravel(state.position).shape[0]
+        check_parameters(step_size, inverse_mass_matrix, magnetic_field, d)
         check_integer("num_integration_steps", num_integration_steps)
         dtype = ravel(state.logdensity_grad).dtype
         # One expm per transition, for the sign this trajectory uses.
@@ -286,9 +273,7 @@ def as_top_level_api(
         flows ``e^{±εGM⁻¹}`` are computed once here, not per step. Tune ``step_size`` and
         ``inverse_mass_matrix`` with ``blackjax.window_adaptation(liesample.magnetic_hmc, …)``.
     """
-    check_positive_step_size(step_size)
-    check_inverse_mass_matrix(inverse_mass_matrix)
-    check_magnetic_field(magnetic_field, np.shape(inverse_mass_matrix)[0])
+    d = check_parameters(step_size, inverse_mass_matrix, magnetic_field)
     check_integer("num_integration_steps", num_integration_steps)
     check_options(momentum_persistence, divergence_threshold, persistent)
     scheme = _scheme(integrator)
@@ -297,14 +282,11 @@ def as_top_level_api(
 
     def init_fn(position, rng_key=None):
         state = init(position, logdensity_fn, rng_key)
-        _check_parameters(position, step_size, inverse_mass_matrix, magnetic_field)
+        check_parameters(step_size, inverse_mass_matrix, magnetic_field, ravel(position).shape[0])
         return state
 
     def step_fn(rng_key, state):
         return _transition(rng_key, state, logdensity_fn, move, num_integration_steps, options)
-
-    def check_positions(positions, **_):
-        check_starts(positions, logdensity_fn, np.shape(inverse_mass_matrix)[0])
 
     settings = {
         "sampler": "magnetic_hmc",
@@ -317,6 +299,7 @@ def as_top_level_api(
     }
     if not callable(integrator):
         settings.update(scheme_setting(integrator))
+    check_positions = check_starts(logdensity_fn, d)
     return Sampler(init_fn, step_fn, settings=settings, check_positions=check_positions)
 
 

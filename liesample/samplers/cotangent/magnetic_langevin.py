@@ -34,22 +34,16 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from liesample.samplers.contract import Sampler, sampling_api, setting
-from liesample.samplers.cotangent.geometric import (
-    check_positive_step_size,
-    ravelled,
-    scheme_setting,
-)
+from liesample.samplers.cotangent.geometric import ravelled, scheme_setting
 from liesample.samplers.cotangent.geometric_langevin import (
     check_friction,
     langevin_scheme,
     transition,
 )
 from liesample.samplers.cotangent.magnetic import (
-    check_inverse_mass_matrix,
-    check_magnetic_field,
+    check_parameters,
     check_starts,
     euclidean_move,
     initial_values,
@@ -130,10 +124,7 @@ def build_kernel(integrator="baoab"):
         friction,
         magnetic_field,
     ):
-        d = state.momentum.shape[0]
-        check_positive_step_size(step_size)
-        check_inverse_mass_matrix(inverse_mass_matrix, d)
-        check_magnetic_field(magnetic_field, d)
+        check_parameters(step_size, inverse_mass_matrix, magnetic_field, state.momentum.shape[0])
         check_friction(friction)
         move = euclidean_move(
             step_size, inverse_mass_matrix, magnetic_field, scheme, state.momentum.dtype, False
@@ -177,10 +168,7 @@ def as_top_level_api(
     liesample.samplers.contract.Sampler
         ``init(position, rng_key=None)`` and ``step(rng_key, state) -> (state, info)``.
     """
-    check_positive_step_size(step_size)
-    check_inverse_mass_matrix(inverse_mass_matrix)
-    d = np.shape(inverse_mass_matrix)[0]
-    check_magnetic_field(magnetic_field, d)
+    d = check_parameters(step_size, inverse_mass_matrix, magnetic_field)
     check_friction(friction)
     scheme = langevin_scheme(integrator)
     move = euclidean_move(step_size, inverse_mass_matrix, magnetic_field, scheme)
@@ -197,9 +185,6 @@ def as_top_level_api(
     def step_fn(rng_key, state):
         return _step(rng_key, state, logdensity_fn, move, friction)
 
-    def check_positions(positions, **_):
-        check_starts(positions, logdensity_fn, d)
-
     settings = {
         "sampler": "magnetic_langevin",
         "step_size": setting(step_size),
@@ -207,6 +192,7 @@ def as_top_level_api(
         "friction": setting(friction),
         **scheme_setting(integrator, "baoab"),
     }
+    check_positions = check_starts(logdensity_fn, d)
     return Sampler(init_fn, step_fn, settings=settings, check_positions=check_positions)
 
 

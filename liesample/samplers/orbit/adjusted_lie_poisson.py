@@ -61,7 +61,12 @@ from liesample.foundation.validation import concrete_array, finite_float
 from liesample.integrators.chain_loop import DEFAULT_NOISE_BLOCK_SIZE, NoiseBlocks, check_block_size
 from liesample.integrators.stability import check_precision, stiffness
 from liesample.samplers.contract import Sampler, StepSizeTuning, sampling_api
-from liesample.samplers.orbit.starts import check_orbit_starts, check_start_energy, distinct_orbits
+from liesample.samplers.orbit.starts import (
+    check_orbit_starts,
+    check_start_energy,
+    distinct_orbits,
+    orbit_init_fn,
+)
 
 __all__ = [
     "DEFAULT_TARGET_ACCEPTANCE_RATE",
@@ -307,10 +312,8 @@ def as_top_level_api(
     target_acceptance_rate : float in (0, 1)
         What the warm-up's dual averaging aims at (default 0.574).
     noise_block_size : int
-        Steps whose draws are made at once in :func:`liesample.sample`, the warm-up and the
-        other drivers (default 32; :mod:`liesample.integrators.chain_loop`). Block ``b`` of chain
-        ``c`` is drawn from ``fold_in(key_c, b)``, so the draws do not depend on how a run is
-        chunked; another block size gives other draws of the same law.
+        Steps whose draws are made at once, in the warm-up too (default 32); as for
+        :func:`liesample.samplers.orbit.lie_poisson_langevin.as_top_level_api`.
 
     Returns
     -------
@@ -371,12 +374,7 @@ def as_top_level_api(
             position = positions[chain]
             check_precision(system, beta, 0.5 * beta * sigma**2, position, position.dtype)
 
-    def init_fn(position, rng_key=None):
-        state = init(position, system, rng_key)
-        value = concrete_array(position)
-        if value is not None:
-            check_orbits(np.asarray(value, dtype=jnp.result_type(float))[None], [0])
-        return state
+    init_fn = orbit_init_fn(init, system, check_orbits)
 
     def check_positions(positions, *, step_size_checks=True):
         positions = np.asarray(positions, dtype=jnp.result_type(float))

@@ -41,7 +41,12 @@ from liesample.integrators.stability import (
     stiffness_on_orbits,
 )
 from liesample.samplers.contract import Sampler, StepSizeTuning, sampling_api
-from liesample.samplers.orbit.starts import check_orbit_starts, check_start_energy, distinct_orbits
+from liesample.samplers.orbit.starts import (
+    check_orbit_starts,
+    check_start_energy,
+    distinct_orbits,
+    orbit_init_fn,
+)
 
 __all__ = [
     "DEFAULT_BIAS_TOLERANCE",
@@ -338,12 +343,7 @@ def as_top_level_api(
         for chain in representatives:
             check_precision(system, beta, theta, positions[chain], positions.dtype)
 
-    def init_fn(position, rng_key=None):
-        state = init(position, system, rng_key)
-        value = concrete_array(position)
-        if value is not None:
-            check_orbits(np.asarray(value, dtype=jnp.result_type(float))[None], [0])
-        return state
+    init_fn = orbit_init_fn(init, system, check_orbits)
 
     def step_fn(rng_key, state):
         return kernel(rng_key, state, current_step(), sigma, theta)

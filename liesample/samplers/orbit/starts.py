@@ -15,9 +15,25 @@ import numpy as np
 
 from liesample.dynamics.system import LiePoissonSystem
 from liesample.foundation.compile import jit
+from liesample.foundation.validation import concrete_array
 from liesample.samplers.contract import PositionCheck, first_bad_chain, raise_first_bad
 
-__all__ = ["check_orbit_starts", "check_start_energy", "distinct_orbits"]
+__all__ = ["check_orbit_starts", "check_start_energy", "distinct_orbits", "orbit_init_fn"]
+
+
+def orbit_init_fn(init, system: LiePoissonSystem, check_orbits):
+    """``init_fn(position, rng_key=None)`` of an orbit sampler: ``init(position, system,
+    rng_key)``, and a concrete ``position`` passed to ``check_orbits(positions, [0])`` as the
+    one chain of a batch (the sampler's own step-size and precision checks)."""
+
+    def init_fn(position, rng_key=None):
+        state = init(position, system, rng_key)
+        value = concrete_array(position)
+        if value is not None:
+            check_orbits(np.asarray(value, dtype=jnp.result_type(float))[None], [0])
+        return state
+
+    return init_fn
 
 
 def _start_values(system):

@@ -37,6 +37,7 @@ from liesample.samplers.spins.lattice import (
     init,
     precess,
     require_isotropic,
+    spin_sampler,
     sublattices,
 )
 from liesample.systems.heisenberg import SpinLatticeSystem
@@ -109,21 +110,16 @@ def as_top_level_api(
         raise ValueError("heat_bath_sweeps + overrelaxation must be >= 1 (a step must move)")
     kernel = build_kernel(system, heat_bath_sweeps, overrelaxation)
 
-    def init_fn(position, rng_key=None):
-        return init(position, system, rng_key)
-
-    def step_fn(rng_key, state):
-        return kernel(rng_key, state, beta, precession_angle)
-
-    settings = {
-        "sampler": "heisenberg_heat_bath",
-        "system": system.name,
-        "beta": beta,
-        "heat_bath_sweeps": heat_bath_sweeps,
-        "overrelaxation": overrelaxation,
-        "precession_angle": precession_angle,
-    }
-    return Sampler(init_fn, step_fn, settings=settings)
+    return spin_sampler(
+        "heisenberg_heat_bath",
+        kernel,
+        system,
+        beta,
+        precession_angle,
+        heat_bath_sweeps=heat_bath_sweeps,
+        overrelaxation=overrelaxation,
+        precession_angle=precession_angle,
+    )
 
 
 heisenberg_heat_bath = sampling_api(

@@ -31,6 +31,7 @@ from liesample.samplers.spins.lattice import (
     energy_change,
     finish_step,
     init,
+    spin_sampler,
     sublattice_field,
     sublattices,
 )
@@ -114,20 +115,15 @@ def as_top_level_api(
     proposal_scale = finite_float("proposal_scale", proposal_scale, positive=True)
     kernel = build_kernel(system, proposal)
 
-    def init_fn(position, rng_key=None):
-        return init(position, system, rng_key)
-
-    def step_fn(rng_key, state):
-        return kernel(rng_key, state, beta, proposal_scale)
-
-    settings = {
-        "sampler": "heisenberg_metropolis",
-        "system": system.name,
-        "beta": beta,
-        "proposal": proposal,
-        "proposal_scale": proposal_scale,
-    }
-    return Sampler(init_fn, step_fn, settings=settings)
+    return spin_sampler(
+        "heisenberg_metropolis",
+        kernel,
+        system,
+        beta,
+        proposal_scale,
+        proposal=proposal,
+        proposal_scale=proposal_scale,
+    )
 
 
 heisenberg_metropolis = sampling_api(

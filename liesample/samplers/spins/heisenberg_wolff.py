@@ -34,6 +34,7 @@ from liesample.samplers.spins.lattice import (
     check_spin_system,
     finish_step,
     init,
+    spin_sampler,
 )
 from liesample.systems.heisenberg import SpinLatticeSystem, neighbour_table
 from liesample.targets.spins import von_mises_fisher
@@ -180,14 +181,7 @@ def as_top_level_api(system: SpinLatticeSystem, *, beta) -> Sampler:
         )
     kernel = build_kernel(system)
 
-    def init_fn(position, rng_key=None):
-        return init(position, system, rng_key)
-
-    def step_fn(rng_key, state):
-        return kernel(rng_key, state, beta)
-
-    settings = {"sampler": "heisenberg_wolff", "system": system.name, "beta": beta}
-    return Sampler(init_fn, step_fn, settings=settings)
+    return spin_sampler("heisenberg_wolff", kernel, system, beta)
 
 
 heisenberg_wolff = sampling_api(

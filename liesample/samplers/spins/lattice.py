@@ -35,6 +35,7 @@ import numpy as np
 
 from liesample.foundation.validation import finite_float
 from liesample.geometry.algebras import so3
+from liesample.samplers.contract import Sampler
 from liesample.systems.heisenberg import (
     SpinLatticeSystem,
     colouring,
@@ -58,6 +59,7 @@ __all__ = [
     "local_field",
     "precess",
     "require_isotropic",
+    "spin_sampler",
     "sublattice_field",
     "sublattices",
 ]
@@ -109,6 +111,21 @@ def init(position, system: SpinLatticeSystem, rng_key=None) -> SpinState:
     del rng_key
     system.check_position(position)
     return SpinState(jnp.asarray(position, dtype=jnp.result_type(float)))
+
+
+def spin_sampler(name: str, kernel, system: SpinLatticeSystem, beta, *parameters, **settings):
+    """The :class:`~liesample.samplers.contract.Sampler` of ``kernel(rng_key, state, beta,
+    *parameters)`` on ``system`` (keyless :func:`init`); its settings are ``name``, the system,
+    ``beta``, then ``settings`` in order."""
+
+    def init_fn(position, rng_key=None):
+        return init(position, system, rng_key)
+
+    def step_fn(rng_key, state):
+        return kernel(rng_key, state, beta, *parameters)
+
+    settings = {"sampler": name, "system": system.name, "beta": beta, **settings}
+    return Sampler(init_fn, step_fn, settings=settings)
 
 
 class Sublattice(NamedTuple):
