@@ -6,7 +6,7 @@ Run with ``.venv/bin/python examples/numpyro_magnetic_hmc.py`` (about 15 s on 2 
 2. ``blackjax.window_adaptation(liesample.magnetic_hmc, ...)`` tunes the step size and the
    diagonal inverse mass matrix (with a provisional zero field).
 3. The field is built from the adapted mass matrix and step size with
-   :func:`liesample.samplers.cotangent.magnetic.default_magnetic_field` and its tuning rule (the field
+   :func:`liesample.default_magnetic_field` and its tuning rule (the field
    turns the whitened velocity by ``ANGLE_PER_STEP`` rad per leapfrog step), and 4 chains are
    run with ``liesample.magnetic_hmc``.
 4. Draws are mapped back to the constrained space and summarised with ArviZ.
@@ -29,7 +29,6 @@ from jax.flatten_util import ravel_pytree
 from numpyro.infer.util import initialize_model
 
 import liesample
-from liesample.samplers.cotangent.magnetic import default_magnetic_field
 
 Y = np.array([28.0, 8.0, -3.0, 7.0, -1.0, 1.0, 18.0, 12.0])
 SIGMA = np.array([15.0, 10.0, 16.0, 11.0, 9.0, 11.0, 10.0, 18.0])
@@ -71,7 +70,7 @@ def main(seed: int = 0, num_draws: int = NUM_DRAWS):
     (state, parameters), _ = warmup.run(key_warmup, position, num_steps=NUM_WARMUP)
     inverse_mass_matrix = np.asarray(parameters["inverse_mass_matrix"])
     strength = ANGLE_PER_STEP / float(parameters["step_size"])
-    parameters["magnetic_field"] = default_magnetic_field(inverse_mass_matrix, strength)
+    parameters["magnetic_field"] = liesample.default_magnetic_field(inverse_mass_matrix, strength)
     sampler = liesample.magnetic_hmc(logdensity_fn, **parameters)
 
     def chain(key):

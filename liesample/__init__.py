@@ -19,6 +19,7 @@ from liesample.integrators import accuracy, drivers, stability
 from liesample.integrators.drivers import simulate
 from liesample.run import sharding
 from liesample.run.runner import load_chains, sample, sample_chains
+from liesample.samplers.cotangent._euclidean import default_magnetic_field
 from liesample.samplers.cotangent.geometric_hmc import geometric_hmc
 from liesample.samplers.cotangent.geometric_langevin import geometric_langevin
 from liesample.samplers.cotangent.magnetic_hmc import jittered_magnetic_hmc, magnetic_hmc
@@ -52,6 +53,7 @@ __all__ = [
     "adjusted_lie_poisson",
     "algebras",
     "analysis",
+    "default_magnetic_field",
     "diagnostics",
     "drivers",
     "dynamics",

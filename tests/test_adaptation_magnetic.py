@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import liesample
-from liesample.samplers.cotangent.magnetic import default_magnetic_field
+from liesample.samplers.cotangent._euclidean import default_magnetic_field
 from liesample.samplers.cotangent.magnetic_hmc import jittered_magnetic_hmc
 from liesample.targets import correlated_gaussian
 from liesample.tuning.adaptation import (

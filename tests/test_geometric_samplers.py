@@ -298,7 +298,7 @@ def test_blackjax_driver_info_contract_and_divergences_are_rejected():
         jax.random.key(8), sampler, num_steps=300, initial_position=jnp.array([0.0, 0.0, 1.0]),
         transform=lambda state, info: (state.position, info),
     )
-    assert set(liesample.samplers.cotangent.geometric.GeometricInfo._fields) >= {
+    assert set(liesample.samplers.cotangent._core.GeometricInfo._fields) >= {
         "acceptance_rate", "is_divergent", "energy"
     }
     assert np.all(np.isfinite(positions)) and np.all(positions[:, 2] > -0.2)

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 import liesample
+from liesample.samplers.spins._lattice import local_energy_change
 from liesample.samplers.spins.heisenberg_metropolis import heisenberg_metropolis
-from liesample.samplers.spins.lattice import local_energy_change
 from liesample.systems import rigid_body
 from liesample.systems.heisenberg import (
     colouring,

@@ -18,7 +18,11 @@ from blackjax.util import run_inference_algorithm
 import liesample
 from liesample.samplers.cotangent import magnetic_hmc as hmc_module
 from liesample.samplers.cotangent import magnetic_langevin as langevin_module
-from liesample.samplers.cotangent.magnetic import default_magnetic_field, magnetic_flow, make_metric
+from liesample.samplers.cotangent._euclidean import (
+    default_magnetic_field,
+    magnetic_flow,
+    make_metric,
+)
 from liesample.samplers.cotangent.magnetic_hmc import (
     MagneticHMCInfo,
     MagneticHMCState,

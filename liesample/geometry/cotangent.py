@@ -18,7 +18,7 @@ each solved exactly:
   ``q ← q + M⁻¹ t φ₁(tGM⁻¹) p`` (:func:`liesample.geometry.poisson.kinetic_magnetic_exponential`);
 - ``O`` (:func:`refresh`): the exact Ornstein–Uhlenbeck flow of the friction and noise,
   ``dp = −γM⁻¹p dt + √(2γ) dW`` (the derived dissipation of ``sec:dissipation``);
-- the Metropolis test, in :mod:`liesample.samplers.cotangent.geometric`.
+- the Metropolis test, in :mod:`liesample.samplers.cotangent._core`.
 
 :func:`compose` chains them by a *scheme*, a list of ``(effect, fraction of the step)``
 pairs, as BlackJAX composes its palindromic integrators from coefficient lists. The named

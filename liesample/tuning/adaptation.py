@@ -55,7 +55,7 @@ from liesample.foundation.compile import jit
 from liesample.foundation.validation import finite_float
 from liesample.geometry import spaces
 from liesample.samplers.contract import first_bad_chain
-from liesample.samplers.cotangent.magnetic import default_magnetic_field
+from liesample.samplers.cotangent._euclidean import default_magnetic_field
 from liesample.samplers.cotangent.magnetic_hmc import magnetic_hmc
 
 __all__ = [

@@ -16,7 +16,11 @@ import numpy as np
 import pytest
 
 import liesample
-from liesample.samplers.cotangent.magnetic import default_magnetic_field, magnetic_flow, make_metric
+from liesample.samplers.cotangent._euclidean import (
+    default_magnetic_field,
+    magnetic_flow,
+    make_metric,
+)
 from liesample.targets import correlated_gaussian
 
 TARGET = correlated_gaussian(3, 30.0, seed=4, mean=[1.0, -0.5, 0.25])

@@ -1,7 +1,7 @@
 """Geometric HMC on Lie groups, spheres and products with ``Rᵈ``: Metropolis-adjusted.
 
 A BlackJAX-shaped module (``init``, ``build_kernel``, ``as_top_level_api``). One transition
-(:func:`liesample.samplers.cotangent.geometric.hamiltonian_transition`):
+(:func:`liesample.samplers.cotangent._core.hamiltonian_transition`):
 
 1. draw ``p ~ N(0, M)`` in algebra coordinates (tangent on spheres), or refresh it partially,
    ``p ← α p + √(1 − α²) ξ`` (``momentum_persistence = α``);
@@ -33,7 +33,7 @@ import numpy as np
 
 from liesample.foundation.validation import concrete_array
 from liesample.samplers.contract import Sampler, sampling_api, setting
-from liesample.samplers.cotangent.geometric import (
+from liesample.samplers.cotangent._core import (
     GeometricInfo,
     GeometricState,
     Move,
@@ -97,7 +97,7 @@ def transition(
     persistent=True,
 ):
     """One geometric HMC transition (``move`` from
-    :func:`liesample.samplers.cotangent.geometric.make_move` for a palindromic scheme)."""
+    :func:`liesample.samplers.cotangent._core.make_move` for a palindromic scheme)."""
     key_momentum, key_accept = jax.random.split(rng_key)
     fresh = move.bundle.sample_momentum(key_momentum, state.position)
     momentum = partial_refresh(fresh, state.momentum, momentum_persistence)
@@ -195,7 +195,7 @@ def as_top_level_api(
         A constant antisymmetric ``G`` on the ``D`` Euclidean coordinates (every ``Euclidean``
         block raveled, in the order of the space's pytree leaves). It changes the dynamics,
         not the target; ``None`` (default) is plain geometric HMC. See
-        :func:`liesample.samplers.cotangent.magnetic.default_magnetic_field`.
+        :func:`liesample.samplers.cotangent._euclidean.default_magnetic_field`.
     divergence_threshold : float
         ``ΔH`` above which a transition is flagged divergent.
     momentum_persistence : float in [0, 1)

@@ -35,7 +35,7 @@ import jax.numpy as jnp
 from liesample.foundation.validation import concrete_array, finite_float
 from liesample.geometry.cotangent import check_scheme
 from liesample.samplers.contract import Sampler, sampling_api, setting
-from liesample.samplers.cotangent.geometric import (
+from liesample.samplers.cotangent._core import (
     GeometricInfo,
     GeometricState,
     Move,
@@ -122,7 +122,7 @@ def transition(
     rng_key, state: GeometricState, move: Move, friction, adjusted, divergence_threshold
 ):
     """One geometric Langevin transition (``move`` from
-    :func:`liesample.samplers.cotangent.geometric.make_move` for a :func:`langevin_scheme`)."""
+    :func:`liesample.samplers.cotangent._core.make_move` for a :func:`langevin_scheme`)."""
     if not adjusted:
         new_state, outcome = unadjusted_transition(
             rng_key, state, move, friction, divergence_threshold

@@ -38,9 +38,8 @@ import jax.numpy as jnp
 
 from liesample.geometry.cotangent import LEAPFROG, PhasePoint, compose, drift, kick
 from liesample.samplers.contract import Sampler, sampling_api, setting
-from liesample.samplers.cotangent.geometric import hamiltonian_scheme, ravelled, scheme_setting
-from liesample.samplers.cotangent.geometric_hmc import check_integer, check_options, transition
-from liesample.samplers.cotangent.magnetic import (
+from liesample.samplers.cotangent._core import hamiltonian_scheme, ravelled, scheme_setting
+from liesample.samplers.cotangent._euclidean import (
     MagneticFlow,
     check_parameters,
     check_starts,
@@ -48,6 +47,7 @@ from liesample.samplers.cotangent.magnetic import (
     initial_values,
     ravel,
 )
+from liesample.samplers.cotangent.geometric_hmc import check_integer, check_options, transition
 
 __all__ = [
     "ADAPTATION",
@@ -253,7 +253,7 @@ def as_top_level_api(
         Steps of the scheme per transition (gradient evaluations for the leapfrog).
     magnetic_field : array, (d, d)
         Antisymmetric ``G`` (any rank, ``0`` allowed), in the order of the raveled position;
-        see :func:`liesample.samplers.cotangent.magnetic.default_magnetic_field`.
+        see :func:`liesample.default_magnetic_field`.
     divergence_threshold : float
         ``ΔH`` above which a transition is flagged divergent (default 1000).
     momentum_persistence : float in [0, 1)

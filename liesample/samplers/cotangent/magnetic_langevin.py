@@ -36,18 +36,18 @@ import jax
 import jax.numpy as jnp
 
 from liesample.samplers.contract import Sampler, sampling_api, setting
-from liesample.samplers.cotangent.geometric import ravelled, scheme_setting
-from liesample.samplers.cotangent.geometric_langevin import (
-    check_friction,
-    langevin_scheme,
-    transition,
-)
-from liesample.samplers.cotangent.magnetic import (
+from liesample.samplers.cotangent._core import ravelled, scheme_setting
+from liesample.samplers.cotangent._euclidean import (
     check_parameters,
     check_starts,
     euclidean_move,
     initial_values,
     ravel,
+)
+from liesample.samplers.cotangent.geometric_langevin import (
+    check_friction,
+    langevin_scheme,
+    transition,
 )
 
 __all__ = [
@@ -157,7 +157,7 @@ def as_top_level_api(
         ``θ > 0``; the noise is ``σ = √(2θ)`` (``θ = βσ²/2`` at ``β = 1``).
     magnetic_field : array, (d, d)
         Antisymmetric ``G``; see
-        :func:`liesample.samplers.cotangent.magnetic.default_magnetic_field`.
+        :func:`liesample.samplers.cotangent._euclidean.default_magnetic_field`.
     integrator : str or sequence of (effect, fraction) pairs
         The splitting of one step: ``"baoab"`` (default), ``"obabo"``, ``"obab"``, or a
         coefficient list of ``"B"``, ``"A"`` and ``"O"`` as for

@@ -61,7 +61,7 @@ from liesample.foundation.validation import concrete_array, finite_float
 from liesample.integrators.chain_loop import DEFAULT_NOISE_BLOCK_SIZE, NoiseBlocks, check_block_size
 from liesample.integrators.stability import check_precision, stiffness
 from liesample.samplers.contract import Sampler, StepSizeTuning, sampling_api
-from liesample.samplers.orbit.starts import (
+from liesample.samplers.orbit._starts import (
     check_orbit_starts,
     check_start_energy,
     distinct_orbits,

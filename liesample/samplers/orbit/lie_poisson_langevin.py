@@ -41,7 +41,7 @@ from liesample.integrators.stability import (
     stiffness_on_orbits,
 )
 from liesample.samplers.contract import Sampler, StepSizeTuning, sampling_api
-from liesample.samplers.orbit.starts import (
+from liesample.samplers.orbit._starts import (
     check_orbit_starts,
     check_start_energy,
     distinct_orbits,

@@ -11,7 +11,7 @@ A BlackJAX-shaped module (``init``, ``build_kernel``, ``as_top_level_api``). One
    precession about ``F_k`` by ``precession_angle`` (``π``: the classical over-relaxation
    ``s ↦ 2(s·F̂)F̂ − s``), which keeps ``h``.
 
-Each colour-class move keeps ``exp(−βh)`` exactly (:mod:`liesample.samplers.spins.lattice`), so
+Each colour-class move keeps ``exp(−βh)`` exactly (:mod:`liesample.samplers.spins._lattice`), so
 their composition does: there is no step size and no discretisation bias. Heat bath alone is
 ergodic; over-relaxation alone is microcanonical (it never changes ``h``), and the pair is the
 physicists' standard sampler for O(3) models. Isotropic systems only (``anisotropy = 0``); any
@@ -26,7 +26,7 @@ import jax
 
 from liesample.foundation.validation import finite_float
 from liesample.samplers.contract import Sampler, sampling_api
-from liesample.samplers.spins.lattice import (
+from liesample.samplers.spins._lattice import (
     SpinInfo,
     SpinState,
     check_beta,

@@ -12,7 +12,7 @@ Proposals (both symmetric, so the acceptance probability is ``min(1, exp(−βΔ
 - ``"rotation"``: ``s' = (s + ε g)/|s + ε g|`` with ``g ~ N(0, I₃)``, whose law depends only on
   ``s·s'`` (isotropy), with tunable size ``ε = proposal_scale``.
 
-``Δh`` at site ``k`` is :func:`liesample.samplers.spins.lattice.energy_change` in the local field
+``Δh`` at site ``k`` is :func:`liesample.samplers.spins._lattice.energy_change` in the local field
 ``F_k = J Σ_{j~k} s_j + B`` (any coupling, field and anisotropy).
 """
 
@@ -23,7 +23,7 @@ import jax.numpy as jnp
 
 from liesample.foundation.validation import finite_float
 from liesample.samplers.contract import Sampler, sampling_api
-from liesample.samplers.spins.lattice import (
+from liesample.samplers.spins._lattice import (
     SpinInfo,
     SpinState,
     check_beta,

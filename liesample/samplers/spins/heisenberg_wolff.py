@@ -28,7 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from liesample.samplers.contract import Sampler, sampling_api
-from liesample.samplers.spins.lattice import (
+from liesample.samplers.spins._lattice import (
     SpinState,
     check_beta,
     check_spin_system,

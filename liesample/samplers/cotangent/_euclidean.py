@@ -31,7 +31,7 @@ from liesample.geometry.cotangent import (
 )
 from liesample.geometry.spaces import Euclidean, check_inverse_mass_matrix
 from liesample.samplers.contract import first_bad_chain
-from liesample.samplers.cotangent.geometric import check_positive_step_size, make_move
+from liesample.samplers.cotangent._core import check_positive_step_size, make_move
 
 __all__ = [
     "MagneticFlow",
@@ -68,9 +68,9 @@ def check_parameters(step_size, inverse_mass_matrix, magnetic_field, dimension=N
 def euclidean_move(
     step_size, inverse_mass_matrix, magnetic_field, scheme, dtype=None, precompute=True
 ):
-    """The geometric samplers' :class:`~liesample.samplers.cotangent.geometric.Move` on
+    """The geometric samplers' :class:`~liesample.samplers.cotangent._core.Move` on
     ``Euclidean((d,))`` with ``M⁻¹``, ``G`` and a checked ``scheme`` (its gradient is set per
-    move by :func:`liesample.samplers.cotangent.geometric.ravelled`)."""
+    move by :func:`liesample.samplers.cotangent._core.ravelled`)."""
     d = np.shape(inverse_mass_matrix)[0]
     return make_move(
         None, Euclidean((d,)), step_size, inverse_mass_matrix, magnetic_field, scheme, dtype,
