@@ -180,6 +180,8 @@ def demo(args) -> int:
         key_iso,
         starts,
         iso_draws,
+        num_warmup=0,
+        exact_starts=True,  # uniform on the sphere: the isotropic body's exact law
         progress=False,
     )
     iso_mu = iso.posterior["mu"].values

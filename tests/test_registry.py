@@ -175,7 +175,7 @@ def test_sample_then_resume(case, sampler, uninterrupted, tmp_path):
     saved_draws = NUM_DRAWS - CHUNK_DRAWS
     options = {"chunk_draws": CHUNK_DRAWS, "progress": False, "output": path}
     tree = liesample.sample(
-        sampler, KEY, starts, saved_draws, event_dims=_event_dims(starts), **options
+        sampler, KEY, starts, saved_draws, num_warmup=0, event_dims=_event_dims(starts), **options
     )
     expected = _first_draws(uninterrupted.positions, saved_draws)
     names = _variable_names(starts)

@@ -120,7 +120,7 @@ def test_magnetic_divergences_reach_sample_stats_and_are_reduced_with_any():
         steps = liesample.sample_chains(sampler, key, starts, 100, progress=False)
     with pytest.warns(RuntimeWarning, match="divergent"):
         tree = liesample.sample(sampler, key, starts, 20, thinning=5, progress=False,
-                                event_dims=("coordinate",))  # fmt: skip
+                                num_warmup=0, event_dims=("coordinate",))  # fmt: skip
     diverging = tree.sample_stats["diverging"].values
     assert diverging.dtype == bool and diverging.any()
     np.testing.assert_array_equal(

@@ -70,7 +70,7 @@ SCRIPT = textwrap.dedent(
     algorithm = liesample.lie_poisson_langevin(
         system, beta=2.0, step_size=0.05, integrator="lie_euler"
     )
-    tree = liesample.sample(algorithm, key, starts, 6, progress=False, devices=2)
+    tree = liesample.sample(algorithm, key, starts, 6, num_warmup=0, progress=False, devices=2)
     short = liesample.sample_chains(algorithm, key, starts, 6, progress=False)
     np.testing.assert_allclose(np.asarray(tree.posterior["mu"]), short.positions, atol=1e-13)
     # The chunk really is split: each device holds half of the chains' states.

@@ -170,6 +170,10 @@ def pytree_variables(positions) -> dict[str, tuple[np.ndarray, str]]:
     return variables
 
 
+DEFAULT_EVENT_DIMS = {0: (), 1: ("component",), 2: ("row", "col")}
+"""Dims of a single array's event axes by their number, when ``event_dims`` is not given."""
+
+
 def to_datatree(
     positions,
     info=None,
@@ -205,8 +209,9 @@ def to_datatree(
     var_name : str, default "mu"
         Name of the sampled variable in the ``posterior`` group (single-array positions; a
         pytree's variables are named from its key paths).
-    event_dims : sequence of str, default ("component",)
-        Dimension names for the event axes; one per axis after (chain, draw). For pytree
+    event_dims : sequence of str, optional
+        Dimension names for the event axes; one per axis after (chain, draw). Default: by the
+        event's rank, ``()``, ``("component",)``, ``("row", "col")``, else ``dim_k``. For pytree
         positions, optionally a mapping from a leaf's name to its dims (the others keep
         ``<name>_dim_k``).
     coords : mapping, optional
@@ -230,13 +235,16 @@ def to_datatree(
         var_name = "mu" if var_name is None else var_name
         if not isinstance(var_name, str) or not var_name:
             raise ValueError(f"var_name must be a non-empty string, got {var_name!r}")
-        event_dims = ("component",) if event_dims is None else event_dims
         if isinstance(event_dims, Mapping):
             raise TypeError("event_dims must be a sequence of dim names for array positions")
         pos = np.asarray(positions)
         if pos.ndim < 2:
             raise ValueError(
                 f"positions must have shape (chains, draws, *event_shape), got shape {pos.shape}"
+            )
+        if event_dims is None:
+            event_dims = DEFAULT_EVENT_DIMS.get(
+                pos.ndim - 2, tuple(f"dim_{k}" for k in range(pos.ndim - 2))
             )
         variables = {var_name: (pos, var_name)}
         leaf_dims = {var_name: tuple(event_dims)}

@@ -1,4 +1,5 @@
-"""Figures for sampler output: traces, time correlations, marginals, sphere densities, cost.
+"""Figures for sampler output: traces, time correlations, marginals, sphere densities, cost,
+spectra per degree and vorticity maps.
 
 Every function draws on a standalone :class:`matplotlib.figure.Figure` rendered by the Agg
 backend (no pyplot state, no display needed), writes a PNG and returns its path.
@@ -9,16 +10,21 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-from matplotlib.figure import Figure
+
+if TYPE_CHECKING:  # matplotlib is imported only when a figure is drawn
+    from matplotlib.figure import Figure
 
 __all__ = [
     "plot_accuracy_cost",
     "plot_autocorrelation",
     "plot_marginals",
+    "plot_spectra",
     "plot_sphere_density",
     "plot_traces",
+    "plot_vorticity",
 ]
 
 _DPI = 150
@@ -45,6 +51,38 @@ def _component_names(names, d: int) -> list[str]:
     if names is None or len(names) != d:
         return _default_names(d)
     return [str(n) for n in names]
+
+
+def _as_chains(positions) -> np.ndarray:
+    """``positions`` as a float array ``(chains, draws, d)`` (a missing ``d`` axis is added)."""
+    pos = np.asarray(positions, dtype=float)
+    if pos.ndim == 2:
+        pos = pos[..., None]
+    if pos.ndim != 3 or pos.shape[0] < 1 or pos.shape[1] < 1:
+        raise ValueError(
+            f"positions must have shape (chains, draws, d) or (chains, draws), "
+            f"got {np.shape(positions)}"
+        )
+    return pos
+
+
+def _as_samples(samples) -> np.ndarray:
+    """``samples`` as a float array ``(n, d)``, ``n ≥ 2`` (chains flattened, ``d`` added)."""
+    x = np.asarray(samples, dtype=float)
+    if x.ndim == 1:
+        x = x[:, None]
+    elif x.ndim == 3:
+        x = x.reshape(-1, x.shape[-1])
+    if x.ndim != 2 or x.shape[0] < 2 or x.shape[1] < 1:
+        raise ValueError(f"samples must have shape (n, d) with n >= 2, got {np.shape(samples)}")
+    return x
+
+
+def _figure(**options) -> Figure:
+    """A standalone Agg :class:`matplotlib.figure.Figure` (matplotlib imported here, lazily)."""
+    from matplotlib.figure import Figure
+
+    return Figure(**options)
 
 
 def _save(fig: Figure, path) -> Path:
@@ -75,21 +113,14 @@ def plot_traces(positions, path, *, names=("μ₁", "μ₂", "μ₃"), max_draws
     -------
     pathlib.Path
     """
-    pos = np.asarray(positions, dtype=float)
-    if pos.ndim == 2:
-        pos = pos[..., None]
-    if pos.ndim != 3 or pos.shape[0] < 1 or pos.shape[1] < 1:
-        raise ValueError(
-            f"positions must have shape (chains, draws, d) or (chains, draws), "
-            f"got {np.shape(positions)}"
-        )
+    pos = _as_chains(positions)
     if int(max_draws) < 1:
         raise ValueError(f"max_draws must be >= 1, got {max_draws}")
     n_chains, n_draws, d = pos.shape
     shown = min(n_draws, int(max_draws))
     labels = _component_names(names, d)
 
-    fig = Figure(figsize=(10, 1.2 + 1.9 * d), layout="constrained")
+    fig = _figure(figsize=(10, 1.2 + 1.9 * d), layout="constrained")
     axes = np.atleast_1d(fig.subplots(d, 1, sharex=True, squeeze=False)[:, 0])
     alpha = 0.9 if n_chains <= 4 else max(0.25, 3.0 / n_chains)
     draws = np.arange(shown)
@@ -154,7 +185,7 @@ def plot_autocorrelation(
             + ("" if se is None else f" and se {se.shape}")
         )
 
-    fig = Figure(figsize=(7.5, 4.5), layout="constrained")
+    fig = _figure(figsize=(7.5, 4.5), layout="constrained")
     ax = fig.subplots()
     ax.axhline(0.0, color="0.6", lw=0.8)
     if se is not None:
@@ -209,13 +240,7 @@ def plot_marginals(
     -------
     pathlib.Path
     """
-    x = np.asarray(samples, dtype=float)
-    if x.ndim == 1:
-        x = x[:, None]
-    elif x.ndim == 3:
-        x = x.reshape(-1, x.shape[-1])
-    if x.ndim != 2 or x.shape[0] < 2 or x.shape[1] < 1:
-        raise ValueError(f"samples must have shape (n, d) with n >= 2, got {np.shape(samples)}")
+    x = _as_samples(samples)
     n, d = x.shape
     if exact_densities is not None and len(exact_densities) != d:
         raise ValueError(
@@ -229,7 +254,7 @@ def plot_marginals(
 
     ncols = min(d, 3)
     nrows = math.ceil(d / ncols)
-    fig = Figure(figsize=(4.2 * ncols, 3.4 * nrows + 0.5), layout="constrained")
+    fig = _figure(figsize=(4.2 * ncols, 3.4 * nrows + 0.5), layout="constrained")
     axes = np.atleast_1d(fig.subplots(nrows, ncols, squeeze=False).ravel())
     for i in range(d):
         ax = axes[i]
@@ -334,7 +359,7 @@ def plot_sphere_density(
 
     vmax = max(float(empirical.max()), float(exact.max()) if exact is not None else 0.0)
     panels = [("sampled", empirical)] + ([("exact", exact)] if exact is not None else [])
-    fig = Figure(figsize=(6.0 * len(panels) + 0.6, 3.9), layout="constrained")
+    fig = _figure(figsize=(6.0 * len(panels) + 0.6, 3.9), layout="constrained")
     axes = np.atleast_1d(fig.subplots(1, len(panels), squeeze=False)[0])
     for ax, (label, dens) in zip(axes, panels, strict=True):
         mesh = ax.pcolormesh(lon_edges, z_edges, dens, cmap="viridis", vmin=0.0, vmax=vmax)
@@ -399,7 +424,7 @@ def plot_accuracy_cost(
             continue
         groups.setdefault(str(row[label]), []).append((xv, yv))
 
-    fig = Figure(figsize=(7.0, 5.0), layout="constrained")
+    fig = _figure(figsize=(7.0, 5.0), layout="constrained")
     ax = fig.subplots()
     markers = "osD^vP*X"
     for k, (name, pts) in enumerate(sorted(groups.items())):
@@ -423,4 +448,127 @@ def plot_accuracy_cost(
             color="0.4",
         )
     ax.set_title(title or f"{_AXIS_LABELS.get(y, y)} vs {_AXIS_LABELS.get(x, x)}")
+    return _save(fig, path)
+
+
+_SPECTRUM_LABELS = {"energy": "energy ε_ℓ", "enstrophy": "enstrophy ζ_ℓ"}
+
+
+def _spectrum_rows(values, name, size=None):
+    rows = np.atleast_2d(np.asarray(values, dtype=float))
+    if rows.ndim != 2 or rows.shape[1] < 1 or (size is not None and rows.shape[1] != size):
+        expected = "(degrees,) or (lines, degrees)" if size is None else f"(..., {size})"
+        raise ValueError(f"{name} must have shape {expected}, got {np.shape(values)}")
+    return rows
+
+
+def plot_spectra(
+    spectra,
+    path,
+    *,
+    kind: str = "energy",
+    labels: Sequence[str] | None = None,
+    errors=None,
+    exact=None,
+    title: str | None = None,
+):
+    """Spectra per degree ``ℓ = 1, 2, …`` on log–log axes, one line per row.
+
+    Parameters
+    ----------
+    spectra : array_like, shape (L,) or (lines, L)
+        Values for ``ℓ = 1 … L``: e.g. mean energy spectra
+        (:func:`liesample.systems.zeitlin_states.energy_spectrum` averaged over draws), one row
+        per inverse temperature.
+    path : str or Path
+        Output PNG.
+    kind : {"energy", "enstrophy"}
+        Y-axis label.
+    labels : sequence of str, optional
+        One legend entry per line.
+    errors : array_like, same shape as ``spectra``, optional
+        Standard errors; a ±2·SE band is drawn.
+    exact : array_like, shape (L,) or (lines, L), optional
+        Exact spectra, drawn dashed in the colour of the matching line (one row for all).
+    title : str, optional
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    if kind not in _SPECTRUM_LABELS:
+        raise ValueError(f"kind must be one of {sorted(_SPECTRUM_LABELS)}, got {kind!r}")
+    rows = _spectrum_rows(spectra, "spectra")
+    lines, size = rows.shape
+    if labels is not None and len(labels) != lines:
+        raise ValueError(f"labels must have one entry per line ({lines}), got {len(labels)}")
+    band = None if errors is None else _spectrum_rows(errors, "errors", size)
+    reference = None if exact is None else _spectrum_rows(exact, "exact", size)
+    if band is not None and band.shape[0] != lines:
+        raise ValueError(f"errors must have {lines} rows, got {band.shape[0]}")
+    degrees = np.arange(1, size + 1)
+    fig = _figure(figsize=(6.5, 4.5), layout="constrained")
+    ax = fig.subplots()
+    for i, row in enumerate(rows):
+        colour = f"C{i % 10}"
+        positive = row > 0
+        label = None if labels is None else str(labels[i])
+        ax.plot(degrees[positive], row[positive], "o-", color=colour, ms=3, label=label)
+        if band is not None:
+            low = np.maximum(row - 2 * band[i], row * 1e-3)
+            ax.fill_between(degrees, low, row + 2 * band[i], color=colour, alpha=0.2, lw=0)
+        if reference is not None:
+            target = reference[i if reference.shape[0] == lines else 0]
+            ax.plot(degrees[target > 0], target[target > 0], "--", color=colour, lw=1)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("degree ℓ")
+    ax.set_ylabel(_SPECTRUM_LABELS[kind])
+    ax.grid(alpha=0.3, which="both")
+    if labels is not None:
+        ax.legend(fontsize="small")
+    note = " (dashed: exact)" if exact is not None else ""
+    fig.suptitle(title or f"{kind.capitalize()} spectrum{note}")
+    return _save(fig, path)
+
+
+def plot_vorticity(values, theta, phi, path, *, labels: Sequence[str] | None = None,
+                   title: str | None = None):
+    """Vorticity maps ``ω(θ, φ)`` (latitude–longitude), one panel per field, one colour scale
+    symmetric about 0.
+
+    ``values`` has shape ``(num_theta, num_phi)`` or ``(panels, num_theta, num_phi)`` on
+    colatitudes ``theta`` and longitudes ``phi`` (e.g. from
+    :func:`liesample.systems.zeitlin_states.vorticity_on_grid` or
+    :meth:`liesample.systems.zeitlin.QuantisedHarmonics.grid`). Returns the PNG's path.
+    """
+    fields = np.asarray(values, dtype=float)
+    if fields.ndim == 2:
+        fields = fields[None]
+    theta, phi = np.asarray(theta, dtype=float), np.asarray(phi, dtype=float)
+    if fields.ndim != 3 or fields.shape[1:] != (theta.size, phi.size):
+        raise ValueError(
+            f"values must have shape (panels, {theta.size}, {phi.size}), got {np.shape(values)}"
+        )
+    if labels is not None and len(labels) != len(fields):
+        raise ValueError(f"labels must have one entry per panel ({len(fields)})")
+    scale = float(np.max(np.abs(fields))) or 1.0
+    panels = len(fields)
+    ncols = min(panels, 3)
+    nrows = math.ceil(panels / ncols)
+    fig = _figure(figsize=(4.6 * ncols, 2.6 * nrows + 0.6), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(nrows, ncols, squeeze=False).ravel())
+    latitude, longitude = 90.0 - np.degrees(theta), np.degrees(phi)
+    image = None
+    for i, field in enumerate(fields):
+        image = axes[i].pcolormesh(longitude, latitude, field, cmap="RdBu_r", vmin=-scale,
+                                   vmax=scale, shading="nearest")
+        axes[i].set_xlabel("longitude (°)")
+        axes[i].set_ylabel("latitude (°)")
+        if labels is not None:
+            axes[i].set_title(str(labels[i]), fontsize="small")
+    for ax in axes[panels:]:
+        ax.set_visible(False)
+    fig.colorbar(image, ax=axes[:panels].tolist(), label="ω")
+    fig.suptitle(title or "Vorticity")
     return _save(fig, path)

@@ -107,10 +107,11 @@ class PoissonLangevinSDE:
         return self.structure.apply(z, pullback(coefficients)[0])
 
     def noise_fields(self, z):
-        """The Stratonovich diffusion matrix ``σ [X_{ĥ_1}, …, X_{ĥ_m}]``, shape ``(d, m)``."""
-        gradients = jax.jacrev(self.noise_hamiltonians)(z)  # (m, d)
+        """The Stratonovich diffusion matrix ``σ [X_{ĥ_1}, …, X_{ĥ_m}]``, shape ``z.shape + (m,)``
+        (``(d, m)`` for vector states; matrix states keep their axes in order)."""
+        gradients = jax.jacrev(self.noise_hamiltonians)(z)  # (m, *z.shape)
         fields = jax.vmap(lambda g: self.structure.apply(z, g))(gradients)
-        return self.sigma * fields.T
+        return self.sigma * jnp.moveaxis(fields, 0, -1)
 
 
 def _deterministic_scene(scene):

@@ -142,6 +142,17 @@ class Space:
     mass_shape: tuple[int, ...] = ()
     copy_dimension: int = 1
     compact: bool = True
+    # How draws of a single block are named in a DataTree: the variable, the dim of its copy
+    # axes and the dims of one copy's point.
+    draw_name = "mu"
+    copy_dim = "copy"
+    point_dims: tuple[str, ...] = ()
+
+    def draw_dims(self) -> tuple[str, ...]:
+        """Dims of the position's axes: ``copy_dim`` (numbered if several) then ``point_dims``."""
+        if len(self.shape) == 1:
+            return (self.copy_dim, *self.point_dims)
+        return (*(f"{self.copy_dim}_{k}" for k in range(len(self.shape))), *self.point_dims)
 
     # ---------------------------------------------------------------- shapes
     @property
@@ -236,14 +247,14 @@ class Euclidean(Space):
 
     shape: tuple[int, ...] = ()
     compact = False
+    copy_dim = "component"
 
     def __post_init__(self):
         object.__setattr__(self, "shape", _shape("Euclidean shape", self.shape))
 
     def uniform(self, rng_key, dtype=None):
         raise ValueError(
-            "Euclidean space has no uniform probability law; give the starting position "
-            "explicitly"
+            "Euclidean space has no uniform probability law; give the starting position explicitly"
         )
 
     def perturb(self, x, eps):
@@ -267,6 +278,7 @@ class U1(Space):
     """
 
     shape: tuple[int, ...] = ()
+    draw_name = "theta"
 
     def __post_init__(self):
         object.__setattr__(self, "shape", _shape("U1 shape", self.shape))
@@ -298,6 +310,7 @@ class Sphere(Space):
 
     n: int
     shape: tuple[int, ...] = ()
+    point_dims = ("component",)
 
     def __post_init__(self):
         object.__setattr__(self, "n", _order("Sphere dimension n", self.n, 1))
@@ -397,6 +410,7 @@ def _su_basis(n: int) -> np.ndarray:
 class _MatrixGroup(Space):
     n: int
     shape: tuple[int, ...] = ()
+    point_dims = ("row", "col")
 
     mass_shape = (1,)
 
@@ -459,6 +473,8 @@ class SO(_MatrixGroup):
     Rodrigues' formula for n = 3 and a Hermitian eigendecomposition otherwise.
     """
 
+    draw_name = "R"
+
     def __post_init__(self):
         object.__setattr__(self, "n", _order("SO(n): n", self.n, 2))
         object.__setattr__(self, "shape", _shape("SO shape", self.shape))
@@ -508,6 +524,8 @@ class SU(_MatrixGroup):
     closed-form for n = 2 (``cos|c| I + i sin|c| ĉ·σ``) and a Hermitian eigendecomposition
     otherwise.
     """
+
+    draw_name = "U"
 
     def __post_init__(self):
         object.__setattr__(self, "n", _order("SU(n): n", self.n, 2))

@@ -18,6 +18,11 @@ sphere only (no spin about the point itself).
 
 Ordering: degree ``ℓ = ℓ_min … L``, then ``m = −ℓ … ℓ``; the index of ``(ℓ, m)`` is
 ``ℓ² + ℓ + m − ℓ_min²``. :func:`degrees_and_orders` lists them.
+
+Gridded fields: :func:`harmonic_analysis` (samples on a latitude–longitude grid → coefficients,
+by quadrature on a :func:`gauss_legendre_grid` or by least squares on any colatitudes) and
+:func:`harmonic_synthesis` (back), in NumPy float64 with O(L³) work: a discrete Fourier
+transform in longitude, then one Legendre sum or small least-squares problem per order.
 """
 
 from __future__ import annotations
@@ -30,6 +35,9 @@ import numpy as np
 
 __all__ = [
     "degrees_and_orders",
+    "gauss_legendre_grid",
+    "harmonic_analysis",
+    "harmonic_synthesis",
     "num_harmonics",
     "real_spherical_harmonics",
     "transport_mode",
@@ -164,7 +172,7 @@ def transport_modes(x, max_degree: int):
     return scale * q[..., ell, np.abs(m)] * angular[..., max_degree + m]
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _legendre_polynomials(max_degree):
     """Monomial coefficients ``A[ℓ, m, k]`` of ``q_ℓm(z) = Σ_k A[ℓ, m, k] z^k`` (float64), by the
     recurrences of :func:`_legendre_over_sin_power` run on coefficient arrays, and the condition
@@ -191,7 +199,7 @@ def _legendre_polynomials(max_degree):
     return coefficients, condition
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _angular_binomials(max_degree):
     """``B[L + m, a]``: ``angular_m(x, y) = Σ_a B[L + m, a] x^a y^{|m|−a}``, where ``angular_m`` is
     ``Re (x + iy)^m`` for ``m ≥ 0`` and ``Im (x + iy)^{|m|}`` for ``m < 0``."""
@@ -247,3 +255,142 @@ def transport_mode(x, max_degree: int, index):
     y_powers = powers[..., 1, :] @ select.T.astype(x.dtype)
     angular = jnp.sum(binomials * powers[..., 0, :] * y_powers, axis=-1)
     return scale * legendre * angular
+
+
+# ---------------------------------------------------------------------------------------------
+# Transforms between a latitude–longitude grid and coefficients (NumPy, float64)
+# ---------------------------------------------------------------------------------------------
+
+
+def gauss_legendre_grid(max_degree: int, num_theta: int | None = None,
+                        num_phi: int | None = None):
+    """A grid on which :func:`harmonic_analysis` is exact for degree ``≤ L``.
+
+    Returns ``(theta, phi, weights)``: ``num_theta ≥ L + 1`` Gauss–Legendre colatitudes
+    (ascending), ``num_phi ≥ 2L + 1`` equispaced longitudes from 0, and the latitude weights
+    (``Σ weights = 2``, the quadrature of ``∫ dz``). The product of two functions of degree ``≤ L``
+    is integrated exactly. Defaults: the smallest sizes.
+    """
+    max_degree, _ = _check_degrees(max_degree, 0)
+    num_theta = max_degree + 1 if num_theta is None else int(num_theta)
+    num_phi = 2 * max_degree + 1 if num_phi is None else int(num_phi)
+    if num_theta < max_degree + 1 or num_phi < 2 * max_degree + 1:
+        raise ValueError(
+            f"an exact grid for degree {max_degree} needs num_theta >= {max_degree + 1} and "
+            f"num_phi >= {2 * max_degree + 1}, got {num_theta} and {num_phi}"
+        )
+    z, weights = np.polynomial.legendre.leggauss(num_theta)
+    theta = np.arccos(z[::-1])
+    return theta, 2.0 * np.pi * np.arange(num_phi) / num_phi, weights[::-1].copy()
+
+
+def _legendre_table(theta, max_degree):
+    """``G[t, ℓ, m] = f_m q_ℓm(cos θ_t) sin^m θ_t`` (``f_0 = 1``, else ``√2``) in float64, zero
+    for ``m > ℓ``: the latitude factor of ``Y_ℓ^{±m}`` (:func:`real_spherical_harmonics`)."""
+    theta = np.asarray(theta, dtype=float)
+    if theta.ndim != 1 or np.any((theta < 0) | (theta > np.pi)):
+        raise ValueError("theta must be a 1-D array of colatitudes in [0, π]")
+    a, b, c = _recurrence_coefficients(max_degree)
+    z = np.cos(theta)
+    current = np.zeros((theta.size, max_degree + 1))
+    current[:, 0] = 1.0 / math.sqrt(4.0 * math.pi)
+    previous = np.zeros_like(current)
+    rows = [current]
+    for ell in range(1, max_degree + 1):
+        shifted = np.concatenate([np.zeros_like(current[:, :1]), current[:, :-1]], axis=1)
+        previous, current = current, a[ell] * z[:, None] * current - b[ell] * previous + (
+            c[ell] * shifted
+        )
+        rows.append(current)
+    q = np.stack(rows, axis=1)  # [t, ℓ, m]
+    orders = np.arange(max_degree + 1)
+    factor = np.where(orders == 0, 1.0, math.sqrt(2.0))
+    return q * factor * np.sin(theta)[:, None, None] ** orders
+
+
+def _check_grid(values, theta, max_degree):
+    values = np.asarray(values, dtype=float)
+    theta = np.asarray(theta, dtype=float)
+    if values.ndim < 2 or values.shape[-2] != theta.size:
+        raise ValueError(
+            f"values must have shape (..., num_theta, num_phi) with num_theta = {theta.size}, "
+            f"got {values.shape}"
+        )
+    if values.shape[-1] < 2 * max_degree + 1:
+        raise ValueError(
+            f"degree {max_degree} needs num_phi >= {2 * max_degree + 1} equispaced longitudes, "
+            f"got {values.shape[-1]}"
+        )
+    return values, theta
+
+
+def harmonic_analysis(values, theta, max_degree: int, weights=None) -> np.ndarray:
+    """Coefficients ``c_ℓm`` (order of :func:`degrees_and_orders`) of ``f ≈ Σ c_ℓm Y_ℓ^m`` from
+    samples ``values[..., t, p] = f(θ_t, φ_p)``, ``φ_p = 2πp/num_phi`` (``num_phi ≥ 2L + 1``).
+
+    The longitudes are resolved exactly by a discrete Fourier transform; then, order by order:
+
+    - ``weights`` given (latitude weights for ``∫ dz``, e.g. :func:`gauss_legendre_grid`):
+      quadrature, ``c_ℓm = Σ w_t (2π/num_phi) Σ_p f Y_ℓ^m`` — the ``L²`` projection, exact for
+      band-limited ``f`` on a Gauss–Legendre grid;
+    - ``weights=None``: least squares over the colatitudes ``theta`` (any ``≥ L + 1`` distinct
+      values, e.g. an equiangular grid), exact for band-limited ``f``.
+    """
+    max_degree, _ = _check_degrees(max_degree, 0)
+    values, theta = _check_grid(values, theta, max_degree)
+    num_phi = values.shape[-1]
+    spectrum = np.fft.rfft(values, axis=-1)[..., : max_degree + 1]  # Σ_p f e^{−imφ_p}
+    table = _legendre_table(theta, max_degree)
+    ell, m = degrees_and_orders(max_degree)
+    out = np.zeros(values.shape[:-2] + (ell.size,))
+    if weights is not None:
+        weights = np.asarray(weights, dtype=float)
+        if weights.shape != theta.shape:
+            raise ValueError(f"weights must have shape {theta.shape}, got {weights.shape}")
+        scale = (2.0 * np.pi / num_phi) * weights[:, None]
+        cosine = np.einsum("...tm,tlm->...lm", spectrum.real * scale, table)
+        sine = np.einsum("...tm,tlm->...lm", -spectrum.imag * scale, table)
+        return np.where(m >= 0, cosine[..., ell, np.abs(m)], sine[..., ell, np.abs(m)])
+    if np.unique(theta).size < max_degree + 1:
+        raise ValueError(
+            f"least squares for degree {max_degree} needs >= {max_degree + 1} distinct "
+            f"colatitudes, got {np.unique(theta).size}"
+        )
+    # f = Σ_m A_m(θ) cos mφ + B_m(θ) sin mφ: A_0 = F_0/n, A_m = 2 Re F_m/n, B_m = −2 Im F_m/n.
+    norm = np.where(np.arange(max_degree + 1) == 0, 1.0, 2.0) / num_phi
+    cosine, sine = spectrum.real * norm, -spectrum.imag * norm
+    for order in range(max_degree + 1):
+        rows = table[:, order:, order]  # [t, ℓ − m]
+        columns = np.flatnonzero(m == order)
+        for part, index in ((cosine, columns), (sine, np.flatnonzero(m == -order))):
+            if order == 0 and part is sine:
+                continue
+            flat = part[..., order].reshape(-1, theta.size).T
+            solution = np.linalg.lstsq(rows, flat, rcond=None)[0]
+            out[..., index] = solution.T.reshape(values.shape[:-2] + (index.size,))
+    return out
+
+
+def harmonic_synthesis(coefficients, theta, num_phi: int) -> np.ndarray:
+    """``f(θ_t, φ_p) = Σ c_ℓm Y_ℓ^m`` on colatitudes ``theta`` and ``num_phi`` equispaced
+    longitudes from 0: shape ``(..., num_theta, num_phi)``; the inverse of
+    :func:`harmonic_analysis` for band-limited fields. ``coefficients`` has ``(L + 1)²`` entries
+    in the order of :func:`degrees_and_orders`. O(L³)."""
+    coefficients = np.asarray(coefficients, dtype=float)
+    max_degree = math.isqrt(coefficients.shape[-1]) - 1
+    if coefficients.ndim < 1 or (max_degree + 1) ** 2 != coefficients.shape[-1]:
+        raise ValueError(
+            f"coefficients must have (L + 1)² entries on the last axis, got {coefficients.shape}"
+        )
+    table = _legendre_table(theta, max_degree)
+    ell, m = degrees_and_orders(max_degree)
+    orders = np.arange(max_degree + 1)
+    cosine = np.zeros(coefficients.shape[:-1] + (max_degree + 1, max_degree + 1))
+    sine = np.zeros_like(cosine)
+    cosine[..., ell[m >= 0], m[m >= 0]] = coefficients[..., m >= 0]
+    sine[..., ell[m < 0], -m[m < 0]] = coefficients[..., m < 0]
+    phi = 2.0 * np.pi * np.arange(int(num_phi)) / int(num_phi)
+    angle = orders[:, None] * phi[None, :]
+    a = np.einsum("...lm,tlm->...tm", cosine, table)
+    b = np.einsum("...lm,tlm->...tm", sine, table)
+    return a @ np.cos(angle) + b @ np.sin(angle)

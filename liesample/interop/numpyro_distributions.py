@@ -7,24 +7,37 @@ An optional integration module (NumPyro is not a dependency of the core: install
 for :func:`liesample.geometric_hmc`, or their exact ``sample`` to simulate data. Their supports
 are NumPyro's ``constraints.sphere`` (shared with ``ProjectedNormal``) and :data:`rotation`.
 
+Every parameter may be traced: a latent concentration, a parameter computed inside the model,
+a ``jit`` or ``vmap`` over the parameters. Normalisers are pure JAX (no host callback) and
+differentiable in the parameters. Values are checked (with an error that names the parameter)
+only when they are concrete; traced values are not checked, as with NumPyro's ``validate_args``.
+
 - ``VonMisesFisher(mean_direction, concentration)`` on ``S^{d−1}`` (``κ = 0``: uniform): density
   ``C_d(κ) exp(κ μ·x)`` with respect to the surface measure, ``C_d(κ) = κ^{d/2−1} /
-  ((2π)^{d/2} I_{d/2−1}(κ))`` (as ``scipy.stats.vonmises_fisher``); differentiable in ``μ``
-  and ``κ`` (``log I_ν`` through SciPy's ``ive`` with its exact derivative). ``sample``: exact;
-  on ``S²`` the closed-form inverse of the cosine's distribution function
+  ((2π)^{d/2} I_{d/2−1}(κ))`` (as ``scipy.stats.vonmises_fisher``). On ``S²`` the closed form
+  ``C_3(κ) = κ / (4π sinh κ)``, in logs ``log κ − log 2π − κ − log(1 − e^{−2κ})`` and a series in
+  ``κ²`` near 0; on other spheres the Bessel function of :mod:`liesample.foundation.special`.
+  Both are exact at ``κ = 0`` and differentiable in ``κ`` to any order (``jax.hessian``).
+  ``sample``: exact; on ``S²`` the closed-form inverse of the cosine's distribution function
   (:func:`liesample.targets.spins.von_mises_fisher`), on other spheres Wood's (1994) rejection
   algorithm.
 - ``Bingham(concentration, orientation=None)`` on ``S²``: density
   ``exp(−Σ_i λ_i (v_i·x)²) / Z(λ)`` with respect to the surface measure, ``v_i`` the columns of
   the rotation ``orientation`` (identity by default); ``Z(λ)`` is the exact 1-D quadrature of
-  :func:`liesample.targets.orbits.bingham_log_normalizer`, differentiable in ``λ`` (which may
-  be a model parameter). ``sample``: exact, by rejection from an angular central Gaussian
-  envelope (:func:`liesample.targets.orbits.sample_bingham`).
+  :func:`liesample.targets.orbits.bingham_log_normalizer`, differentiable in ``λ``.
+  ``sample``: exact, by rejection from an angular central Gaussian envelope
+  (:func:`liesample.targets.orbits.sample_bingham`).
 - ``MatrixFisher(F)`` on SO(3): density ``exp(tr(FᵀR)) / c(F)`` with respect to the Haar
-  probability measure; ``c(F)`` by the 1-D Bessel integral of
-  :class:`liesample.targets.groups.MatrixFisherLaw`, so ``F`` must be concrete (not a traced model
-  parameter). ``sample``: exact; the quaternion of ``R`` follows a Bingham law on ``S³``, drawn
-  by the same angular-central-Gaussian rejection (acceptance ≳ 45 % for any ``F``).
+  probability measure. With the proper SVD ``F = U diag(s) Vᵀ`` (``U, V ∈ SO(3)``,
+  ``s₁ ≥ s₂ ≥ |s₃|``, computed by ``jnp.linalg.svd``), ``c`` is the 1-D integral of
+  :class:`liesample.targets.groups.MatrixFisherLaw`,
+  ``c(s) = ½ ∫_{−1}^{1} I₀(½(s₁−s₂)(1−u)) I₀(½(s₁+s₂)(1+u)) e^{s₃u} du``, evaluated in logs by
+  a fixed tanh-sinh rule (its nodes crowd double-exponentially onto the end points, where the
+  integrand's boundary layers sit for large ``s``). ``∂ log c/∂F = E[R] = U diag(∂ log c/∂s) Vᵀ``
+  is well defined also for repeated singular values (``F = κ I``), where the SVD's own
+  derivative is not: the gradient in ``F`` is written this way. ``sample``: exact; the
+  quaternion of ``R`` follows a Bingham law on ``S³``, drawn by the same angular-central-Gaussian
+  rejection (acceptance ≳ 45 % for any ``F``).
 
 The rejection samplers are loops vmapped over draws, compiled with :func:`liesample.jit`
 (XLA:CPU miscompiles small vmapped while loops otherwise; see ``liesample.foundation.compile``).
@@ -41,14 +54,20 @@ except ImportError as error:  # an optional integration module
         "pip install 'liesample[numpyro]' (or pip install numpyro)"
     ) from error
 
-import functools
+import math
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy import special
+from jax.scipy.special import logsumexp
 
 from liesample.foundation.compile import jit
+from liesample.foundation.special import (
+    bessel_iv_ratio,
+    log_bessel_iv,
+    log_bessel_iv_reduced,
+)
+from liesample.foundation.validation import concrete_array
 from liesample.geometry.spaces import SO
 from liesample.targets import groups, orbits
 from liesample.targets.spins import von_mises_fisher
@@ -56,45 +75,44 @@ from liesample.targets.spins import von_mises_fisher
 __all__ = ["Bingham", "MatrixFisher", "VonMisesFisher", "log_bessel_iv", "rotation"]
 
 
-# --------------------------------------------------------------------------- log I_ν(κ)
-
-
-def _log_ive_host(order, kappa):
-    return np.log(special.ive(order, kappa)).astype(kappa.dtype)
-
-
-def _ratio_host(order, kappa):
-    return (special.ive(order + 1.0, kappa) / special.ive(order, kappa)).astype(kappa.dtype)
-
-
-def _callback(fn, order, kappa):
-    kappa = jnp.asarray(kappa)
-    shape = jax.ShapeDtypeStruct(kappa.shape, kappa.dtype)
-    return jax.pure_callback(
-        lambda k: fn(order, np.asarray(k)), shape, kappa, vmap_method="broadcast_all"
-    )
-
-
-@functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
-def _log_iv(order, kappa):
-    return _callback(_log_ive_host, order, kappa) + kappa
-
-
-@_log_iv.defjvp
-def _log_iv_jvp(order, primals, tangents):
-    (kappa,) = primals
-    (dkappa,) = tangents
-    # d/dκ log I_ν(κ) = I_{ν+1}(κ)/I_ν(κ) + ν/κ.
-    slope = _callback(_ratio_host, order, kappa) + order / kappa
-    return _log_iv(order, kappa), slope * dkappa
-
-
-def log_bessel_iv(order: float, kappa):
-    """``log I_ν(κ)`` for a fixed order ``ν ≥ 0`` and ``κ > 0``, differentiable in ``κ``."""
-    return _log_iv(float(order), kappa)
+def _check_finite(name, value):
+    """``ValueError`` when a concrete ``value`` has a non-finite entry (tracers pass)."""
+    concrete = concrete_array(value)
+    if concrete is not None and not np.all(np.isfinite(concrete)):
+        raise ValueError(f"{name} must be finite, got {concrete}")
+    return concrete
 
 
 # --------------------------------------------------------------------------- vMF
+
+# log(sinh κ / κ) = Σ_n 2^{2n} B_{2n} κ^{2n} / (2n (2n)!): the coefficients of κ², …, κ¹⁰.
+_LOG_SINHC = (1.0 / 6.0, -1.0 / 180.0, 1.0 / 2835.0, -1.0 / 37800.0, 1.0 / 467775.0)
+_SINHC_SWITCH = 0.1  # the first omitted term (κ¹²) is below 1e−18 there
+
+
+def _log_vmf_normalizer_s2(kappa):
+    """``log(κ / (4π sinh κ))``, exact to round-off for every ``κ ≥ 0`` (``−log 4π`` at 0)."""
+    small = kappa < _SINHC_SWITCH
+    k_small = jnp.where(small, kappa, 0.0)
+    k_large = jnp.where(small, 1.0, kappa)
+    k2 = k_small * k_small
+    log_sinhc = jnp.zeros_like(k2)
+    for c in reversed(_LOG_SINHC):
+        log_sinhc = (log_sinhc + c) * k2
+    series = -math.log(4.0 * math.pi) - log_sinhc
+    closed = (jnp.log(k_large) - math.log(2.0 * math.pi) - k_large
+              - jnp.log(-jnp.expm1(-2.0 * k_large)))  # fmt: skip
+    return jnp.where(small, series, closed)
+
+
+def _log_vmf_normalizer(kappa, d: int):
+    """``log C_d(κ) = log Γ(d/2) + (d/2−1) log 2 − (d/2) log 2π − log[Γ(ν+1)(κ/2)^{−ν} I_ν(κ)]``,
+    ``ν = d/2 − 1``: no ``log κ`` term, so ``κ = 0`` is exact."""
+    if d == 3:
+        return _log_vmf_normalizer_s2(kappa)
+    nu = d / 2.0 - 1.0
+    constant = math.lgamma(d / 2.0) + nu * math.log(2.0) - (d / 2.0) * math.log(2.0 * math.pi)
+    return constant - log_bessel_iv_reduced(nu, kappa)
 
 
 def _householder_to(mean_direction, x):
@@ -145,6 +163,15 @@ class VonMisesFisher(Distribution):
                 f"mean_direction must be a unit vector of length d >= 2, got shape "
                 f"{mean_direction.shape}"
             )
+        direction = _check_finite("mean_direction", mean_direction)
+        if direction is not None and np.any(np.abs(np.linalg.norm(direction, axis=-1) - 1) > 1e-6):
+            raise ValueError(
+                f"mean_direction must be a unit vector, got norm "
+                f"{np.linalg.norm(direction, axis=-1)}"
+            )
+        kappa = _check_finite("concentration", concentration)
+        if kappa is not None and np.any(kappa < 0):
+            raise ValueError(f"concentration must be >= 0, got {kappa}")
         batch_shape = jax.lax.broadcast_shapes(mean_direction.shape[:-1], concentration.shape)
         event_shape = mean_direction.shape[-1:]
         self.mean_direction = jnp.broadcast_to(mean_direction, batch_shape + event_shape)
@@ -157,15 +184,7 @@ class VonMisesFisher(Distribution):
 
     def log_normalizer(self):
         """``log C_d(κ)`` (surface measure); at ``κ = 0`` the uniform law's ``−log |S^{d−1}|``."""
-        nu = self.d / 2.0 - 1.0
-        kappa = self.concentration
-        # Below 1e-8 the series C_d(κ) = C_d(0) (1 − A κ² + …) is C_d(0) to round-off.
-        small = kappa < 1e-8
-        safe = jnp.where(small, 1.0, kappa)
-        log_2pi = jnp.log(2 * jnp.pi)
-        general = nu * jnp.log(safe) - (self.d / 2.0) * log_2pi - log_bessel_iv(nu, safe)
-        uniform = special.gammaln(self.d / 2.0) - np.log(2.0) - (self.d / 2.0) * np.log(np.pi)
-        return jnp.where(small, uniform, general)
+        return _log_vmf_normalizer(self.concentration, self.d)
 
     def log_prob(self, value):
         return self.log_normalizer() + self.concentration * jnp.sum(
@@ -174,9 +193,8 @@ class VonMisesFisher(Distribution):
 
     @property
     def mean(self):
-        nu = self.d / 2.0 - 1.0
-        ratio = jnp.exp(log_bessel_iv(nu + 1.0, self.concentration)
-                        - log_bessel_iv(nu, self.concentration))
+        """``A_d(κ) μ``, ``A_d = I_{d/2}/I_{d/2−1}``."""
+        ratio = bessel_iv_ratio(self.d / 2.0 - 1.0, self.concentration)
         return ratio[..., None] * self.mean_direction
 
     def sample(self, key, sample_shape=()):
@@ -232,6 +250,7 @@ class Bingham(Distribution):
                 "concentration must have shape (..., 3) (the three λ_i of a Bingham law on "
                 f"S²), got shape {concentration.shape}"
             )
+        _check_finite("concentration", concentration)
         if orientation is None:
             orientation = jnp.eye(3, dtype=concentration.dtype)
         orientation = jnp.asarray(orientation, dtype=concentration.dtype)
@@ -240,6 +259,10 @@ class Bingham(Distribution):
                 f"orientation must be a rotation matrix of shape (..., 3, 3), got shape "
                 f"{orientation.shape}"
             )
+        frame = _check_finite("orientation", orientation)
+        if frame is not None and not np.all(rotation(frame)):
+            raise ValueError(f"orientation must be a rotation matrix (RᵀR = I, det R = 1), "
+                             f"got {frame}")  # fmt: skip
         batch_shape = jax.lax.broadcast_shapes(concentration.shape[:-1], orientation.shape[:-2])
         self.concentration = jnp.broadcast_to(concentration, batch_shape + (3,))
         self.orientation = jnp.broadcast_to(orientation, batch_shape + (3, 3))
@@ -277,32 +300,137 @@ class Bingham(Distribution):
         return jnp.einsum("...ij,...j->...i", self.orientation, y)
 
 
-class MatrixFisher(Distribution):
-    """Matrix Fisher law on SO(3), ``∝ exp(tr(FᵀR))`` w.r.t. Haar (module docstring)."""
+def _tanh_sinh_rule(step: float, half_width: float):
+    """Nodes of the tanh-sinh rule on ``[−1, 1]`` as ``(1 − u, 1 + u, log w)``, each computed
+    without cancellation (``1 − u`` reaches ``1e−60``: the end points' layers are resolved)."""
+    t = np.arange(-half_width, half_width + 0.5 * step, step)
+    y = 0.5 * np.pi * np.sinh(t)
+    one_minus = 2.0 / (np.exp(2.0 * y) + 1.0)
+    one_plus = 2.0 / (1.0 + np.exp(-2.0 * y))
+    log_cosh = np.abs(y) + np.log1p(np.exp(-2.0 * np.abs(y))) - np.log(2.0)
+    log_weight = np.log(step * 0.5 * np.pi * np.cosh(t)) - 2.0 * log_cosh
+    return one_minus, one_plus, log_weight
 
-    arg_constraints = {}
+
+# Step 1/32 on |t| ≤ 4.5 (289 nodes): log c to ~1e−12 relative for singular values up to 1e4.
+_ONE_MINUS_U, _ONE_PLUS_U, _LOG_WEIGHT = _tanh_sinh_rule(1.0 / 32.0, 4.5)
+
+
+def _proper_svd(F):
+    """``(U, s, V)`` with ``F = U diag(s) Vᵀ``, ``U, V ∈ SO(3)``, ``s₁ ≥ s₂ ≥ |s₃|`` (JAX)."""
+    u, s, vt = jnp.linalg.svd(F)
+    v = vt.T
+    sign_u, sign_v = jnp.sign(jnp.linalg.det(u)), jnp.sign(jnp.linalg.det(v))
+    last = jnp.array([0.0, 0.0, 1.0], F.dtype)
+    flip_u, flip_v = 1.0 + (sign_u - 1.0) * last, 1.0 + (sign_v - 1.0) * last
+    return u * flip_u, s * flip_u * flip_v, v * flip_v
+
+
+def _log_c_of_singular_values(s):
+    """``log c(s)`` for proper singular values ``s₁ ≥ s₂ ≥ |s₃|`` (module docstring): the
+    exponent of the integrand, ``s₁ + (s₂ + s₃) u`` after ``I₀``'s own growth, is largest at
+    ``u = 1``; ``logsumexp`` keeps it from overflowing."""
+    dtype = s.dtype
+    one_minus = jnp.asarray(_ONE_MINUS_U, dtype)
+    log_integrand = (
+        log_bessel_iv_reduced(0, 0.5 * (s[0] - s[1]) * one_minus)
+        + log_bessel_iv_reduced(0, 0.5 * (s[0] + s[1]) * jnp.asarray(_ONE_PLUS_U, dtype))
+        + s[2] * (1.0 - one_minus)
+    )
+    return logsumexp(jnp.asarray(_LOG_WEIGHT, dtype) + log_integrand) - math.log(2.0)
+
+
+@jax.custom_jvp
+def _matrix_fisher_log_normalizer(F):
+    return _log_c_of_singular_values(_proper_svd(F)[1])
+
+
+@_matrix_fisher_log_normalizer.defjvp
+def _matrix_fisher_log_normalizer_jvp(primals, tangents):
+    # d log c = tr(E[R]ᵀ dF) = Σ_k ∂_k log c(s) (Uᵀ dF V)_kk: defined for repeated singular
+    # values too (differentiating the SVD itself is not).
+    (F,), (dF,) = primals, tangents
+    u, s, v = _proper_svd(F)
+    value, slope = jax.value_and_grad(_log_c_of_singular_values)(s)
+    return value, jnp.sum(slope * jnp.diagonal(u.T @ dF @ v))
+
+
+def _matrix_fisher_mean(F):
+    """``E[R] = U diag(∂ log c/∂s) Vᵀ``."""
+    u, s, v = _proper_svd(F)
+    return (u * jax.grad(_log_c_of_singular_values)(s)) @ v.T
+
+
+def _quaternion_basis() -> np.ndarray:
+    """``M`` (3, 3, 4, 4) with ``R(q)_ab = qᵀ M_ab q``: ``R(q)`` is a homogeneous quadratic in the
+    quaternion, read off by polarisation."""
+    basis = np.eye(4)
+    M = np.zeros((3, 3, 4, 4))
+    for i in range(4):
+        M[:, :, i, i] = groups.quaternion_to_rotation(basis[i], xp=np)
+        for j in range(i + 1, 4):
+            polar = groups.quaternion_to_rotation(basis[i] + basis[j], xp=np)
+            M[:, :, i, j] = M[:, :, j, i] = 0.5 * (polar - M[:, :, i, i] - M[:, :, j, j])
+    return M
+
+
+_QUATERNION_BASIS = _quaternion_basis()
+
+
+def _sample_matrix_fisher(key, F, num_samples: int):
+    """Exact draws ``(num_samples, 3, 3)`` for a (possibly traced) ``F``: ``tr(FᵀR(q)) = qᵀBq``,
+    so ``±q`` is Bingham on ``S³`` (as :meth:`liesample.targets.groups.MatrixFisherLaw.sample`)."""
+    B = jnp.einsum("ab,abij->ij", F, jnp.asarray(_QUATERNION_BASIS, F.dtype))
+    eigenvalues, eigenvectors = jnp.linalg.eigh(B)
+    x, _ = orbits.sample_bingham(key, -eigenvalues, num_samples)
+    return groups.quaternion_to_rotation(x @ eigenvectors.T)
+
+
+class MatrixFisher(Distribution):
+    """Matrix Fisher law on SO(3), ``∝ exp(tr(FᵀR))`` w.r.t. Haar (module docstring).
+
+    ``F`` (``..., 3, 3``): any finite real matrices, possibly traced; leading axes are the
+    batch.
+    """
+
+    arg_constraints = {"F": constraints.independent(constraints.real, 2)}
     support = rotation
 
     def __init__(self, F, *, validate_args=None):
-        F = np.asarray(F, dtype=float)
-        self._reference = groups.MatrixFisherLaw(F)  # validates: a finite 3x3 matrix
-        self.F = jnp.asarray(F)
-        self._log_c = self._reference.log_normalizer()
-        super().__init__((), (3, 3), validate_args=validate_args)
+        F = jnp.asarray(F, dtype=jnp.result_type(F, float))
+        if F.ndim < 2 or F.shape[-2:] != (3, 3):
+            raise ValueError(f"F must be a finite 3x3 matrix (or a batch (..., 3, 3)), got "
+                             f"shape {F.shape}")  # fmt: skip
+        _check_finite("F", F)
+        self.F = F
+        super().__init__(F.shape[:-2], (3, 3), validate_args=validate_args)
+
+    def log_normalizer(self):
+        """``log c(F) = log ∫_{SO(3)} exp(tr(FᵀR)) dR`` (Haar probability; 0 at ``F = 0``)."""
+        return jnp.vectorize(_matrix_fisher_log_normalizer, signature="(3,3)->()")(self.F)
 
     def log_prob(self, value):
-        return jnp.sum(self.F * value, axis=(-2, -1)) - self._log_c
+        return jnp.sum(self.F * value, axis=(-2, -1)) - self.log_normalizer()
 
     @property
     def mean(self):
-        return jnp.asarray(self._reference.mean())
+        """``E[R] = U diag(∂ log c/∂s) Vᵀ`` (exact)."""
+        return jnp.vectorize(_matrix_fisher_mean, signature="(3,3)->(3,3)")(self.F)
 
     def sample(self, key, sample_shape=()):
         """Exact draws: the quaternion's Bingham law on S³ (``targets.groups.MatrixFisherLaw``)."""
         shape = tuple(sample_shape)
-        n = max(int(np.prod(shape)), 1)
-        draws = self._reference.sample(key, n)
-        return draws[: int(np.prod(shape))].reshape(shape + (3, 3))
+        count = int(np.prod(shape))
+        n = max(count, 1)
+        concrete = concrete_array(self.F)
+        if concrete is not None and not self.batch_shape:  # the reference's own draws
+            draws = groups.MatrixFisherLaw(concrete).sample(key, n)
+            return draws[:count].reshape(shape + (3, 3))
+        flat = self.F.reshape(-1, 3, 3)
+        keys = jax.random.split(key, flat.shape[0])
+        draws = jax.vmap(lambda k, f: _sample_matrix_fisher(k, f, n))(keys, flat)
+        draws = jnp.swapaxes(draws, 0, 1)[:count]  # (count, batch, 3, 3)
+        return draws.reshape(shape + self.batch_shape + (3, 3))
 
 
 SO3 = SO(3)  # the space MatrixFisher lives on, for liesample.geometric_hmc

@@ -18,14 +18,26 @@ Discrete sites, and supports with neither a space nor a bijection, are refused w
 is initialised, naming the site. The log-density is the model's joint log-density (NumPyro's
 ``log_density``) with respect to the area of spheres, Haar measure on SO(3) and Lebesgue
 measure in the unconstrained coordinates: these differ from the samplers' reference measures by
-constants only.
+constants only. Every shape is settled in ``init``: the sites' spaces, the starts and the
+deterministic sites (evaluated abstractly on the start), so no shape error waits for the end
+of the run.
+
+**NumPyro's conventions.** The keywords of ``numpyro.infer.HMC`` mean what they mean there:
+``potential_fn`` (model-free use, ``init_params`` given to ``MCMC.run``), ``init_strategy``
+(``init_to_median``, ``init_to_value``, …; a value it gives a sphere or SO(3) site is taken to
+the nearest point of the manifold), ``dense_mass``, ``inverse_mass_matrix``, ``step_size``,
+``adapt_step_size``, ``adapt_mass_matrix``, ``target_accept_prob``,
+``find_heuristic_step_size``, ``num_steps`` and ``trajectory_length``. A dense mass is possible
+on ``Euclidean`` sites only: the exact drift on a sphere or a group needs one inverse mass per
+copy (:mod:`liesample.samplers.cotangent.geometric_hmc`).
 
 **Warm-up.** During NumPyro's ``num_warmup`` iterations the kernel adapts exactly as
 :func:`liesample.window_adaptation` does, sharing its code
 (:func:`liesample.tuning.adaptation.warmup_pieces` and
 :func:`liesample.tuning.adaptation.window_schedule`) and reading what to adapt from
 ``liesample.geometric_hmc.adaptation``: Stan's windows, dual averaging of the step size towards
-``target_accept_prob``, the inverse mass from Welford moments in algebra coordinates, and a
+``target_accept_prob``, the inverse mass from Welford moments in algebra coordinates (for a
+``dense_mass`` block the Welford covariance, shrunk towards ``1e-3 I`` as Stan does), and a
 fixed integration time ``T = π/2`` (``L = ceil(T/ε)`` steps of the ``integrator`` scheme)
 unless ``num_integration_steps`` is given. At the last warm-up iteration the step size becomes
 dual averaging's average; after that nothing changes.
@@ -33,9 +45,12 @@ dual averaging's average; after that nothing changes.
 **State and diagnostics.** The sample field is ``z``: the manifold sites' points and the other
 sites' unconstrained values (``init_params`` takes the same form); ``postprocess_fn`` maps it to
 the constrained values and adds deterministic sites, so ``mcmc.get_samples()`` holds what the
-model sees. The state also carries ``diverging`` (collected by default: ``print_summary``
-counts divergences), ``accept_prob``, ``potential_energy``, ``num_steps`` and ``step_size``
-(``extra_fields``; ``arviz.from_numpyro`` names them ``acceptance_rate``, ``lp``, ``n_steps``).
+model sees. ``extra_fields`` offers NumPyro's HMC names: ``diverging`` (collected by default:
+``print_summary`` counts divergences), ``energy`` (``H`` of the state after the transition,
+for ``arviz.plot_energy``), ``potential_energy``, ``accept_prob``, ``mean_accept_prob``,
+``num_steps``, ``step_size``, ``trajectory_length`` and ``adapt_state`` (its ``step_size`` and
+``inverse_mass_matrix``, keyed by tuples of site names). ``arviz.from_numpyro`` names some of
+them ``lp``, ``acceptance_rate`` and ``n_steps``.
 
 **Chains.** ``chain_method="vectorized"`` vmaps init and transition over chains;
 ``"sequential"`` works as well. NumPyro compiles its loop with plain ``jax.jit``, not
@@ -46,6 +61,7 @@ to round-off, a slow test), as XLA:CPU's vmapped-loop miscompile
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import NamedTuple
 
@@ -65,10 +81,12 @@ except ImportError as error:  # an optional integration module
 import jax
 import jax.numpy as jnp
 import numpy as np
+from blackjax.adaptation.step_size import dual_averaging_adaptation
 
 from liesample.foundation.compile import jit
 from liesample.foundation.validation import concrete_array, finite_float
 from liesample.geometry import spaces
+from liesample.geometry.cotangent import cotangent_bundle
 from liesample.interop.numpyro_distributions import rotation
 from liesample.samplers.cotangent.geometric_hmc import geometric_hmc
 from liesample.tuning.adaptation import (
@@ -79,9 +97,10 @@ from liesample.tuning.adaptation import (
     window_schedule,
 )
 
-__all__ = ["GeometricHMC", "GeometricHMCState"]
+__all__ = ["AdaptState", "GeometricHMC", "GeometricHMCState"]
 
 MAX_INIT_ATTEMPTS = 100
+HEURISTIC_ACCEPT_PROB = 0.8  # NumPyro's find_reasonable_step_size aims one step at this rate
 SUPPORTED = (
     "constraints.sphere (Sphere), liesample.interop.numpyro_distributions.rotation (SO(3)), "
     "constraints.circular (U1), or a continuous support with a bijection to R^d "
@@ -89,19 +108,48 @@ SUPPORTED = (
 )
 
 
+class AdaptState(NamedTuple):
+    """``extra_fields=("adapt_state",)`` (the names of NumPyro's ``HMCAdaptState``): the step
+    size and inverse mass of the next transition; ``inverse_mass_matrix`` is keyed by tuples
+    of site names (one per site, one per ``dense_mass`` group)."""
+
+    step_size: jax.Array
+    inverse_mass_matrix: dict
+
+
+class DenseMass(NamedTuple):
+    """The dense inverse masses of ``dense_mass`` blocks and their window's Welford moments
+    (dicts keyed by block; empty without ``dense_mass``)."""
+
+    matrices: dict
+    mean: dict
+    m2: dict
+    count: jax.Array
+
+
 class GeometricHMCState(NamedTuple):
-    """One chain's state; ``z`` is the sample field (module docstring)."""
+    """One chain's state; ``z`` is the sample field, the others are ``extra_fields`` (module
+    docstring). ``inner``, ``warmup`` and ``dense`` are the sampler's and the warm-up's carry."""
 
     i: jax.Array
     z: dict
     potential_energy: jax.Array
+    energy: jax.Array
     diverging: jax.Array
     accept_prob: jax.Array
+    mean_accept_prob: jax.Array
     num_steps: jax.Array
     step_size: jax.Array
+    adapt_state: AdaptState
     inner: object  # the liesample.geometric_hmc state
     warmup: WarmupState
+    dense: DenseMass
     rng_key: jax.Array
+
+    @property
+    def trajectory_length(self):
+        """``ε L`` of the transition that led here."""
+        return self.step_size * self.num_steps
 
 
 def _base_constraint(constraint):
@@ -131,6 +179,8 @@ def _site_space(name, site):
             raise ValueError(f"site {name!r} on the sphere must have unit vectors of length >= 2")
         return _Site(spaces.Sphere(value.shape[-1] - 1, shape=value.shape[:-1]), None)
     if base is rotation:
+        if value.ndim < 2 or value.shape[-2:] != (3, 3):
+            raise ValueError(f"site {name!r} on SO(3) must have 3 x 3 matrices, got {value.shape}")
         return _Site(spaces.SO(3, shape=value.shape[:-2]), None)
     if type(base) is type(constraints.circular):
         return _Site(spaces.U1(shape=value.shape), None)
@@ -166,11 +216,26 @@ def _is_manifold(support) -> bool:
     )
 
 
+def _nearest_point(space, x):
+    """The point of a manifold site nearest to ``x`` (what an ``init_strategy`` gave): unit
+    vectors on spheres, the polar factor on SO(3); angles as they are."""
+    x = jnp.asarray(x)
+    if isinstance(space, spaces.Sphere):
+        return x / jnp.linalg.norm(x, axis=-1, keepdims=True)
+    if isinstance(space, spaces.SO):
+        u, _, vt = jnp.linalg.svd(x)
+        sign = jnp.sign(jnp.linalg.det(u @ vt))
+        u = u.at[..., :, -1].multiply(sign[..., None])
+        return u @ vt
+    return x
+
+
 # ArviZ's converter (``arviz.from_numpyro``) replays ``kernel.model`` under NumPyro's
 # ``init_to_sample``, which needs a bijection for every latent support and has none for a
 # sphere or SO(3). ``kernel.model`` therefore shows manifold sites through a view whose support
 # has an identity "bijection" registered for this private constraint type only: the log-density,
 # draws and values are the original distribution's, and NumPyro's own samplers never see it.
+# ``init_strategy`` runs on the same view (then :func:`_nearest_point`).
 class _ManifoldSupport(constraints.Constraint):
     def __init__(self, base):
         self.base = base
@@ -221,73 +286,195 @@ class _ViewManifoldSites(numpyro.primitives.Messenger):
             msg["fn"] = _ManifoldView(msg["fn"])
 
 
-class GeometricHMC(MCMCKernel):
-    """Geometric HMC on a NumPyro model's sites, on spheres, SO(3), circles and ``Rᵈ``.
+def _check_flag(name, value, allowed, why):
+    if value != allowed:
+        raise ValueError(f"{name}={value!r} is not supported by GeometricHMC ({why}); allowed: "
+                         f"{name}={allowed!r}")  # fmt: skip
 
-    Parameters
-    ----------
-    model : callable
-        A NumPyro model (module docstring for the supports it handles).
-    step_size : float
-        Initial step size of the warm-up (the step size when ``adapt_step_size=False``).
-    num_integration_steps : int, optional
-        Fixed leapfrog steps per transition; by default ``ceil(integration_time / ε)``.
-    integration_time : float, optional
-        ``T`` of a trajectory (default ``π/2`` in the units set by the mass).
-    inverse_mass_matrix : None, float or dict
-        Starting ``M⁻¹`` (unit by default): a positive scalar or a dict site → value shaped as
-        :func:`liesample.geometric_hmc` takes it (one value per copy of a sphere or group, one
-        per coordinate of ``Euclidean`` and ``U1`` sites).
-    adapt_step_size, adapt_mass_matrix : bool
-        What the warm-up adapts (of what ``liesample.geometric_hmc.adaptation`` declares).
-    target_accept_prob : float, optional
-        Dual averaging's target Metropolis rate (by default the declared one, 0.8).
-    divergence_threshold : float
-        ``ΔH`` above which a transition is flagged divergent.
-    integrator : str or sequence of (effect, fraction) pairs
-        The integration scheme, as for :func:`liesample.geometric_hmc` (``"leapfrog"`` by
-        default, ``"minimal_norm"``, or a palindromic coefficient list).
-    """
+
+def _dense_spec(dense_mass):
+    """``dense_mass`` as NumPyro takes it: a bool, or a list of site-name tuples."""
+    if isinstance(dense_mass, bool):
+        return dense_mass
+    message = (
+        "dense_mass must be a bool or a list of tuples of site names (NumPyro's structured "
+        f"mass, e.g. [('a', 'b'), ('c',)]), got {dense_mass!r}"
+    )
+    if not isinstance(dense_mass, (list, tuple)):
+        raise TypeError(message)
+    groups = []
+    for item in dense_mass:
+        group = (item,) if isinstance(item, str) else item
+        if not isinstance(group, (list, tuple)) or not all(isinstance(n, str) for n in group):
+            raise TypeError(message)
+        if group:
+            groups.append(tuple(group))
+    return groups
+
+
+def _steps_argument(num_integration_steps):
+    if num_integration_steps is None:
+        return None
+    if (
+        isinstance(num_integration_steps, bool)
+        or int(num_integration_steps) != num_integration_steps
+        or num_integration_steps < 1
+    ):
+        raise ValueError(
+            f"num_integration_steps (num_steps) must be an integer >= 1, got "
+            f"{num_integration_steps!r}"
+        )
+    return int(num_integration_steps)
+
+
+class GeometricHMC(MCMCKernel):
+    """Geometric HMC on a NumPyro model's sites, on spheres, SO(3), circles and ``Rᵈ``; a
+    ``numpyro.infer.mcmc.MCMCKernel`` with the keywords of ``numpyro.infer.HMC`` (module
+    docstring; the parameters are documented on ``__init__``)."""
 
     sample_field = "z"
 
     def __init__(
         self,
-        model: Callable,
+        model: Callable | None = None,
+        potential_fn: Callable | None = None,
         *,
         step_size: float = 0.1,
         num_integration_steps: int | None = None,
         integration_time: float | None = None,
+        num_steps: int | None = None,
+        trajectory_length: float | None = None,
         inverse_mass_matrix=None,
+        dense_mass=False,
         adapt_step_size: bool = True,
         adapt_mass_matrix: bool = True,
         target_accept_prob: float | None = None,
+        find_heuristic_step_size: bool = False,
+        init_strategy: Callable | None = None,
         divergence_threshold: float = 1000.0,
         integrator="leapfrog",
+        kinetic_fn=None,
+        forward_mode_differentiation: bool = False,
+        regularize_mass_matrix: bool = True,
     ):
-        if not callable(model):
-            raise TypeError(f"model must be a NumPyro model (a callable), got {model!r}")
+        """Set up the kernel (nothing is traced or compiled until ``init``).
+
+        Parameters
+        ----------
+        model : callable, optional
+            A NumPyro model (module docstring for the supports it handles). Give ``model`` or
+            ``potential_fn``.
+        potential_fn : callable, optional
+            NumPyro's model-free form: ``z ↦ −log π(z)`` of an array or a dict of arrays, every
+            coordinate in ``Rᵈ`` (Lebesgue measure). ``init_params`` must then be given to
+            ``MCMC.run`` (with a leading chain axis for several chains, as in NumPyro); the
+            draws are ``z`` itself.
+        step_size : float
+            Initial step size of the warm-up (the step size when ``adapt_step_size=False``).
+        num_integration_steps, num_steps : int, optional
+            Fixed steps of the scheme per transition (``num_steps`` is NumPyro's name; give
+            one); by default ``ceil(integration_time / ε)``.
+        integration_time, trajectory_length : float, optional
+            ``T`` of a trajectory (``trajectory_length`` is NumPyro's name; default ``π/2`` in
+            the units set by the mass, where NumPyro's HMC takes ``2π``).
+        inverse_mass_matrix : None, float or dict
+            Starting ``M⁻¹`` (unit by default): a positive scalar, or a dict keyed by site name
+            or by tuple of site names (NumPyro's keys) → a value shaped as
+            :func:`liesample.geometric_hmc` takes it (one value per copy of a sphere or group,
+            one per coordinate of ``Euclidean`` and ``U1`` sites); a ``dense_mass`` group
+            takes an ``(n, n)`` matrix (or ``(n,)`` diagonal) on its ``n`` unconstrained
+            coordinates, in the group's order.
+        dense_mass : bool or list of tuples of str
+            As in NumPyro: ``True`` is one dense ``M⁻¹`` over every latent site (sorted by
+            name), ``[("a", "b"), ("c",)]`` one per group, ``False`` diagonal. Dense blocks
+            are possible on ``Euclidean`` sites only; a sphere, rotation or circle site named
+            is refused, by name, when the kernel is initialised.
+        adapt_step_size, adapt_mass_matrix : bool
+            What the warm-up adapts (of what ``liesample.geometric_hmc.adaptation`` declares).
+        target_accept_prob : float, optional
+            Dual averaging's target Metropolis rate (by default the declared one, 0.8).
+        find_heuristic_step_size : bool
+            As in NumPyro: with ``adapt_step_size``, before the warm-up and at the end of each
+            mass window, double or halve the step size until one step's acceptance rate
+            ``min(1, e^{−ΔH})`` crosses 0.8, and restart dual averaging from there.
+        init_strategy : callable, optional
+            A NumPyro initialisation strategy (``init_to_median()``, ``init_to_value(values=
+            …)``, ``init_to_sample``, ``init_to_uniform``, …), retried with new keys until the
+            log-density and its gradient are finite (at most 100 times). By default: uniform
+            on manifold sites and in ``(−2, 2)`` in the unconstrained coordinates of the others
+            (NumPyro's ``init_to_uniform``). ``init_params`` given to ``MCMC.run`` win.
+        divergence_threshold : float
+            ``ΔH`` above which a transition is flagged divergent.
+        integrator : str or sequence of (effect, fraction) pairs
+            The integration scheme, as for :func:`liesample.geometric_hmc` (``"leapfrog"`` by
+            default, ``"minimal_norm"``, or a palindromic coefficient list).
+        kinetic_fn, forward_mode_differentiation, regularize_mass_matrix
+            NumPyro's, accepted at their defaults only (``None``, ``False``, ``True``): the
+            kinetic energy is ``½ pᵀM⁻¹p`` in algebra coordinates, gradients are taken in
+            reverse mode, and the adapted mass is always regularised (Stan's shrinkage).
+
+        Raises
+        ------
+        TypeError, ValueError
+            For a missing model, both ``model`` and ``potential_fn``, a setting out of range,
+            two names given for one setting, or a NumPyro keyword at an unsupported value (the
+            message names what is allowed).
+        """
+        if potential_fn is not None and model is not None:
+            raise ValueError("give model or potential_fn, not both (as numpyro.infer.HMC)")
+        if potential_fn is None and not callable(model):
+            raise TypeError(
+                f"model must be a NumPyro model (a callable), or give potential_fn; got {model!r}"
+            )
+        if potential_fn is not None and not callable(potential_fn):
+            raise TypeError(f"potential_fn must be a callable, got {potential_fn!r}")
+        if kinetic_fn is not None:
+            raise ValueError(
+                "kinetic_fn is not supported by GeometricHMC (its kinetic energy is ½ pᵀM⁻¹p in "
+                "algebra coordinates, set by the geometry); allowed: kinetic_fn=None"
+            )
+        _check_flag("forward_mode_differentiation", forward_mode_differentiation, False,
+                    "gradients are taken in reverse mode")  # fmt: skip
+        _check_flag("regularize_mass_matrix", regularize_mass_matrix, True,
+                    "the adapted mass is always shrunk as Stan does")  # fmt: skip
+        if init_strategy is not None and not callable(init_strategy):
+            raise TypeError(
+                f"init_strategy must be a NumPyro initialisation strategy, got {init_strategy!r}"
+            )
+        if init_strategy is not None and potential_fn is not None:
+            raise ValueError(
+                "init_strategy needs a model; with potential_fn give init_params to MCMC.run"
+            )
         self._model = model
+        self._potential_fn = potential_fn
+        self._init_strategy = init_strategy
         self._step_size = finite_float("step_size", step_size, positive=True)
-        if num_integration_steps is not None:
-            if integration_time is not None:
-                raise ValueError("give integration_time or num_integration_steps, not both")
-            if (
-                isinstance(num_integration_steps, bool)
-                or int(num_integration_steps) != num_integration_steps
-                or num_integration_steps < 1
-            ):
-                raise ValueError(
-                    f"num_integration_steps must be an integer >= 1, got {num_integration_steps!r}"
-                )
-            num_integration_steps = int(num_integration_steps)
+        for alias, name, value in (
+            ("num_steps", "num_integration_steps", num_integration_steps),
+            ("trajectory_length", "integration_time", integration_time),
+        ):
+            given = num_steps if alias == "num_steps" else trajectory_length
+            if given is not None and value is not None:
+                raise ValueError(f"{alias} is NumPyro's name for {name}: give one of them")
+        if num_steps is not None:
+            num_integration_steps = num_steps
+        if trajectory_length is not None:
+            integration_time = trajectory_length
+        if num_integration_steps is not None and integration_time is not None:
+            raise ValueError(
+                "give integration_time (trajectory_length) or num_integration_steps "
+                "(num_steps), not both"
+            )
+        num_integration_steps = _steps_argument(num_integration_steps)
         time = DEFAULT_INTEGRATION_TIME if integration_time is None else integration_time
         self._integration_time = finite_float("integration_time", time, positive=True)
         self._num_integration_steps = num_integration_steps
         self._initial_mass = inverse_mass_matrix
+        self._dense_mass = _dense_spec(dense_mass)
         adapted = geometric_hmc.adaptation["adapted"]
         self._adapt_step_size = bool(adapt_step_size) and "step_size" in adapted
         self._adapt_mass = bool(adapt_mass_matrix) and "inverse_mass_matrix" in adapted
+        self._find_heuristic = bool(find_heuristic_step_size) and self._adapt_step_size
         if target_accept_prob is None:
             target_accept_prob = geometric_hmc.adaptation["target_acceptance_rate"]
         target = finite_float("target_accept_prob", target_accept_prob)
@@ -299,8 +486,9 @@ class GeometricHMC(MCMCKernel):
         self._pieces = None
         self._sample_fn = None
         self._num_warmup = 0
+        self._array_params = False
 
-    # ------------------------------------------------------------------ the model
+    # ------------------------------------------------------------------ the sites
     def _setup(self, rng_key, model_args, model_kwargs):
         # A feasible value per latent site (no sampling, so nothing is compiled for it).
         model = numpyro.handlers.substitute(
@@ -313,10 +501,108 @@ class GeometricHMC(MCMCKernel):
                 sites[name] = _site_space(name, site)
         if not sites:
             raise ValueError("the model has no latent sample sites: nothing to sample")
+        self._has_deterministic = any(s["type"] == "deterministic" for s in trace.values())
+        self._set_sites(sites)
+
+    def _setup_potential(self, init_params, batched):
+        """Sites of ``potential_fn``: the arrays of ``init_params`` (one chain's shapes)."""
+        self._array_params = not isinstance(init_params, dict)
+        params = {"z": init_params} if self._array_params else init_params
+        sites = {}
+        for name, value in params.items():
+            if not isinstance(name, str) or isinstance(value, (dict, list, tuple)):
+                raise TypeError(
+                    "with potential_fn, init_params must be an array or a dict of arrays keyed "
+                    f"by str, got {jax.tree.structure(init_params)}"
+                )
+            shape = np.shape(value)[1:] if batched else np.shape(value)
+            sites[name] = _Site(spaces.Euclidean(tuple(shape)), None)
+        self._has_deterministic = False
+        self._set_sites(sites)
+
+    def _set_sites(self, sites):
+        """The sites, then the sampler's blocks: each site alone, or a ``dense_mass`` group
+        packed into one ``Euclidean`` vector (its sites raveled in the group's order)."""
         self._sites = sites
         self._space = {name: site.space for name, site in sites.items()}
-        self._has_deterministic = any(s["type"] == "deterministic" for s in trace.values())
-        self._pieces = warmup_pieces(self._space, self._target, self._adapt_mass)
+        groups = self._dense_groups()
+        grouped = {name for group in groups for name in group}
+        self._blocks = {name: (name,) for name in sites if name not in grouped}
+        self._dense_keys = []
+        for group in groups:
+            key = "+".join(group)
+            while key in self._blocks or (len(group) > 1 and key in sites):
+                key += "+"
+            self._blocks[key] = group
+            self._dense_keys.append(key)
+        self._inner_space = {
+            key: (
+                spaces.Euclidean((sum(math.prod(self._space[n].shape) for n in group),))
+                if key in self._dense_keys
+                else self._space[group[0]]
+            )
+            for key, group in self._blocks.items()
+        }
+        self._pieces = warmup_pieces(self._inner_space, self._target, self._adapt_mass)
+        self._da_init = dual_averaging_adaptation(self._target)[0]
+
+    def _dense_groups(self):
+        spec = self._dense_mass
+        if spec is False:
+            return []
+        groups = [tuple(sorted(self._sites))] if spec is True else spec
+        seen = set()
+        euclidean = sorted(n for n, s in self._space.items() if isinstance(s, spaces.Euclidean))
+        for group in groups:
+            for name in group:
+                if name not in self._sites:
+                    raise ValueError(
+                        f"dense_mass names {name!r}, which is not a latent site; the latent "
+                        f"sites are {sorted(self._sites)}"
+                    )
+                if name in seen:
+                    raise ValueError(f"dense_mass names the site {name!r} in two groups")
+                seen.add(name)
+                if name not in euclidean:
+                    raise ValueError(
+                        f"dense_mass: site {name!r} moves on {self._space[name]!r}, where GeometricHMC's "
+                        "exact drift needs one inverse mass per copy; a dense mass is possible "
+                        f"on Euclidean sites only: allowed dense_mass=[{tuple(euclidean)!r}] or "
+                        "groups of these sites"
+                    )
+        return list(groups)
+
+    def _pack(self, z):
+        """Site values → the sampler's position (a dict of blocks)."""
+        return {
+            key: (
+                jnp.concatenate([jnp.ravel(z[n]) for n in group])
+                if key in self._dense_keys
+                else z[group[0]]
+            )
+            for key, group in self._blocks.items()
+        }
+
+    def _unpack(self, position):
+        """The sampler's position → site values."""
+        z = {}
+        for key, group in self._blocks.items():
+            if key not in self._dense_keys:
+                z[group[0]] = position[key]
+                continue
+            offset = 0
+            for name in group:
+                shape = self._space[name].shape
+                size = math.prod(shape)
+                z[name] = position[key][offset : offset + size].reshape(shape)
+                offset += size
+        return z
+
+    def _to_user(self, z):
+        return z["z"] if self._array_params else z
+
+    def _from_user(self, params):
+        return {"z": params} if self._array_params else params
 
     def _constrain(self, z):
         return {
@@ -325,6 +611,10 @@ class GeometricHMC(MCMCKernel):
         }
 
     def _logdensity_fn(self, model_args, model_kwargs):
+        """``log π`` of site values."""
+        if self._potential_fn is not None:
+            return lambda z: -self._potential_fn(self._to_user(z))
+
         def logdensity(z):
             params = self._constrain(z)
             log_joint, _ = log_density(self._model, model_args, model_kwargs, params)
@@ -336,6 +626,14 @@ class GeometricHMC(MCMCKernel):
 
         return logdensity
 
+    def _inner_logdensity(self, model_args, model_kwargs):
+        """``log π`` of the sampler's position."""
+        logdensity = self._logdensity_fn(model_args, model_kwargs)
+        if not self._dense_keys:
+            return logdensity
+        return lambda position: logdensity(self._unpack(position))
+
+    # ------------------------------------------------------------------ starts
     def _random_position(self, key):
         """Uniform on manifold sites, uniform in ``(−2, 2)`` in unconstrained coordinates
         (NumPyro's ``init_to_uniform``)."""
@@ -349,24 +647,226 @@ class GeometricHMC(MCMCKernel):
                 out[name] = jax.random.uniform(k, site.space.shape, dtype, -2.0, 2.0)
         return out
 
+    def _strategy_position(self, key, model_args, model_kwargs):
+        """The sites' values ``init_strategy`` gives (unconstrained; manifold sites taken to
+        their nearest point)."""
+        model = numpyro.handlers.substitute(
+            numpyro.handlers.seed(self.model, key), substitute_fn=self._init_strategy
+        )
+        trace = numpyro.handlers.trace(model).get_trace(*model_args, **model_kwargs)
+        dtype = jnp.zeros(()).dtype
+        out = {}
+        for name, site in self._sites.items():
+            value = jnp.asarray(trace[name]["value"], dtype)
+            if site.transform is None:
+                out[name] = _nearest_point(site.space, value)
+            else:
+                out[name] = site.transform.inv(value)
+            out[name] = jnp.broadcast_to(out[name], site.space.position_array_shape)
+        return out
+
+    def _find_start(self, key, logdensity, draw):
+        """Starts from ``draw`` until log π and its gradient are finite (at most 100 draws)."""
+
+        def body(carry):
+            key, _, attempt = carry
+            key, key_draw = jax.random.split(key)
+            return key, draw(key_draw), attempt + 1
+
+        def cond(carry):
+            _, position, attempt = carry
+            value, grad = jax.value_and_grad(logdensity)(position)
+            finite = jnp.isfinite(value)
+            for g in jax.tree.leaves(grad):
+                finite = finite & jnp.all(jnp.isfinite(g))
+            return ~finite & (attempt < MAX_INIT_ATTEMPTS)
+
+        key, key_draw = jax.random.split(key)
+        first = (key, draw(key_draw), jnp.asarray(1))
+        return jax.lax.while_loop(cond, body, first)[1]
+
+    def _check_init_params(self, init_params, batched):
+        if not isinstance(init_params, dict) or set(init_params) != set(self._sites):
+            raise ValueError(
+                f"init_params must be a dict with the latent sites {sorted(self._sites)}: "
+                "points on the manifold sites, unconstrained values on the others"
+            )
+        params = {name: init_params[name] for name in self._sites}
+        chains = np.shape(jax.tree.leaves(params)[0])[0] if batched else None
+        for c in range(chains) if batched else (None,):
+            start = params if c is None else jax.tree.map(lambda x, c=c: x[c], params)
+            spaces.check_position(
+                self._space, start, "init_params" + ("" if c is None else f"[chain {c}]")
+            )
+        return params
+
+    # ------------------------------------------------------------------ masses
+    def _starting_masses(self, dtype):
+        """``(inverse mass of the warm-up pieces, DenseMass)`` from ``inverse_mass_matrix``:
+        the pieces hold a diagonal placeholder for each dense block."""
+        given = self._initial_mass
+        if isinstance(given, dict):
+            by_key = {}
+            for key, value in given.items():
+                names = (key,) if isinstance(key, str) else tuple(key)
+                block = [k for k, group in self._blocks.items() if group == names]
+                if not block:
+                    raise ValueError(
+                        f"inverse_mass_matrix has the key {key!r}, which names no block; the "
+                        f"keys are the sites or dense_mass groups {list(self._blocks.values())}"
+                    )
+                by_key[block[0]] = value
+            missing = [self._blocks[k] for k in self._blocks if k not in by_key]
+            if missing:
+                raise ValueError(f"inverse_mass_matrix misses the sites or groups {missing}")
+        else:
+            by_key = None if given is None else {key: given for key in self._blocks}
+        matrices = {}
+        for key in self._dense_keys:
+            n = self._inner_space[key].shape[0]
+            value = jnp.ones(()) if by_key is None else jnp.asarray(by_key[key], dtype)
+            if np.ndim(value) < 2:
+                value = jnp.diag(jnp.broadcast_to(value, (n,)))
+            spaces.check_inverse_mass_matrix(value, n, f"inverse mass of {self._blocks[key]}")
+            matrices[key] = jnp.asarray(value, dtype)
+            if by_key is not None:
+                by_key[key] = jnp.ones(n, dtype)
+        if by_key is not None and not self._dense_keys and not isinstance(given, dict):
+            by_key = given  # a scalar, as before
+        pieces_mass = spaces.check_inverse_mass(self._inner_space, by_key, dtype)
+        zero = {key: jnp.zeros(m.shape[0], dtype) for key, m in matrices.items()}
+        dense = DenseMass(
+            matrices, zero, {key: jnp.zeros_like(m) for key, m in matrices.items()}, jnp.asarray(0)
+        )
+        return pieces_mass, dense
+
+    def _kernel_mass(self, inverse_mass, dense):
+        return {**inverse_mass, **dense.matrices}
+
+    def _adapt_state(self, step_size, mass):
+        return AdaptState(step_size, {self._blocks[key]: m for key, m in mass.items()})
+
+    def _update_dense(self, dense, position, stage, window_end):
+        """Welford covariance of each dense block in slow windows; at a window's end the
+        block's ``M⁻¹`` becomes it, shrunk towards ``1e-3 I`` (Stan's regularisation)."""
+        if not self._dense_keys or not self._adapt_mass:
+            return dense
+        slow = stage == 1
+        count = jnp.where(slow, dense.count + 1, dense.count)
+        n = count.astype(position[self._dense_keys[0]].dtype)
+        matrices, means, m2s = {}, {}, {}
+        for key in self._dense_keys:
+            x = position[key]
+            delta = x - dense.mean[key]
+            mean = dense.mean[key] + delta / jnp.maximum(n, 1.0)
+            m2 = dense.m2[key] + jnp.outer(delta, x - mean)
+            mean = jnp.where(slow, mean, dense.mean[key])
+            m2 = jnp.where(slow, m2, dense.m2[key])
+            covariance = m2 / jnp.maximum(n - 1.0, 1.0)
+            covariance = 0.5 * (covariance + covariance.T)
+            eye = jnp.eye(x.shape[0], dtype=x.dtype)
+            shrunk = (n / (n + 5.0)) * covariance + 1e-3 * (5.0 / (n + 5.0)) * eye
+            matrices[key] = jnp.where(window_end, shrunk, dense.matrices[key])
+            means[key] = jnp.where(window_end, jnp.zeros_like(mean), mean)
+            m2s[key] = jnp.where(window_end, jnp.zeros_like(m2), m2)
+        return DenseMass(matrices, means, m2s, jnp.where(window_end, 0 * count, count))
+
+    def _heuristic_step_size(self, key, inner, logdensity, mass, step_size):
+        """NumPyro's ``find_heuristic_step_size``: from ``step_size``, double (or halve) the
+        step while one step's ``min(1, e^{−ΔH})`` stays above (below) 0.8; the step at which
+        that flips."""
+        step_size = jnp.asarray(step_size)
+        finfo = jnp.finfo(step_size.dtype)
+
+        def body(carry):
+            step, _, direction, key = carry
+            key, key_move = jax.random.split(key)
+            step = step * jnp.power(2.0, direction).astype(step.dtype)
+            _, info = self._kernel(
+                key_move,
+                inner,
+                logdensity,
+                self._inner_space,
+                step_size=step,
+                num_integration_steps=1,
+                inverse_mass_matrix=mass,
+            )
+            new_direction = jnp.where(info.metropolis_rate > HEURISTIC_ACCEPT_PROB, 1, -1)
+            return step, direction, new_direction, key
+
+        def cond(carry):
+            step, last, direction, _ = carry
+            in_range = ((step > finfo.tiny) | (direction >= 0)) & (
+                (step < finfo.max) | (direction <= 0)
+            )
+            return in_range & ((last == 0) | (direction == last))
+
+        zero = jnp.asarray(0)
+        return jax.lax.while_loop(cond, body, (step_size, zero, zero, key))[0]
+
     # ------------------------------------------------------------------ MCMCKernel
     def init(self, rng_key, num_warmup, init_params, model_args, model_kwargs):
         model_kwargs = model_kwargs or {}
         batched = not is_prng_key(rng_key)
-        self._setup(rng_key[0] if batched else rng_key, model_args, model_kwargs)
+        if self._potential_fn is not None:
+            if init_params is None:
+                raise ValueError(
+                    "with potential_fn, give init_params to MCMC.run (an array or a dict of "
+                    "arrays, with a leading axis of num_chains for vectorized chains), as "
+                    "numpyro.infer.HMC needs"
+                )
+            self._setup_potential(init_params, batched)
+            init_params = self._from_user(init_params)
+        else:
+            self._setup(rng_key[0] if batched else rng_key, model_args, model_kwargs)
+            if init_params is not None:
+                init_params = self._check_init_params(init_params, batched)
         self._num_warmup = int(num_warmup)
         if self._num_warmup > 0:
             self._schedule = window_schedule(self._num_warmup)  # constants (also under jit)
+        dtype = jnp.zeros(()).dtype
+        pieces_mass, dense = self._starting_masses(dtype)
         logdensity = self._logdensity_fn(model_args, model_kwargs)
-        if init_params is not None:
-            self._check_init_params(init_params, batched)
+        inner_logdensity = self._inner_logdensity(model_args, model_kwargs)
+        if self._init_strategy is None:
+            draw = self._random_position
+        else:
+
+            def draw(key):
+                return self._strategy_position(key, model_args, model_kwargs)
 
         def init_one(key, params):
             key, key_init = jax.random.split(key)
             if params is None:
-                params = self._find_start(key_init, logdensity)
-            inner = geometric_hmc.init(params, logdensity, self._space)
-            return self._state(jnp.asarray(0), inner, key, dtype=inner.logdensity.dtype)
+                params = self._find_start(key_init, logdensity, draw)
+            inner = geometric_hmc.init(self._pack(params), inner_logdensity, self._inner_space)
+            dtype = inner.logdensity.dtype
+            step_size = jnp.asarray(self._step_size, dtype)
+            if self._find_heuristic:
+                key, key_step = jax.random.split(key)
+                mass = self._kernel_mass(pieces_mass, dense)
+                step_size = self._heuristic_step_size(
+                    key_step, inner, inner_logdensity, mass, step_size
+                )
+            warm = self._pieces.init(inner, step_size, pieces_mass)
+            mass = self._kernel_mass(warm.inverse_mass, dense)
+            zero = jnp.asarray(0.0, dtype)
+            return GeometricHMCState(
+                jnp.asarray(0),
+                self._to_user(self._unpack(inner.position)),
+                -inner.logdensity,
+                -inner.logdensity,
+                jnp.asarray(False),
+                zero,
+                zero,
+                jnp.asarray(0),
+                warm.step_size,
+                self._adapt_state(warm.step_size, mass),
+                inner,
+                warm,
+                dense,
+                key,
+            )
 
         if batched:
             state = jit(jax.vmap(init_one))(rng_key, init_params)
@@ -386,84 +886,50 @@ class GeometricHMC(MCMCKernel):
                     else f" after {MAX_INIT_ATTEMPTS} random starts; give init_params"
                 )
             )
+        # The draws' shapes, deterministic sites included, settled now rather than after the run.
+        first = jax.tree.map(lambda x: x[0], state.z) if batched else state.z
+        jax.eval_shape(self.postprocess_fn(model_args, model_kwargs), first)
         return state
 
-    def _check_init_params(self, init_params, batched):
-        if not isinstance(init_params, dict) or set(init_params) != set(self._sites):
-            raise ValueError(
-                f"init_params must be a dict with the latent sites {sorted(self._sites)}: "
-                "points on the manifold sites, unconstrained values on the others"
-            )
-        params = {name: init_params[name] for name in self._sites}
-        chains = np.shape(jax.tree.leaves(params)[0])[0] if batched else None
-        for c in range(chains) if batched else (None,):
-            start = params if c is None else jax.tree.map(lambda x, c=c: x[c], params)
-            spaces.check_position(
-                self._space, start, "init_params" + ("" if c is None else f"[chain {c}]")
-            )
-
-    def _find_start(self, key, logdensity):
-        """Random starts until log π and its gradient are finite (at most 100 draws)."""
-
-        def body(carry):
-            key, _, attempt = carry
-            key, key_draw = jax.random.split(key)
-            return key, self._random_position(key_draw), attempt + 1
-
-        def cond(carry):
-            _, position, attempt = carry
-            value, grad = jax.value_and_grad(logdensity)(position)
-            finite = jnp.isfinite(value)
-            for g in jax.tree.leaves(grad):
-                finite = finite & jnp.all(jnp.isfinite(g))
-            return ~finite & (attempt < MAX_INIT_ATTEMPTS)
-
-        key, key_draw = jax.random.split(key)
-        first = (key, self._random_position(key_draw), jnp.asarray(1))
-        return jax.lax.while_loop(cond, body, first)[1]
-
-    def _state(self, i, inner, rng_key, dtype, info=None, warm=None, step_size=None):
-        if warm is None:
-            mass = spaces.check_inverse_mass(self._space, self._initial_mass, dtype)
-            warm = self._pieces.init(inner, self._step_size, mass)
-            step_size = warm.step_size
-        return GeometricHMCState(
-            i,
-            inner.position,
-            -inner.logdensity,
-            jnp.asarray(False) if info is None else info.is_divergent,
-            jnp.asarray(0.0, dtype) if info is None else info.acceptance_rate,
-            jnp.asarray(0) if info is None else jnp.asarray(info.num_integration_steps),
-            step_size,
-            inner,
-            warm,
-            rng_key,
-        )
-
-    def _steps_for(self, step_size):
-        if self._num_integration_steps is not None:
-            return jnp.asarray(self._num_integration_steps)
-        return integration_steps(step_size, self._integration_time)
-
     def _sample_one(self, state, model_args, model_kwargs):
-        logdensity = self._logdensity_fn(model_args, model_kwargs or {})
+        logdensity = self._inner_logdensity(model_args, model_kwargs or {})
         rng_key, key = jax.random.split(state.rng_key)
-        warm = state.warmup
+        if self._find_heuristic:
+            key, key_step = jax.random.split(key)
+        warm, dense = state.warmup, state.dense
         step_size = warm.step_size
         steps = self._steps_for(step_size)
+        mass = self._kernel_mass(warm.inverse_mass, dense)
         inner, info = self._kernel(
             key,
             state.inner,
             logdensity,
-            self._space,
+            self._inner_space,
             step_size=step_size,
             num_integration_steps=steps,
-            inverse_mass_matrix=warm.inverse_mass,
+            inverse_mass_matrix=mass,
         )
+        dtype = inner.logdensity.dtype
+        kinetic = cotangent_bundle(self._inner_space, mass, None, dtype).kinetic_energy
+        energy = -inner.logdensity + kinetic(inner.momentum)
         if self._num_warmup > 0:
             index = jnp.minimum(state.i, self._num_warmup - 1)
             stage, window_end = (jnp.asarray(column)[index] for column in self._schedule)
             updated = self._pieces.update(warm, inner, info, stage, window_end)
+            new_dense = self._update_dense(dense, inner.position, stage, window_end)
+            if self._find_heuristic and self._adapt_mass:
+
+                def restart(warm):
+                    new_mass = self._kernel_mass(warm.inverse_mass, new_dense)
+                    step = self._heuristic_step_size(
+                        key_step, inner, logdensity, new_mass, warm.step_size
+                    )
+                    da_state = self._da_init(step)
+                    return warm._replace(
+                        da_state=da_state, step_size=jnp.exp(da_state.log_step_size)
+                    )
+
+                updated = jax.lax.cond(window_end, restart, lambda warm: warm, updated)
             final = jnp.where(
                 state.i == self._num_warmup - 1,
                 self._pieces.final_step_size(updated),
@@ -473,9 +939,34 @@ class GeometricHMC(MCMCKernel):
                 final = jnp.asarray(self._step_size, final.dtype)
             updated = updated._replace(step_size=final)
             in_warmup = state.i < self._num_warmup
-            warm = jax.tree.map(lambda a, b: jnp.where(in_warmup, a, b), updated, warm)
-        dtype = inner.logdensity.dtype
-        return self._state(state.i + 1, inner, rng_key, dtype, info, warm, step_size)
+            keep = lambda new, old: jax.tree.map(lambda a, b: jnp.where(in_warmup, a, b), new, old)
+            warm, dense = keep(updated, warm), keep(new_dense, dense)
+        # NumPyro's running mean, restarted when sampling begins.
+        count = jnp.where(state.i < self._num_warmup, state.i + 1, state.i + 1 - self._num_warmup)
+        mean_accept = state.mean_accept_prob + (
+            info.acceptance_rate - state.mean_accept_prob
+        ) / count.astype(dtype)
+        return GeometricHMCState(
+            state.i + 1,
+            self._to_user(self._unpack(inner.position)),
+            -inner.logdensity,
+            energy,
+            info.is_divergent,
+            info.acceptance_rate,
+            mean_accept,
+            jnp.asarray(info.num_integration_steps),
+            step_size,
+            self._adapt_state(warm.step_size, self._kernel_mass(warm.inverse_mass, dense)),
+            inner,
+            warm,
+            dense,
+            rng_key,
+        )
+
+    def _steps_for(self, step_size):
+        if self._num_integration_steps is not None:
+            return jnp.asarray(self._num_integration_steps)
+        return integration_steps(step_size, self._integration_time)
 
     def sample(self, state, model_args, model_kwargs):
         return self._sample_fn(state, model_args, model_kwargs)
@@ -485,10 +976,15 @@ class GeometricHMC(MCMCKernel):
         return ("z", "diverging")
 
     def get_diagnostics_str(self, state):
-        return f"step size {float(state.step_size):.2e}, acc. prob={float(state.accept_prob):.2f}"
+        return (
+            f"{int(state.num_steps)} steps of size {float(state.step_size):.2e}. "
+            f"acc. prob={float(state.mean_accept_prob):.2f}"
+        )
 
     def postprocess_fn(self, model_args, model_kwargs):
         model_kwargs = model_kwargs or {}
+        if self._potential_fn is not None:
+            return lambda z: z
 
         def postprocess(z):
             params = self._constrain(z)
@@ -504,8 +1000,11 @@ class GeometricHMC(MCMCKernel):
     @property
     def model(self):
         """The model, its manifold sites shown to ``arviz.from_numpyro`` through a view (same
-        log-density and draws; see the comment above ``_ManifoldSupport``)."""
+        log-density and draws; see the comment above ``_ManifoldSupport``); ``None`` with
+        ``potential_fn``."""
         model = self._model
+        if model is None:
+            return None
 
         def viewed(*args, **kwargs):
             with _ViewManifoldSites():
@@ -519,4 +1018,3 @@ class GeometricHMC(MCMCKernel):
         if self._sites is None:
             raise RuntimeError("the kernel is not initialised: run MCMC first")
         return dict(self._space)
-

@@ -20,6 +20,7 @@ them.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
@@ -240,9 +241,7 @@ def sample_chains(
     initial_positions, num_chains = _as_positions(initial_positions)
     _check_run_arguments(num_draws, num_warmup, thinning, on_nonfinite, chunk_draws, adapt)
     rng_key = prng_key(rng_key)
-    min_acceptance_rate = finite_float(
-        "min_acceptance_rate", min_acceptance_rate, nonnegative=True
-    )
+    min_acceptance_rate = finite_float("min_acceptance_rate", min_acceptance_rate, nonnegative=True)
     if not isinstance(resume, bool):
         raise TypeError(f"resume must be a bool, got {resume!r}")
     if resume and output is None:
@@ -711,83 +710,122 @@ def load_chains(path) -> ChainsResult:
     return ChainsResult(positions, info, math.nan, num_steps)
 
 
+def _saved_num_warmup(run_options) -> int | None:
+    """The ``num_warmup`` of the run that ``resume=True`` continues, if its file exists."""
+    output = run_options.get("output")
+    if not run_options.get("resume") or output is None or not os.path.exists(output):
+        return None
+    import h5netcdf
+
+    with h5netcdf.File(output, "r") as f:
+        return int(f.attrs["num_warmup"])
+
+
 def sample(
     algorithm,
     rng_key,
     initial_positions,
     num_draws: int,
     *,
-    num_warmup: int = 0,
-    thinning: int = 1,
-    progress: bool = True,
-    chunk_draws: int | None = None,
-    on_nonfinite: str = "warn",
-    devices=None,
-    output=None,
-    resume: bool = False,
-    adapt: bool | None = None,
-    min_acceptance_rate: float = DEFAULT_MIN_ACCEPTANCE_RATE,
+    num_warmup: int | None = None,
     var_name: str | None = None,
     event_dims=None,
     coords=None,
     attrs=None,
+    **run_options,
 ):
     """Run chains with :func:`sample_chains` and return an ArviZ ``DataTree``.
 
-    The tree has ``posterior/<var_name>`` with dims ``(chain, draw, *event_dims)`` (defaults
-    ``mu`` and ``("component",)``) and ``sample_stats`` under ArviZ's names (``diverging``,
-    ``acceptance_rate``, ``energy``, and the sampler's own fields such as ``casimir_error``);
-    its attributes record the wall time, the number of steps, the sampler's settings
-    (``sampler``, ``step_size`` and ``step_size_source``, ``stability`` mode and
-    ``stability_number``, …), whether the warm-up adapted, and ``attrs``. The other arguments
-    are those of :func:`sample_chains` (warm-up adaptation, divergence and stuck-chain
-    reports, sharded chains, incremental saving, resume).
+    The tree has ``posterior/<var_name>`` with dims ``(chain, draw, *event_dims)`` and
+    ``sample_stats`` under ArviZ's names (``diverging``, ``acceptance_rate``, ``energy``, and
+    the sampler's own fields such as ``casimir_error``); its attributes record the wall time,
+    the number of steps, the sampler's settings (``sampler``, ``step_size`` and
+    ``step_size_source``, ``stability`` mode and ``stability_number``, …), whether the warm-up
+    adapted, and ``attrs``.
 
-    Pytree positions (dicts, tuples) give one posterior variable per leaf, named from its key
-    path (``mu``, ``log_kappa``; tuple entries ``x0``, ``x1``…; nested keys joined with ``.``),
-    with dims ``<name>_dim_k`` (``event_dims`` may map a leaf's name to other dims); a complex
-    leaf ``U`` is split into ``U.real`` and ``U.imag``
-    (:func:`liesample.analysis.diagnostics.to_datatree`).
+    Parameters
+    ----------
+    algorithm, rng_key, initial_positions, num_draws
+        As for :func:`sample_chains`.
+    num_warmup : int, optional
+        Steps run and discarded before the first draw (the sampler adapts there). Default:
+        as many steps as the draws span (``num_draws * thinning``): chains started from
+        arbitrary points forget their starts before anything is kept, and a sampler built
+        without a step size tunes it there. ``0`` keeps every step from the starts and warns,
+        unless ``exact_starts=True`` says the starts are already draws from the target.
+    var_name, event_dims
+        Name and event dims of single-array positions. Default: the sampler's declaration
+        (``R`` with dims ``(row, col)`` for ``SO(n)``, ``U`` for ``SU(n)``), else ``mu`` with
+        dims named from the event's rank (``component``; ``row, col``). Pytree positions give
+        one variable per leaf, named from its key path (``mu``, ``log_kappa``; tuple entries
+        ``x0``, ``x1``…; nested keys joined with ``.``), with dims ``<name>_dim_k``
+        (``event_dims`` may map a leaf's name to other dims); a complex leaf ``U`` is split into
+        ``U.real`` and ``U.imag`` (:func:`liesample.analysis.diagnostics.to_datatree`). Names,
+        dims and ``coords`` are checked against the starts before any sampling.
+    coords, attrs
+        Coordinates by dim name, and extra attributes for the tree.
+    run_options
+        The other keywords of :func:`sample_chains`: ``thinning``, ``progress``,
+        ``chunk_draws``, ``on_nonfinite``, ``devices``, ``output``, ``resume``, ``adapt``,
+        ``min_acceptance_rate``; and ``exact_starts`` (bool, default False).
+
     ArviZ's ESS and R-hat of these variables are those of the ambient coordinates (vector
     components, matrix entries), not of intrinsic coordinates on the group or sphere.
 
-    Example: ``sample(liesample.adjusted_lie_poisson(system, beta=1.0), key, starts, 1000,
-    num_warmup=500)`` tunes the step size by dual averaging in the warm-up, then samples.
+    Example: ``sample(liesample.adjusted_lie_poisson(system, beta=1.0), key, starts, 1000)``
+    tunes the step size by dual averaging in a warm-up of 1000 steps, then samples.
     """
     from liesample.analysis.diagnostics import to_datatree
 
+    exact_starts = run_options.pop("exact_starts", False)
+    if not isinstance(exact_starts, bool):
+        raise TypeError(f"exact_starts must be a bool, got {exact_starts!r}")
+    thinning = run_options.get("thinning", 1)
+    if num_warmup is None:
+        num_warmup = _saved_num_warmup(run_options)
+    if num_warmup is None:
+        _check_run_arguments(num_draws, 0, thinning, "warn", None, None)
+        num_warmup = int(num_draws) * int(thinning)
+    elif num_warmup == 0 and not exact_starts:
+        warnings.warn(
+            "num_warmup=0: every step from initial_positions is kept; unless the starts are "
+            "draws from the target (then pass exact_starts=True), the draws are biased towards "
+            "them. Leave num_warmup unset for a warm-up as long as the run.",
+            UserWarning,
+            stacklevel=2,
+        )
+    positions, _ = _as_positions(initial_positions)
+    names = as_sampler(algorithm).draw_names
+    if (
+        var_name is None
+        and event_dims is None
+        and names is not None
+        and is_single_array(positions)
+        and np.ndim(positions) - 1 == len(names.event_dims)
+    ):
+        var_name, event_dims = names
+    # the names, dims and coords of the draws, checked on the starts before any work
+    datatree = functools.partial(
+        to_datatree, var_name=var_name, event_dims=event_dims, coords=coords
+    )
+    datatree(jax.tree.map(lambda leaf: np.asarray(leaf)[:, None], positions))
+
     result = sample_chains(
-        algorithm,
-        rng_key,
-        initial_positions,
-        num_draws,
-        num_warmup=num_warmup,
-        thinning=thinning,
-        progress=progress,
-        chunk_draws=chunk_draws,
-        on_nonfinite=on_nonfinite,
-        devices=devices,
-        output=output,
-        resume=resume,
-        adapt=adapt,
-        min_acceptance_rate=min_acceptance_rate,
+        algorithm, rng_key, initial_positions, num_draws, num_warmup=num_warmup, **run_options
     )
     settings = {
         k: v for k, v in (result.settings or {}).items() if k not in ("num_warmup", "step_size")
     }
-    return to_datatree(
+    return datatree(
         result.positions,
         result.info,
-        var_name=var_name,
-        event_dims=event_dims,
-        coords=coords,
         thinning=thinning,
         step_size=(result.settings or {}).get("step_size"),
         attrs={
             "wall_time_seconds": result.wall_time,
             "num_steps": result.num_steps,
             "num_warmup": num_warmup,
-            "on_nonfinite": on_nonfinite,
+            "on_nonfinite": run_options.get("on_nonfinite", "warn"),
             **settings,
             **(attrs or {}),
         },

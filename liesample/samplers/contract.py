@@ -61,6 +61,7 @@ __all__ = [
     "CONTRACT_FIELDS",
     "REDUCE_OVER_THINNING",
     "SAMPLE_STATS_NAMES",
+    "DrawNames",
     "Sampler",
     "SamplerInfo",
     "StepSizeTuning",
@@ -167,6 +168,13 @@ class StepSizeTuning(NamedTuple):
     target_acceptance_rate: float | None = None
 
 
+class DrawNames(NamedTuple):
+    """How a sampler's single-array positions are named in a ``DataTree``."""
+
+    var_name: str
+    event_dims: tuple[str, ...]
+
+
 class Sampler(blackjax.base.SamplingAlgorithm, DeclaresNoiseBlocks):
     """``SamplingAlgorithm(init, step)`` plus what the runner and the step loop read.
 
@@ -187,20 +195,34 @@ class Sampler(blackjax.base.SamplingAlgorithm, DeclaresNoiseBlocks):
         How the step size is chosen and tuned in warm-up; ``None`` (default): nothing to tune.
     noise_blocks : liesample.integrators.chain_loop.NoiseBlocks or None
         How ``step`` consumes noise drawn in blocks; ``None`` (default): one key per step.
+    draw_names : DrawNames or None
+        The name and event dims of a single-array position in the ``DataTree`` of
+        :func:`liesample.sample` (e.g. ``R`` with dims ``(row, col)`` on ``SO(3)``); ``None``
+        (default): named from the event's rank.
     """
 
     settings: Mapping = MappingProxyType({})
     check_positions: Callable | None = None
     tuning: StepSizeTuning | None = None
+    draw_names: DrawNames | None = None
 
     def __new__(
-        cls, init, step, *, settings=None, check_positions=None, tuning=None, noise_blocks=None
+        cls,
+        init,
+        step,
+        *,
+        settings=None,
+        check_positions=None,
+        tuning=None,
+        noise_blocks=None,
+        draw_names=None,
     ):
         self = super().__new__(cls, init, step)
         self.settings = {} if settings is None else settings
         self.check_positions = check_positions
         self.tuning = tuning
         self.noise_blocks = noise_blocks
+        self.draw_names = draw_names
         return self
 
 
@@ -239,9 +261,7 @@ Low-level pieces: ``{name}.init``, ``{name}.build_kernel`` (BlackJAX-shaped).
 """
 
 
-def sampling_api(
-    as_top_level_api, init, build_kernel, name: str, module: str, *, adaptation=None
-):
+def sampling_api(as_top_level_api, init, build_kernel, name: str, module: str, *, adaptation=None):
     """``blackjax.GenerateSamplingAPI(as_top_level_api, init, build_kernel)`` whose ``help()``
     and ``__doc__`` are ``as_top_level_api``'s docstring (plus the precision rule) and whose
     call signature is that of ``as_top_level_api``.

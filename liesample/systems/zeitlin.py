@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import functools
 import math
+from dataclasses import dataclass
 
 import jax
 import jax.numpy as jnp
@@ -62,6 +63,7 @@ from liesample.targets.zeitlin import UnitaryOrbitLaw
 
 __all__ = [
     "QuantisedHarmonics",
+    "SkewHermitianUnitary",
     "isospectral_midpoint",
     "quantised_harmonics",
     "random_vorticity",
@@ -299,15 +301,17 @@ def _compiled_from_coefficients(harmonics):
     return jax.jit(harmonics.from_coefficients)
 
 
-def random_vorticity(size: int, seed: int = 0, slope: float = 1.0, enstrophy: float = 1.0):
+def random_vorticity(size: int, seed: int = 0, slope: float = 1.0, enstrophy: float = 0.5):
     """A trace-free vorticity with Gaussian coefficients ``ω_ℓm ∝ ℓ^{−slope/2}`` (all ``ℓ ≥ 1``),
-    scaled to ``‖W‖² = enstrophy``; real coordinates, shape ``(N, N)``."""
+    scaled to the enstrophy ``½∫ω² = ½‖W‖² = enstrophy``; real coordinates, shape ``(N, N)``.
+    The default ``0.5`` is ``‖W‖² = 1``. (For a given energy spectrum:
+    :func:`liesample.systems.zeitlin_states.spectral_vorticity`.)"""
     basis = quantised_harmonics(size)
     rng = np.random.default_rng(seed)
     ell = basis.degrees
     amplitude = np.where(ell > 0, np.maximum(ell, 1.0) ** (-slope / 2), 0.0)
     c = rng.standard_normal(ell.shape) * amplitude
-    c *= math.sqrt(enstrophy / np.sum(c**2))
+    c *= math.sqrt(2.0 * enstrophy / np.sum(c**2))
     return np.asarray(_compiled_from_coefficients(basis)(jnp.asarray(c)))
 
 
@@ -328,8 +332,40 @@ def so3_from_su2(x):
     return jnp.stack([m1, m2, m3], -1)
 
 
+@dataclass(frozen=True, init=False)
+class SkewHermitianUnitary(Unitary):
+    """:class:`liesample.geometry.algebras.Unitary` whose group element is the exponential of
+    a skew-Hermitian matrix by its eigendecomposition.
+
+    ``Z`` skew-Hermitian makes ``iZ = VΛV*`` Hermitian (``jnp.linalg.eigh``, batched over
+    leading axes), and ``e^{−Z} = V e^{iΛ} V*``: one Hermitian eigendecomposition and one matrix
+    product, unitary to round-off for any ``‖Z‖``. The general ``expm`` (Padé with scaling and
+    squaring) needs a squaring per doubling of ``‖Z‖``, and large steps of the adjusted sampler
+    make ``‖Z‖`` large; the eigendecomposition's cost does not depend on it. Same map as the
+    base class, to round-off.
+    """
+
+    def group_element(self, zeta):
+        """``U = e^{−Z} = V e^{iΛ} V*`` with ``iZ = VΛV*``."""
+        values, vectors = jnp.linalg.eigh(1j * self.to_matrix(zeta))
+        rotated = vectors * jnp.exp(1j * values)[..., None, :]
+        return rotated @ jnp.conj(jnp.swapaxes(vectors, -1, -2))
+
+
 class ZeitlinSystem(LiePoissonSystem):
     """A :class:`LiePoissonSystem` whose states must also be trace-free (su(N), not u(N))."""
+
+    def step_casimir_error(self, mu, reference_casimirs):
+        """Relative drift of the Casimir ``‖W‖² = −tr(W²)`` alone: O(N²), what the adjusted
+        sampler reports per step (``casimir_error`` of its Info).
+
+        Every move is a conjugation ``U W U*``, which changes the spectrum only through the
+        round-off of ``U``'s unitarity, and that shows in ``‖W‖²``; :meth:`casimir_error`
+        compares the whole spectrum (one Hermitian eigenvalue problem, O(N³)).
+        """
+        norm_sq = jnp.sum(jnp.asarray(mu) ** 2, axis=(-2, -1))
+        reference = reference_casimirs[..., -1]
+        return jnp.abs(norm_sq - reference) / jnp.maximum(jnp.abs(reference), norm_sq)
 
     def check_position(self, position, name: str = "position"):
         super().check_position(position, name)
@@ -352,10 +388,12 @@ def zeitlin_euler(size: int, noise_degree: int = 2, noise_smoothness: int = 1, p
         ``N ≥ 2``; the vorticity is resolved up to degree ``ℓ = N − 1``.
     noise_degree : int
         ``L``: noise Hamiltonians from the ``L(L+2)`` modes ``1 ≤ ℓ ≤ L`` (``L ≤ N − 1``).
+        ``L = 1`` is refused for ``N ≥ 3``: rigid rotations alone keep ``h`` fixed (for
+        ``N = 2`` they are the whole algebra and ``h`` is a Casimir).
     noise_smoothness : int
         ``n ≥ 0``: ``ψ_ℓm = (ℓ(ℓ+1))^{−n/2} E_ℓm`` is orthonormal in ``⟨α, (−Δ)ⁿβ⟩``.
     position : array (N, N), optional
-        Default start; :func:`random_vorticity` (seed 0, unit enstrophy) when omitted.
+        Default start; :func:`random_vorticity` (seed 0, ``‖W‖² = 1``) when omitted.
 
     Returns
     -------
@@ -375,8 +413,14 @@ def zeitlin_euler(size: int, noise_degree: int = 2, noise_smoothness: int = 1, p
         if value < low or (high is not None and value > high):
             allowed = f"{low} … {high}" if high is not None else f">= {low}"
             raise ValueError(f"{name} must be in {allowed} for N = {size}, got {value}")
+    if noise_degree == 1 and size > 2:
+        raise ValueError(
+            f"noise_degree=1 cannot mix for N = {size}: the ℓ = 1 noise fields are rigid "
+            "rotations of the sphere, which commute with the Laplacian, so {h, ĥ_i} = 0, the "
+            "energy h never changes and no sampler reaches the Gibbs law. Use noise_degree >= 2"
+        )
     harmonics = quantised_harmonics(size)
-    algebra = Unitary(size)
+    algebra = SkewHermitianUnitary(size)
     modes = harmonics.basis(noise_degree, 1)
     ell = harmonics.degrees[1 : (noise_degree + 1) ** 2]
     streams = modes * (ell * (ell + 1.0))[:, None, None] ** (-0.5 * noise_smoothness)

@@ -6,7 +6,13 @@ on the orbit). So ``E_π[f] = E_Haar[f(UW₀U*) e^{−βh(UW₀U*)}] / E_Haar[e^
 by self-normalised importance sampling with i.i.d. Haar unitaries (QR of a complex Ginibre
 matrix with the phases of ``R``'s diagonal divided out, Mezzadri's recipe). The estimate comes
 with its delta-method standard error, so a test compares a chain against it with the two
-errors combined. Exact up to that Monte-Carlo error, for any ``h``; meant for small ``N``.
+errors combined. Exact up to that Monte-Carlo error, for any ``h``; meant for small ``N`` (the
+weights degenerate as the orbit's dimension ``N² − N`` grows).
+
+Two laws are exact in closed form at any ``N``: the mean energy spectrum of the uniform law
+(``β = 0``, :func:`uniform_orbit_energy_spectrum`), and the Gibbs law of a Hamiltonian linear in
+the ``ℓ = 1`` modes, ``h = κ ω_10``, by the Harish-Chandra–Itzykson–Zuber integral
+(:func:`dipole_gibbs_moments`).
 
 States are the real coordinates of :class:`liesample.geometry.algebras.Unitary`
 (``x = Re W + Im W``).
@@ -14,6 +20,7 @@ States are the real coordinates of :class:`liesample.geometry.algebras.Unitary`
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -21,7 +28,12 @@ import numpy as np
 
 from liesample.foundation.validation import finite_float
 
-__all__ = ["UnitaryOrbitLaw", "haar_unitaries"]
+__all__ = [
+    "UnitaryOrbitLaw",
+    "dipole_gibbs_moments",
+    "haar_unitaries",
+    "uniform_orbit_energy_spectrum",
+]
 
 
 def haar_unitaries(rng: np.random.Generator, num: int, size: int) -> np.ndarray:
@@ -92,3 +104,71 @@ class UnitaryOrbitLaw:
         mean = (w[:, None] * values).sum(0) / total
         error = np.sqrt((w[:, None] ** 2 * (values - mean) ** 2).sum(0)) / total
         return mean, error, float(total**2 / np.sum(w**2))
+
+
+# ---------------------------------------------------------------------------------------------
+# Exact laws at any N (docs/zeitlin.md, "Exact references that scale")
+# ---------------------------------------------------------------------------------------------
+
+
+def _spin_norm(size: int) -> float:
+    """``‖S₃‖_F = √(N(N² − 1)/12)``: ``E_10 = i S₃ / ‖S₃‖_F`` is the unit ``ℓ = 1, m = 0`` mode."""
+    return math.sqrt(size * (size * size - 1) / 12.0)
+
+
+def _langevin(x):
+    """``L(x) = coth x − 1/x`` and ``L'(x) = 1/x² − 1/sinh² x``, by series for ``|x| < 1e-3``."""
+    x = np.asarray(x, dtype=float)
+    small = np.abs(x) < 1e-3
+    safe = np.where(small, 1.0, x)
+    value = np.where(small, x / 3.0 - x**3 / 45.0, 1.0 / np.tanh(safe) - 1.0 / safe)
+    slope = np.where(small, 1.0 / 3.0 - x**2 / 15.0, 1.0 / safe**2 - 1.0 / np.sinh(safe) ** 2)
+    return value, slope
+
+
+def _pair_half_gaps(spectrum, coupling):
+    """``κ (b_j − b_k) / (2‖S₃‖_F)`` over the pairs ``j < k`` of the spectrum ``b`` of ``iW``."""
+    b = np.asarray(spectrum, dtype=float)
+    if b.ndim != 1 or b.size < 2 or not np.all(np.isfinite(b)):
+        raise ValueError(f"spectrum must be a finite 1-D array of >= 2 eigenvalues, got {b!r}")
+    j, k = np.triu_indices(b.size, 1)
+    return finite_float("coupling", coupling) * (b[j] - b[k]) / (2.0 * _spin_norm(b.size))
+
+
+def dipole_gibbs_moments(spectrum, beta: float, coupling: float = 1.0):
+    """Exact ``(E[h], Var[h])`` of ``h = κ ω_10`` under ``∝ exp(−βh)`` on a unitary orbit.
+
+    ``ω_10 = ⟨W, E_10⟩`` is the ``ℓ = 1, m = 0`` coefficient of the vorticity (its dipole
+    moment along the axis; by the orbit's invariance any unit direction of the ``ℓ = 1`` modes
+    gives the same law). ``spectrum`` is the eigenvalues ``b`` of the Hermitian ``iW`` (the
+    orbit; any ``N ≥ 2``, repeated values allowed). With ``c_jk = κ (b_j − b_k) / (2‖S₃‖_F)``
+    the Harish-Chandra–Itzykson–Zuber integral factorises,
+    ``E_Haar[exp(−βh)] = Π_{j<k} sinh(βc_jk) / (βc_jk)``, so ``h`` is a sum of independent
+    ``c_jk V_jk`` with ``V_jk`` exponentially tilted uniform on ``[−1, 1]``:
+
+        E[h] = −Σ_{j<k} c_jk L(βc_jk),      Var[h] = Σ_{j<k} c_jk² L'(βc_jk),
+
+    with the Langevin function ``L(x) = coth x − 1/x``. Stable for every ``β`` (either sign)
+    and ``N``; O(N²). Derivation: docs/zeitlin.md.
+    """
+    c = _pair_half_gaps(spectrum, coupling)
+    value, slope = _langevin(finite_float("beta", beta) * c)
+    return float(-np.sum(c * value)), float(np.sum(c * c * slope))
+
+
+def uniform_orbit_energy_spectrum(size: int, squared_norm: float) -> np.ndarray:
+    """Exact mean energy per degree, ``E[ε_ℓ]`` for ``ℓ = 1 … N−1``, under the uniform
+    (``β = 0``) law on the orbit of any trace-free ``W`` with ``‖W‖² = squared_norm``.
+
+    ``su(N)`` is an irreducible real representation of ``U(N)``, so by Schur's lemma the Haar
+    average of ``W ⊗ W`` is ``‖W‖²/(N² − 1)`` times the identity: every coefficient ``ω_ℓm``
+    (``ℓ ≥ 1``) has ``E[ω_ℓm²] = ‖W‖²/(N² − 1)``, and
+    ``E[ε_ℓ] = (2ℓ + 1) ‖W‖² / (2ℓ(ℓ + 1)(N² − 1))``. The mean energy ``E[h]`` is their sum.
+    """
+    if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or size < 2:
+        raise ValueError(f"size must be an int >= 2, got {size!r}")
+    squared_norm = finite_float("squared_norm", squared_norm)
+    if squared_norm < 0:
+        raise ValueError(f"squared_norm must be >= 0, got {squared_norm}")
+    ell = np.arange(1, size, dtype=float)
+    return (2 * ell + 1) * squared_norm / (2 * ell * (ell + 1) * (size * size - 1.0))

@@ -48,7 +48,7 @@ from liesample.geometry.cotangent import (
     kick,
     refresh,
 )
-from liesample.samplers.contract import Sampler, setting
+from liesample.samplers.contract import DrawNames, Sampler, setting
 
 __all__ = [
     "GeometricInfo",
@@ -322,7 +322,12 @@ def space_sampler(logdensity_fn, space, step_fn: Callable, settings: dict) -> Sa
         del rng_key
         return init(position, logdensity_fn, space)
 
-    return Sampler(init_fn, step_fn, settings=settings, check_positions=check_starts(space))
+    names = None
+    if isinstance(space, spaces.Space):
+        names = DrawNames(space.draw_name, space.draw_dims())
+    return Sampler(
+        init_fn, step_fn, settings=settings, check_positions=check_starts(space), draw_names=names
+    )
 
 
 def scheme_step(move: Move, sign, friction=None) -> Callable:

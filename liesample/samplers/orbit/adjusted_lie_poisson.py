@@ -110,7 +110,8 @@ class AdjustedLiePoissonInfo(NamedTuple):
     acceptance_rate : ``min(1, exp(L))`` of the proposal (0 for a divergent one).
     energy : ``h`` at the chain's state after the step.
     is_accepted : whether the chain moved.
-    casimir_error : relative Casimir drift of the new state (``LiePoissonSystem.casimir_error``).
+    casimir_error : relative Casimir drift of the new state (``LiePoissonSystem.casimir_error``,
+        or the system's cheaper ``step_casimir_error`` where it declares one).
     """
 
     is_divergent: jax.Array
@@ -202,6 +203,7 @@ def build_noise_kernel(system: LiePoissonSystem):
     (:func:`check_linear_noise`).
     """
     check_linear_noise(system)
+    casimir_error = _per_step_casimir_error(system)
 
     def kernel(noise, state: AdjustedLiePoissonState, step_size, sigma, beta):
         normals, accept = noise[:-1], noise[-1]
@@ -234,11 +236,18 @@ def build_noise_kernel(system: LiePoissonSystem):
             acceptance_rate,
             new_state.energy,
             is_accepted,
-            system.casimir_error(new_state.position, state.reference_casimirs),
+            casimir_error(new_state.position, state.reference_casimirs),
         )
         return new_state, info
 
     return kernel
+
+
+def _per_step_casimir_error(system: LiePoissonSystem):
+    """The Casimir drift reported each step: the system's ``step_casimir_error`` where it
+    declares one (a cheap invariant, e.g. ``‖W‖²`` for Zeitlin's model, whose full spectrum
+    costs an eigenvalue problem per step), else ``casimir_error``."""
+    return getattr(system, "step_casimir_error", system.casimir_error)
 
 
 def _draw_noise(system, rng_key, shape, dtype):

@@ -1,0 +1,179 @@
+"""The posteriordb models of ``benchmarks/posteriordb_models.py`` are the Stan programs.
+
+For every posterior, at reference draws (Stan's, shipped in ``benchmarks/data/posteriordb``):
+the model's sites give exactly the reference keys; the transformed parameters (deterministic
+sites) reproduce the reference values from the sample sites; NumPyro's potential energy on the
+unconstrained space is finite; and the NumPyro log joint differs from the Stan program's
+``target`` (written again below with SciPy, line by line from the ``.stan`` code shipped with
+the data) by one constant across draws. The reference draws carry no ``lp__``, so this second,
+independent transcription stands in for Stan's own log density.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy import stats
+
+pytest.importorskip("numpyro")
+
+from numpyro.infer.util import initialize_model, log_density, unconstrain_fn  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository root
+
+from benchmarks import posteriordb_models as pdb  # noqa: E402
+
+
+def _normal(x, loc, scale):
+    return np.sum(stats.norm.logpdf(x, loc, scale))
+
+
+def stan_eight_schools(d, p):
+    theta = p["theta_trans"] * p["tau"] + p["mu"]
+    return (
+        _normal(p["theta_trans"], 0, 1)
+        + _normal(d["y"], theta, d["sigma"])
+        + _normal(p["mu"], 0, 5)
+        + stats.cauchy.logpdf(p["tau"], 0, 5)
+    )
+
+
+def stan_ark(d, p):
+    y, lags = d["y_now"], d["lags"]  # y[t], and y[t - k] in column k - 1
+    mu = p["alpha"] + sum(p["beta"][k] * lags[:, k] for k in range(lags.shape[1]))
+    return (
+        _normal(p["alpha"], 0, 10)
+        + _normal(p["beta"], 0, 10)
+        + stats.cauchy.logpdf(p["sigma"], 0, 2.5)
+        + _normal(y, mu, p["sigma"])
+    )
+
+
+def stan_gp_pois_regr(d, p):
+    x = d["x"]
+    cov = p["alpha"] ** 2 * np.exp(-0.5 * np.subtract.outer(x, x) ** 2 / p["rho"] ** 2)
+    f = np.linalg.cholesky(cov + 1e-10 * np.eye(len(x))) @ p["f_tilde"]
+    return (
+        stats.gamma.logpdf(p["rho"], 25, scale=1 / 4)
+        + _normal(p["alpha"], 0, 2)
+        + _normal(p["f_tilde"], 0, 1)
+        + np.sum(stats.poisson.logpmf(d["k"], np.exp(f)))
+    )
+
+
+def stan_kidscore_momiq(d, p):
+    mean = p["beta"][0] + p["beta"][1] * d["mom_iq"]
+    return stats.cauchy.logpdf(p["sigma"], 0, 2.5) + _normal(d["kid_score"], mean, p["sigma"])
+
+
+def stan_logmesquite(d, p):
+    b, x = p["beta"], d["predictors"]  # log diam1, log diam2, log canopy, log total, log density, group
+    mean = b[0] + sum(b[j + 1] * x[:, j] for j in range(6))
+    return _normal(d["log_weight"], mean, p["sigma"])
+
+
+def stan_garch11(d, p):
+    y = d["y"]
+    sigma = [float(d["sigma1"])]
+    for t in range(1, len(y)):
+        sigma.append(
+            np.sqrt(
+                p["alpha0"] + p["alpha1"] * (y[t - 1] - p["mu"]) ** 2 + p["beta1"] * sigma[-1] ** 2
+            )
+        )
+    return _normal(y, p["mu"], np.array(sigma))
+
+
+def stan_blr(d, p):
+    return (
+        _normal(p["beta"], 0, 10)
+        + _normal(p["sigma"], 0, 10)
+        + _normal(d["y"], d["X"] @ p["beta"], p["sigma"])
+    )
+
+
+STAN = {
+    "eight_schools-eight_schools_noncentered": stan_eight_schools,
+    "arK-arK": stan_ark,
+    "gp_pois_regr-gp_pois_regr": stan_gp_pois_regr,
+    "kidiq-kidscore_momiq": stan_kidscore_momiq,
+    "mesquite-logmesquite": stan_logmesquite,
+    "garch-garch11": stan_garch11,
+    "sblrc-blr": stan_blr,
+}
+
+
+def test_every_posterior_has_a_transcription():
+    assert set(STAN) == set(pdb.POSTERIORS) == set(pdb.SPECS)
+
+
+@pytest.fixture(scope="module", params=pdb.POSTERIORS)
+def posterior(request):
+    return pdb.load(request.param)
+
+
+@pytest.fixture(scope="module")
+def initialized(posterior):
+    """NumPyro's ``(init, potential_fn, postprocess_fn)`` for the posterior's model."""
+    init, potential_fn, postprocess_fn, _ = initialize_model(
+        jax.random.key(0), posterior.model, model_kwargs=posterior.model_kwargs()
+    )
+    return init, potential_fn, postprocess_fn
+
+
+def test_sites_name_the_reference_keys(posterior, initialized):
+    """The reported sites' coordinates are the reference keys; the latent sample sites are
+    what :meth:`Posterior.latent` rebuilds from them."""
+    init, _, postprocess_fn = initialized
+    values = postprocess_fn(init.z)
+    reported = {name: values[name] for name in posterior.reported}
+    assert sorted(pdb.reference_keys(reported)) == sorted(posterior.keys)
+    rebuilt = posterior.latent(posterior.draws_sample[:1])
+    assert set(rebuilt) == set(init.z)
+    for name in init.z:
+        assert np.shape(rebuilt[name])[1:] == np.shape(values[name])
+
+
+def test_log_density_finite_and_transformed_parameters_reproduced(posterior, initialized):
+    """At every reference draw kept: the deterministic sites recomputed from the sample sites
+    equal the reference values, and the potential energy (unconstrained) is finite."""
+    draws = posterior.draws_sample
+    latent = posterior.latent(draws)
+    kwargs = posterior.model_kwargs()
+    _, potential_fn, postprocess_fn = initialized
+
+    def one(params):
+        z = unconstrain_fn(posterior.model, (), kwargs, params)
+        return potential_fn(z), postprocess_fn(z)
+
+    energy, constrained = jax.jit(jax.vmap(one))(jax.tree.map(jnp.asarray, latent))
+    assert np.all(np.isfinite(np.asarray(energy)))
+    recomputed = pdb.flatten(constrained, posterior.keys, batch_ndim=1)
+    np.testing.assert_allclose(recomputed, draws, rtol=1e-7, atol=1e-9 * np.abs(draws).max())
+
+
+def test_log_joint_equals_stan_target_up_to_a_constant(posterior):
+    """NumPyro's log joint minus the SciPy transcription of the Stan program is one constant
+    (the normalisers Stan's ``~`` drops and NumPyro's half laws add) across reference draws."""
+    latent = posterior.latent(posterior.draws_sample)
+    kwargs = posterior.model_kwargs()
+
+    def numpyro_log_joint(params):
+        return log_density(posterior.model, (), kwargs, params)[0]
+
+    ours = np.asarray(jax.jit(jax.vmap(numpyro_log_joint))(jax.tree.map(jnp.asarray, latent)))
+    data = {k: np.asarray(v) for k, v in posterior.data.items()}
+    n = len(posterior.draws_sample)
+    stan = np.array(
+        [STAN[posterior.name](data, {k: np.asarray(v)[i] for k, v in latent.items()}) for i in range(n)]
+    )
+    assert np.all(np.isfinite(ours)) and np.all(np.isfinite(stan))
+    difference = ours - stan
+    spread = np.ptp(stan)  # the log density varies by this much across the draws
+    assert spread > 1.0
+    np.testing.assert_allclose(difference, difference[0], atol=1e-8 * max(1.0, np.abs(stan).max()))
