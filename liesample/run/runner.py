@@ -808,7 +808,9 @@ def sample(
     datatree = functools.partial(
         to_datatree, var_name=var_name, event_dims=event_dims, coords=coords
     )
-    datatree(jax.tree.map(lambda leaf: np.asarray(leaf)[:, None], positions))
+    with warnings.catch_warnings():  # ArviZ remarks on a tree of one draw
+        warnings.simplefilter("ignore", UserWarning)
+        datatree(jax.tree.map(lambda leaf: np.asarray(leaf)[:, None], positions))
 
     result = sample_chains(
         algorithm, rng_key, initial_positions, num_draws, num_warmup=num_warmup, **run_options

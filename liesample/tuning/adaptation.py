@@ -40,6 +40,7 @@ length is learnt by a ChEES-type rule over jittered lengths; sample with
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from typing import NamedTuple
@@ -55,6 +56,7 @@ from liesample.foundation.compile import jit
 from liesample.foundation.validation import finite_float
 from liesample.geometry import spaces
 from liesample.samplers.contract import first_bad_chain
+from liesample.samplers.cotangent._core import check_starts
 from liesample.samplers.cotangent._euclidean import default_magnetic_field
 from liesample.samplers.cotangent.magnetic_hmc import magnetic_hmc
 
@@ -172,14 +174,21 @@ def _close_window(window_end, new_inverse_mass, da_init, da_final, operands):
     return jax.lax.cond(window_end, close, lambda operands: operands, operands)
 
 
-def warmup_pieces(space, target_acceptance_rate: float, adapt_mass: bool = True) -> WarmupPieces:
+def warmup_pieces(
+    space, target_acceptance_rate: float, adapt_mass: bool = True, batched: bool = False
+) -> WarmupPieces:
     """Dual averaging of the step size towards ``target_acceptance_rate`` and the Welford mass
     of :func:`_inverse_mass`, one transition at a time, on Stan's schedule: ``stage`` 1 (slow
     window) accumulates the mass statistic, ``window_end`` sets the mass and restarts dual
-    averaging from its averaged step size."""
+    averaging from its averaged step size. ``batched``: states carry a leading chain axis; the
+    chains share the step size and mass, dual averaging follows the harmonic mean of their
+    acceptance rates (a stuck chain lowers the step) and the mass pools their moments."""
     da_init, da_update, da_final = dual_averaging_adaptation(target_acceptance_rate)
+    statistic = jax.vmap(functools.partial(_statistic, space)) if batched else None
 
     def init(state, initial_step_size, inverse_mass):
+        if batched:
+            state = jax.tree.map(lambda leaf: leaf[0], state)
         dtype = jnp.asarray(state.logdensity).dtype
         size = _statistic(space, state).shape[0]
         welford = (jnp.zeros(size, dtype), jnp.zeros(size, dtype), jnp.asarray(0))
@@ -188,18 +197,20 @@ def warmup_pieces(space, target_acceptance_rate: float, adapt_mass: bool = True)
 
     def update(warm, state, info, stage, window_end):
         da_state, _, inverse_mass, welford = warm
-        rate = jnp.where(jnp.isfinite(info.metropolis_rate), info.metropolis_rate, 0.0)
-        da_state = da_update(da_state, rate)
-        mean, m2, count = welford
         slow = (stage == 1) & adapt_mass
-        x = _statistic(space, state)
-        new_count = count + 1
-        delta = x - mean
-        new_mean = mean + delta / new_count
-        new_m2 = m2 + delta * (x - new_mean)
-        welford = jax.tree.map(
-            lambda a, b: jnp.where(slow, a, b), (new_mean, new_m2, new_count), welford
-        )
+        if batched:
+            da_state = da_update(da_state, _harmonic_mean(info.metropolis_rate))
+            updated = _welford_batch(welford, statistic(state))
+        else:
+            rate = jnp.where(jnp.isfinite(info.metropolis_rate), info.metropolis_rate, 0.0)
+            da_state = da_update(da_state, rate)
+            mean, m2, count = welford
+            x = _statistic(space, state)
+            new_count = count + 1
+            delta = x - mean
+            new_mean = mean + delta / new_count
+            updated = (new_mean, m2 + delta * (x - new_mean), new_count)
+        welford = jax.tree.map(lambda a, b: jnp.where(slow, a, b), updated, welford)
 
         da_state, inverse_mass, welford = _close_window(
             window_end & adapt_mass,
@@ -214,6 +225,22 @@ def warmup_pieces(space, target_acceptance_rate: float, adapt_mass: bool = True)
         return da_final(warm.da_state)
 
     return WarmupPieces(init, update, final_step_size)
+
+
+def _num_chains(space, position) -> int | None:
+    """The chains of a batch of starts (one more leading axis than ``space``'s points), or
+    ``None`` for one point."""
+    leaves = jax.tree.leaves(position)
+    extra = {
+        np.ndim(x) - len(s.position_array_shape)
+        for s, x in zip(spaces._spaces(space), leaves, strict=False)
+    }
+    if extra == {1} and len(leaves) == len(spaces._spaces(space)):
+        sizes = {np.shape(x)[0] for x in leaves}
+        if len(sizes) != 1:
+            raise ValueError(f"the starts' leaves have different numbers of chains: {sizes}")
+        return sizes.pop()
+    return None
 
 
 def window_adaptation(
@@ -311,7 +338,6 @@ def window_adaptation(
             f"{sorted(declared['parameters'])} and the options {sorted(declared['options'])}"
         )
     initial_mass = parameters.pop("inverse_mass_matrix", None)
-    pieces = warmup_pieces(space, target, adapt_mass)
 
     def num_steps_for(step_size):
         if not is_hmc:
@@ -320,12 +346,9 @@ def window_adaptation(
             return jnp.asarray(int(fixed_steps))
         return integration_steps(step_size, integration_time)
 
-    def one_step(carry, xs):
-        state, warm = carry
-        key, (stage, window_end) = xs
-        steps = num_steps_for(warm.step_size)
+    def transition(key, state, warm, steps):
         extra = {"num_integration_steps": steps} if is_hmc else {}
-        state, info = kernel(
+        return kernel(
             key,
             state,
             logdensity_fn,
@@ -335,20 +358,41 @@ def window_adaptation(
             **extra,
             **parameters,
         )
-        warm = pieces.update(warm, state, info, stage, window_end)
-        record = AdaptationInfo(state, info, warm.step_size, steps)
-        return (state, warm), record
 
     def run(rng_key, initial_position, num_steps: int = 1000):
-        """Warm up for ``num_steps`` transitions; ``((state, parameters), info)``."""
+        """Warm up for ``num_steps`` transitions: ``((state, parameters), info)``.
+
+        ``initial_position`` is one point, or a batch of starts with a leading chain axis (one
+        per chain, as for :func:`liesample.sample`): the chains then adapt together (shared
+        step size and mass) and ``state`` holds every chain's final state, the starts of the
+        run that follows."""
         if isinstance(num_steps, bool) or int(num_steps) != num_steps or num_steps < 20:
             raise ValueError(f"num_steps must be an integer >= 20, got {num_steps!r}")
-        state = algorithm.init(initial_position, logdensity_fn, space)
+        num_chains = _num_chains(space, initial_position)
+        batched = num_chains is not None
+        if batched:
+            check_starts(space)(initial_position)
+            state = jax.vmap(lambda x: algorithm.init(x, logdensity_fn, space))(initial_position)
+            move = jax.vmap(transition, in_axes=(0, 0, None, None))
+        else:
+            state = algorithm.init(initial_position, logdensity_fn, space)
+            move = transition
+        pieces = warmup_pieces(space, target, adapt_mass, batched)
         dtype = jnp.asarray(state.logdensity).dtype
         inverse_mass = spaces.check_inverse_mass(space, initial_mass, dtype)
         stages, ends = window_schedule(num_steps)
         carry = (state, pieces.init(state, initial_step_size, inverse_mass))
         keys = jax.random.split(rng_key, int(num_steps))
+
+        def one_step(carry, xs):
+            state, warm = carry
+            key, (stage, window_end) = xs
+            steps = num_steps_for(warm.step_size)
+            if batched:
+                key = jax.random.split(key, num_chains)
+            state, info = move(key, state, warm, steps)
+            warm = pieces.update(warm, state, info, stage, window_end)
+            return (state, warm), AdaptationInfo(state, info, warm.step_size, steps)
 
         @jit
         def warmup(carry, keys, stages, ends):
@@ -356,10 +400,9 @@ def window_adaptation(
 
         (state, warm), info = warmup(carry, keys, stages, ends)
         step_size = float(pieces.final_step_size(warm))
-        inverse_mass = warm.inverse_mass
         tuned = dict(parameters)
         tuned["step_size"] = step_size
-        tuned["inverse_mass_matrix"] = inverse_mass
+        tuned["inverse_mass_matrix"] = warm.inverse_mass
         if is_hmc:
             tuned["num_integration_steps"] = int(num_steps_for(step_size))
         tuned.update(build_options)
@@ -710,9 +753,7 @@ def magnetic_window_adaptation(
             "magnetic_field": default_magnetic_field(inverse_mass, angle / step_size),
             **scheme,
         }
-        info = info._replace(
-            trajectory_length=info.trajectory_length.at[-1].set(trajectory)
-        )
+        info = info._replace(trajectory_length=info.trajectory_length.at[-1].set(trajectory))
         return (states, parameters), info
 
     return GeometricAdaptation(run)
@@ -752,4 +793,3 @@ def _flat_starts(positions, logdensity_fn):
             "start every chain where log π is finite"
         )
     return flat
-

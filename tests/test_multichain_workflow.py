@@ -1,0 +1,104 @@
+"""The multi-chain workflow of the README: warm up every chain together, then sample; and
+``liesample.sample`` warms up by default, so fresh starts cannot pass for posterior draws."""
+
+import arviz as az
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import liesample
+from liesample.spaces import Euclidean, Sphere
+
+KAPPA, SD = 20.0, 0.03
+SPACE = {"mu": Sphere(2), "x": Euclidean((2,))}
+
+
+def logdensity(position):
+    """vMF(e₃, κ) on S² times N(0, SD²) on R², both exact."""
+    return KAPPA * position["mu"][2] - 0.5 * jnp.sum(position["x"] ** 2) / SD**2
+
+
+def starts(num_chains, key=jax.random.key(0)):
+    """Arbitrary starts, far from the mass: uniform directions, x in [-2, 2]²."""
+    k1, k2 = jax.random.split(key)
+    mu = jax.vmap(lambda k: Sphere(2).uniform(k))(jax.random.split(k1, num_chains))
+    return {"mu": mu, "x": jax.random.uniform(k2, (num_chains, 2), minval=-2.0, maxval=2.0)}
+
+
+def vmf_mean_cosine(kappa):
+    return 1.0 / np.tanh(kappa) - 1.0 / kappa
+
+
+def check_exact(tree):
+    """Mean cosine and the Gaussian sd against their exact values, within 4.5 MCSE."""
+    mcse_mean = az.mcse(tree, var_names=["mu"], method="mean")["mu"].values
+    cosine = tree.posterior["mu"].values[..., 2]
+    assert abs(cosine.mean() - vmf_mean_cosine(KAPPA)) < 4.5 * mcse_mean[2]
+    mcse_sd = az.mcse(tree, var_names=["x"], method="sd")["x"].values
+    sd = tree.posterior["x"].values.reshape(-1, 2).std(axis=0)
+    np.testing.assert_array_less(np.abs(sd - SD), 4.5 * mcse_sd)
+    assert float(az.rhat(tree, var_names=["x"])["x"].max()) < 1.05
+
+
+def test_window_adaptation_adapts_a_batch_of_starts_and_hands_them_on():
+    """``window_adaptation(...).run`` on 4 starts adapts the chains together and returns every
+    chain's state; sampling from them (no further warm-up) gives the exact law."""
+    warmup = liesample.window_adaptation(liesample.geometric_hmc, logdensity, SPACE)
+    (state, parameters), info = warmup.run(jax.random.key(1), starts(4), 400)
+    assert state.position["mu"].shape == (4, 3) and state.position["x"].shape == (4, 2)
+    assert np.shape(parameters["step_size"]) == ()
+    assert info.info.acceptance_rate.shape == (400, 4)
+    sampler = liesample.geometric_hmc(logdensity, SPACE, **parameters)
+    tree = liesample.sample(
+        sampler, jax.random.key(2), state.position, 1000, num_warmup=0, exact_starts=True,
+        progress=False,
+    )  # fmt: skip
+    check_exact(tree)
+
+
+def test_one_start_keeps_the_single_chain_warm_up():
+    """One start still gives one chain's state (the BlackJAX shape)."""
+    warmup = liesample.window_adaptation(liesample.geometric_hmc, logdensity, SPACE)
+    one = jax.tree.map(lambda leaf: leaf[0], starts(1))
+    (state, _), info = warmup.run(jax.random.key(1), one, 100)
+    assert state.position["x"].shape == (2,)
+    assert info.info.acceptance_rate.shape == (100,)
+
+
+def test_adapt_on_one_chain_then_sample_fresh_chains_by_default():
+    """The trap: tune on one chain, then sample 4 fresh chains from arbitrary starts. The
+    default warm-up of ``liesample.sample`` forgets the starts, and the sd is exact."""
+    warmup = liesample.window_adaptation(liesample.geometric_hmc, logdensity, SPACE)
+    one = jax.tree.map(lambda leaf: leaf[0], starts(1))
+    (_, parameters), _ = warmup.run(jax.random.key(1), one, 400)
+    sampler = liesample.geometric_hmc(logdensity, SPACE, **parameters)
+    tree = liesample.sample(sampler, jax.random.key(3), starts(4, jax.random.key(7)), 1000,
+                            progress=False)  # fmt: skip
+    assert tree.attrs["num_warmup"] == 1000
+    check_exact(tree)
+
+
+def test_no_warm_up_from_arbitrary_starts_warns():
+    """``num_warmup=0`` keeps the starts in the draws: it warns unless the starts are exact."""
+    sampler = liesample.geometric_hmc(logdensity, SPACE, 0.01, 3)
+    with pytest.warns(UserWarning, match="num_warmup=0"):
+        liesample.sample(sampler, jax.random.key(3), starts(2), 5, num_warmup=0, progress=False)
+
+
+def test_draw_names_come_from_the_space_and_are_checked_before_sampling():
+    """A bare SO(3) array is named ``R`` with dims (row, col); dims that do not fit the starts
+    fail before any step is taken."""
+    space = liesample.spaces.SO(3)
+    sampler = liesample.geometric_hmc(lambda r: 3.0 * jnp.trace(r), space, 0.2, 3)
+    rotations = jnp.stack([jnp.eye(3)] * 2)
+    tree = liesample.sample(sampler, jax.random.key(0), rotations, 4, progress=False)
+    assert tree.posterior["R"].dims == ("chain", "draw", "row", "col")
+    calls = []
+    counting = liesample.samplers.contract.Sampler(
+        sampler.init, lambda *a: calls.append(1) or sampler.step(*a)
+    )
+    with pytest.raises(ValueError, match="event_dims must name each event axis"):
+        liesample.sample(counting, jax.random.key(0), rotations, 4, event_dims=("c",),
+                         progress=False)  # fmt: skip
+    assert not calls
