@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 
 import jax
 import numpy as np
@@ -112,3 +113,17 @@ def is_single_array(positions) -> bool:
     of several leaves (dict, tuple, named tuple, …)."""
     structure = jax.tree.structure(positions)
     return isinstance(positions, list) or structure.num_nodes == structure.num_leaves == 1
+
+
+def raise_or_warn(
+    message: str,
+    raise_error: bool,
+    error: type[Exception] = ValueError,
+    warning: type[Warning] = UserWarning,
+    stacklevel: int = 2,
+) -> None:
+    """Raise ``error(message)`` if ``raise_error``, else warn ``warning(message)`` at the caller
+    of the function that calls this one (``stacklevel`` counted from that function)."""
+    if raise_error:
+        raise error(message)
+    warnings.warn(message, warning, stacklevel=stacklevel + 1)

@@ -247,10 +247,11 @@ class Euclidean(Space):
 
     shape: tuple[int, ...] = ()
     compact = False
-    copy_dim = "component"
 
     def __post_init__(self):
         object.__setattr__(self, "shape", _shape("Euclidean shape", self.shape))
+
+    copy_dim = "component"
 
     def uniform(self, rng_key, dtype=None):
         raise ValueError(
@@ -412,6 +413,11 @@ class _MatrixGroup(Space):
     shape: tuple[int, ...] = ()
     point_dims = ("row", "col")
 
+    def __post_init__(self):
+        group = type(self).__name__
+        object.__setattr__(self, "n", _order(f"{group}(n): n", self.n, 2))
+        object.__setattr__(self, "shape", _shape(f"{group} shape", self.shape))
+
     mass_shape = (1,)
 
     @property
@@ -475,10 +481,6 @@ class SO(_MatrixGroup):
 
     draw_name = "R"
 
-    def __post_init__(self):
-        object.__setattr__(self, "n", _order("SO(n): n", self.n, 2))
-        object.__setattr__(self, "shape", _shape("SO shape", self.shape))
-
     @property
     def copy_dimension(self):
         return self.n * (self.n - 1) // 2
@@ -526,10 +528,6 @@ class SU(_MatrixGroup):
     """
 
     draw_name = "U"
-
-    def __post_init__(self):
-        object.__setattr__(self, "n", _order("SU(n): n", self.n, 2))
-        object.__setattr__(self, "shape", _shape("SU shape", self.shape))
 
     @property
     def copy_dimension(self):

@@ -52,6 +52,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from liesample.foundation.compile import jit
+from liesample.foundation.validation import raise_or_warn
 from liesample.integrators.orbit import INTEGRATORS, Integrator
 
 __all__ = [
@@ -208,9 +209,7 @@ def check_step_size(system, integrator, step_size, theta, position, mode="warn")
         "(see liesample.integrators.stability), or pass "
         "stability='warn' or 'off' to run anyway (the chain then samples a wrong law)"
     )
-    if mode == "raise":
-        raise ValueError(message)
-    warnings.warn(message, UserWarning, stacklevel=4)
+    raise_or_warn(message, mode == "raise", stacklevel=4)
     return kappa
 
 

@@ -35,7 +35,12 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from liesample.foundation.compile import jit
-from liesample.foundation.validation import finite_float, is_single_array, prng_key
+from liesample.foundation.validation import (
+    finite_float,
+    is_single_array,
+    prng_key,
+    raise_or_warn,
+)
 from liesample.integrators.chain_loop import run_draws, run_steps
 from liesample.run.sharding import chain_sharding, shard_chains, to_host
 from liesample.samplers.contract import Sampler, as_sampler, reduce_over_thinning
@@ -423,9 +428,7 @@ def _report_divergences(result: ChainsResult, on_nonfinite: str):
         "and flagged in info['is_divergent'] (sample_stats 'diverging'). Reduce step_size or "
         "sigma, or let the warm-up adapt it."
     )
-    if on_nonfinite == "raise":
-        raise NonFiniteStateError(message)
-    warnings.warn(message, RuntimeWarning, stacklevel=3)
+    raise_or_warn(message, on_nonfinite == "raise", NonFiniteStateError, RuntimeWarning, 3)
 
 
 def _report_stuck_chains(result: ChainsResult, threshold: float):

@@ -459,30 +459,18 @@ def charged_particle_path(
     *,
     step_size,
     num_steps: int,
-    beta=None,
-    sigma=1.0,
-    theta=None,
-    hamiltonian: bool = True,
-    magnetic: bool = True,
-    integrator: str = "baoab",
     thinning: int = 1,
+    **dynamics_options,
 ) -> ChargedParticlePath:
     """Simulate one path of the charged particle (validated, jit-compiled).
 
-    Parameters are those of :func:`charged_particle_dynamics`, plus ``initial_state``
-    ``z0 = (q, p)`` of shape ``(2n,)``, ``step_size > 0``, ``num_steps ≥ 1`` and ``thinning``
-    (a divisor of ``num_steps``). Warns when the path became non-finite or an implicit solve
-    did not converge (both are also flagged in the result).
+    ``dynamics_options`` are the keywords of :func:`charged_particle_dynamics` (``beta``,
+    ``sigma``, ``theta``, ``hamiltonian``, ``magnetic``, ``integrator``); also
+    ``initial_state`` ``z0 = (q, p)`` of shape ``(2n,)``, ``step_size > 0``, ``num_steps ≥ 1``
+    and ``thinning`` (a divisor of ``num_steps``). Warns when the path became non-finite or an
+    implicit solve did not converge (both are also flagged in the result).
     """
-    dynamics = charged_particle_dynamics(
-        system,
-        beta=beta,
-        sigma=sigma,
-        theta=theta,
-        hamiltonian=hamiltonian,
-        magnetic=magnetic,
-        integrator=integrator,
-    )
+    dynamics = charged_particle_dynamics(system, **dynamics_options)
     system.check_state(initial_state)
     step_size = finite_float("step_size", step_size, positive=True)
     for name, value in (("num_steps", num_steps), ("thinning", thinning)):
