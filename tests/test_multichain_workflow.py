@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import liesample
-from liesample.spaces import Euclidean, Sphere
+from liesample.geometry.spaces import Euclidean, Sphere
 
 KAPPA, SD = 20.0, 0.03
 SPACE = {"mu": Sphere(2), "x": Euclidean((2,))}
@@ -19,9 +19,9 @@ def logdensity(position):
     return KAPPA * position["mu"][2] - 0.5 * jnp.sum(position["x"] ** 2) / SD**2
 
 
-def starts(num_chains, key=jax.random.key(0)):
+def starts(num_chains, seed=0):
     """Arbitrary starts, far from the mass: uniform directions, x in [-2, 2]²."""
-    k1, k2 = jax.random.split(key)
+    k1, k2 = jax.random.split(jax.random.key(seed))
     mu = jax.vmap(lambda k: Sphere(2).uniform(k))(jax.random.split(k1, num_chains))
     return {"mu": mu, "x": jax.random.uniform(k2, (num_chains, 2), minval=-2.0, maxval=2.0)}
 
@@ -73,7 +73,7 @@ def test_adapt_on_one_chain_then_sample_fresh_chains_by_default():
     one = jax.tree.map(lambda leaf: leaf[0], starts(1))
     (_, parameters), _ = warmup.run(jax.random.key(1), one, 400)
     sampler = liesample.geometric_hmc(logdensity, SPACE, **parameters)
-    tree = liesample.sample(sampler, jax.random.key(3), starts(4, jax.random.key(7)), 1000,
+    tree = liesample.sample(sampler, jax.random.key(3), starts(4, seed=7), 1000,
                             progress=False)  # fmt: skip
     assert tree.attrs["num_warmup"] == 1000
     check_exact(tree)

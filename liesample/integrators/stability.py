@@ -141,7 +141,7 @@ def stiffness(system, theta, position) -> float:
         with jax.ensure_compile_time_eval():
             curvatures = curvatures_on(jnp.asarray(position))
         cache[cache_key] = float(np.max(np.abs(np.asarray(curvatures))))
-    return theta * cache[cache_key]
+    return abs(theta) * cache[cache_key]
 
 
 def stiffness_on_orbits(system, theta, positions) -> np.ndarray:
@@ -153,9 +153,7 @@ def stiffness_on_orbits(system, theta, positions) -> np.ndarray:
         return np.zeros(len(positions))
     with jax.ensure_compile_time_eval():
         casimirs = np.asarray(jax.vmap(system.casimirs)(jnp.asarray(positions)))
-    keys = [
-        (positions.shape[1:], tuple(np.round(c, 12).reshape(-1))) for c in casimirs
-    ]
+    keys = [(positions.shape[1:], tuple(np.round(c, 12).reshape(-1))) for c in casimirs]
     cache = system.__dict__.setdefault("_stiffness_cache", {})
     missing = sorted({i for i, key in enumerate(keys) if key not in cache})
     if missing:
@@ -177,11 +175,11 @@ def stiffness_on_orbits(system, theta, positions) -> np.ndarray:
             values = np.asarray(batched(jnp.asarray(positions[padded])))[: len(missing)]
         for i, value in zip(missing, values, strict=True):
             cache[keys[i]] = float(value)
-    return theta * np.array([cache[key] for key in keys])
+    return abs(theta) * np.array([cache[key] for key in keys])
 
 
 def stability_number(system, step_size, theta, position) -> float:
-    """``κ = step_size · θ · max_i |h''_i|`` on the orbit through ``position``."""
+    """``κ = step_size · |θ| · max_i |h''_i|`` on the orbit through ``position`` (θ < 0 at β < 0)."""
     return step_size * stiffness(system, theta, position)
 
 
@@ -248,10 +246,10 @@ def check_precision(system, beta, theta, position, dtype) -> bool:
     if jnp.dtype(dtype) != jnp.float32 or theta == 0.0 or not system.curvature_bound:
         return False
     position = np.asarray(position, dtype=float)
-    curvature = stiffness(system, theta, position) / theta  # max_i |h''_i| on the orbit
+    curvature = stiffness(system, theta, position) / abs(theta)  # max_i |h''_i| on the orbit
     if curvature == 0.0:
         return False
-    stable_step = 2.0 / (theta * curvature)
+    stable_step = 2.0 / (abs(theta) * curvature)
     spread = 1.0 / np.sqrt(abs(beta) * curvature) if beta else np.inf
     size = float(np.max(np.abs(position)))
     reasons = []

@@ -91,6 +91,14 @@ def heavy_top(
         # |Π·Γ| ≤ ½|μ|² and |Γ|² ≤ |μ|²: the size of the round-off in either Casimir.
         return jnp.full(mu.shape[:-1] + (2,), jnp.sum(mu * mu, axis=-1)[..., None])
 
+    def check_beta(beta):
+        if not beta > 0:
+            raise ValueError(
+                f"beta must be > 0 for the heavy top, got {beta}: its orbits (T*S²) are not "
+                "compact and the kinetic energy is unbounded, so exp(−βh) is not normalisable "
+                "at β <= 0"
+            )
+
     def reference(beta, position):
         position = np.asarray(position, dtype=float)
         pi, gamma = position[:3], position[3:]
@@ -113,6 +121,7 @@ def heavy_top(
         event_shape=(6,),
         default_position=np.concatenate([np.zeros(3), default_gamma]),
         reference=reference,
+        check_beta=check_beta,
         component_names=("Π₁", "Π₂", "Π₃", "Γ₁", "Γ₂", "Γ₃"),
         params={"inertia": moments, "mgl": mgl, "chi": tuple(chi_vector), "gravity": gravity},
         positive_casimirs=(0,),
