@@ -240,6 +240,276 @@ def substep_cost(quick, log):
     return rows
 
 
+ONSAGER = np.array([1.0] * 5 + [-1.0] * 5)
+"""The issue's negative-temperature case: 10 vortices, Γ = +1 ×5, −1 ×5; observable |D|²."""
+
+
+def _dipole_squared(x):
+    dipole = jnp.einsum("k,...ki->...i", jnp.asarray(ONSAGER, x.dtype), x)
+    return jnp.sum(dipole * dipole, axis=-1)
+
+
+def _baseline_sweep(beta, scale):
+    """The physicist's single-vortex Metropolis, as a user writes it in JAX: each sweep visits
+    the vortices in order, proposes ``(x + ε g)/|x + ε g|`` with a fixed ``ε`` and recomputes the
+    vortex's pair energies."""
+    gamma = jnp.asarray(ONSAGER)
+
+    def sweep(x, key):
+        keys = jax.random.split(key, ONSAGER.size)
+
+        def one(k, x):
+            kg, ku = jax.random.split(keys[k])
+            y = x[k] + scale * jax.random.normal(kg, (3,))
+            y = y / jnp.linalg.norm(y)
+            others = jnp.arange(ONSAGER.size) != k
+            old = jnp.log(jnp.sum((x - x[k]) ** 2, -1))
+            new = jnp.log(jnp.sum((x - y) ** 2, -1))
+            dh = -gamma[k] * jnp.sum(jnp.where(others, gamma * (new - old), 0.0)) / (4 * math.pi)
+            accept = jnp.log(jax.random.uniform(ku)) < -beta * dh
+            return x.at[k].set(jnp.where(accept, y, x[k]))
+
+        return jax.lax.fori_loop(0, ONSAGER.size, one, x)
+
+    return sweep
+
+
+def _timed_dipole_chains(sweep, starts, num_sweeps, key):
+    """``|D|²`` after every sweep of vmapped chains, and the seconds of the compiled run."""
+
+    def chain(start, key):
+        def one(x, k):
+            x = sweep(x, k)
+            return x, _dipole_squared(x)
+
+        return jax.lax.scan(one, start, jax.random.split(key, num_sweeps))[1]
+
+    keys = jax.random.split(key, starts.shape[0])
+    compiled = liesample.jit(jax.vmap(chain)).lower(starts, keys).compile()
+    values, seconds = common.timed(compiled, starts, keys)
+    return np.asarray(values), seconds
+
+
+def _ess(values):
+    import arviz as az
+
+    return float(az.ess(np.asarray(values), method="bulk"))
+
+
+def exact_sampler(quick, log):
+    """ESS/s of |D|² for ``liesample.vortex_metropolis`` against the user's single-vortex
+    Metropolis, same chains, sweeps and machine, at β = −4 and −2; also the whole
+    ``liesample.sample`` call (warm-up, compile and runner included)."""
+    num_chains = 16 if quick else 64
+    num_sweeps = 1000 if quick else 20_000
+    burn = num_sweeps // 10
+    rows = []
+    system = point_vortices(ONSAGER)
+    for beta in (-4.0, -2.0):
+        starts = jnp.asarray(uniform_sphere_points(jax.random.key(80), (num_chains, ONSAGER.size)))
+        start = time.perf_counter()
+        run = liesample.sample_chains(
+            liesample.vortex_metropolis(system, beta=beta),
+            jax.random.key(81),
+            np.asarray(starts),
+            num_sweeps,
+            num_warmup=500,
+            progress=False,
+        )
+        sample_seconds = time.perf_counter() - start
+        tuned = run.settings["step_size"]
+        algorithm = liesample.vortex_metropolis(system, beta=beta, proposal_scale=tuned)
+        states = jax.vmap(algorithm.init)(starts)
+
+        def ours(x, key, algorithm=algorithm):
+            return algorithm.step(key, algorithm.init.__self__ if False else x)[0]
+
+        def ours_sweep(x, key, algorithm=algorithm):
+            state = algorithm.step(key, type(states)(x, system.hamiltonian(x)))[0]
+            return state.position
+
+        del ours
+        entries = {
+            "vortex_metropolis": (ours_sweep, tuned),
+            "baseline_metropolis": (_baseline_sweep(beta, 0.5), 0.5),
+        }
+        for name, (sweep, scale) in entries.items():
+            values, seconds = _timed_dipole_chains(sweep, starts, num_sweeps, jax.random.key(82))
+            kept = values[:, burn:]
+            ess = _ess(kept)
+            chain_means = kept.mean(axis=1)
+            row = {
+                "beta": beta,
+                "sampler": name,
+                "proposal_scale": scale,
+                "chains": num_chains,
+                "sweeps": num_sweeps,
+                "mean_dipole_squared": float(kept.mean()),
+                "mcse": float(kept.std() / math.sqrt(ess)),
+                "chain_mean_spread": float(chain_means.std(ddof=1) / math.sqrt(num_chains)),
+                "ess": ess,
+                "seconds": seconds,
+                "ess_per_second": ess / seconds * (num_sweeps / (num_sweeps - burn)),
+            }
+            rows.append(row)
+            log(
+                f"  beta {beta:+g} {name:20s} eps {scale:.3g}: E|D|² {row['mean_dipole_squared']:.2f}"
+                f" ± {row['mcse']:.2f}, ESS {ess:.0f}, {seconds:.2f} s, ESS/s "
+                f"{row['ess_per_second']:.0f}"
+            )
+        rows.append(
+            {
+                "beta": beta,
+                "sampler": "liesample.sample(vortex_metropolis)",
+                "proposal_scale": tuned,
+                "acceptance": float(np.mean(run.info["acceptance_rate"])),
+                "chains": num_chains,
+                "sweeps": num_sweeps,
+                "mean_dipole_squared": float(
+                    np.asarray(_dipole_squared(jnp.asarray(run.positions))).mean()
+                ),
+                "seconds_with_warmup_and_compile": sample_seconds,
+            }
+        )
+        log(f"  beta {beta:+g} liesample.sample: {sample_seconds:.1f} s (tuned eps {tuned:.3g})")
+    return rows
+
+
+def _substep_dropping_time(base, rate_fn, dynamics, mu, dt, dW, safety, max_substeps):
+    """The substep rule before this benchmark's fix: a capped step *drops* the rest of its
+    time (kept here to measure what that did)."""
+    dt = jnp.asarray(dt, dtype=mu.dtype)
+
+    def cond(carry):
+        return (carry[0] > 0) & (carry[1] < max_substeps)
+
+    def body(carry):
+        remaining, count, x = carry
+        rate = rate_fn(dynamics, x)
+        limit = jnp.where(rate > 0, safety / jnp.where(rate > 0, rate, 1.0), remaining)
+        h = jnp.minimum(remaining, limit)
+        x = base(dynamics, x, h, dW * (h / dt))
+        return jnp.where(h >= remaining, 0.0, remaining - h), count + 1, x
+
+    return jax.lax.while_loop(cond, body, (dt, jnp.int32(0), mu))[2]
+
+
+def negative_temperature_bias(quick, log):
+    """The unadjusted sampler on a like-signed pair at β = −6 (exponent −0.48: it clusters):
+    ``E[x₁·x₂]`` and ``P(x₁·x₂ > 0.999)`` from the final states of i.i.d. chains at time 20,
+    against the exact pair law, for: the Hamiltonian drift off (no substeps needed) as dt → 0;
+    the drift on without substeps; with substeps whose cap keeps the clock (now); with the old
+    rule that dropped the capped step's remaining time; and the batched cost of substeps."""
+    num_chains = 256 if quick else 2048
+    horizon = 5.0 if quick else 20.0
+    beta = -6.0
+    system = point_vortices([1.0, 1.0])
+    law = system.reference(beta)
+    exact_mean, exact_tail = law.mean(), float(1.0 - law.cdf(0.999))
+    starts = jnp.asarray(uniform_sphere_points(jax.random.key(90), (num_chains, 2)))
+    keys = jax.random.split(jax.random.key(91), num_chains)
+    sigma_, theta, scene = liesample.samplers.orbit.lie_poisson_langevin.make_dynamics(
+        system, beta=beta, sigma=1.0
+    )
+    rate_fn = substep_rate(system)
+    configurations = [
+        ("drift off", False, "none", dt) for dt in (0.2, 0.1, 0.05)
+    ] + [
+        ("drift on, no substeps", True, "none", 0.05),
+        ("drift on, substeps (clock kept)", True, "kept", 0.05),
+        ("drift on, substeps (old: time dropped)", True, "dropped", 0.05),
+    ]
+    base = get_integrator("splitting")
+    rows = []
+    for label, hamiltonian, rule, dt in configurations:
+        dynamics = PoissonLangevin(
+            system, sigma_, theta, liesample.Scene(hamiltonian=hamiltonian)
+        )
+        num_steps = int(round(horizon / dt))
+
+        def chain(x, key, dynamics=dynamics, dt=dt, rule=rule):
+            def one(x, k):
+                dW = dynamics.brownian_increments(k, dt, x.dtype)
+                if rule == "none":
+                    return base(dynamics, x, dt, dW), None
+                if rule == "kept":
+                    return substep(base, rate_fn, dynamics, x, dt, dW, safety=0.05,
+                                   max_substeps=1000)[0], None
+                return _substep_dropping_time(base, rate_fn, dynamics, x, dt, dW, 0.05, 1000), None
+
+            return jax.lax.scan(one, x, jax.random.split(key, num_steps))[0]
+
+        compiled = liesample.jit(jax.vmap(chain)).lower(starts, keys).compile()
+        final, seconds = common.timed(compiled, starts, keys)
+        final = np.asarray(final)
+        c = np.sum(final[:, 0] * final[:, 1], axis=-1)
+        tail = float(np.mean(c > 0.999))
+        row = {
+            "configuration": label,
+            "dt": dt,
+            "mean": float(c.mean()),
+            "standard_error": float(math.sqrt(law.variance() / num_chains)),
+            "exact_mean": exact_mean,
+            "tail": tail,
+            "tail_standard_error": float(math.sqrt(exact_tail * (1 - exact_tail) / num_chains)),
+            "exact_tail": exact_tail,
+            "ks_pvalue": float(stats.kstest(c, law.cdf).pvalue),
+            "seconds": seconds,
+            "chains": num_chains,
+            "time": horizon,
+        }
+        rows.append(row)
+        log(
+            f"  {label:40s} dt {dt:<5g} E[c] {row['mean']:+.4f} ± {row['standard_error']:.4f} "
+            f"(exact {exact_mean:+.4f}); P(c>0.999) {tail:.4f} (exact {exact_tail:.4f}); "
+            f"KS p {row['ks_pvalue']:.2g}; {seconds:.1f} s"
+        )
+    return rows
+
+
+def batched_substeps(quick, log):
+    """Seconds of 200 collision-safe steps (10 vortices, β = −2, dt = 0.01) for 1, 2 and 8
+    vmapped chains: under ``vmap`` each step costs the slowest chain's substeps."""
+    system = point_vortices(ONSAGER)
+    rows = []
+    for cap in (1000, 100):
+        algorithm = liesample.lie_poisson_langevin(
+            system, beta=-2.0, step_size=0.01, stability="off",
+            integrator=point_vortex_integrator(system, max_substeps=cap),
+        )
+        for num_chains in (1, 2, 8):
+            starts = jnp.asarray(
+                uniform_sphere_points(jax.random.key(100), (num_chains, ONSAGER.size))
+            )
+
+            def chain(start, key, algorithm=algorithm):
+                def one(state, k):
+                    return algorithm.step(k, state)[0], None
+
+                return jax.lax.scan(one, algorithm.init(start), jax.random.split(key, 200))[0]
+
+            keys = jax.random.split(jax.random.key(101), num_chains)
+            compiled = liesample.jit(jax.vmap(chain)).lower(starts, keys).compile()
+            _, seconds = common.timed(compiled, starts, keys)
+            rows.append({"max_substeps": cap, "chains": num_chains, "seconds": seconds})
+            log(f"  cap {cap}: {num_chains} chains, 200 steps: {seconds:.2f} s")
+    return rows
+
+
+def run_exact(out_dir: Path, quick: bool, log) -> dict:
+    """The exact sampler, the β < 0 bias of the unadjusted one, batched substeps:
+    ``vortices_exact.json``."""
+    data = {"machine": common.machine_info(), "quick": quick}
+    log("vortices: exact single-vortex Metropolis against the user's Metropolis")
+    data["exact_sampler"] = exact_sampler(quick, log)
+    log("vortices: the unadjusted sampler at beta < 0")
+    data["negative_temperature"] = negative_temperature_bias(quick, log)
+    log("vortices: batched substeps")
+    data["batched_substeps"] = batched_substeps(quick, log)
+    common.write_json(out_dir / "vortices_exact.json", data)
+    return data
+
+
 def _plots(data, out_dir):
     fig = Figure(figsize=(11, 4.2))
     for index, vary in enumerate(("N", "L")):
@@ -291,6 +561,7 @@ def run(out_dir: Path, quick: bool, log) -> None:
     log("vortices: substepping cost")
     data["substeps"] = substep_cost(quick, log)
     data["total_seconds"] = time.perf_counter() - start
+    run_exact(out_dir, quick, log)
     common.write_json(out_dir / "vortices.json", data)
     _plots(data, out_dir)
 
@@ -452,4 +723,10 @@ def report(out_dir: Path, md_dir: Path) -> str:
 
 
 if __name__ == "__main__":
+    if "--exact" in sys.argv:  # only the exact-sampler parts (vortices_exact.json)
+        quick_run = "--quick" in sys.argv
+        results = Path(__file__).resolve().parent / "results" / ("quick" if quick_run else "")
+        results.mkdir(parents=True, exist_ok=True)
+        run_exact(results, quick_run, lambda message: print(message, flush=True))
+        sys.exit(0)
     sys.exit(suites.standalone(__file__))

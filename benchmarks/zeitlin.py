@@ -25,8 +25,12 @@ Writes ``zeitlin.json`` and ``zeitlin.png``. Parts:
 
 from __future__ import annotations
 
+import dataclasses
+import functools
+import json
 import math
 import os
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -34,8 +38,11 @@ from pathlib import Path
 # LAPACK's worker threads spin while waiting: on a shared, loaded 2-core machine that made
 # expm/solve/eigh of 32×32 complex matrices 30–100× slower (measured). One thread each, set
 # before NumPy or JAX loads LAPACK (when this suite runs alone).
+# A worker of this suite started with LIESAMPLE_ZEITLIN_BENCH_WORKER=default keeps the default
+# threads (to measure what a user gets).
 for _name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_name, "1")
+    if os.environ.get("LIESAMPLE_ZEITLIN_BENCH_WORKER") != "default":
+        os.environ.setdefault(_name, "1")
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
@@ -52,8 +59,13 @@ from matplotlib.figure import Figure
 
 import liesample
 from benchmarks import common, suites
+from liesample.dynamics.system import LiePoissonSystem
+from liesample.geometry.algebras import Unitary
+from liesample.samplers.orbit.adjusted_lie_poisson import build_kernel
+from liesample.samplers.orbit.adjusted_lie_poisson import init as adjusted_init
 from liesample.systems.zeitlin import isospectral_midpoint, random_vorticity, zeitlin_euler
 
+_WORKER_FLAG = "LIESAMPLE_ZEITLIN_BENCH_WORKER"
 SUITE = {"order": 60, "title": "Zeitlin su(N) Euler on the sphere"}
 
 ENSTROPHY_PER_MODE = 1.0  # ‖W‖² = N: the vorticity's amplitude does not grow with N
@@ -64,7 +76,7 @@ MIDPOINT_MAX_ITERATIONS = 100
 
 
 def _start(size):
-    return random_vorticity(size, seed=0, enstrophy=ENSTROPHY_PER_MODE * size)
+    return random_vorticity(size, seed=0, enstrophy=0.5 * ENSTROPHY_PER_MODE * size)
 
 
 def _cost_per_step(system, algorithm, start, repeats):
@@ -256,6 +268,320 @@ def ess_per_second(quick, log):
     return rows
 
 
+# ------------------------------------------------------------- adjusted sampler: cost and ESS
+
+ADJUSTED_PLAN = ((32, 8, 400, 2000), (64, 8, 200, 1000), (128, 4, 100, 400))  # N, chains, warm, run
+ADJUSTED_QUICK_PLAN = ((16, 4, 100, 200),)
+ADJUSTED_BETA = 1.0
+TARGET_ACCEPTANCE = 0.574
+
+
+def _today_system(system):
+    """The step as it was before the structured exponential: the same declaration on the plain
+    :class:`Unitary` algebra (Padé ``expm`` with an LU solve) and without the system's cheap
+    per-step invariant (so every step evaluates the full spectrum for ``casimir_error``)."""
+    fields = {f.name: getattr(system, f.name) for f in dataclasses.fields(LiePoissonSystem)}
+    fields["algebra"] = Unitary(system.params["N"])
+    return LiePoissonSystem(**fields)
+
+
+def _chain_runner(system, num_chains):
+    """``run(states, key, step_size, num_steps) -> (states, (h, ε₁, accepted))``, compiled
+    once per number of steps; ``ε₁`` is the ℓ = 1 energy (three O(N²) projections)."""
+    kernel = build_kernel(system)
+    ell_one = jnp.asarray(system.params["harmonics"].basis(1, 1))  # E_1m, m = −1, 0, 1
+
+    def run(states, key, step_size, num_steps):
+        def body(states, k):
+            keys = jax.random.split(k, num_chains)
+            states, info = jax.vmap(kernel, in_axes=(0, 0, None, None, None))(
+                keys, states, step_size, 1.0, ADJUSTED_BETA
+            )
+            coefficients = jnp.einsum("kij,cij->ck", ell_one, states.position)
+            energy_one = 0.25 * jnp.sum(coefficients**2, axis=-1)  # ½ Σ ω²/(ℓ(ℓ+1)), ℓ = 1
+            return states, (info.energy, energy_one, info.is_accepted)
+
+        return jax.lax.scan(body, states, jax.random.split(key, num_steps))
+
+    return liesample.jit(run, static_argnums=3)
+
+
+def _best_time(fn, *args, repeats=3):
+    best = math.inf
+    for _ in range(repeats):
+        out, seconds = common.timed(fn, *args)
+        best = min(best, seconds)
+    return out, best
+
+
+def _floor_seconds(system, states, step_size, key):
+    """Seconds (best of three) of the matrix work one step needs, batched over the same chains:
+    the exponential of the proposal's generator and its two conjugation products
+    (``coadjoint_exp``), and the two products of ``[W, ∇h]`` (the brackets ``{h, ĥ_i}``)."""
+    streams = jnp.asarray(system.params["noise_streams"])
+    num_chains = states.position.shape[0]
+    coefficients = jnp.sqrt(step_size) * jax.random.normal(key, (num_chains, len(streams)))
+    zetas = jnp.einsum("k...,ck->c...", streams, coefficients)
+    algebra = system.algebra
+    gradients = -system.params["harmonics"].inverse_laplacian(states.position)
+
+    def matrix_work(zetas, positions, gradients):
+        moved = algebra.coadjoint_exp(zetas, positions)
+        w, g = algebra.to_matrix(positions), algebra.to_matrix(gradients)
+        return moved, w @ g - g @ w
+
+    compiled = liesample.jit(matrix_work).lower(zetas, states.position, gradients).compile()
+    _, seconds = _best_time(compiled, zetas, states.position, gradients)
+    return seconds
+
+
+def _step_seconds(system, states, step_size, num_steps, repeats=3):
+    """Seconds per chain-step (best of ``repeats``) of the adjusted step, states carried."""
+    num_chains = states.position.shape[0]
+    run = _chain_runner(system, num_chains)
+    key = jax.random.key(5)
+    run(states, key, step_size, num_steps)  # compile
+    (_, (_, _, accepted)), seconds = _best_time(
+        lambda: run(states, key, step_size, num_steps), repeats=repeats
+    )
+    return seconds / (num_chains * num_steps), float(jnp.mean(accepted))
+
+
+def adjusted_costs(quick, log, sizes=None, with_ess=True):
+    """Per N: the tuned step, seconds per chain-step now and as before (same process, so the
+    same BLAS threads), the matrix-work floor, and ESS/s of h and of the ℓ = 1 energy."""
+    plan = ADJUSTED_QUICK_PLAN if quick else ADJUSTED_PLAN
+    rows = []
+    for size, num_chains, warmup, num_steps in plan:
+        if sizes is not None and size not in sizes:
+            continue
+        system = zeitlin_euler(size, noise_degree=2)
+        kernel_states = jax.vmap(functools.partial(adjusted_init, system=system))(
+            jnp.repeat(jnp.asarray(_start(size))[None], num_chains, 0)
+        )
+        run = _chain_runner(system, num_chains)
+        key = jax.random.key(size)
+        step_size = _tuned_step_on(run, kernel_states, key, 40)
+        states, _ = run(kernel_states, jax.random.fold_in(key, 100), step_size, warmup)
+        if not with_ess:
+            num_steps = 2  # what follows needs only the warm state and a few draws
+        run(states, key, step_size, num_steps)  # compile
+        ((_, (h, energy_one, accepted)), seconds) = common.timed(
+            run, states, jax.random.fold_in(key, 101), step_size, num_steps
+        )
+        h, energy_one = np.asarray(h).T, np.asarray(energy_one).T  # (chains, draws)
+        ess_h, ess_one = (
+            (float(arviz.ess(h)), float(arviz.ess(energy_one))) if with_ess else (math.nan,) * 2
+        )
+        now, _ = _step_seconds(system, states, step_size, 100)
+        today_steps = max(5, min(50, int(2e5 / size**3 * 50)))
+        today_system = _today_system(system)
+        today_states = jax.vmap(functools.partial(adjusted_init, system=today_system))(
+            states.position
+        )
+        today, _ = _step_seconds(today_system, today_states, step_size, today_steps, repeats=2)
+        floor = _floor_seconds(system, states, step_size, jax.random.fold_in(key, 102))
+        row = {
+            "N": size,
+            "chains": num_chains,
+            "steps": num_steps,
+            "step_size": step_size,
+            "acceptance": float(np.mean(accepted)),
+            "seconds_per_chain_step": now,
+            "seconds_per_chain_step_before": today,
+            "floor_per_chain_step": floor / num_chains,
+            "run_seconds": seconds,
+            "ess_h": ess_h,
+            "ess_energy_l1": ess_one,
+            "ess_per_second_h": ess_h / seconds,
+            "ess_per_second_energy_l1": ess_one / seconds,
+            "blas_threads": os.environ.get("OPENBLAS_NUM_THREADS", "default"),
+        }
+        rows.append(row)
+        log(
+            f"  N = {size}: dt = {step_size:.3g}, acceptance {row['acceptance']:.2f}; "
+            f"{now * 1e3:.3f} ms/chain-step (before {today * 1e3:.3f}, floor "
+            f"{floor / num_chains * 1e3:.3f}); ESS/s h {row['ess_per_second_h']:.2f}, "
+            f"ε₁ {row['ess_per_second_energy_l1']:.2f}"
+        )
+    return rows
+
+
+def _cost_subprocess(threads, quick, sizes=None, with_ess=True):
+    """:func:`adjusted_costs` in a fresh process with ``OPENBLAS_NUM_THREADS`` (and OMP, MKL)
+    set to ``threads`` (``None``: left unset, what a user gets by default)."""
+    env = dict(os.environ)
+    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        env.pop(name, None)
+        if threads is not None:
+            env[name] = str(threads)
+    env[_WORKER_FLAG] = "default" if threads is None else "set"
+    code = (
+        "import json, sys; from benchmarks import zeitlin; "
+        f"rows = zeitlin.adjusted_costs({quick!r}, lambda m: print(m, file=sys.stderr, "
+        f"flush=True), {sizes!r}, {with_ess!r}); print(json.dumps(rows))"
+    )
+    root = Path(__file__).resolve().parent.parent
+    done = subprocess.run(
+        [sys.executable, "-c", code], env=env, cwd=root, capture_output=True, text=True
+    )
+    if done.returncode != 0:
+        raise RuntimeError(done.stderr[-2000:])
+    print(done.stderr, end="", flush=True)
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+# ------------------------------------------------------------- noise: degree and smoothness
+
+NOISE_PLAN = {16: (32, 2000, (2, 3, 5, 15), (0, 1, 2)), 32: (16, 1500, (2, 4, 8, 31), (1, 2))}
+NOISE_QUICK_PLAN = {8: (8, 300, (2, 7), (1,))}
+NOISE_BETAS = (8.0, -8.0)
+
+
+def _spread_over_orbit(position, num_chains, seed):
+    """``U W U*`` for Haar-random unitaries ``U`` (QR of complex Gaussians, phases fixed):
+    points spread uniformly over the orbit of ``position``."""
+    rng = np.random.default_rng(seed)
+    size = position.shape[-1]
+    gaussian = rng.normal(size=(num_chains, size, size)) + 1j * rng.normal(
+        size=(num_chains, size, size)
+    )
+    q, r = np.linalg.qr(gaussian)
+    q = q * (np.diagonal(r, axis1=-2, axis2=-1) / np.abs(np.diagonal(r, axis1=-2, axis2=-1)))[
+        :, None, :
+    ]
+    algebra = Unitary(size)
+    w = np.asarray(algebra.to_matrix(jnp.asarray(position)))
+    return np.asarray(algebra.from_matrix(jnp.asarray(q @ w @ np.conj(np.swapaxes(q, -1, -2)))))
+
+
+def _spectrum_runner(system, beta, num_chains):
+    """``run(states, key, step_size, num_steps) -> (states, (ε_ℓ per step, accepted))``."""
+    kernel = build_kernel(system)
+    harmonics = system.params["harmonics"]
+
+    def run(states, key, step_size, num_steps):
+        def body(states, k):
+            keys = jax.random.split(k, num_chains)
+            states, info = jax.vmap(kernel, in_axes=(0, 0, None, None, None))(
+                keys, states, step_size, 1.0, beta
+            )
+            return states, (harmonics.energy_spectrum(states.position), info.is_accepted)
+
+        return jax.lax.scan(body, states, jax.random.split(key, num_steps))
+
+    return liesample.jit(run, static_argnums=3)
+
+
+def _time_to_stationarity(means, window=50):
+    """First step after which the chain mean, averaged over ``window`` steps, stays within 10 %
+    of its initial distance from the stationary value (the mean over the last half)."""
+    stationary = means[len(means) // 2 :].mean()
+    gap = abs(means[0] - stationary)
+    smoothed = np.convolve(means, np.ones(window) / window, mode="valid")
+    outside = np.nonzero(np.abs(smoothed - stationary) > 0.1 * max(gap, 1e-300))[0]
+    if len(outside) == 0:
+        return 0
+    first_inside = int(outside[-1]) + 1
+    return first_inside if first_inside < len(smoothed) else None
+
+
+def noise_mixing(quick, log):
+    """ESS per step of each degree's energy and steps to stationarity from points spread over
+    the orbit, against ``noise_degree`` and ``noise_smoothness``, at ``β`` of both signs."""
+    plan = NOISE_QUICK_PLAN if quick else NOISE_PLAN
+    rows = []
+    for size, (num_chains, num_steps, degrees, smoothnesses) in plan.items():
+        starts = _spread_over_orbit(_start(size), num_chains, seed=size)
+        for beta in NOISE_BETAS:
+            for degree in degrees:
+                for smoothness in smoothnesses:
+                    system = zeitlin_euler(size, noise_degree=degree, noise_smoothness=smoothness)
+                    states = jax.vmap(functools.partial(adjusted_init, system=system))(
+                        jnp.asarray(starts)
+                    )
+                    run = _spectrum_runner(system, beta, num_chains)
+                    key = jax.random.key(size * 1000 + degree * 10 + smoothness)
+                    step_size = _tuned_step_on(run, states, key, 40)
+                    begin = time.perf_counter()
+                    _, (spectra, accepted) = run(states, key, step_size, num_steps)
+                    spectra = np.asarray(spectra)  # (steps, chains, N − 1)
+                    seconds = time.perf_counter() - begin
+                    half = spectra[num_steps // 2 :]
+                    ess = np.array(
+                        [float(arviz.ess(half[:, :, k].T)) for k in range(size - 1)]
+                    ) / (num_chains * len(half))
+                    h = spectra.sum(-1).mean(1)
+                    row = {
+                        "N": size,
+                        "beta": beta,
+                        "noise_degree": degree,
+                        "noise_smoothness": smoothness,
+                        "num_noises": system.num_noises,
+                        "chains": num_chains,
+                        "steps": num_steps,
+                        "step_size": step_size,
+                        "acceptance": float(np.mean(accepted)),
+                        "seconds": seconds,
+                        "ess_per_step_by_degree": ess,
+                        "steps_to_stationarity_l1": _time_to_stationarity(spectra[:, :, 0].mean(1)),
+                        "steps_to_stationarity_h": _time_to_stationarity(h),
+                        "stationary_l1_fraction": float(
+                            half[:, :, 0].mean() / half.sum(-1).mean()
+                        ),
+                    }
+                    rows.append(row)
+                    log(
+                        f"  N = {size}, β = {beta:+g}, L = {degree}, n = {smoothness}: dt "
+                        f"{step_size:.3g}, acc {row['acceptance']:.2f}, ESS/step min "
+                        f"{ess.min():.2e} (ℓ=1 {ess[0]:.2e}), to stationarity ℓ=1 "
+                        f"{row['steps_to_stationarity_l1']}, h {row['steps_to_stationarity_h']}; "
+                        f"{seconds:.1f} s"
+                    )
+    return rows
+
+
+def _tuned_step_on(run, states, key, num_steps):
+    """:func:`_tuned_step` for a runner whose outputs end with the acceptance flags."""
+    low, high = -12.0, 24.0
+    for i in range(12):
+        middle = 0.5 * (low + high)
+        _, outputs = run(states, jax.random.fold_in(key, i), 10.0**middle, num_steps)
+        if float(jnp.mean(outputs[-1])) > TARGET_ACCEPTANCE:
+            low = middle
+        else:
+            high = middle
+    return 10.0 ** (0.5 * (low + high))
+
+
+def run_adjusted(out_dir: Path, quick: bool, log) -> None:
+    """The adjusted sampler's cost, floor and ESS/s (one BLAS thread, and the default threads
+    for the cost alone), written to ``zeitlin_adjusted.json``."""
+    log("Zeitlin su(N): adjusted step, one BLAS thread (cost, floor, ESS/s)")
+    one_thread = _cost_subprocess(1, quick)
+    log("Zeitlin su(N): adjusted step, default BLAS threads (cost)")
+    default_threads = _cost_subprocess(None, quick, with_ess=False)
+    results = {
+        "mode": "quick" if quick else "full",
+        "machine": common.machine_info(),
+        "beta": ADJUSTED_BETA,
+        "one_thread": one_thread,
+        "default_threads": default_threads,
+    }
+    common.write_json(out_dir / "zeitlin_adjusted.json", results)
+
+
+def run_noise(out_dir: Path, quick: bool, log) -> None:
+    """The noise-degree and smoothness measurements, written to ``zeitlin_noise.json``."""
+    log("Zeitlin su(N): noise degree and smoothness")
+    results = {
+        "mode": "quick" if quick else "full",
+        "machine": common.machine_info(),
+        "rows": noise_mixing(quick, log),
+    }
+    common.write_json(out_dir / "zeitlin_noise.json", results)
+
+
 def run(out_dir: Path, quick: bool, log) -> None:
     log("Zeitlin su(N): cost per step against N")
     cost = cost_against_size(quick, log)
@@ -271,6 +597,8 @@ def run(out_dir: Path, quick: bool, log) -> None:
     }
     common.write_json(out_dir / "zeitlin.json", results)
     _plot(results, out_dir / "zeitlin.png")
+    run_adjusted(out_dir, quick, log)
+    run_noise(out_dir, quick, log)
 
 
 def _plot(results, path):

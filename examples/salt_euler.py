@@ -94,7 +94,7 @@ def main(argv=None) -> int:
 
     system = zeitlin_euler(size, noise_degree=noise_degree)
     harmonics = system.params["harmonics"]
-    start = random_vorticity(size, seed=1, slope=1.0, enstrophy=ENSTROPHY)
+    start = random_vorticity(size, seed=1, slope=1.0, enstrophy=0.5 * ENSTROPHY)
     record = steps // 2
     key = jax.random.key(0)
 

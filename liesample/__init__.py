@@ -26,6 +26,7 @@ from liesample.samplers.cotangent.magnetic_hmc import jittered_magnetic_hmc, mag
 from liesample.samplers.cotangent.magnetic_langevin import magnetic_langevin
 from liesample.samplers.orbit.adjusted_lie_poisson import adjusted_lie_poisson
 from liesample.samplers.orbit.lie_poisson_langevin import lie_poisson_langevin
+from liesample.samplers.orbit.vortex_metropolis import vortex_metropolis
 from liesample.samplers.spins.heisenberg_heat_bath import heisenberg_heat_bath
 from liesample.samplers.spins.heisenberg_metropolis import heisenberg_metropolis
 from liesample.samplers.spins.heisenberg_wolff import heisenberg_wolff
@@ -81,5 +82,6 @@ __all__ = [
     "symplectic",
     "systems",
     "targets",
+    "vortex_metropolis",
     "window_adaptation",
 ]

@@ -236,6 +236,11 @@ SAMPLERS = [
         _su2_starts,
     ),
     SamplerCase(
+        "vortex_metropolis",
+        lambda: liesample.vortex_metropolis(_point_vortices(), beta=-1.0),
+        lambda: _VORTEX_STARTS,
+    ),
+    SamplerCase(
         "heisenberg_heat_bath",
         lambda: liesample.heisenberg_heat_bath(_heisenberg(), beta=1.0),
         lambda: _spin_starts((4, 4), seed=1),

@@ -1,9 +1,9 @@
 """The posteriordb models of ``benchmarks/posteriordb_models.py`` are the Stan programs.
 
 For every posterior, at reference draws (Stan's, shipped in ``benchmarks/data/posteriordb``):
-the model's sites give exactly the reference keys; the transformed parameters (deterministic
-sites) reproduce the reference values from the sample sites; NumPyro's potential energy on the
-unconstrained space is finite; and the NumPyro log joint differs from the Stan program's
+the model's sites give exactly the reference keys; mapping a draw to NumPyro's unconstrained
+space and back (``postprocess_fn``, deterministic sites included) reproduces it; NumPyro's
+potential energy there is finite; and the NumPyro log joint differs from the Stan program's
 ``target`` (written again below with SciPy, line by line from the ``.stan`` code shipped with
 the data) by one constant across draws. The reference draws carry no ``lp__``, so this second,
 independent transcription stands in for Stan's own log density.
@@ -22,11 +22,11 @@ from scipy import stats
 
 pytest.importorskip("numpyro")
 
-from numpyro.infer.util import initialize_model, log_density, unconstrain_fn  # noqa: E402
+from numpyro.infer.util import initialize_model, log_density, unconstrain_fn
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository root
 
-from benchmarks import posteriordb_models as pdb  # noqa: E402
+from benchmarks import posteriordb_models as pdb
 
 
 def _normal(x, loc, scale):
@@ -72,7 +72,8 @@ def stan_kidscore_momiq(d, p):
 
 
 def stan_logmesquite(d, p):
-    b, x = p["beta"], d["predictors"]  # log diam1, log diam2, log canopy, log total, log density, group
+    # predictors: log diam1, log diam2, log canopy height, log total height, log density, group
+    b, x = p["beta"], d["predictors"]
     mean = b[0] + sum(b[j + 1] * x[:, j] for j in range(6))
     return _normal(d["log_weight"], mean, p["sigma"])
 
@@ -140,8 +141,8 @@ def test_sites_name_the_reference_keys(posterior, initialized):
 
 
 def test_log_density_finite_and_transformed_parameters_reproduced(posterior, initialized):
-    """At every reference draw kept: the deterministic sites recomputed from the sample sites
-    equal the reference values, and the potential energy (unconstrained) is finite."""
+    """At every reference draw kept: unconstrained and constrained again (deterministic sites
+    recomputed) it is unchanged, and the potential energy there is finite."""
     draws = posterior.draws_sample
     latent = posterior.latent(draws)
     kwargs = posterior.model_kwargs()
@@ -170,7 +171,10 @@ def test_log_joint_equals_stan_target_up_to_a_constant(posterior):
     data = {k: np.asarray(v) for k, v in posterior.data.items()}
     n = len(posterior.draws_sample)
     stan = np.array(
-        [STAN[posterior.name](data, {k: np.asarray(v)[i] for k, v in latent.items()}) for i in range(n)]
+        [
+            STAN[posterior.name](data, {k: np.asarray(v)[i] for k, v in latent.items()})
+            for i in range(n)
+        ]
     )
     assert np.all(np.isfinite(ours)) and np.all(np.isfinite(stan))
     difference = ours - stan

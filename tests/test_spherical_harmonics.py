@@ -164,14 +164,14 @@ def test_quadrature_analysis_is_the_l2_projection():
     ell, m = degrees_and_orders(MAX_DEGREE)
     for degree in range(MAX_DEGREE + 1):
         norm = math.sqrt((2 * degree + 1) / (4 * math.pi))
-        exact = quad(lambda z, d=degree: 2 * math.pi * norm * math.exp(2 * z) *
+        exact = quad(lambda z, d=degree, c=norm: 2 * math.pi * c * math.exp(2 * z) *
                      eval_legendre(d, z), -1, 1, epsabs=1e-14)[0]
         assert abs(coefficients[(ell == degree) & (m == 0)][0] - exact) < 1e-12
     assert np.max(np.abs(coefficients[m != 0])) < 1e-13
 
 
 def test_grid_transform_validation():
-    theta, phi, weights = gauss_legendre_grid(3)
+    theta, _, weights = gauss_legendre_grid(3)
     with pytest.raises(ValueError, match="num_phi >= 7"):
         harmonic_analysis(np.zeros((theta.size, 5)), theta, 3)
     with pytest.raises(ValueError, match="num_theta = 4"):

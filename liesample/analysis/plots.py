@@ -78,6 +78,15 @@ def _as_samples(samples) -> np.ndarray:
     return x
 
 
+def __getattr__(name):
+    """``plots.Figure`` is matplotlib's class, imported on first use (PEP 562)."""
+    if name == "Figure":
+        from matplotlib.figure import Figure
+
+        return Figure
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 def _figure(**options) -> Figure:
     """A standalone Agg :class:`matplotlib.figure.Figure` (matplotlib imported here, lazily)."""
     from matplotlib.figure import Figure

@@ -71,8 +71,9 @@ def make_dynamics(system, *, beta=None, sigma=1.0, theta=None, hamiltonian=True)
     With noise (``σ > 0``) the dissipation is derived, ``θ = βσ²/2``, so ``β`` is required and
     ``θ`` may not be given. Without noise (``σ = 0``) there is no temperature; ``θ ≥ 0`` sets a
     pure energy-descent flow. Effects whose coefficient vanishes are left out of the scene.
-    ``system`` is anything with a ``check_beta`` attribute (``None`` or ``β ↦ None``, raising
-    where ``exp(−βh)`` is not normalisable).
+    ``system`` is anything with ``check_beta`` (``None`` or ``β ↦ None``, raising where
+    ``exp(−βh)`` is not normalisable) and ``check_noise`` (``None`` or ``() ↦ None``, raising
+    where the noise cannot reach the orbit) attributes.
     """
     sigma = finite_float("sigma", sigma, nonnegative=True)
     if sigma > 0:
@@ -81,6 +82,8 @@ def make_dynamics(system, *, beta=None, sigma=1.0, theta=None, hamiltonian=True)
         beta = finite_float("beta", beta)
         if system.check_beta is not None:
             system.check_beta(beta)
+        if system.check_noise is not None:
+            system.check_noise()
         if theta is not None:
             raise ValueError(
                 "theta is derived from beta and sigma (theta = beta*sigma**2/2); "

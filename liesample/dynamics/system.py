@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from liesample.dynamics.noise_span import check_noise_reaches_orbit
 from liesample.foundation.validation import concrete_array
 from liesample.geometry.algebras import LieAlgebra
 
@@ -89,6 +90,11 @@ class LiePoissonSystem:
         at a time and then evaluates only that direction, so a piece costs one noise function
         instead of ``m``. Only with the default grouping (``noise_groups=None``). ``None``
         (default): every piece goes through ``noise_hamiltonians``.
+    noise_reaches_orbits : bool
+        ``True`` where the noise is known to reach every direction of every orbit (the
+        library's systems, each with its argument); ``False`` (default, and after
+        :meth:`with_noise`): :meth:`check_noise` runs the rank test of
+        :mod:`liesample.dynamics.noise_span` once, when a sampler is built.
     """
 
     name: str
@@ -108,6 +114,7 @@ class LiePoissonSystem:
     hamiltonian_pieces: tuple[Callable, ...] | None = None
     curvature_bound: bool = True
     single_noise_hamiltonian: Callable | None = None
+    noise_reaches_orbits: bool = False
 
     def __post_init__(self):
         if self.single_noise_hamiltonian is not None and self.noise_groups is not None:
@@ -139,7 +146,15 @@ class LiePoissonSystem:
             num_noises=num_noises,
             noise_groups=noise_groups,
             single_noise_hamiltonian=None,  # it evaluated the old functions
+            noise_reaches_orbits=False,
         )
+
+    def check_noise(self) -> None:
+        """Raise ``ValueError`` where the noise provably cannot reach the whole orbit (the rank
+        test of :func:`liesample.dynamics.noise_span.check_noise_reaches_orbit`), unless the
+        system declares ``noise_reaches_orbits``."""
+        if not self.noise_reaches_orbits:
+            check_noise_reaches_orbit(self)
 
     @property
     def noise_group_labels(self):

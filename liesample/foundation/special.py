@@ -5,7 +5,7 @@ not), built from elementary JAX operations only, so ``jit``, ``vmap``, ``jax.gra
 ``jax.hessian`` apply to any order with no callback into the host. Two branches:
 
 - ``κ ≤ 25``: the power series ``I_ν(κ) = (κ/2)^ν / Γ(ν+1) · Σ_k (κ²/4)^k / (k! (ν+1)_k)``, whose
-  terms are all positive (no cancellation), 48 terms in nested (Horner) form;
+  terms are all positive (no cancellation), 48 terms, summed as powers of ``κ²/25² ≤ 1``;
 - ``κ > 25``: Debye's uniform expansion (DLMF 10.41.3) written in ``r = √(ν² + κ²)`` and
   ``p = ν/r``: ``I_ν(κ) ≈ e^{r} (κ/(ν+r))^ν / √(2π r) · Σ_k U_k(p)/ν^k`` with
   ``U_k(p)/ν^k = r^{−k} Σ_j u_{kj} p^{2j}`` (so ``ν = 0`` is Hankel's large-argument series), 20
@@ -23,7 +23,9 @@ import functools
 import math
 from fractions import Fraction
 
+import jax
 import jax.numpy as jnp
+import numpy as np
 
 from liesample.foundation.validation import finite_float
 
@@ -62,32 +64,50 @@ def _debye_polynomials() -> tuple[tuple[Fraction, ...], ...]:
 
 
 @functools.lru_cache(maxsize=1)
-def _debye_coefficients() -> tuple[tuple[float, ...], ...]:
-    """For ``k = 1…K``: ``(u_{k0}, u_{k1}, …)`` with ``U_k(p) = p^k Σ_j u_{kj} p^{2j}``."""
-    return tuple(tuple(float(c) for c in u[k::2]) for k, u in enumerate(_debye_polynomials())
-                 if k > 0)  # fmt: skip
+def _debye_matrix() -> np.ndarray:
+    """``C`` (K, K+1): ``U_k(p) = p^k Σ_j C[k−1, j] p^{2j}`` for ``k = 1…K``."""
+    matrix = np.zeros((_DEBYE_TERMS, _DEBYE_TERMS + 1))
+    for k, u in enumerate(_debye_polynomials()[1:], start=1):
+        coefficients = [float(c) for c in u[k::2]]
+        matrix[k - 1, : len(coefficients)] = coefficients
+    return matrix
+
+
+@functools.cache
+def _series_coefficients(order: float) -> np.ndarray:
+    """``Q^k / (k! (ν+1)_k)``, ``k = 0…N``, ``Q = 25²/4``: the series in powers of ``q/Q ≤ 1``
+    (no power overflows, in any precision)."""
+    scale = 0.25 * _SWITCH * _SWITCH
+    log_terms = [0.0]
+    for k in range(1, _SERIES_TERMS + 1):
+        log_terms.append(log_terms[-1] + math.log(scale / (k * (k + order))))
+    return np.exp(np.array(log_terms))
+
+
+def _powers(z, n: int):
+    """``(z⁰, z¹, …, zⁿ)`` along a new last axis, by repeated doubling: products only, so every
+    derivative is exact also at ``z = 0`` (``z ** k`` is not)."""
+    powers = jnp.stack([jnp.ones_like(z), z], axis=-1)
+    while powers.shape[-1] < n + 1:
+        top = powers[..., -1:] * z[..., None]  # z^m, m = current length
+        powers = jnp.concatenate([powers, powers * top], axis=-1)
+    return powers[..., : n + 1]
 
 
 def _log_series(order: float, kappa):
     """``log Σ_k (κ²/4)^k / (k! (ν+1)_k)``: the reduced function on the series branch."""
-    q = 0.25 * kappa * kappa
-    nested = jnp.ones_like(kappa)
-    for k in range(_SERIES_TERMS, 1, -1):
-        nested = 1.0 + q * nested / (k * (k + order))
-    return jnp.log1p(q * nested / (1.0 + order))
+    z = kappa * kappa / (_SWITCH * _SWITCH)  # q / Q
+    coefficients = jnp.asarray(_series_coefficients(order)[1:], kappa.dtype)
+    return jnp.log1p(jnp.sum(_powers(z, _SERIES_TERMS)[..., 1:] * coefficients, axis=-1))
 
 
 def _log_ive_debye(order: float, kappa):
     """``log(I_ν(κ) e^{−κ})`` by Debye's expansion (valid for ``√(ν²+κ²) > 25``)."""
     r = jnp.sqrt(order * order + kappa * kappa)
     p2 = (order / r) ** 2
-    inverse_r = 1.0 / r
-    total = jnp.zeros_like(kappa)
-    for coefficients in reversed(_debye_coefficients()):  # Horner in 1/r over k ≥ 1
-        inner = jnp.zeros_like(kappa)
-        for c in reversed(coefficients):  # Horner in p² over j
-            inner = inner * p2 + c
-        total = (total + inner) * inverse_r
+    matrix = jnp.asarray(_debye_matrix(), kappa.dtype)
+    inner = _powers(p2, _DEBYE_TERMS) @ matrix.T  # U_k(p)/p^k, k = 1…K
+    total = jnp.sum(inner * _powers(1.0 / r, _DEBYE_TERMS)[..., 1:], axis=-1)
     log_ive = order * order / (r + kappa) - 0.5 * jnp.log(2.0 * math.pi * r) + jnp.log1p(total)
     if order > 0.0:
         log_ive = log_ive + order * jnp.log(kappa / (order + r))
@@ -122,7 +142,11 @@ def log_bessel_iv_reduced(order, kappa):
     jax array, shape of ``kappa``
         Differentiable in ``κ`` to any order, also at ``κ = 0``.
     """
-    order = _order(order)
+    return _reduced(_order(order), kappa)
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _reduced(order: float, kappa):
     kappa, small, k_small, k_large = _branches(order, kappa)
     large = _log_ive_debye(order, k_large) + k_large - _log_half_power(order, k_large)
     return jnp.where(small, _log_series(order, k_small), large)
@@ -133,7 +157,11 @@ def log_bessel_ive(order, kappa):
 
     ``−inf`` at ``κ = 0`` for ``ν > 0``. Differentiable in ``κ`` to any order for ``κ > 0``.
     """
-    order = _order(order)
+    return _log_ive(_order(order), kappa)
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _log_ive(order: float, kappa):
     kappa, small, k_small, k_large = _branches(order, kappa)
     series = _log_half_power(order, k_small) + _log_series(order, k_small) - k_small
     return jnp.where(small, series, _log_ive_debye(order, k_large))
@@ -155,7 +183,11 @@ def log_bessel_iv(order, kappa):
         ``log I_ν(κ)`` (``−inf`` at ``κ = 0`` for ``ν > 0``); ``d/dκ log I_ν(κ) =
         I_{ν+1}(κ)/I_ν(κ) + ν/κ`` and higher derivatives by ``jax.grad``/``jax.hessian``.
     """
-    order = _order(order)
+    return _log_iv(_order(order), kappa)
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _log_iv(order: float, kappa):
     kappa, small, k_small, k_large = _branches(order, kappa)
     series = _log_half_power(order, k_small) + _log_series(order, k_small)
     return jnp.where(small, series, _log_ive_debye(order, k_large) + k_large)
@@ -163,7 +195,11 @@ def log_bessel_iv(order, kappa):
 
 def bessel_iv_ratio(order, kappa):
     """``I_{ν+1}(κ) / I_ν(κ)`` (``0`` at ``κ = 0``), differentiable in ``κ`` to any order."""
-    order = _order(order)
+    return _ratio(_order(order), kappa)
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _ratio(order: float, kappa):
     kappa, small, k_small, k_large = _branches(order, kappa)
     series = (0.5 * k_small / (order + 1.0)) * jnp.exp(
         _log_series(order + 1.0, k_small) - _log_series(order, k_small)

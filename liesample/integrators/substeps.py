@@ -14,10 +14,18 @@ stiff drift is resolved at the scale ``safety/rate``. Every substep is a coadjoi
 integrator, so an orbit-preserving base stays on the orbit to round-off.
 
 A state far from stiffness costs one substep (one ``rate`` evaluation extra). A step that would
-need more than ``max_substeps`` stops there and *drops the rest of its time* (the remaining
-``dt``, drift and noise alike): the state stays valid and no substep is ever longer than the
-rule allows, at the price of a slower clock in that step; :func:`substep` reports it
-(``completed = False``), and benchmarks count how often it happens.
+need more than ``max_substeps`` takes the rest of its time in its last substep: the clock is
+never slowed (a step always advances by ``dt``, drift and noise alike), and only that last
+substep is longer than the rule allows; :func:`substep` reports it (``resolved = False``).
+Dropping the rest of the time instead would slow the clock where the rate is large, and a
+process slowed by a factor ``s(μ)`` samples ``∝ exp(−βh)/s(μ)``: for point vortices at ``β < 0``,
+a law that piles up at collisions. The unresolved part is confined to states whose rate exceeds
+``max_substeps·safety/dt``, a region that shrinks as ``dt → 0``.
+
+**Batched chains.** Under ``jax.vmap`` the substep loop runs until the slowest chain is done (every
+chain is computed at every substep and masked), so a batch of chains costs the largest number
+of substeps among them: at most ``max_substeps`` base steps per chain and step, the bound the
+cap gives.
 """
 
 from __future__ import annotations
@@ -34,7 +42,10 @@ __all__ = ["adaptive_substepping", "substep"]
 
 
 def substep(base, rate_fn: Callable, dynamics, mu, dt, dW=None, *, safety=0.1, max_substeps=256):
-    """One adaptive step; returns ``(μ', number_of_substeps, completed)``.
+    """One adaptive step; returns ``(μ', number_of_substeps, resolved)``.
+
+    ``resolved`` is ``False`` when the step reached ``max_substeps`` and its last substep took
+    the rest of the step, longer than ``safety/rate`` (module docstring).
 
     Parameters
     ----------
@@ -45,26 +56,29 @@ def substep(base, rate_fn: Callable, dynamics, mu, dt, dW=None, *, safety=0.1, m
     safety : float
         Substep length in units of ``1/rate``.
     max_substeps : int
-        Upper bound on substeps per step; beyond it the rest of the step is dropped.
+        Upper bound on substeps per step; the last one takes the rest of the step.
     """
     dt = jnp.asarray(dt, dtype=mu.dtype)
 
     def cond(carry):
-        remaining, count, _ = carry
+        remaining, count, _, _ = carry
         return (remaining > 0) & (count < max_substeps)
 
     def body(carry):
-        remaining, count, position = carry
+        remaining, count, position, resolved = carry
         rate = rate_fn(dynamics, position)
         limit = jnp.where(rate > 0, safety / jnp.where(rate > 0, rate, 1.0), remaining)
-        h = jnp.minimum(remaining, limit)
+        last = count >= max_substeps - 1
+        h = jnp.where(last, remaining, jnp.minimum(remaining, limit))
+        resolved = resolved & (h <= limit)
         increments = None if dW is None else dW * (h / dt)
         position = base(dynamics, position, h, increments)
         remaining = jnp.where(h >= remaining, jnp.zeros_like(remaining), remaining - h)
-        return remaining, count + 1, position
+        return remaining, count + 1, position, resolved
 
-    remaining, count, mu = jax.lax.while_loop(cond, body, (dt, jnp.int32(0), mu))
-    return mu, count, remaining <= 0
+    start = (dt, jnp.int32(0), mu, jnp.ones((), bool))
+    _, count, mu, resolved = jax.lax.while_loop(cond, body, start)
+    return mu, count, resolved
 
 
 def adaptive_substepping(

@@ -565,10 +565,10 @@ class GeometricHMC(MCMCKernel):
                 seen.add(name)
                 if name not in euclidean:
                     raise ValueError(
-                        f"dense_mass: site {name!r} moves on {self._space[name]!r}, where GeometricHMC's "
-                        "exact drift needs one inverse mass per copy; a dense mass is possible "
-                        f"on Euclidean sites only: allowed dense_mass=[{tuple(euclidean)!r}] or "
-                        "groups of these sites"
+                        f"dense_mass: site {name!r} moves on {self._space[name]!r}, where "
+                        "GeometricHMC's exact drift needs one inverse mass per copy; a dense "
+                        "mass is possible on Euclidean sites only: allowed "
+                        f"dense_mass=[{tuple(euclidean)!r}] or groups of these sites"
                     )
         return list(groups)
 
@@ -724,10 +724,13 @@ class GeometricHMC(MCMCKernel):
         matrices = {}
         for key in self._dense_keys:
             n = self._inner_space[key].shape[0]
-            value = jnp.ones(()) if by_key is None else jnp.asarray(by_key[key], dtype)
-            if np.ndim(value) < 2:
-                value = jnp.diag(jnp.broadcast_to(value, (n,)))
-            spaces.check_inverse_mass_matrix(value, n, f"inverse mass of {self._blocks[key]}")
+            value = jnp.ones((), dtype) if by_key is None else jnp.asarray(by_key[key], dtype)
+            name = f"inverse mass of {self._blocks[key]}"
+            if np.ndim(value) == 0:
+                value = jnp.full(n, value)
+            spaces.check_inverse_mass_matrix(value, n, name)
+            if np.ndim(value) == 1:
+                value = jnp.diag(value)
             matrices[key] = jnp.asarray(value, dtype)
             if by_key is not None:
                 by_key[key] = jnp.ones(n, dtype)
@@ -871,6 +874,11 @@ class GeometricHMC(MCMCKernel):
         if batched:
             state = jit(jax.vmap(init_one))(rng_key, init_params)
             self._sample_fn = jax.vmap(self._sample_one, in_axes=(0, None, None))
+            if self._find_heuristic:
+                # The chains share the iteration count: passed unbatched, the window-end search
+                # stays a branch under vmap instead of running at every iteration.
+                shared = jax.vmap(self._sample_one, in_axes=(0, None, None, None))
+                self._sample_fn = lambda state, a, kw: shared(state, a, kw, state.i[0])
         else:
             state = jit(init_one)(rng_key, init_params)
             self._sample_fn = self._sample_one
@@ -891,7 +899,8 @@ class GeometricHMC(MCMCKernel):
         jax.eval_shape(self.postprocess_fn(model_args, model_kwargs), first)
         return state
 
-    def _sample_one(self, state, model_args, model_kwargs):
+    def _sample_one(self, state, model_args, model_kwargs, i=None):
+        i = state.i if i is None else i
         logdensity = self._inner_logdensity(model_args, model_kwargs or {})
         rng_key, key = jax.random.split(state.rng_key)
         if self._find_heuristic:
@@ -913,7 +922,7 @@ class GeometricHMC(MCMCKernel):
         kinetic = cotangent_bundle(self._inner_space, mass, None, dtype).kinetic_energy
         energy = -inner.logdensity + kinetic(inner.momentum)
         if self._num_warmup > 0:
-            index = jnp.minimum(state.i, self._num_warmup - 1)
+            index = jnp.minimum(i, self._num_warmup - 1)
             stage, window_end = (jnp.asarray(column)[index] for column in self._schedule)
             updated = self._pieces.update(warm, inner, info, stage, window_end)
             new_dense = self._update_dense(dense, inner.position, stage, window_end)
@@ -931,18 +940,18 @@ class GeometricHMC(MCMCKernel):
 
                 updated = jax.lax.cond(window_end, restart, lambda warm: warm, updated)
             final = jnp.where(
-                state.i == self._num_warmup - 1,
+                i == self._num_warmup - 1,
                 self._pieces.final_step_size(updated),
                 updated.step_size,
             )
             if not self._adapt_step_size:
                 final = jnp.asarray(self._step_size, final.dtype)
             updated = updated._replace(step_size=final)
-            in_warmup = state.i < self._num_warmup
+            in_warmup = i < self._num_warmup
             keep = lambda new, old: jax.tree.map(lambda a, b: jnp.where(in_warmup, a, b), new, old)
             warm, dense = keep(updated, warm), keep(new_dense, dense)
         # NumPyro's running mean, restarted when sampling begins.
-        count = jnp.where(state.i < self._num_warmup, state.i + 1, state.i + 1 - self._num_warmup)
+        count = jnp.where(i < self._num_warmup, i + 1, i + 1 - self._num_warmup)
         mean_accept = state.mean_accept_prob + (
             info.acceptance_rate - state.mean_accept_prob
         ) / count.astype(dtype)

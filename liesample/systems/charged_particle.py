@@ -101,6 +101,7 @@ class ChargedParticleSystem:
 
     num_noises = property(lambda self: self.dimension)
     check_beta = None  # every finite β is admissible as far as the system knows
+    check_noise = None  # the noise acts on every momentum: it reaches every point
 
     @property
     def event_shape(self) -> tuple[int]:

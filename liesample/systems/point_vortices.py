@@ -29,7 +29,7 @@ Each moves every vortex with the same divergence-free velocity ``−(1/R) u × �
 same truncated modes, so ``exp(−βh)`` is exactly invariant for every ``L`` (paper,
 ``eq:poisson-langevin-eq``). With
 ``L = 1`` the modes are rigid rotations, which commute with ``h``: no dissipation and no change
-of the vortices' relative positions, so sampling needs ``L ≥ 2``.
+of the vortices' relative positions, so :func:`point_vortices` refuses it (``L ≥ 2``).
 
 **The paper's closed form** (:func:`all_modes_dissipation`, the labelled variant
 ``point_vortex_integrator(..., dissipation="all_modes")``): the dissipation of
@@ -250,8 +250,8 @@ def point_vortices(circulations, max_degree: int = 2, radius: float = 1.0) -> Po
     circulations : sequence of N nonzero floats
         ``Γ_k``; signs may differ.
     max_degree : int
-        ``L ≥ 1``: the noise modes are ``ψ_ℓm``, ``1 ≤ ℓ ≤ L`` (``L(L+2)`` directions). ``L ≥ 2``
-        is needed for the noise to change the vortices' relative positions.
+        ``L ≥ 2``: the noise modes are ``ψ_ℓm``, ``1 ≤ ℓ ≤ L`` (``L(L+2)`` directions). ``L = 1``
+        (rigid rotations only, which never change the vortices' relative positions) is refused.
     radius : float
         ``R > 0``. The Gibbs law in the unit vectors ``x/R`` does not depend on ``R``.
 
@@ -269,6 +269,13 @@ def point_vortices(circulations, max_degree: int = 2, radius: float = 1.0) -> Po
     if max_degree < 1:
         raise ValueError(
             f"max_degree must be >= 1 (the transport modes are ℓ = 1 … L), got {max_degree}"
+        )
+    if max_degree == 1:
+        raise ValueError(
+            "max_degree=1 gives only the three rigid rotations as noise: they commute with h "
+            "({h, ĥ_1m} = 0), so there is no dissipation, the vortices' relative positions never "
+            "change and no sampler reaches the Gibbs law exp(-beta*h); use max_degree >= 2 "
+            "(the default, 2), or liesample.vortex_metropolis, which needs no noise"
         )
     max_degree = int(max_degree)
     radius = finite_float("radius", radius, positive=True)
@@ -314,6 +321,9 @@ def point_vortices(circulations, max_degree: int = 2, radius: float = 1.0) -> Po
             "radius": radius,
         },
         check_beta=check_beta,
+        # ℓ ≤ L transport with L >= 2: brackets of the ℓ = 2 fields reach every degree, and the
+        # Hamiltonian fields of all degrees move distinct vortices independently
+        noise_reaches_orbits=True,
         curvature_bound=False,  # h is singular at collisions: substepping handles stiffness
         circulations=gamma,
         radius=radius,

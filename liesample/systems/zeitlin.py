@@ -332,24 +332,73 @@ def so3_from_su2(x):
     return jnp.stack([m1, m2, m3], -1)
 
 
+# Taylor degree of the exponential and the largest norm it takes without a squaring: the
+# remainder θ^17/17! stays below the double-precision unit round-off 2^−53.
+_TAYLOR_DEGREE = 16
+_TAYLOR_RADIUS = 0.8
+_TAYLOR_COEFFICIENTS = tuple(1.0 / math.factorial(k) for k in range(_TAYLOR_DEGREE + 1))
+
+
+def _skew_hermitian_exponential(a):
+    """``e^{A}`` for skew-Hermitian ``A`` (complex ``(..., N, N)``) by matrix products alone.
+
+    Scaling and squaring specialised to the unitary group: ``A/2^s`` with ``s`` the fewest
+    halvings that bring a norm bound (the smaller of the 1-norm and the Frobenius norm, both
+    ``≥ ‖A‖₂``; chosen per matrix, not differentiated) within ``_TAYLOR_RADIUS``; its degree-16
+    Taylor polynomial by Paterson–Stockmeyer in ``A⁴`` (seven products); ``s`` squarings; one
+    Newton–Schulz step back onto the unitary group.
+    No LAPACK call (no linear solve, as a Padé approximant needs), so nothing waits on a
+    threaded BLAS; batched over leading axes (a matrix that needs fewer squarings keeps its
+    value while the others square). Unitary to round-off; the value is accurate to round-off
+    times ``‖A‖₂``, as for any scaling and squaring.
+    """
+    norm = jax.lax.stop_gradient(
+        jnp.minimum(
+            jnp.max(jnp.sum(jnp.abs(a), axis=-2), axis=-1),
+            jnp.sqrt(jnp.sum(jnp.abs(a) ** 2, axis=(-2, -1))),
+        )
+    )
+    squarings = jnp.ceil(jnp.log2(jnp.maximum(norm, 1e-300) / _TAYLOR_RADIUS))
+    squarings = jnp.maximum(squarings, 0.0).astype(jnp.int32)
+    a = a * jnp.exp2(-squarings.astype(norm.dtype))[..., None, None].astype(a.dtype)
+    eye = jnp.eye(a.shape[-1], dtype=a.dtype)
+    a2 = a @ a
+    a3 = a2 @ a
+    a4 = a2 @ a2
+    c = _TAYLOR_COEFFICIENTS
+
+    def block(j):  # Σ_{i<4} c_{4j+i} Aⁱ
+        return c[4 * j] * eye + c[4 * j + 1] * a + c[4 * j + 2] * a2 + c[4 * j + 3] * a3
+
+    power = c[_TAYLOR_DEGREE] * a4 + block(3)
+    for j in (2, 1, 0):
+        power = power @ a4 + block(j)
+
+    def square(i, u):
+        return jnp.where((i < squarings)[..., None, None], u @ u, u)
+
+    u = jax.lax.fori_loop(0, jnp.max(squarings), square, power)
+    # Each squaring doubles the round-off of unitarity; one Newton–Schulz step towards the
+    # polar factor, U(3 − U*U)/2, squares that error away (two products).
+    return u - 0.5 * u @ (jnp.conj(jnp.swapaxes(u, -1, -2)) @ u - eye)
+
+
 @dataclass(frozen=True, init=False)
 class SkewHermitianUnitary(Unitary):
-    """:class:`liesample.geometry.algebras.Unitary` whose group element is the exponential of
-    a skew-Hermitian matrix by its eigendecomposition.
+    """:class:`liesample.geometry.algebras.Unitary` whose group element
+    ``e^{−Z}`` is computed for what ``Z`` is: skew-Hermitian.
 
-    ``Z`` skew-Hermitian makes ``iZ = VΛV*`` Hermitian (``jnp.linalg.eigh``, batched over
-    leading axes), and ``e^{−Z} = V e^{iΛ} V*``: one Hermitian eigendecomposition and one matrix
-    product, unitary to round-off for any ``‖Z‖``. The general ``expm`` (Padé with scaling and
-    squaring) needs a squaring per doubling of ``‖Z‖``, and large steps of the adjusted sampler
-    make ``‖Z‖`` large; the eigendecomposition's cost does not depend on it. Same map as the
-    base class, to round-off.
+    The general ``expm`` (a Padé approximant, one LU solve, scaling and squaring) calls LAPACK
+    for the solve; on a shared machine a threaded LAPACK's workers spin and that one call
+    dominates the step. Here the exponential is matrix products only
+    (:func:`_skew_hermitian_exponential`): same map to round-off, and differentiable in
+    forward mode at ``Z = 0`` (the step-size rule differentiates moves along the noise), which
+    an eigendecomposition with its degenerate eigenvalues is not.
     """
 
     def group_element(self, zeta):
-        """``U = e^{−Z} = V e^{iΛ} V*`` with ``iZ = VΛV*``."""
-        values, vectors = jnp.linalg.eigh(1j * self.to_matrix(zeta))
-        rotated = vectors * jnp.exp(1j * values)[..., None, :]
-        return rotated @ jnp.conj(jnp.swapaxes(vectors, -1, -2))
+        """``U = e^{−Z}`` (unitary to round-off)."""
+        return _skew_hermitian_exponential(-self.to_matrix(zeta))
 
 
 class ZeitlinSystem(LiePoissonSystem):
@@ -449,6 +498,9 @@ def zeitlin_euler(size: int, noise_degree: int = 2, noise_smoothness: int = 1, p
         event_shape=(size, size),
         default_position=position,
         reference=reference,
+        # the ℓ ≤ L modes with L >= 2 generate su(N) under brackets (checked by the rank test of
+        # liesample.dynamics.noise_span in tests/test_noise_span.py)
+        noise_reaches_orbits=True,
         params={
             "N": size,
             "noise_degree": noise_degree,

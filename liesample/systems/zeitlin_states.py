@@ -17,14 +17,16 @@ vorticity of a flow has zero mean).
 - Spectra per degree: :func:`energy_spectrum`, :func:`enstrophy_spectrum` (JAX, any batch axes,
   usable inside a sampling loop).
 - Time: :func:`physical_time_unit` converts the model's time to the time of Euler's equations on
-  the unit sphere (docs/zeitlin.md).
+  the unit sphere.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -34,7 +36,11 @@ from liesample.geometry.spherical_harmonics import (
     harmonic_analysis,
     harmonic_synthesis,
 )
-from liesample.systems.zeitlin import _check_size, quantised_harmonics
+from liesample.systems.zeitlin import (
+    _check_size,
+    _compiled_from_coefficients,
+    quantised_harmonics,
+)
 
 __all__ = [
     "energy_spectrum",
@@ -53,17 +59,27 @@ def physical_time_unit(size: int) -> float:
     """``√(16π / (N(N² − 1)))``: one unit of model time is this much time of Euler's equations
     ``∂_t ω + u·∇ω = 0`` on the unit sphere, ``t_phys = physical_time_unit(N) · t_model``.
 
-    The model's ``Ẇ = [P, W]`` with Frobenius-orthonormal harmonics runs faster than the
-    continuum by ``1/physical_time_unit`` (derivation in docs/zeitlin.md; the tests check it
-    on Rossby–Haurwitz waves, which turn at exactly this rate in the model)."""
+    The model's ``Ẇ = [P, W]`` with Frobenius-orthonormal harmonics changes the coefficients at
+    ``physical_time_unit`` times the continuum's rate: the quantised coordinates
+    ``X_k = S_k/√(s(s+1))`` obey ``[X_i, X_j] = iε_ijk X_k/√(s(s+1))`` against the unit sphere's
+    ``{x_i, x_j} = ε_ijk x_k``, and a Frobenius-normalised matrix is ``√(4π/N)`` times the
+    quantisation of an ``L²``-normalised function, so ``[P, W]`` is
+    ``√(4π/N) · 2/√(N² − 1)`` times the quantised ``{ψ, ω}``. The tests check it on
+    Rossby–Haurwitz waves, which the model turns at exactly this rate."""
     size = _check_size(size)
     return math.sqrt(16.0 * math.pi / (size * (size * size - 1.0)))
+
+
+@functools.lru_cache(maxsize=8)
+def _compiled_coefficients(harmonics):
+    return jax.jit(harmonics.coefficients)
 
 
 def _from_coefficients(size, coefficients):
     coefficients = np.array(coefficients, dtype=float)
     coefficients[..., 0] = 0.0  # ℓ = 0: the trace, absent in su(N)
-    return np.asarray(quantised_harmonics(size).from_coefficients(jnp.asarray(coefficients)))
+    transform = _compiled_from_coefficients(quantised_harmonics(size))
+    return np.asarray(transform(jnp.asarray(coefficients)))
 
 
 def vorticity_from_grid(values, theta, size: int, weights=None) -> np.ndarray:
@@ -86,8 +102,8 @@ def vorticity_on_grid(x, theta, num_phi: int) -> np.ndarray:
     ``num_phi`` equispaced longitudes from 0, shape ``(..., num_theta, num_phi)``: the inverse of
     :func:`vorticity_from_grid` on trace-free states."""
     x = np.asarray(x, dtype=float)
-    coefficients = np.asarray(quantised_harmonics(x.shape[-1]).coefficients(jnp.asarray(x)))
-    return harmonic_synthesis(coefficients, theta, num_phi)
+    transform = _compiled_coefficients(quantised_harmonics(x.shape[-1]))
+    return harmonic_synthesis(np.asarray(transform(jnp.asarray(x))), theta, num_phi)
 
 
 def _unit_vectors(points, name):
@@ -137,7 +153,7 @@ def rossby_haurwitz(size: int, degree: int = 4, order: int = 4, amplitude: float
     :func:`rossby_haurwitz_angular_velocity` (Haurwitz): the solid rotation advects the wave,
     and a field of a single degree does not advect itself. The same holds exactly in Zeitlin's
     model (the quantised ``ℓ = 1`` modes generate rotations and ``Δ_N`` has the exact
-    eigenvalues), at that rate divided by :func:`physical_time_unit` in model time. ``Y_ℓ^m``
+    eigenvalues), at that rate times :func:`physical_time_unit` per unit of model time. ``Y_ℓ^m``
     is the real harmonic (``m < 0``: the ``sin |m|φ`` one); ``1 ≤ ℓ ≤ N − 1``.
     """
     size = _check_size(size)
@@ -165,7 +181,8 @@ def rossby_haurwitz_angular_velocity(degree: int, angular_velocity: float = 1.0)
     :func:`rossby_haurwitz` turns; ``ℓ = 1`` does not move relative to the rotation it is."""
     if isinstance(degree, bool) or not isinstance(degree, (int, np.integer)) or degree < 1:
         raise ValueError(f"degree must be an int >= 1, got {degree!r}")
-    return finite_float("angular_velocity", angular_velocity) * (1.0 - 2.0 / (degree * (degree + 1)))
+    omega = finite_float("angular_velocity", angular_velocity)
+    return omega * (1.0 - 2.0 / (degree * (degree + 1)))
 
 
 def spectral_vorticity(size: int, spectrum: Callable | np.ndarray, seed: int = 0, *,
@@ -209,11 +226,13 @@ def spectral_vorticity(size: int, spectrum: Callable | np.ndarray, seed: int = 0
     return _from_coefficients(size, coefficients)
 
 
-def _per_degree(x, weights):
-    x = jnp.asarray(x)
+@functools.partial(jax.jit, static_argnames="energy")
+def _per_degree(x, energy):
+    """``½ Σ_m ω_ℓm² w_ℓ`` for ``ℓ = 1 … N − 1``, ``w_ℓ = 1/(ℓ(ℓ+1))`` (energy) or 1."""
     harmonics = quantised_harmonics(x.shape[-1])
     ell = harmonics.degrees
-    per_mode = jnp.asarray(weights(ell), dtype=x.dtype) * harmonics.coefficients(x) ** 2
+    weights = 0.5 / np.maximum(ell * (ell + 1), 1) if energy else np.full(ell.shape, 0.5)
+    per_mode = jnp.asarray(weights, dtype=x.dtype) * harmonics.coefficients(x) ** 2
     onehot = (ell[:, None] == np.arange(1, harmonics.size)[None, :]).astype(float)
     return per_mode @ jnp.asarray(onehot, dtype=per_mode.dtype)
 
@@ -221,10 +240,10 @@ def _per_degree(x, weights):
 def enstrophy_spectrum(x):
     """Enstrophy per degree ``ζ_ℓ = ½ Σ_m ω_ℓm²``, ``ℓ = 1 … N − 1``: shape ``(..., N − 1)``
     for states ``(..., N, N)``; ``Σ ζ_ℓ = ½‖W‖²`` on trace-free states. JAX (jit/vmap)."""
-    return _per_degree(x, lambda ell: np.where(ell > 0, 0.5, 0.0))
+    return _per_degree(jnp.asarray(x, dtype=jnp.result_type(x, float)), energy=False)
 
 
 def energy_spectrum(x):
     """Energy per degree ``ε_ℓ = ζ_ℓ / (ℓ(ℓ + 1))``, ``ℓ = 1 … N − 1``: shape ``(..., N − 1)``;
     ``Σ ε_ℓ`` is the Hamiltonian ``h``. JAX (jit/vmap)."""
-    return _per_degree(x, lambda ell: np.where(ell > 0, 0.5 / np.maximum(ell * (ell + 1), 1), 0.0))
+    return _per_degree(jnp.asarray(x, dtype=jnp.result_type(x, float)), energy=True)

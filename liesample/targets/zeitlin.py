@@ -107,7 +107,7 @@ class UnitaryOrbitLaw:
 
 
 # ---------------------------------------------------------------------------------------------
-# Exact laws at any N (docs/zeitlin.md, "Exact references that scale")
+# Exact laws at any N
 # ---------------------------------------------------------------------------------------------
 
 
@@ -149,7 +149,9 @@ def dipole_gibbs_moments(spectrum, beta: float, coupling: float = 1.0):
         E[h] = −Σ_{j<k} c_jk L(βc_jk),      Var[h] = Σ_{j<k} c_jk² L'(βc_jk),
 
     with the Langevin function ``L(x) = coth x − 1/x``. Stable for every ``β`` (either sign)
-    and ``N``; O(N²). Derivation: docs/zeitlin.md.
+    and ``N``; O(N²). Why it factorises: ``E_10 ∝ iS₃`` has equally spaced eigenvalues, so the
+    HCIZ determinant is a Vandermonde determinant in ``e^{βκ b_j/‖S₃‖_F}`` (the
+    Duistermaat–Heckman formula of the rotations about the axis).
     """
     c = _pair_half_gaps(spectrum, coupling)
     value, slope = _langevin(finite_float("beta", beta) * c)

@@ -337,6 +337,7 @@ def as_top_level_api(
     beta = finite_float("beta", beta)
     if system.check_beta is not None:
         system.check_beta(beta)
+    system.check_noise()
     sigma = finite_float("sigma", sigma, positive=True)
     if step_size is not None:
         step_size = finite_float("step_size", step_size, positive=True)
