@@ -50,3 +50,19 @@ def test_every_demo_option_has_help_and_a_shown_default(capsys):
         assert f"(default: {action.default})" in text or action.default is None
     assert "jax_enable_x64" in text and "float64" in text
     assert all(name in text for name in INTEGRATORS)
+
+
+def test_demo_fails_when_every_step_diverges(tmp_path, capsys):
+    """The explicit Euler–Heun scheme at the demo's step blows up on every chain: the demo says
+    so and exits with a failure status instead of printing huge estimates as a result."""
+    argv = ["demo", "--integrator", "euler_heun", "--time", "100", "--chains", "2"]
+    status = main([*argv, "--output", str(tmp_path), "--no-progress"])
+    assert status == 1
+    assert "diverged" in capsys.readouterr().err
+
+
+def test_isotropic_demo_leaves_out_the_constant_energy(tmp_path, capsys):
+    """An isotropic body's h is constant on the orbit: no E[h] row (its R-hat is meaningless)."""
+    argv = ["demo", "--inertia", "2", "2", "2", "--time", "100", "--chains", "2"]
+    assert main([*argv, "--output", str(tmp_path), "--no-progress"]) == 0
+    assert "E[h]" not in capsys.readouterr().out
