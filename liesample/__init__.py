@@ -27,6 +27,7 @@ from liesample.samplers.cotangent.magnetic_langevin import magnetic_langevin
 from liesample.samplers.orbit.adjusted_lie_poisson import adjusted_lie_poisson
 from liesample.samplers.orbit.lie_poisson_langevin import lie_poisson_langevin
 from liesample.samplers.orbit.vortex_metropolis import vortex_metropolis
+from liesample.samplers.recommended import recommended_sampler
 from liesample.samplers.spins.heisenberg_heat_bath import heisenberg_heat_bath
 from liesample.samplers.spins.heisenberg_metropolis import heisenberg_metropolis
 from liesample.samplers.spins.heisenberg_wolff import heisenberg_wolff
@@ -72,6 +73,7 @@ __all__ = [
     "magnetic_hmc",
     "magnetic_langevin",
     "magnetic_window_adaptation",
+    "recommended_sampler",
     "safe_compiler_options",
     "sample",
     "sample_chains",
