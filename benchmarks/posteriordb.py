@@ -72,12 +72,9 @@ NOTES = (
     "Left out: `wells_data-wells_dist` and `radon_mn-radon_pooled` have no reference draws in "
     "posteriordb; `garch-garch11` and `sblrc-blr` stand in for them. GARCH(1,1)'s "
     "`beta1` is bounded by `1 − alpha1`, a bound that depends on another parameter: "
-    "`GeometricHMC` builds each Euclidean site's bijection once, at initialisation "
-    "(`liesample/interop/numpyro_kernel.py`, `_site_space`), so on this posterior it keeps "
-    "the bound of the initial point (`1 − 0.5`) and its log density is not the model's "
-    "(NumPyro's own potential re-derives the bound at every evaluation). At a start with "
-    "`alpha1 + beta1 > 1`, which the frozen bound allows, the volatility recursion blows up "
-    "and the log density is −∞: `GeometricHMC` then refuses to start (a failed run below)."
+    "`GeometricHMC` builds each Euclidean site's bijection from the support the model gives at "
+    "every evaluation, as NumPyro's potential does (`tests/test_numpyro_dependent_support.py`), "
+    "so its log density is the model's there too."
 )
 
 

@@ -274,20 +274,31 @@ def _baseline_sweep(beta, scale):
     return sweep
 
 
-def _timed_dipole_chains(sweep, starts, num_sweeps, key):
-    """``|D|²`` after every sweep of vmapped chains, and the seconds of the compiled run."""
+def _compiled_dipole_chains(sweep, starts, num_sweeps, key):
+    """A compiled run of vmapped chains recording ``|D|²`` after every sweep (states:
+    positions, or states with a ``position``), and its arguments."""
 
     def chain(start, key):
         def one(x, k):
             x = sweep(x, k)
-            return x, _dipole_squared(x)
+            return x, _dipole_squared(getattr(x, "position", x))
 
         return jax.lax.scan(one, start, jax.random.split(key, num_sweeps))[1]
 
-    keys = jax.random.split(key, starts.shape[0])
-    compiled = liesample.jit(jax.vmap(chain)).lower(starts, keys).compile()
-    values, seconds = common.timed(compiled, starts, keys)
-    return np.asarray(values), seconds
+    keys = jax.random.split(key, jax.tree.leaves(starts)[0].shape[0])
+    return liesample.jit(jax.vmap(chain)).lower(starts, keys).compile(), (starts, keys)
+
+
+def _interleaved_timings(compiled, repeats=3):
+    """``{name: (values, best seconds)}``: the compiled runs timed in turn, ``repeats`` rounds
+    (the machine is shared; the best of the rounds is each run's cost)."""
+    out = {}
+    for _ in range(repeats):
+        for name, (fn, args) in compiled.items():
+            values, seconds = common.timed(fn, *args)
+            best = min(seconds, out[name][1]) if name in out else seconds
+            out[name] = (np.asarray(values), best)
+    return out
 
 
 def _ess(values):
@@ -319,22 +330,21 @@ def exact_sampler(quick, log):
         sample_seconds = time.perf_counter() - start
         tuned = run.settings["step_size"]
         algorithm = liesample.vortex_metropolis(system, beta=beta, proposal_scale=tuned)
-        states = jax.vmap(algorithm.init)(starts)
 
-        def ours(x, key, algorithm=algorithm):
-            return algorithm.step(key, algorithm.init.__self__ if False else x)[0]
+        def ours_sweep(state, key, algorithm=algorithm):
+            return algorithm.step(key, state)[0]
 
-        def ours_sweep(x, key, algorithm=algorithm):
-            state = algorithm.step(key, type(states)(x, system.hamiltonian(x)))[0]
-            return state.position
-
-        del ours
         entries = {
-            "vortex_metropolis": (ours_sweep, tuned),
-            "baseline_metropolis": (_baseline_sweep(beta, 0.5), 0.5),
+            "vortex_metropolis": (ours_sweep, tuned, jax.vmap(algorithm.init)(starts)),
+            "baseline_metropolis": (_baseline_sweep(beta, 0.5), 0.5, starts),
         }
-        for name, (sweep, scale) in entries.items():
-            values, seconds = _timed_dipole_chains(sweep, starts, num_sweeps, jax.random.key(82))
+        compiled = {
+            name: _compiled_dipole_chains(sweep, first, num_sweeps, jax.random.key(82))
+            for name, (sweep, _, first) in entries.items()
+        }
+        timings = _interleaved_timings(compiled)
+        for name, (_, scale, _) in entries.items():
+            values, seconds = timings[name]
             kept = values[:, burn:]
             ess = _ess(kept)
             chain_means = kept.mean(axis=1)
@@ -353,8 +363,9 @@ def exact_sampler(quick, log):
             }
             rows.append(row)
             log(
-                f"  beta {beta:+g} {name:20s} eps {scale:.3g}: E|D|² {row['mean_dipole_squared']:.2f}"
-                f" ± {row['mcse']:.2f}, ESS {ess:.0f}, {seconds:.2f} s, ESS/s "
+                f"  beta {beta:+g} {name:20s} eps {scale:.3g}: "
+                f"E|D|² {row['mean_dipole_squared']:.2f} ± {row['mcse']:.2f}, ESS {ess:.0f}, "
+                f"{seconds:.2f} s, ESS/s "
                 f"{row['ess_per_second']:.0f}"
             )
         rows.append(
@@ -396,73 +407,72 @@ def _substep_dropping_time(base, rate_fn, dynamics, mu, dt, dW, safety, max_subs
 
 def negative_temperature_bias(quick, log):
     """The unadjusted sampler on a like-signed pair at β = −6 (exponent −0.48: it clusters):
-    ``E[x₁·x₂]`` and ``P(x₁·x₂ > 0.999)`` from the final states of i.i.d. chains at time 20,
-    against the exact pair law, for: the Hamiltonian drift off (no substeps needed) as dt → 0;
-    the drift on without substeps; with substeps whose cap keeps the clock (now); with the old
-    rule that dropped the capped step's remaining time; and the batched cost of substeps."""
-    num_chains = 256 if quick else 2048
-    horizon = 5.0 if quick else 20.0
+    time averages of ``c = x₁·x₂`` and of ``c > 0.999`` over chains of length 200 (the first
+    fifth dropped; standard errors from the spread of the chain means) against the exact pair
+    law, for: the Hamiltonian drift off (no substeps needed) as dt shrinks; the drift on without
+    substeps; substeps whose last capped substep takes the rest of the step (now), at caps 3 and
+    50; and the old rule, whose capped step dropped its remaining time (cap 3)."""
+    num_chains = 8 if quick else 32
+    horizon = 20.0 if quick else 200.0
     beta = -6.0
     system = point_vortices([1.0, 1.0])
     law = system.reference(beta)
     exact_mean, exact_tail = law.mean(), float(1.0 - law.cdf(0.999))
     starts = jnp.asarray(uniform_sphere_points(jax.random.key(90), (num_chains, 2)))
     keys = jax.random.split(jax.random.key(91), num_chains)
-    sigma_, theta, scene = liesample.samplers.orbit.lie_poisson_langevin.make_dynamics(
+    sigma_, theta, _ = liesample.samplers.orbit.lie_poisson_langevin.make_dynamics(
         system, beta=beta, sigma=1.0
     )
     rate_fn = substep_rate(system)
-    configurations = [
-        ("drift off", False, "none", dt) for dt in (0.2, 0.1, 0.05)
-    ] + [
-        ("drift on, no substeps", True, "none", 0.05),
-        ("drift on, substeps (clock kept)", True, "kept", 0.05),
-        ("drift on, substeps (old: time dropped)", True, "dropped", 0.05),
+    configurations = [("drift off", False, "none", dt, 0) for dt in (0.2, 0.1, 0.05)] + [
+        ("drift on, no substeps", True, "none", 0.05, 0),
+        ("drift on, substeps, clock kept", True, "kept", 0.05, 3),
+        ("drift on, substeps, clock kept", True, "kept", 0.05, 50),
+        ("drift on, substeps, old rule: time dropped", True, "dropped", 0.05, 3),
     ]
     base = get_integrator("splitting")
     rows = []
-    for label, hamiltonian, rule, dt in configurations:
-        dynamics = PoissonLangevin(
-            system, sigma_, theta, liesample.Scene(hamiltonian=hamiltonian)
-        )
-        num_steps = int(round(horizon / dt))
+    for label, hamiltonian, rule, dt, cap in configurations:
+        dynamics = PoissonLangevin(system, sigma_, theta, liesample.Scene(hamiltonian=hamiltonian))
+        num_steps = round(horizon / dt)
 
-        def chain(x, key, dynamics=dynamics, dt=dt, rule=rule):
+        def advance(x, dW, dynamics=dynamics, dt=dt, rule=rule, cap=cap):
+            if rule == "none":
+                return base(dynamics, x, dt, dW)
+            if rule == "kept":
+                return substep(base, rate_fn, dynamics, x, dt, dW, safety=0.05, max_substeps=cap)[0]
+            return _substep_dropping_time(base, rate_fn, dynamics, x, dt, dW, 0.05, cap)
+
+        def chain(x, key, dynamics=dynamics, dt=dt, advance=advance, num_steps=num_steps):
             def one(x, k):
-                dW = dynamics.brownian_increments(k, dt, x.dtype)
-                if rule == "none":
-                    return base(dynamics, x, dt, dW), None
-                if rule == "kept":
-                    return substep(base, rate_fn, dynamics, x, dt, dW, safety=0.05,
-                                   max_substeps=1000)[0], None
-                return _substep_dropping_time(base, rate_fn, dynamics, x, dt, dW, 0.05, 1000), None
+                x = advance(x, dynamics.brownian_increments(k, dt, x.dtype))
+                return x, jnp.sum(x[0] * x[1])
 
-            return jax.lax.scan(one, x, jax.random.split(key, num_steps))[0]
+            return jax.lax.scan(one, x, jax.random.split(key, num_steps))[1]
 
         compiled = liesample.jit(jax.vmap(chain)).lower(starts, keys).compile()
-        final, seconds = common.timed(compiled, starts, keys)
-        final = np.asarray(final)
-        c = np.sum(final[:, 0] * final[:, 1], axis=-1)
-        tail = float(np.mean(c > 0.999))
+        c, seconds = common.timed(compiled, starts, keys)
+        c = np.asarray(c)[:, num_steps // 5 :]
+        means, tails = c.mean(axis=1), (c > 0.999).mean(axis=1)
         row = {
             "configuration": label,
             "dt": dt,
-            "mean": float(c.mean()),
-            "standard_error": float(math.sqrt(law.variance() / num_chains)),
+            "max_substeps": cap,
+            "mean": float(means.mean()),
+            "standard_error": float(means.std(ddof=1) / math.sqrt(num_chains)),
             "exact_mean": exact_mean,
-            "tail": tail,
-            "tail_standard_error": float(math.sqrt(exact_tail * (1 - exact_tail) / num_chains)),
+            "tail": float(tails.mean()),
+            "tail_standard_error": float(tails.std(ddof=1) / math.sqrt(num_chains)),
             "exact_tail": exact_tail,
-            "ks_pvalue": float(stats.kstest(c, law.cdf).pvalue),
             "seconds": seconds,
             "chains": num_chains,
             "time": horizon,
         }
         rows.append(row)
         log(
-            f"  {label:40s} dt {dt:<5g} E[c] {row['mean']:+.4f} ± {row['standard_error']:.4f} "
-            f"(exact {exact_mean:+.4f}); P(c>0.999) {tail:.4f} (exact {exact_tail:.4f}); "
-            f"KS p {row['ks_pvalue']:.2g}; {seconds:.1f} s"
+            f"  {label:42s} dt {dt:<5g} cap {cap:<3d} E[c] {row['mean']:+.4f} ± "
+            f"{row['standard_error']:.4f} (exact {exact_mean:+.4f}); P(c>0.999) {row['tail']:.4f}"
+            f" ± {row['tail_standard_error']:.4f} (exact {exact_tail:.4f}); {seconds:.1f} s"
         )
     return rows
 
@@ -474,7 +484,10 @@ def batched_substeps(quick, log):
     rows = []
     for cap in (1000, 100):
         algorithm = liesample.lie_poisson_langevin(
-            system, beta=-2.0, step_size=0.01, stability="off",
+            system,
+            beta=-2.0,
+            step_size=0.01,
+            stability="off",
             integrator=point_vortex_integrator(system, max_substeps=cap),
         )
         for num_chains in (1, 2, 8):
@@ -712,10 +725,122 @@ def report(out_dir: Path, md_dir: Path) -> str:
             "for repelling pairs and grows as close approaches become likely. The chains start "
             "uniform and run t = 10, which does not reach the deep clustering of exponent −0.9 "
             "(Gibbs median separation ≈ 1e-5): there the expected count diverges and the cap "
-            "(which drops the rest of the step) is what bounds the cost. The time ratio is larger "
+            "is what bounds the cost. The time ratio is larger "
             "than the mean count because vmapped chains wait for the slowest chain's substeps. "
+            "(Since this table, a capped step no longer drops its remaining time: its last "
+            "substep takes it; see the exact-sampler section below.) "
             "Sampling without the Hamiltonian drift (`hamiltonian=False`, same invariant law) "
             "needs no substeps at all."
+        ),
+        "",
+    ]
+    exact = report_exact(out_dir)
+    return "\n".join(lines) + ("\n" + exact if exact else "")
+
+
+def report_exact(out_dir: Path) -> str:
+    """Markdown section from ``vortices_exact.json``, if it exists."""
+    path = out_dir / "vortices_exact.json"
+    if not path.exists():
+        return ""
+    data = json.loads(path.read_text())
+    machine = data["machine"]
+    lines = [
+        "## Point vortices at negative temperature: exact sampler and unadjusted bias",
+        "",
+        (
+            f"From `benchmarks/vortices.py --exact` ({machine.get('date_utc', '?')}, "
+            f"{machine.get('cpu_model', '?')}, {machine.get('usable_cpus', '?')} cores usable, "
+            f"{'quick' if data['quick'] else 'full'} mode; the machine was shared with other "
+            "jobs, so the two samplers of each β were timed in turn, best of 3 rounds)."
+        ),
+        "",
+        (
+            "**Exact sampler.** 10 vortices (Γ = +1 ×5, −1 ×5), observable |D|², "
+            "D = Σ Γ_k x_k; the same uniform starts, chains and sweeps for "
+            "`liesample.vortex_metropolis` (proposal scale tuned by its warm-up) and a user's "
+            "single-vortex Metropolis in JAX (fixed ε = 0.5); ESS (bulk) after a 10% burn-in; "
+            "seconds of the compiled run, compile excluded:"
+        ),
+        "",
+        "| β | sampler | ε | E\\|D\\|² ± MCSE | ESS | seconds | ESS/s | ratio |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    rows = data["exact_sampler"]
+    for beta in sorted({r["beta"] for r in rows}):
+        pair = {r["sampler"]: r for r in rows if r["beta"] == beta and "ess" in r}
+        baseline = pair["baseline_metropolis"]["ess_per_second"]
+        for name in ("vortex_metropolis", "baseline_metropolis"):
+            r = pair[name]
+            lines.append(
+                f"| {beta:g} | {name} | {r['proposal_scale']:.3g} | "
+                f"{r['mean_dipole_squared']:.2f} ± {r['mcse']:.2f} | {r['ess']:.0f} | "
+                f"{r['seconds']:.2f} | {r['ess_per_second']:.0f} | "
+                f"{r['ess_per_second'] / baseline:.2f}× |"
+            )
+    chains, sweeps = rows[0]["chains"], rows[0]["sweeps"]
+    whole = [r for r in rows if "seconds_with_warmup_and_compile" in r]
+    lines += [
+        "",
+        (
+            f"{chains} chains × {sweeps} sweeps. The whole `liesample.sample_chains` call "
+            "(500 warm-up sweeps, compile, runner) took "
+            + ", ".join(
+                f"{r['seconds_with_warmup_and_compile']:.1f} s at β = {r['beta']:g} "
+                f"(acceptance {r['acceptance']:.2f})"
+                for r in whole
+            )
+            + ". At β = −2 the tuned scale reaches its cap (proposals uniform on the sphere) "
+            "and the acceptance stays above the target: independent proposals win there."
+        ),
+        "",
+        (
+            "**Unadjusted sampler at β < 0.** A like-signed pair at β = −6 (pair exponent "
+            "−0.48: it clusters), `splitting`, σ = 1; time averages over "
+            f"{data['negative_temperature'][0]['chains']} chains of length "
+            f"t = {data['negative_temperature'][0]['time']:g} (first fifth dropped; standard "
+            "errors from the spread of the chain means, rough for the rare tail):"
+        ),
+        "",
+        "| configuration | dt | cap | E[x₁·x₂] ± s.e. (exact) | P(x₁·x₂ > 0.999) (exact) | s |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in data["negative_temperature"]:
+        cap = r["max_substeps"] or "–"
+        lines.append(
+            f"| {r['configuration']} | {r['dt']:g} | {cap} | {r['mean']:+.4f} ± "
+            f"{r['standard_error']:.4f} ({r['exact_mean']:+.4f}) | {r['tail']:.4f} ± "
+            f"{r['tail_standard_error']:.4f} ({r['exact_tail']:.4f}) | {r['seconds']:.1f} |"
+        )
+    lines += [
+        "",
+        (
+            "Two causes. (1) With substeps, the old rule dropped the rest of a capped step: the "
+            "clock then runs slower where pairs are close (speed ∝ d²), and a process slowed by "
+            "s(x) samples ∝ exp(−βh)/s(x), which at β < 0 is not integrable at like-signed "
+            "collisions: the chains collapse (h climbs, |D|² overshoots). Fixed in "
+            "`liesample/integrators/substeps.py`: the last allowed substep takes the remaining "
+            "time. (2) Without substeps, or in a capped step's last substep, the Hamiltonian "
+            "rotation of a close pair (rate ∝ 1/d²) is unresolved and flings the pair apart: "
+            "too few close pairs (|D|² too low at β < 0), a bias that shrinks only as the "
+            "fraction of pairs closer than about √dt does. The Hamiltonian drift does not change "
+            "the invariant law and the noise and derived dissipation stay bounded at "
+            "collisions, so `hamiltonian=False` samples the exact law as dt → 0 with no "
+            "substeps (rows 'drift off')."
+        ),
+        "",
+        "**Batched substeps** (10 vortices, β = −2, dt = 0.01, 200 collision-safe steps):",
+        "",
+        "| cap | chains | seconds |",
+        "|---|---|---|",
+    ]
+    for r in data["batched_substeps"]:
+        lines.append(f"| {r['max_substeps']} | {r['chains']} | {r['seconds']:.2f} |")
+    lines += [
+        "",
+        (
+            "Under `vmap` the substep loop runs until the slowest chain is done, so a batch "
+            "costs its largest substep count per step, bounded by the cap."
         ),
         "",
     ]
@@ -728,5 +853,6 @@ if __name__ == "__main__":
         results = Path(__file__).resolve().parent / "results" / ("quick" if quick_run else "")
         results.mkdir(parents=True, exist_ok=True)
         run_exact(results, quick_run, lambda message: print(message, flush=True))
+        print(report_exact(results))
         sys.exit(0)
     sys.exit(suites.standalone(__file__))

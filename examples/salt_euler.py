@@ -4,15 +4,25 @@ Writes two figures into ``--out`` (default ``salt-euler-output/``):
 
 - ``salt_euler_scenes.png``: the vorticity on the sphere (Mollweide maps, from the quantised
   harmonics) for three scenes from one random start: pure Euler (``σ = 0``, ``θ = 0``: ``h``
-  and every Casimir conserved), pure energy descent (``σ = 0``, ``θ > 0``: ``h`` decreases to
-  its minimum on the isospectral orbit, pushing the vorticity to the smallest resolved scales),
-  and draws of the Gibbs law ``∝ exp(−βh)`` on the orbit at ``β > 0`` (small scales) and
-  ``β < 0`` (negative temperature: the energy condenses into the largest scales, ``ℓ = 1``).
-- ``salt_euler_energy.png``: ``h(t)`` in each scene and the energy spectrum ``ε_ℓ`` by degree.
+  and every Casimir conserved), pure energy descent (``σ = 0``, ``θ > 0``: ``h`` decreases,
+  pushing the vorticity towards small scales, until the Euler tendency has no component along
+  the retained noise streams; ``docs/zeitlin.md``), and draws of the Gibbs law ``∝ exp(−βh)``
+  on the orbit at ``β > 0`` (small scales) and ``β < 0`` (negative temperature: the energy
+  condenses into the largest scales, ``ℓ = 1``; ``examples/condensation.py`` sweeps ``β``).
+- ``salt_euler_energy.png``: ``h(t)`` of the two deterministic scenes, ``h`` along the Gibbs
+  chains, and the energy spectrum ``ε_ℓ`` by degree.
 
-Every scene is ``liesample.lie_poisson_langevin`` on ``systems.zeitlin_euler(N, noise_degree=L)``
-with the effects chosen by ``sigma``/``beta``/``theta``; the dissipation is derived from the
-``L(L+2)`` transport modes (``docs/zeitlin.md``).
+The two deterministic scenes are the SALT-Euler dynamics, ``liesample.lie_poisson_langevin`` on
+``systems.zeitlin_euler(N, noise_degree=L)`` with ``sigma = 0`` and the dissipation ``theta``
+derived from the ``L(L+2)`` transport modes (``docs/zeitlin.md``). The Gibbs draws come from
+the sampler ``liesample.recommended_sampler`` picks for this model, the Metropolis-adjusted
+``liesample.adjusted_lie_poisson``: exact at any step, it needs no step-bias control, and its
+automatic step is set on the start's orbit. The example steps its chains directly (to plot
+``h`` step by step) and prints ``E[h]`` over the second half with its MCSE and R-hat;
+``liesample.sample(sampler, key, starts, num_draws)`` would also tune the step in a warm-up
+(``examples/condensation.py`` tunes one step per ``β``). The unadjusted
+``liesample.lie_poisson_langevin`` at ``σ > 0`` is the SALT-Euler dynamics itself, with a
+step bias, and mixes far more slowly per second.
 
     .venv/bin/python examples/salt_euler.py [--size N] [--quick] [--out DIR]
 """
@@ -34,6 +44,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 import liesample
+from liesample.analysis.diagnostics import expectation_table
 from liesample.systems.zeitlin import random_vorticity, zeitlin_euler
 
 NOISE_DEGREE = 4
@@ -41,26 +52,25 @@ ENSTROPHY = 40.0  # ‖W‖² of the start (sets the time scale: turnover ~ 1/�
 STEP_SIZE = 0.05
 THETA = 50.0  # dissipation strength of the energy-descent scene
 BETAS = (40.0, -40.0)  # the two temperatures of the Gibbs scene
-SIGMA = 2.0
 
 
 def run_chains(algorithm, starts, num_steps, rng_key, record_every):
-    """Run one chain per start; return recorded positions ``(C, T, N, N)`` and energies
-    ``(C, num_steps)``."""
+    """Run one chain per start; return recorded positions ``(C, T, N, N)``, energies and
+    acceptance rates ``(C, num_steps)``."""
 
     def chain(start, key):
         def body(state, k):
             state, info = algorithm.step(k, state)
-            return state, (state.position, info.energy)
+            return state, (state.position, info.energy, info.acceptance_rate)
 
-        _, (positions, energies) = jax.lax.scan(
+        _, (positions, energies, acceptance) = jax.lax.scan(
             body, algorithm.init(start), jax.random.split(key, num_steps)
         )
-        return positions[record_every - 1 :: record_every], energies
+        return positions[record_every - 1 :: record_every], energies, acceptance
 
     keys = jax.random.split(rng_key, len(starts))
-    positions, energies = liesample.jit(jax.vmap(chain))(jnp.asarray(starts), keys)
-    return np.asarray(positions), np.asarray(energies)
+    result = liesample.jit(jax.vmap(chain))(jnp.asarray(starts), keys)
+    return tuple(np.asarray(x) for x in result)
 
 
 def draw_map(fig, spec, harmonics, x, title, limit):
@@ -92,29 +102,32 @@ def main(argv=None) -> int:
     noise_degree = min(2 if args.quick else NOISE_DEGREE, size - 1)
     args.out.mkdir(parents=True, exist_ok=True)
 
-    system = zeitlin_euler(size, noise_degree=noise_degree)
-    harmonics = system.params["harmonics"]
     start = random_vorticity(size, seed=1, slope=1.0, enstrophy=0.5 * ENSTROPHY)
+    # the start's orbit is the default position: it sets the adjusted sampler's automatic step
+    system = zeitlin_euler(size, noise_degree=noise_degree, position=start)
+    harmonics = system.params["harmonics"]
     record = steps // 2
     key = jax.random.key(0)
 
     euler = liesample.lie_poisson_langevin(system, sigma=0.0, theta=0.0, step_size=STEP_SIZE)
-    euler_path, euler_energy = run_chains(euler, start[None], steps, key, record)
+    euler_path, euler_energy, _ = run_chains(euler, start[None], steps, key, record)
     descent = liesample.lie_poisson_langevin(
         system, sigma=0.0, theta=THETA, step_size=STEP_SIZE
     )
-    descent_path, descent_energy = run_chains(descent, start[None], steps, key, record)
-    gibbs = {}
-    for beta in BETAS:
-        sampler = liesample.lie_poisson_langevin(
-            system, beta=beta, sigma=SIGMA, step_size=STEP_SIZE
+    descent_path, descent_energy, _ = run_chains(descent, start[None], steps, key, record)
+    gibbs = {}  # β -> (positions (C, T, N, N), h (C, steps))
+    starts = np.repeat(start[None], gibbs_chains, axis=0)
+    for index, beta in enumerate(BETAS):
+        sampler = liesample.recommended_sampler(system, beta=beta)
+        positions, energies, acceptance = run_chains(
+            sampler, starts, gibbs_steps, jax.random.key(index + 1), gibbs_steps // 10
         )
-        starts = np.repeat(start[None], gibbs_chains, axis=0)
-        every = gibbs_steps // 10
-        chain_key = jax.random.key(int(abs(beta)))
-        gibbs[beta] = run_chains(sampler, starts, gibbs_steps, chain_key, every)
-        print(f"β = {beta:+g}: mean h over the second half = "
-              f"{gibbs[beta][1][:, gibbs_steps // 2 :].mean():.4f}")
+        gibbs[beta] = (positions, energies)
+        row = expectation_table({"h": energies[:, gibbs_steps // 2 :]}).loc["h"]
+        print(f"β = {beta:+g} ({sampler.settings['sampler']}, step "
+              f"{sampler.settings['step_size']:.3g}, acceptance {acceptance.mean():.2f}): "
+              f"E[h] over the second half = {row['estimate']:.4f} ± {row['mcse']:.4f} (MCSE), "
+              f"R-hat {row['r_hat']:.3f}")
     print(f"h: start {float(system.hamiltonian(jnp.asarray(start))):.4f}, Euler end "
           f"{euler_energy[0, -1]:.4f}, descent end {descent_energy[0, -1]:.4f}")
 
@@ -139,17 +152,25 @@ def main(argv=None) -> int:
     fig.savefig(args.out / "salt_euler_scenes.png", dpi=110)
 
     # -- energy in time, and by degree -------------------------------------------------------
-    fig = Figure(figsize=(11, 4), layout="constrained")
-    ax_t, ax_l = fig.subplots(1, 2)
+    fig = Figure(figsize=(15, 4), layout="constrained")
+    ax_t, ax_g, ax_l = fig.subplots(1, 3)
     t = STEP_SIZE * np.arange(1, steps + 1)
     ax_t.plot(t, euler_energy[0], label="Euler (σ = θ = 0)")
     ax_t.plot(t, descent_energy[0], label=f"energy descent (θ = {THETA:g})")
-    tg = STEP_SIZE * np.arange(1, gibbs_steps + 1)
-    for beta in BETAS:
-        ax_t.plot(tg, gibbs[beta][1][0], lw=0.6, label=f"sampler, β = {beta:+g}")
     ax_t.set_xlabel("t")
     ax_t.set_ylabel("h")
     ax_t.legend(fontsize=8)
+    for beta in BETAS:
+        for chain, trace in enumerate(gibbs[beta][1]):
+            ax_g.plot(np.arange(1, gibbs_steps + 1), trace, lw=0.6,
+                      color="C3" if beta < 0 else "C0",
+                      label=f"β = {beta:+g}" if chain == 0 else None)
+    ax_g.axhline(float(system.hamiltonian(jnp.asarray(start))), color="k", ls="--", lw=1,
+                 label="start")
+    ax_g.set_xlabel("step")
+    ax_g.set_ylabel("h")
+    ax_g.set_title("Gibbs chains (adjusted sampler)", fontsize=9)
+    ax_g.legend(fontsize=8)
     ell = np.arange(1, size)
     spectrum = liesample.jit(harmonics.energy_spectrum)
     ax_l.semilogy(ell, spectrum(jnp.asarray(start)), "k.-", label="start")

@@ -183,3 +183,39 @@ def test_learnt_trajectory_length_is_near_the_optimum_of_an_isotropic_gaussian()
     (_, parameters), info = warmup.run(jax.random.key(6), starts, num_steps=500)
     np.testing.assert_allclose(parameters["inverse_mass_matrix"], 4.0, rtol=0.5)
     assert 0.9 < float(info.trajectory_length[-1]) < 3.6
+
+
+def _scaled_gaussian_run(initial_time, num_steps=300):
+    """The ChEES warm-up on a 5-d Gaussian (sd up to 2: whitened by the adapted mass, every
+    direction has frequency 1 and ESS per gradient peaks near ``T ≈ 1.8``), from ``T_0``."""
+    scales = jnp.array([1.0, 2.0, 0.5, 1.5, 1.0])
+
+    def logdensity_fn(x):
+        return -0.5 * jnp.sum((x / scales) ** 2)
+
+    starts = jax.random.normal(jax.random.key(0), (CHAINS, 5))
+    warmup = magnetic_window_adaptation(logdensity_fn, initial_integration_time=initial_time)
+    (_, parameters), info = warmup.run(jax.random.key(1), starts, num_steps=num_steps)
+    return parameters, np.asarray(info.trajectory_length)
+
+
+def test_trajectory_length_below_one_step_grows_again():
+    # Regression (posteriordb's blr: T fell to ~1e-5 with ε ~ 0.07, one step per transition,
+    # and stayed there). Below ε every transition is one step of length ε whatever T is; the
+    # ChEES gradient taken at u·T instead of the time integrated saw no gain in a longer T, so
+    # T stayed at 0.01 here. At the time integrated it asks for more: T grows at the largest
+    # rate the learning rate allows (0.02 in log T per transition).
+    parameters, times = _scaled_gaussian_run(0.01)
+    assert times[-1] > 0.1, times[::25]
+    assert np.all(np.diff(np.log(times[:150])) > 0.0), times[:150:10]
+    assert parameters["num_integration_steps"] >= 1
+
+
+def test_trajectory_length_far_too_long_is_brought_back():
+    # Regression (posteriordb's kidiq and garch: T = 12 and 18, several times the slowest
+    # direction's half period). From T = 100 the noisy gradient wandered higher (T ~ 250 here)
+    # and ended near 60; T is now pulled below π √(tr Σ̃) (whitened: about π √5 ≈ 7 here) and
+    # comes back to the optimum's neighbourhood.
+    _, times = _scaled_gaussian_run(100.0)
+    assert np.max(times[50:]) < 10.0, times[::25]
+    assert 0.9 < times[-1] < 3.6, times[::25]

@@ -470,6 +470,51 @@ ROWS = [
         ValueError,
         "num_draws",
     ),
+    # ---- liesample.vortex_metropolis
+    (
+        "vortex_metropolis system",
+        lambda: liesample.vortex_metropolis(RIGID, beta=1.0),
+        TypeError,
+        "system",
+    ),
+    (
+        "vortex_metropolis beta",
+        lambda: liesample.vortex_metropolis(systems.point_vortices([1.0, 1.0]), beta=-100.0),
+        ValueError,
+        "beta.*non-normalisable",
+    ),
+    (
+        "vortex_metropolis proposal",
+        lambda: liesample.vortex_metropolis(
+            systems.point_vortices([1.0, 1.0]), beta=1.0, proposal="gauss"
+        ),
+        ValueError,
+        "proposal",
+    ),
+    (
+        "vortex_metropolis proposal_scale",
+        lambda: liesample.vortex_metropolis(
+            systems.point_vortices([1.0, 1.0]), beta=1.0, proposal_scale=0.0
+        ),
+        ValueError,
+        "proposal_scale.*> 0",
+    ),
+    (
+        "vortex_metropolis target_acceptance_rate",
+        lambda: liesample.vortex_metropolis(
+            systems.point_vortices([1.0, 1.0]), beta=1.0, target_acceptance_rate=1.0
+        ),
+        ValueError,
+        "target_acceptance_rate",
+    ),
+    (
+        "vortex_metropolis init collision",
+        lambda: liesample.vortex_metropolis(systems.point_vortices([1.0, 1.0]), beta=1.0).init(
+            np.array([[0, 0, 1.0], [0, 0, 1.0]])
+        ),
+        ValueError,
+        "coincident",
+    ),
     # ---- systems.point_vortices
     (
         "point_vortices empty",
@@ -500,6 +545,12 @@ ROWS = [
         lambda: systems.point_vortices([1.0, 1.0], max_degree=0),
         ValueError,
         "max_degree",
+    ),
+    (
+        "point_vortices max_degree 1",
+        lambda: systems.point_vortices([1.0, 1.0], max_degree=1),
+        ValueError,
+        "max_degree=1.*max_degree >= 2",
     ),
     (
         "point_vortices radius",

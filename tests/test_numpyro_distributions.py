@@ -1,16 +1,26 @@
-"""liesample.interop.numpyro_distributions: the Bingham distribution (exact normaliser and draws) and vMF at κ = 0."""
+"""liesample.interop.numpyro_distributions: the Bingham distribution (exact normaliser and draws),
+vMF at κ = 0, and every parameter traced (jit, a latent concentration in a model)."""
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from scipy.stats import gamma, vonmises_fisher
 
-pytest.importorskip("numpyro")
-from numpyro.distributions import constraints  # noqa: E402
+numpyro = pytest.importorskip("numpyro")
+import numpyro.distributions as dist
+from numpyro.distributions import constraints
+from numpyro.handlers import seed, trace
+from numpyro.infer.util import log_density
 
-from liesample.geometry.spaces import SO, Sphere  # noqa: E402
-from liesample.interop.numpyro_distributions import Bingham, VonMisesFisher  # noqa: E402
-from liesample.targets.orbits import bingham_second_moments  # noqa: E402
+from liesample.geometry.spaces import SO, Sphere
+from liesample.interop.numpyro_distributions import (
+    Bingham,
+    MatrixFisher,
+    VonMisesFisher,
+)
+from liesample.targets.groups import MatrixFisherLaw
+from liesample.targets.orbits import bingham_second_moments
 
 LAM = np.array([0.5, 3.0, -1.0])
 ORIENTATION = np.asarray(SO(3).uniform(jax.random.key(4)))
@@ -59,3 +69,88 @@ def test_vmf_at_zero_concentration_is_the_uniform_law():
     assert float(VonMisesFisher(d6, 0.0).log_prob(d6)) == pytest.approx(-3 * np.log(np.pi))
     draws = np.asarray(VonMisesFisher(mu, 0.0).sample(jax.random.key(2), (4000,)))
     assert np.all(np.abs(draws.mean(0)) < 5.0 / np.sqrt(3.0 * len(draws)))
+
+
+# ------------------------------------------------------------------ traced parameters
+
+
+ROTATIONS = np.asarray(SO(3, shape=(5,)).uniform(jax.random.key(5)))
+
+
+def _proper_F(singular_values, rng_seed=0):
+    q, p = np.linalg.qr(np.random.default_rng(rng_seed).standard_normal((2, 3, 3)))[0]
+    q, p = q * np.sign(np.linalg.det(q)), p * np.sign(np.linalg.det(p))
+    return q @ np.diag(singular_values) @ p.T
+
+
+def test_parameters_may_be_traced_under_jit_and_match_the_references():
+    """MatrixFisher's JAX normaliser (SVD + tanh-sinh rule) against SciPy's quadrature; its
+    gradient in F is E[R], also for the repeated singular values of F = κI; Bingham and vMF under
+    jit equal their eager values."""
+    log_prob = jax.jit(lambda F: MatrixFisher(F).log_prob(ROTATIONS))
+    grad = jax.jit(jax.grad(lambda F: MatrixFisher(F).log_normalizer()))
+    for F in (_proper_F([30.0, 20.0, -5.0]), _proper_F([2.0, 1.0, -0.5], 1), 3.0 * np.eye(3),
+              np.zeros((3, 3))):  # fmt: skip
+        reference = MatrixFisherLaw(F)
+        expected = np.sum(F * ROTATIONS, axis=(1, 2)) - reference.log_normalizer()
+        assert np.allclose(log_prob(F), expected, rtol=1e-12, atol=1e-12)
+        assert np.allclose(grad(F), reference.mean(), atol=1e-12)
+        assert np.allclose(MatrixFisher(F).mean, reference.mean(), atol=1e-12)
+    x = np.asarray(Sphere(2, shape=(5,)).uniform(jax.random.key(6)))
+    bingham = jax.jit(lambda lam, frame: Bingham(lam, frame).log_prob(x))
+    assert np.allclose(bingham(LAM, ORIENTATION), Bingham(LAM, ORIENTATION).log_prob(x), rtol=1e-13)
+    vmf = jax.jit(lambda mu, kappa: VonMisesFisher(mu, kappa).log_prob(x))
+    mu = np.array([0.0, 0.6, 0.8])
+    assert np.allclose(vmf(mu, 3.0), vonmises_fisher(mu, 3.0).logpdf(x), rtol=1e-13)
+
+
+def test_a_latent_concentration_inside_a_model():
+    """``MatrixFisher(κ I)`` and ``MatrixFisher(0)`` with ``κ`` a latent site, and a vMF whose
+    parameters are computed in the model: NumPyro's joint log-density under jit is the exact one;
+    prior draws under jit are rotations."""
+
+    def model():
+        kappa = numpyro.sample("kappa", dist.Gamma(2.0, 0.5))
+        R = numpyro.sample("R", MatrixFisher(kappa * jnp.eye(3)))
+        numpyro.sample("Q", MatrixFisher(jnp.zeros((3, 3))))
+        numpyro.sample("x", VonMisesFisher(R[:, 2], 1.0 + kappa), obs=jnp.array([0.0, 0.6, 0.8]))
+
+    params = {"kappa": 2.5, "R": ROTATIONS[0], "Q": ROTATIONS[1]}
+    joint = jax.jit(lambda p: log_density(model, (), {}, p)[0])(params)
+    mu, kappa = ROTATIONS[0][:, 2], 2.5
+    expected = (
+        gamma.logpdf(kappa, 2.0, scale=2.0)
+        + kappa * np.trace(ROTATIONS[0]) - MatrixFisherLaw(kappa * np.eye(3)).log_normalizer()
+        + vonmises_fisher(mu, 1.0 + kappa).logpdf(np.array([0.0, 0.6, 0.8]))
+    )  # fmt: skip
+    assert float(joint) == pytest.approx(expected, rel=1e-12)
+    draw = jax.jit(lambda key: trace(seed(model, key)).get_trace()["R"]["value"])
+    R = np.asarray(draw(jax.random.key(0)))
+    assert np.allclose(R.T @ R, np.eye(3), atol=1e-12) and np.linalg.det(R) == pytest.approx(1.0)
+
+
+def test_matrix_fisher_draws_for_a_traced_or_batched_F_are_exact():
+    F = _proper_F([3.0, 1.0, -0.5], 2)
+    draws = jax.jit(lambda F, key: MatrixFisher(F).sample(key, (4000,)))(F, jax.random.key(3))
+    R = np.asarray(draws)
+    assert np.allclose(np.swapaxes(R, 1, 2) @ R, np.eye(3), atol=1e-12)
+    exact = MatrixFisherLaw(F).mean()
+    assert np.all(np.abs(R.mean(0) - exact) < 5 * R.std(0) / np.sqrt(len(R)) + 1e-12)
+    batch = MatrixFisher(np.stack([F, np.zeros((3, 3))]))
+    assert batch.batch_shape == (2,) and batch.log_normalizer().shape == (2,)
+    assert batch.sample(jax.random.key(4), (7,)).shape == (7, 2, 3, 3)
+
+
+def test_concrete_parameters_are_still_checked():
+    with pytest.raises(ValueError, match="F must be finite"):
+        MatrixFisher(np.full((3, 3), np.nan))
+    with pytest.raises(ValueError, match=r"F must be a finite 3x3 matrix"):
+        MatrixFisher(np.eye(2))
+    with pytest.raises(ValueError, match="concentration must be >= 0"):
+        VonMisesFisher(np.array([0.0, 0.0, 1.0]), -1.0)
+    with pytest.raises(ValueError, match="mean_direction must be a unit vector"):
+        VonMisesFisher(np.array([0.0, 0.0, 2.0]), 1.0)
+    with pytest.raises(ValueError, match="concentration must be finite"):
+        Bingham(np.array([0.0, np.inf, 1.0]))
+    with pytest.raises(ValueError, match="orientation must be a rotation matrix"):
+        Bingham(LAM, 2.0 * np.eye(3))

@@ -253,3 +253,29 @@ def test_vmf_adjusted_with_dual_averaging_matches_the_exact_law():
     rate = float(tree.sample_stats["acceptance_rate"].values.mean())
     assert abs(rate - 0.574) < 0.1, rate
     _check_vmf(tree)
+
+
+def test_chains_that_disagree_are_reported_as_not_converged():
+    """Chains that stay where they started (a tiny step, no warm-up) disagree on the energy:
+    the runner warns with the split R-hat; chains that mix do not warn."""
+    system = liesample.systems.rigid_body((1.0, 2.0, 4.0))
+    starts = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.6, 0.8, 0.0]])
+    frozen = liesample.adjusted_lie_poisson(system, beta=3.0, step_size=1e-4)
+    with pytest.warns(RuntimeWarning, match="split R-hat of their energy"):
+        liesample.sample_chains(frozen, jax.random.key(0), starts, 200, progress=False)
+    mixing = liesample.adjusted_lie_poisson(system, beta=3.0, step_size=0.5)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        liesample.sample_chains(mixing, jax.random.key(0), starts, 2000, num_warmup=500,
+                                progress=False)  # fmt: skip
+
+
+def test_split_rhat_against_hand_values():
+    from liesample.run.runner import split_rhat
+
+    rng = np.random.default_rng(0)
+    same = rng.standard_normal((4, 1000))
+    assert abs(split_rhat(same) - 1.0) < 0.01
+    shifted = same + np.arange(4)[:, None]
+    assert split_rhat(shifted) > 1.5
+    assert np.isnan(split_rhat(same[:1])) and np.isnan(split_rhat(np.ones((4, 100))))

@@ -4,13 +4,17 @@ Sampler runs produce ``positions`` shaped ``(chains, draws, *event_shape)`` and 
 record of per-draw arrays shaped ``(chains, draws)``. This module turns them into an ArviZ
 ``xarray.DataTree``, tabulates Monte-Carlo estimates against exact values using ArviZ's
 ESS, R-hat and MCSE, and computes the FFT autocovariances used to check time correlations.
+Errors of means of correlated draws by blocking, and of functions of several means (specific
+heat, susceptibility, Binder cumulant) by the jackknife over blocks.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 from collections.abc import Mapping, Sequence
+from typing import NamedTuple
 
 import arviz_stats as azs
 import jax
@@ -24,12 +28,19 @@ from liesample.foundation.validation import is_single_array
 from liesample.samplers.contract import SAMPLE_STATS_NAMES
 
 __all__ = [
+    "BlockingResult",
+    "JackknifeResult",
     "autocovariance",
+    "binder_cumulant",
+    "blocking_error",
     "casimir_drift",
     "count_nonfinite",
     "expectation_table",
     "format_table",
+    "jackknife",
     "pytree_variables",
+    "specific_heat",
+    "susceptibility",
     "to_datatree",
 ]
 
@@ -184,13 +195,14 @@ def to_datatree(
     step_size: float | None = None,
     thinning: int = 1,
     attrs: Mapping | None = None,
+    observables=None,
 ) -> xr.DataTree:
     """Package sampler output as an ArviZ ``DataTree``.
 
     Parameters
     ----------
-    positions : array_like ``(chains, draws, *event_shape)``, or a pytree of such arrays
-        Sampled states. A pytree (dict, tuple, named tuple: the positions of the geometric
+    positions : array_like ``(chains, draws, *event_shape)``, a pytree of such arrays, or None
+        Sampled states (``None``: only ``observables`` were kept). A pytree (dict, tuple, named tuple: the positions of the geometric
         samplers on product spaces) gives one posterior variable per leaf, named from its key
         path: dict keys and named-tuple fields as given (``mu``, ``log_kappa``), tuple entries
         ``x0``, ``x1``…, nested keys joined with ``.`` (``{"a": {"b": …}}`` -> ``a.b``). Its
@@ -224,14 +236,26 @@ def to_datatree(
     attrs : mapping, optional
         Extra run metadata (sampler name, seed, ...). Stored on the root and on both groups;
         ``None`` values are dropped and other values are converted to NetCDF-safe types.
+    observables : array_like ``(chains, draws, *shape)`` or a pytree of such arrays, optional
+        Functions of the state recorded at each draw (``observables=`` of
+        :func:`liesample.sample`): extra ``posterior`` variables, so that ArviZ's summary, ESS
+        and R-hat act on them. A dict's keys (key paths, as for pytree positions) name them, a
+        single array is named ``observable``; dims ``<name>_dim_k`` unless ``event_dims`` (a
+        mapping) names them. Their names must differ from the positions'.
 
     Returns
     -------
     xarray.DataTree
         Groups ``posterior`` and (if ``info`` is given) ``sample_stats``.
     """
-    single = is_single_array(positions)
-    if single:
+    if positions is None and observables is None:
+        raise ValueError("to_datatree needs positions, observables or both; got neither")
+    single = positions is not None and is_single_array(positions)
+    if positions is None:
+        if var_name is not None:
+            raise ValueError("var_name names the positions, and there are none (positions=None)")
+        variables, leaf_dims = {}, {}
+    elif single:
         var_name = "mu" if var_name is None else var_name
         if not isinstance(var_name, str) or not var_name:
             raise ValueError(f"var_name must be a non-empty string, got {var_name!r}")
@@ -255,19 +279,40 @@ def to_datatree(
                 "are named from their key paths"
             )
         variables = pytree_variables(positions)
+    if observables is not None:
+        observed = {"observable": observables} if is_single_array(observables) else observables
+        try:
+            observed = pytree_variables(observed)
+        except ValueError as error:
+            raise ValueError(str(error).replace("positions", "observables")) from None
+        clash = sorted(set(observed) & set(variables))
+        if clash:
+            raise ValueError(
+                f"observables {clash} have the names of position variables: rename them"
+            )
+    else:
+        observed = {}
+    if not single:
         given = {} if event_dims is None else event_dims
         if not isinstance(given, Mapping):
             raise TypeError(
                 "event_dims for pytree positions must be a mapping {leaf name: dims}, got "
                 f"{event_dims!r}"
             )
-        leaf_names = {leaf for _, leaf in variables.values()}
+        leaf_names = {leaf for _, leaf in [*variables.values(), *observed.values()]}
         unknown = sorted(set(given) - leaf_names)
         if unknown:
             raise ValueError(f"event_dims names no leaf of positions: {unknown}")
         leaf_dims = {leaf: tuple(dims) for leaf, dims in given.items()}
-        for value, leaf in variables.values():
-            leaf_dims.setdefault(leaf, tuple(f"{leaf}_dim_{k}" for k in range(value.ndim - 2)))
+    for value, leaf in [*variables.values(), *observed.values()]:
+        leaf_dims.setdefault(leaf, tuple(f"{leaf}_dim_{k}" for k in range(value.ndim - 2)))
+    shapes = {value.shape[:2] for value, _ in [*variables.values(), *observed.values()]}
+    if len(shapes) > 1:
+        raise ValueError(
+            "positions and observables must have the same (chains, draws) sizes, got "
+            f"{sorted(shapes)}"
+        )
+    variables = {**variables, **observed}
     if isinstance(thinning, bool) or int(thinning) != thinning or thinning < 1:
         raise ValueError(f"thinning must be a positive integer, got {thinning!r}")
 
@@ -541,3 +586,391 @@ def count_nonfinite(info) -> int:
         )
     flags = _chain_draw_array(items[key], f"info[{key!r}]")
     return int(np.count_nonzero(flags))
+
+
+# --------------------------------------------------------------------------- errors of means
+
+
+class BlockingResult(NamedTuple):
+    """The blocking estimate of the standard error of a mean (:func:`blocking_error`).
+
+    mean : float
+        Mean over every chain and draw.
+    error : float
+        Standard error of ``mean`` at the chosen level.
+    level : int
+        The chosen level ``k``: blocks of ``2**k`` consecutive draws.
+    errors, errors_error : numpy.ndarray
+        The error estimate at every level ``0, 1, …`` and its own standard error (the plateau
+        plot of Flyvbjerg and Petersen).
+    tau_int : float
+        Integrated autocorrelation time ``(error / errors[0])**2`` (``1`` for independent
+        draws; ``Var(mean) = tau_int · Var(x) / draws``).
+    num_blocks : int
+        Blocks over all chains at the chosen level.
+    """
+
+    mean: float
+    error: float
+    level: int
+    errors: np.ndarray
+    errors_error: np.ndarray
+    tau_int: float
+    num_blocks: int
+
+
+_BLOCKING_CONFIDENCE = 0.99
+_MIN_BLOCKS = 32  # fewer blocks at the chosen level: the error is itself uncertain (warned)
+
+
+def _blocking_levels(x):
+    """Per level ``k``: ``(n_k, variance (chains,), lag-1 autocovariance (chains,))`` of the
+    series of means of ``2**k`` consecutive draws of each chain (an odd last draw dropped)."""
+    levels = []
+    y = x
+    while y.shape[1] >= 2:
+        n = y.shape[1]
+        centred = y - y.mean(axis=1, keepdims=True)
+        variance = np.mean(centred**2, axis=1)
+        lag1 = np.sum(centred[:, :-1] * centred[:, 1:], axis=1) / n
+        levels.append((n, variance, lag1))
+        y = y[:, : 2 * (n // 2)]
+        y = 0.5 * (y[:, 0::2] + y[:, 1::2])
+    return levels
+
+
+def blocking_error(x, *, warn: bool = True) -> BlockingResult:
+    """Standard error of the mean of correlated draws by blocking (Flyvbjerg and Petersen 1989),
+    with the level chosen automatically (Jonsson 2018).
+
+    Each chain's draws are averaged in pairs, again and again: at level ``k`` a chain has
+    ``n_k`` means of ``2**k`` consecutive draws, and ``s_k^2 / (n_k - 1)`` (their variance over
+    their number) estimates the variance of the chain's mean, growing with ``k`` until the
+    blocks are longer than the autocorrelation time and then constant (the plateau). Blocks
+    of length ``b`` still underestimate the error by a relative ``O(tau_int / b)``, while the
+    error's own noise grows as ``sqrt(b / draws)``; the level chosen is the later of two:
+
+    - the first from which the blocks' lag-1 autocorrelations are all compatible with zero
+      (Jonsson 2018): ``M_j = sum over chains and levels k >= j of n_k (gamma_k / s_k^2)^2``
+      below the 99% quantile of chi-square with as many degrees of freedom as terms;
+    - the first whose block length balances that bias against the noise (Wolff 2004; Lee,
+      Booth and Alavi 2011): ``b^3 > 2 · draws · tau_k^2``, ``draws`` over all chains and
+      ``tau_k = (error_k / error_0)^2``.
+
+    Chains are combined at that common level: ``Var(mean) = sum_c s_{c,k}^2 / (n_k - 1) / chains^2`` (the grand mean
+    averages the chains' means; a chain that sits apart from the others is not seen here:
+    use R-hat for that).
+
+    Parameters
+    ----------
+    x : array_like, shape (draws,) or (chains, draws)
+        One scalar quantity per draw (e.g. an observable recorded by ``liesample.sample``).
+    warn : bool
+        Warn (``RuntimeWarning``) when the chosen level leaves fewer than 32 blocks in all,
+        i.e. the draws are too few for their autocorrelation time and the error is uncertain.
+
+    Returns
+    -------
+    BlockingResult
+
+    Example: ``blocking_error(tree.posterior["h"].values).error`` is the standard error of
+    the mean energy of a run with ``observables={"h": system.hamiltonian}``.
+    """
+    import scipy.stats
+
+    arr = np.asarray(x, dtype=float)
+    arr = arr[None] if arr.ndim == 1 else arr
+    arr = _chain_draw_array(arr, "x", min_draws=_MIN_DRAWS)
+    if not np.all(np.isfinite(arr)):
+        raise ValueError("x must be finite")
+    num_chains = arr.shape[0]
+    levels = _blocking_levels(arr)
+    sizes = np.array([n for n, _, _ in levels])
+    variances = np.array([v for _, v, _ in levels])  # (levels, chains)
+    lag1 = np.array([g for _, _, g in levels])
+    per_level = np.sum(variances / (sizes[:, None] - 1), axis=1) / num_chains**2
+    errors = np.sqrt(per_level)
+    errors_error = errors / np.sqrt(2.0 * num_chains * (sizes - 1))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        terms = np.where(variances > 0, sizes[:, None] * (lag1 / variances) ** 2, 0.0).sum(axis=1)
+    statistic = np.cumsum(terms[::-1])[::-1]  # M_j: levels j and above
+    dof = num_chains * (len(levels) - np.arange(len(levels)))
+    uncorrelated = np.flatnonzero(statistic < scipy.stats.chi2.ppf(_BLOCKING_CONFIDENCE, dof))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        tau = per_level / per_level[0]
+    block_lengths = 2.0 ** np.arange(len(levels))
+    balanced = np.flatnonzero(block_lengths**3 > 2.0 * arr.size * tau**2)
+    last = len(levels) - 1
+    level = max(
+        int(uncorrelated[0]) if uncorrelated.size else last,
+        int(balanced[0]) if balanced.size else last,
+    )
+    if per_level[0] == 0:  # constant draws: no error at any level
+        level = 0
+    num_blocks = int(num_chains * sizes[level])
+    if warn and num_blocks < _MIN_BLOCKS:
+        warnings.warn(
+            f"blocking_error: the chosen level {level} leaves {num_blocks} blocks of "
+            f"{2**level} draws (fewer than {_MIN_BLOCKS}): the draws are few for their "
+            "autocorrelation time and the error is itself uncertain "
+            f"(relative standard error {errors_error[level] / max(errors[level], 1e-300):.2f});"
+            " run longer chains",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+    error = float(errors[level])
+    tau_int = (error / errors[0]) ** 2 if errors[0] > 0 else math.nan
+    return BlockingResult(
+        float(np.mean(arr)), error, level, errors, errors_error, float(tau_int), num_blocks
+    )
+
+
+class JackknifeResult(NamedTuple):
+    """A function of means and its jackknife error (:func:`jackknife`).
+
+    estimate : float or numpy.ndarray
+        ``function`` of the means over every chain and draw.
+    error : float or numpy.ndarray
+        Its jackknife standard error over the blocks of every chain.
+    bias : float or numpy.ndarray
+        The jackknife estimate of its bias (``estimate - bias`` is the bias-corrected value).
+    per_chain, per_chain_error : numpy.ndarray
+        The same estimate and error from each chain alone (leading axis: chains), to compare
+        the chains with each other.
+    block_size : int
+        Draws per block.
+    num_blocks : int
+        Blocks over all chains.
+    """
+
+    estimate: object
+    error: object
+    bias: object
+    per_chain: np.ndarray
+    per_chain_error: np.ndarray
+    block_size: int
+    num_blocks: int
+
+
+def _leave_one_out(function, block_means):
+    """``(f(all), jackknife error, jackknife bias)`` over the leading (block) axis of each
+    array in ``block_means``."""
+    num = block_means[0].shape[0]
+    totals = [b.sum(axis=0) for b in block_means]
+    full = np.asarray(function(*[t / num for t in totals]), dtype=float)
+    left_out = np.stack(
+        [
+            np.asarray(
+                function(
+                    *[(t - b[i]) / (num - 1) for t, b in zip(totals, block_means, strict=True)]
+                )
+            )
+            for i in range(num)
+        ]
+    ).astype(float)
+    mean_left_out = left_out.mean(axis=0)
+    error = np.sqrt((num - 1) / num * np.sum((left_out - mean_left_out) ** 2, axis=0))
+    return full, error, (num - 1) * (mean_left_out - full)
+
+
+def jackknife(function, *series, block_size: int | None = None) -> JackknifeResult:
+    """Jackknife estimate and error of ``function(mean of series[0], mean of series[1], …)``.
+
+    For variance-type quantities, which are functions of several means (the specific heat
+    from ``⟨E⟩`` and ``⟨E²⟩``, a Binder cumulant from ``⟨m²⟩`` and ``⟨m⁴⟩``), whose error the
+    MCSE of a single mean does not give. Each chain's draws are cut into blocks of
+    ``block_size`` consecutive draws (the draws after the last whole block dropped); leaving
+    out one block at a time among all ``B`` blocks of all chains gives ``B`` values ``f_i`` of
+    the function of the remaining means, and the error
+    ``sqrt((B - 1)/B · sum_i (f_i - mean f)^2)`` and bias ``(B - 1)(mean f - f)``. Blocks much
+    longer than the autocorrelation time are nearly independent, which the error assumes.
+
+    Parameters
+    ----------
+    function : callable
+        ``function(*means) -> float or array``, numpy-compatible; ``means[j]`` is the mean of
+        ``series[j]`` over chains and draws (shape ``series[j].shape[2:]``).
+    *series : array_like, each shape (chains, draws, ...) (or (draws, ...) for one chain)
+        Per-draw values, all with the same chains and draws.
+    block_size : int, optional
+        Draws per block. Default: the longest block length the automatic blocking level of
+        :func:`blocking_error` picks for any component of any series.
+
+    Returns
+    -------
+    JackknifeResult
+
+    Example: the specific heat per site of ``N`` spins at ``beta`` from a run with
+    ``observables={"h": system.hamiltonian}``,
+    ``jackknife(lambda e, e2: beta**2 * (e2 - e**2) / N, h, h**2)``
+    (:func:`specific_heat` does this, with the energy shifted first).
+    """
+    if not callable(function):
+        raise TypeError(f"function must be callable, got {type(function).__name__}")
+    if not series:
+        raise ValueError("jackknife needs at least one series")
+    arrays = []
+    for j, values in enumerate(series):
+        arr = np.asarray(values, dtype=float)
+        arrays.append(arr[None] if arr.ndim == 1 else arr)
+        _chain_draw_array(arrays[-1], f"series[{j}]", min_draws=2, ndims=(arrays[-1].ndim,))
+        if arrays[-1].shape[:2] != arrays[0].shape[:2]:
+            raise ValueError(
+                f"every series must have the same (chains, draws): series[0] has "
+                f"{arrays[0].shape[:2]}, series[{j}] has {arrays[-1].shape[:2]}"
+            )
+        if not np.all(np.isfinite(arrays[-1])):
+            raise ValueError(f"series[{j}] must be finite")
+    num_chains, num_draws = arrays[0].shape[:2]
+    if block_size is None:
+        block_size = max(
+            2 ** blocking_error(arr.reshape(num_chains, num_draws, -1)[..., i], warn=False).level
+            for arr in arrays
+            for i in range(int(np.prod(arr.shape[2:], dtype=int)))
+        )
+    if isinstance(block_size, bool) or not isinstance(block_size, (int, np.integer)):
+        raise TypeError(f"block_size must be an integer, got {block_size!r}")
+    blocks_per_chain = num_draws // block_size if block_size >= 1 else 0
+    if blocks_per_chain < 1 or num_chains * blocks_per_chain < 2:
+        raise ValueError(
+            f"block_size={block_size} leaves fewer than 2 blocks in {num_chains} chain(s) of "
+            f"{num_draws} draws"
+        )
+    kept = blocks_per_chain * block_size
+    # (chains, blocks, ...) block means of each series
+    block_means = [
+        arr[:, :kept].reshape(num_chains, blocks_per_chain, block_size, *arr.shape[2:]).mean(2)
+        for arr in arrays
+    ]
+    estimate, error, bias = _leave_one_out(
+        function, [b.reshape(-1, *b.shape[2:]) for b in block_means]
+    )
+    per_chain, per_chain_error = [], []
+    for c in range(num_chains):
+        if blocks_per_chain >= 2:
+            value, spread, _ = _leave_one_out(function, [b[c] for b in block_means])
+        else:
+            value = np.asarray(function(*[b[c].mean(axis=0) for b in block_means]), float)
+            spread = np.full_like(value, math.nan)
+        per_chain.append(value)
+        per_chain_error.append(spread)
+
+    def scalar(value):
+        return float(value) if np.ndim(value) == 0 else value
+
+    return JackknifeResult(
+        scalar(estimate),
+        scalar(error),
+        scalar(bias),
+        np.stack(per_chain),
+        np.stack(per_chain_error),
+        int(block_size),
+        int(num_chains * blocks_per_chain),
+    )
+
+
+def _per_draw(values):
+    arr = np.asarray(values, dtype=float)
+    return arr[None] if arr.ndim == 1 else arr
+
+
+def _magnetisation_norm(magnetisation):
+    """``|m|`` per draw: the value of a scalar magnetisation ``(chains, draws)``, the norm of
+    a vector one ``(chains, draws, components)``."""
+    m = np.asarray(magnetisation, dtype=float)
+    if m.ndim == 3:
+        return np.linalg.norm(m, axis=-1)
+    if m.ndim in (1, 2):
+        return np.abs(_per_draw(m))
+    raise ValueError(
+        "magnetisation must have shape (chains, draws) or (chains, draws, components), got "
+        f"shape {m.shape}"
+    )
+
+
+def _positive(name, value):
+    value = float(value)
+    if not (math.isfinite(value) and value > 0):
+        raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
+    return value
+
+
+def specific_heat(energy, beta, num_sites, *, block_size=None) -> JackknifeResult:
+    """Specific heat per site ``C = β² (⟨E²⟩ − ⟨E⟩²) / N`` with its jackknife error.
+
+    Parameters
+    ----------
+    energy : array_like, shape (chains, draws) or (draws,)
+        The total energy ``E`` (the Hamiltonian) at each draw, e.g. recorded with
+        ``observables={"h": system.hamiltonian}``.
+    beta : float
+        Inverse temperature of the run (any sign).
+    num_sites : int or float
+        ``N``, the number of sites (spins, vortices) the heat capacity is divided by; ``1``
+        gives the total heat capacity.
+    block_size : int, optional
+        As for :func:`jackknife`.
+
+    The energy is shifted by its overall mean first (the variance is unchanged, the
+    cancellation in ``⟨E²⟩ − ⟨E⟩²`` is avoided).
+    """
+    beta = float(beta)
+    num_sites = _positive("num_sites", num_sites)
+    e = _per_draw(energy)
+    e = e - np.mean(e)
+    return jackknife(
+        lambda m1, m2: beta**2 * (m2 - m1**2) / num_sites, e, e**2, block_size=block_size
+    )
+
+
+def susceptibility(
+    magnetisation, beta, num_sites, *, connected: bool = True, block_size=None
+) -> JackknifeResult:
+    """Magnetic susceptibility per site with its jackknife error.
+
+    ``connected=True``: ``χ = β N (⟨m²⟩ − ⟨|m|⟩²)``, the finite-lattice convention that stays
+    finite through an ordered phase (the order parameter of a finite lattice without field
+    is ``⟨|m|⟩``, its ``⟨m⟩`` vanishes by symmetry). ``connected=False``:
+    ``χ = β N ⟨m²⟩``, the susceptibility of the symmetric (disordered) phase, equal to the
+    sum of the spin correlations ``β/N Σ_kl ⟨s_k·s_l⟩``.
+
+    Parameters
+    ----------
+    magnetisation : array_like, shape (chains, draws), (chains, draws, components) or (draws,)
+        The magnetisation per site ``m = (1/N) Σ_k s_k`` at each draw: a scalar (Ising-like)
+        or a vector (Heisenberg spins; ``m² = |m|²``).
+    beta : float
+    num_sites : int or float
+        ``N``.
+    connected : bool
+    block_size : int, optional
+        As for :func:`jackknife`.
+    """
+    beta = float(beta)
+    num_sites = _positive("num_sites", num_sites)
+    norm = _magnetisation_norm(magnetisation)
+    if connected:
+        return jackknife(
+            lambda a, m2: beta * num_sites * (m2 - a**2), norm, norm**2, block_size=block_size
+        )
+    return jackknife(lambda m2: beta * num_sites * m2, norm**2, block_size=block_size)
+
+
+def binder_cumulant(magnetisation, *, block_size=None) -> JackknifeResult:
+    """Binder cumulant ``U = 1 − ⟨m⁴⟩ / (3 ⟨m²⟩²)`` with its jackknife error.
+
+    ``m² = |m|²`` for a vector magnetisation. With this (Ising) normalisation ``U → 2/3`` in
+    an ordered phase and, for a Gaussian ``n``-component ``m`` (disordered phase),
+    ``U → 1 − (n + 2)/(3n)``: ``0`` for a scalar, ``4/9`` for Heisenberg spins.
+
+    Parameters
+    ----------
+    magnetisation : array_like, shape (chains, draws), (chains, draws, components) or (draws,)
+        As for :func:`susceptibility`.
+    block_size : int, optional
+        As for :func:`jackknife`.
+    """
+    squared = _magnetisation_norm(magnetisation) ** 2
+    return jackknife(
+        lambda m2, m4: 1.0 - m4 / (3.0 * m2**2), squared, squared**2, block_size=block_size
+    )

@@ -14,7 +14,9 @@ not), built from elementary JAX operations only, so ``jit``, ``vmap``, ``jax.gra
   ``ν``.
 
 Both branches are evaluated at inputs clipped to their own range and joined by ``jnp.where``,
-so neither produces a NaN in the other's range (nor in its derivatives).
+so neither produces a NaN in the other's range (nor in its derivatives). The order enters the
+compiled code as a value, not a constant: one compile serves every order. ``log_bessel_i0`` is a
+cheaper ``log I₀`` (from ``jax.scipy.special.i0e``) for quadrature rules with many nodes.
 """
 
 from __future__ import annotations
@@ -26,18 +28,20 @@ from fractions import Fraction
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.scipy.special import gammaln, i0e, i1e
 
 from liesample.foundation.validation import finite_float
 
 __all__ = [
     "bessel_iv_ratio",
+    "log_bessel_i0",
     "log_bessel_iv",
     "log_bessel_iv_reduced",
     "log_bessel_ive",
 ]
 
 _SWITCH = 25.0  # the series below, Debye's expansion above
-_SERIES_TERMS = 48  # (κ²/4)^k / (k!)² at κ = 25, k = 48 is e^{−42} of the sum's size
+_SERIES_TERMS = 48  # at κ = 25 the 48th term (κ²/4)^k / (k!)² is e^{−61} of the sum
 _DEBYE_TERMS = 20  # max_p |U_21(p)/p^21| / 25^21 < 1e−17
 
 
@@ -73,17 +77,6 @@ def _debye_matrix() -> np.ndarray:
     return matrix
 
 
-@functools.cache
-def _series_coefficients(order: float) -> np.ndarray:
-    """``Q^k / (k! (ν+1)_k)``, ``k = 0…N``, ``Q = 25²/4``: the series in powers of ``q/Q ≤ 1``
-    (no power overflows, in any precision)."""
-    scale = 0.25 * _SWITCH * _SWITCH
-    log_terms = [0.0]
-    for k in range(1, _SERIES_TERMS + 1):
-        log_terms.append(log_terms[-1] + math.log(scale / (k * (k + order))))
-    return np.exp(np.array(log_terms))
-
-
 def _powers(z, n: int):
     """``(z⁰, z¹, …, zⁿ)`` along a new last axis, by repeated doubling: products only, so every
     derivative is exact also at ``z = 0`` (``z ** k`` is not)."""
@@ -94,37 +87,41 @@ def _powers(z, n: int):
     return powers[..., : n + 1]
 
 
-def _log_series(order: float, kappa):
-    """``log Σ_k (κ²/4)^k / (k! (ν+1)_k)``: the reduced function on the series branch."""
-    z = kappa * kappa / (_SWITCH * _SWITCH)  # q / Q
-    coefficients = jnp.asarray(_series_coefficients(order)[1:], kappa.dtype)
+def _log_series(order, kappa):
+    """``log Σ_k (κ²/4)^k / (k! (ν+1)_k)``: the reduced function on the series branch, summed in
+    powers of ``z = κ²/25² ≤ 1`` with coefficients ``Q^k / (k! (ν+1)_k)``, ``Q = 25²/4`` (no power
+    overflows, in any precision; the coefficients are products, not logs, of their ratios)."""
+    k = jnp.arange(1, _SERIES_TERMS + 1, dtype=kappa.dtype)
+    coefficients = jnp.cumprod(0.25 * _SWITCH * _SWITCH / (k * (k + order)))
+    z = kappa * kappa / (_SWITCH * _SWITCH)
     return jnp.log1p(jnp.sum(_powers(z, _SERIES_TERMS)[..., 1:] * coefficients, axis=-1))
 
 
-def _log_ive_debye(order: float, kappa):
+def _log_ive_debye(order, kappa):
     """``log(I_ν(κ) e^{−κ})`` by Debye's expansion (valid for ``√(ν²+κ²) > 25``)."""
     r = jnp.sqrt(order * order + kappa * kappa)
     p2 = (order / r) ** 2
     matrix = jnp.asarray(_debye_matrix(), kappa.dtype)
     inner = _powers(p2, _DEBYE_TERMS) @ matrix.T  # U_k(p)/p^k, k = 1…K
     total = jnp.sum(inner * _powers(1.0 / r, _DEBYE_TERMS)[..., 1:], axis=-1)
-    log_ive = order * order / (r + kappa) - 0.5 * jnp.log(2.0 * math.pi * r) + jnp.log1p(total)
-    if order > 0.0:
-        log_ive = log_ive + order * jnp.log(kappa / (order + r))
-    return log_ive
+    return (order * order / (r + kappa) + order * jnp.log(kappa / (order + r))
+            - 0.5 * jnp.log(2.0 * math.pi * r) + jnp.log1p(total))  # fmt: skip
 
 
-def _branches(order: float, kappa):
+def _branches(order, kappa):
+    """``(ν, κ, κ ≤ 25, κ for the series, κ for Debye)``, each input safe for its branch."""
     kappa = jnp.asarray(kappa, dtype=jnp.result_type(kappa, float))
+    order = jax.lax.stop_gradient(jnp.asarray(order, kappa.dtype))
     small = kappa <= _SWITCH
-    return kappa, small, jnp.where(small, kappa, _SWITCH), jnp.where(small, 2.0 * _SWITCH, kappa)
+    k_small, k_large = jnp.where(small, kappa, _SWITCH), jnp.where(small, 2.0 * _SWITCH, kappa)
+    return order, kappa, small, k_small, k_large
 
 
-def _log_half_power(order: float, kappa):
-    """``ν log(κ/2) − log Γ(ν+1)`` (``−log Γ(1) = 0`` for ``ν = 0``, also at ``κ = 0``)."""
-    if order == 0.0:
-        return jnp.zeros_like(kappa)
-    return order * jnp.log(0.5 * kappa) - math.lgamma(order + 1.0)
+def _log_half_power(order, kappa):
+    """``ν log(κ/2) − log Γ(ν+1)``; ``0`` for ``ν = 0`` (also at ``κ = 0``)."""
+    zero = order == 0.0
+    safe = jnp.where(zero, 1.0, kappa)
+    return jnp.where(zero, 0.0, order * jnp.log(0.5 * safe) - gammaln(order + 1.0))
 
 
 def log_bessel_iv_reduced(order, kappa):
@@ -145,9 +142,9 @@ def log_bessel_iv_reduced(order, kappa):
     return _reduced(_order(order), kappa)
 
 
-@functools.partial(jax.jit, static_argnums=0)
-def _reduced(order: float, kappa):
-    kappa, small, k_small, k_large = _branches(order, kappa)
+@jax.jit
+def _reduced(order, kappa):
+    order, kappa, small, k_small, k_large = _branches(order, kappa)
     large = _log_ive_debye(order, k_large) + k_large - _log_half_power(order, k_large)
     return jnp.where(small, _log_series(order, k_small), large)
 
@@ -160,9 +157,9 @@ def log_bessel_ive(order, kappa):
     return _log_ive(_order(order), kappa)
 
 
-@functools.partial(jax.jit, static_argnums=0)
-def _log_ive(order: float, kappa):
-    kappa, small, k_small, k_large = _branches(order, kappa)
+@jax.jit
+def _log_ive(order, kappa):
+    order, kappa, small, k_small, k_large = _branches(order, kappa)
     series = _log_half_power(order, k_small) + _log_series(order, k_small) - k_small
     return jnp.where(small, series, _log_ive_debye(order, k_large))
 
@@ -186,9 +183,9 @@ def log_bessel_iv(order, kappa):
     return _log_iv(_order(order), kappa)
 
 
-@functools.partial(jax.jit, static_argnums=0)
-def _log_iv(order: float, kappa):
-    kappa, small, k_small, k_large = _branches(order, kappa)
+@jax.jit
+def _log_iv(order, kappa):
+    order, kappa, small, k_small, k_large = _branches(order, kappa)
     series = _log_half_power(order, k_small) + _log_series(order, k_small)
     return jnp.where(small, series, _log_ive_debye(order, k_large) + k_large)
 
@@ -198,11 +195,48 @@ def bessel_iv_ratio(order, kappa):
     return _ratio(_order(order), kappa)
 
 
-@functools.partial(jax.jit, static_argnums=0)
-def _ratio(order: float, kappa):
-    kappa, small, k_small, k_large = _branches(order, kappa)
+@jax.jit
+def _ratio(order, kappa):
+    order, kappa, small, k_small, k_large = _branches(order, kappa)
     series = (0.5 * k_small / (order + 1.0)) * jnp.exp(
         _log_series(order + 1.0, k_small) - _log_series(order, k_small)
     )
     debye = jnp.exp(_log_ive_debye(order + 1.0, k_large) - _log_ive_debye(order, k_large))
     return jnp.where(small, series, debye)
+
+
+# --------------------------------------------------------------------------- order 0, fast
+
+@jax.custom_jvp
+def log_bessel_i0(y):
+    """``log I₀(y)`` for ``y ≥ 0`` from ``jax.scipy.special.i0e`` (Chebyshev expansions, cheaper
+    than :func:`log_bessel_iv` for quadrature rules with many nodes).
+
+    Its derivative is ``I₁/I₀``, exactly ``0`` at ``y = 0`` (differentiating ``y + log i0e(y)``
+    directly gives the one-sided ``1`` there), and so on to any order.
+    """
+    y = jnp.asarray(y, dtype=jnp.result_type(y, float))
+    return y + jnp.log(i0e(y))
+
+
+@log_bessel_i0.defjvp
+def _log_bessel_i0_jvp(primals, tangents):
+    (y,), (dy,) = primals, tangents
+    return log_bessel_i0(y), _i0_ratio(y) * dy
+
+
+@jax.custom_jvp
+def _i0_ratio(y):
+    """``R(y) = I₁(y)/I₀(y)``."""
+    return i1e(y) / i0e(y)
+
+
+@_i0_ratio.defjvp
+def _i0_ratio_jvp(primals, tangents):
+    # R' = 1 − R/y − R² (from I₀' = I₁, I₁' = I₀ − I₁/y); near 0 its series 1/2 − 3y²/16.
+    (y,), (dy,) = primals, tangents
+    ratio = _i0_ratio(y)
+    small = jnp.abs(y) < 1e-4
+    safe = jnp.where(small, 1.0, y)
+    slope = jnp.where(small, 0.5 - 3.0 * y * y / 16.0, 1.0 - ratio / safe - ratio * ratio)
+    return ratio, slope * dy

@@ -127,7 +127,9 @@ def run_steps(algorithm, key, state, first_step, num_steps, update=None, extra=N
     return jax.lax.fori_loop(first_step // size, num_blocks_end, one_block, (state, extra))
 
 
-def run_draws(algorithm, key, state, first_step, num_draws: int, thinning: int, reduce):
+def run_draws(
+    algorithm, key, state, first_step, num_draws: int, thinning: int, reduce, record=None
+):
     """``num_draws`` draws ``thinning`` steps apart, from step ``first_step``; returns
     ``(state, (positions, info))``.
 
@@ -136,25 +138,37 @@ def run_draws(algorithm, key, state, first_step, num_draws: int, thinning: int, 
     ``reduce(name)(window)`` over the ``thinning`` values of the info field in each draw's
     window (leading axis: the steps). The steps are those of :func:`run_steps`, so the draws do
     not depend on how a run is split into calls. ``num_draws`` and ``thinning`` are static.
+
+    ``record``, if given, is a function of the position: ``positions`` then stacks
+    ``record(state.position)`` (a pytree), evaluated once per draw, at the last step of its
+    window, instead of the position (the runner's ``observables``). The steps do not change.
     """
     _, example = jax.eval_shape(algorithm.step, jax.random.key(0), state)
     fields = example._asdict()
     window = {n: jnp.zeros((thinning, *v.shape), v.dtype) for n, v in fields.items()}
     reduced = jax.eval_shape(lambda w: {n: reduce(n)(w[n]) for n in w}, window)
     infos = {n: jnp.zeros((num_draws, *v.shape), v.dtype) for n, v in reduced.items()}
-    positions = jax.tree.map(
-        lambda leaf: jnp.zeros((num_draws, *leaf.shape), leaf.dtype), state.position
-    )
+    recorded = state.position if record is None else jax.eval_shape(record, state.position)
+    positions = jax.tree.map(lambda leaf: jnp.zeros((num_draws, *leaf.shape), leaf.dtype), recorded)
 
     def update(step, state, info, carry):
         window, positions, infos = carry
         offset = step - first_step
         draw, slot = offset // thinning, offset % thinning
         window = {n: window[n].at[slot].set(v) for n, v in info._asdict().items()}
-        # Written at every step of the window; the last step's write is the one kept.
-        positions = jax.tree.map(
-            lambda out, leaf: out.at[draw].set(leaf), positions, state.position
-        )
+        if record is None:
+            # Written at every step of the window; the last step's write is the one kept.
+            positions = jax.tree.map(
+                lambda out, leaf: out.at[draw].set(leaf), positions, state.position
+            )
+        else:  # evaluated at the window's last step only (a cond on the unbatched step index)
+            positions = jax.lax.cond(
+                slot == thinning - 1,
+                lambda: jax.tree.map(
+                    lambda out, leaf: out.at[draw].set(leaf), positions, record(state.position)
+                ),
+                lambda: positions,
+            )
         if thinning == 1:
             values = {n: reduce(n)(window[n]) for n in window}
         else:  # reduce once per window (the step index is the same for every chain)

@@ -64,6 +64,7 @@ from jax.scipy.special import logsumexp
 from liesample.foundation.compile import jit
 from liesample.foundation.special import (
     bessel_iv_ratio,
+    log_bessel_i0,
     log_bessel_iv,
     log_bessel_iv_reduced,
 )
@@ -333,8 +334,8 @@ def _log_c_of_singular_values(s):
     dtype = s.dtype
     one_minus = jnp.asarray(_ONE_MINUS_U, dtype)
     log_integrand = (
-        log_bessel_iv_reduced(0, 0.5 * (s[0] - s[1]) * one_minus)
-        + log_bessel_iv_reduced(0, 0.5 * (s[0] + s[1]) * jnp.asarray(_ONE_PLUS_U, dtype))
+        log_bessel_i0(0.5 * (s[0] - s[1]) * one_minus)
+        + log_bessel_i0(0.5 * (s[0] + s[1]) * jnp.asarray(_ONE_PLUS_U, dtype))
         + s[2] * (1.0 - one_minus)
     )
     return logsumexp(jnp.asarray(_LOG_WEIGHT, dtype) + log_integrand) - math.log(2.0)
@@ -368,6 +369,7 @@ def _quaternion_basis() -> np.ndarray:
     M = np.zeros((3, 3, 4, 4))
     for i in range(4):
         M[:, :, i, i] = groups.quaternion_to_rotation(basis[i], xp=np)
+    for i in range(4):
         for j in range(i + 1, 4):
             polar = groups.quaternion_to_rotation(basis[i] + basis[j], xp=np)
             M[:, :, i, j] = M[:, :, j, i] = 0.5 * (polar - M[:, :, i, i] - M[:, :, j, j])

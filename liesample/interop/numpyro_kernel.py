@@ -12,7 +12,9 @@ its support names:
 - ``constraints.circular`` (NumPyro's ``VonMises``): :class:`liesample.geometry.spaces.U1` (angles);
 - any other continuous support with a bijection to ``Rᵈ`` (``numpyro.distributions.biject_to``):
   ``Euclidean``, in the unconstrained coordinates NumPyro's HMC uses, with the log-Jacobian of
-  the bijection added to the log-density.
+  the bijection added to the log-density. The bijection is built from the support as the model
+  gives it at each evaluation (as NumPyro's ``potential_energy`` does), so a bound that depends
+  on another site (``Uniform(0, 1 - a)``) follows that site's current value.
 
 Discrete sites, and supports with neither a space nor a bijection, are refused when the kernel
 is initialised, naming the site. The log-density is the model's joint log-density (NumPyro's
@@ -161,11 +163,13 @@ def _base_constraint(constraint):
 
 class _Site(NamedTuple):
     space: object
-    transform: object  # None for manifold sites
+    euclidean: bool  # moved in the unconstrained coordinates of its support's bijection
 
 
 def _site_space(name, site):
-    """The liesample space of a latent site, and its bijection for a Euclidean one."""
+    """The liesample space of a latent site (``Euclidean`` when it is moved through its
+    support's bijection; the bijection itself is rebuilt at every evaluation, as a support may
+    depend on other sites' values)."""
     support = site["fn"].support
     base = _base_constraint(support)
     value = jnp.asarray(site["value"])
@@ -177,13 +181,13 @@ def _site_space(name, site):
     if type(base) is type(constraints.sphere):
         if value.ndim < 1 or value.shape[-1] < 2:
             raise ValueError(f"site {name!r} on the sphere must have unit vectors of length >= 2")
-        return _Site(spaces.Sphere(value.shape[-1] - 1, shape=value.shape[:-1]), None)
+        return _Site(spaces.Sphere(value.shape[-1] - 1, shape=value.shape[:-1]), False)
     if base is rotation:
         if value.ndim < 2 or value.shape[-2:] != (3, 3):
             raise ValueError(f"site {name!r} on SO(3) must have 3 x 3 matrices, got {value.shape}")
-        return _Site(spaces.SO(3, shape=value.shape[:-2]), None)
+        return _Site(spaces.SO(3, shape=value.shape[:-2]), False)
     if type(base) is type(constraints.circular):
-        return _Site(spaces.U1(shape=value.shape), None)
+        return _Site(spaces.U1(shape=value.shape), False)
     try:
         transform = biject_to(support)
     except NotImplementedError:
@@ -192,7 +196,7 @@ def _site_space(name, site):
             f"supported: {SUPPORTED}"
         ) from None
     shape = jnp.shape(transform.inv(value))
-    return _Site(spaces.Euclidean(shape), transform)
+    return _Site(spaces.Euclidean(shape), True)
 
 
 def _feasible_value(site):
@@ -516,7 +520,7 @@ class GeometricHMC(MCMCKernel):
                     f"by str, got {jax.tree.structure(init_params)}"
                 )
             shape = np.shape(value)[1:] if batched else np.shape(value)
-            sites[name] = _Site(spaces.Euclidean(tuple(shape)), None)
+            sites[name] = _Site(spaces.Euclidean(tuple(shape)), False)
         self._has_deterministic = False
         self._set_sites(sites)
 
@@ -604,11 +608,24 @@ class GeometricHMC(MCMCKernel):
     def _from_user(self, params):
         return {"z": params} if self._array_params else params
 
-    def _constrain(self, z):
-        return {
-            name: z[name] if site.transform is None else site.transform(z[name])
-            for name, site in self._sites.items()
-        }
+    def _constrained_model(self, z, jacobians):
+        """The model with its latent sites set from ``z``: each Euclidean site's value is the
+        bijection of its support *as the model builds it now* (with the values of the sites
+        before it, as NumPyro's ``potential_energy`` does: a bound may depend on another
+        site) applied to its unconstrained value; the log-Jacobians go into ``jacobians``."""
+
+        def constrain(site):
+            name = site["name"]
+            if site["type"] != "sample" or site["is_observed"] or name not in self._sites:
+                return None
+            if not self._sites[name].euclidean:
+                return z[name]
+            transform = biject_to(site["fn"].support)
+            value = transform(z[name])
+            jacobians[name] = transform.log_abs_det_jacobian(z[name], value)
+            return value
+
+        return numpyro.handlers.substitute(self._model, substitute_fn=constrain)
 
     def _logdensity_fn(self, model_args, model_kwargs):
         """``log π`` of site values."""
@@ -616,12 +633,12 @@ class GeometricHMC(MCMCKernel):
             return lambda z: -self._potential_fn(self._to_user(z))
 
         def logdensity(z):
-            params = self._constrain(z)
-            log_joint, _ = log_density(self._model, model_args, model_kwargs, params)
+            jacobians = {}
+            model = self._constrained_model(z, jacobians)
+            log_joint, _ = log_density(model, model_args, model_kwargs, {})
             for name, site in self._sites.items():
-                if site.transform is not None:
-                    jacobian = site.transform.log_abs_det_jacobian(z[name], params[name])
-                    log_joint = log_joint + jnp.sum(jacobian)
+                if site.euclidean:
+                    log_joint = log_joint + jnp.sum(jacobians[name])
             return log_joint
 
         return logdensity
@@ -641,7 +658,7 @@ class GeometricHMC(MCMCKernel):
         dtype = jnp.zeros(()).dtype
         out = {}
         for k, (name, site) in zip(keys, self._sites.items()):
-            if site.transform is None:
+            if not site.euclidean:
                 out[name] = site.space.uniform(k, dtype)
             else:
                 out[name] = jax.random.uniform(k, site.space.shape, dtype, -2.0, 2.0)
@@ -658,10 +675,10 @@ class GeometricHMC(MCMCKernel):
         out = {}
         for name, site in self._sites.items():
             value = jnp.asarray(trace[name]["value"], dtype)
-            if site.transform is None:
+            if not site.euclidean:
                 out[name] = _nearest_point(site.space, value)
-            else:
-                out[name] = site.transform.inv(value)
+            else:  # the support as the strategy's trace built it
+                out[name] = biject_to(trace[name]["fn"].support).inv(value)
             out[name] = jnp.broadcast_to(out[name], site.space.position_array_shape)
         return out
 
@@ -996,11 +1013,11 @@ class GeometricHMC(MCMCKernel):
             return lambda z: z
 
         def postprocess(z):
-            params = self._constrain(z)
+            model = self._constrained_model(z, {})
+            trace = numpyro.handlers.trace(model).get_trace(*model_args, **model_kwargs)
+            params = {name: trace[name]["value"] for name in self._sites}
             if not self._has_deterministic:
                 return params
-            model = numpyro.handlers.substitute(self._model, data=params)
-            trace = numpyro.handlers.trace(model).get_trace(*model_args, **model_kwargs)
             extra = {n: s["value"] for n, s in trace.items() if s["type"] == "deterministic"}
             return {**params, **extra}
 

@@ -16,6 +16,11 @@ them.
   it, to a NetCDF-4 file (h5netcdf, growing ``draw`` dimension) as soon as the chunk is done;
   ``resume=True`` continues a run from the last chunk saved there, after an interruption or to
   extend it to more draws, and returns the same draws as an uninterrupted run (bitwise).
+- **Observables.** ``observables=`` evaluates functions of the position at every kept draw
+  inside the compiled loop (magnetisation, correlation functions, spectra) and stores their
+  values per draw; with ``keep_positions=False`` the full states are not stored (large lattices,
+  Zeitlin's vorticity matrices). They are saved to ``output=``, restored on ``resume=`` and are
+  posterior variables of :func:`sample`'s tree. The draws do not change.
 """
 
 from __future__ import annotations
@@ -48,6 +53,8 @@ from liesample.tuning.warmup import choose_from_starts, warm_up
 
 DEFAULT_MIN_ACCEPTANCE_RATE = 0.05
 """A chain whose mean acceptance rate over the run is below this is reported as stuck."""
+MAX_ENERGY_RHAT = 1.05
+"""Chains whose energies have a split R-hat above this are reported as not converged."""
 
 # Test hook: called as ``_after_chunk_hook(draws_done)`` once a chunk is saved to ``output``
 # (tests/test_resume.py kills the process there to simulate an interruption).
@@ -64,16 +71,70 @@ class NonFiniteStateError(FloatingPointError):
 @dataclass(frozen=True)
 class ChainsResult:
     """Draws of ``positions`` with shape ``(chains, draws, *event_shape)`` (a pytree of such
-    arrays for pytree positions), per-draw ``info``
-    arrays with shape ``(chains, draws)``, the sampling wall time in seconds (compilation
-    excluded; on a resumed run, the time of this session only), and the sampler's ``settings``
-    after warm-up (step size and how it was chosen, stability mode, …)."""
+    arrays for pytree positions; ``None`` for a run with ``keep_positions=False``), per-draw
+    ``info`` arrays with shape ``(chains, draws)``, the sampling wall time in seconds
+    (compilation excluded; on a resumed run, the time of this session only), the sampler's
+    ``settings`` after warm-up (step size and how it was chosen, stability mode, …), and the
+    ``observables`` recorded at each draw (the pytree the ``observables`` option returns, each
+    leaf ``(chains, draws, *shape)``; ``None`` without that option)."""
 
     positions: np.ndarray
     info: dict
     wall_time: float
     num_steps: int
     settings: dict = None
+    observables: object = None
+
+
+def _as_observables(observables, keep_positions):
+    """``(function, cache key)``: ``observables`` (a callable, or a mapping name -> callable)
+    as one function ``position -> pytree``, and a hashable key naming it for the compile cache;
+    ``(None, None)`` without observables."""
+    if not isinstance(keep_positions, bool):
+        raise TypeError(f"keep_positions must be a bool, got {keep_positions!r}")
+    if observables is None:
+        if not keep_positions:
+            raise ValueError(
+                "keep_positions=False stores no draws at all without observables: pass "
+                "observables= (a function of the position, or a dict name -> function)"
+            )
+        return None, None
+    if callable(observables):
+        return observables, observables
+    if isinstance(observables, dict):
+        if not observables:
+            raise ValueError("observables is an empty dict: give at least one name -> function")
+        for name, function in observables.items():
+            if not isinstance(name, str) or not name:
+                raise TypeError(f"observables' names must be non-empty strings, got {name!r}")
+            if not callable(function):
+                raise TypeError(
+                    f"observables[{name!r}] must be a function of the position, got "
+                    f"{type(function).__name__}"
+                )
+        functions = dict(observables)
+
+        def observe(position):
+            return {name: function(position) for name, function in functions.items()}
+
+        return observe, tuple(functions.items())
+    raise TypeError(
+        "observables must be a function of the position (returning an array or a pytree of "
+        f"arrays) or a dict name -> function, got {type(observables).__name__}"
+    )
+
+
+def _observable_shapes(observe, initial_positions):
+    """The shapes and dtypes of ``observe`` vmapped over the starts' chains (checked: a
+    non-empty pytree of numeric arrays)."""
+    example = jax.eval_shape(jax.vmap(observe), initial_positions)
+    leaves = jax.tree.leaves(example)
+    if not leaves:
+        raise ValueError("observables returned an empty pytree: it has no arrays")
+    for leaf in leaves:
+        if not hasattr(leaf, "dtype") or leaf.dtype.kind not in "biufc":
+            raise TypeError(f"observables must return numeric arrays, got {leaf!r}")
+    return example
 
 
 def _as_positions(initial_positions):
@@ -188,6 +249,8 @@ def sample_chains(
     resume: bool = False,
     adapt: bool | None = None,
     min_acceptance_rate: float = DEFAULT_MIN_ACCEPTANCE_RATE,
+    observables=None,
+    keep_positions: bool = True,
 ) -> ChainsResult:
     """Run ``len(initial_positions)`` chains of ``algorithm`` in parallel (``jax.vmap``).
 
@@ -227,7 +290,9 @@ def sample_chains(
         a ``RuntimeWarning`` naming the chains, or :class:`NonFiniteStateError`.
     min_acceptance_rate : float
         Chains whose mean ``acceptance_rate`` over the draws is below this are reported as
-        stuck (``RuntimeWarning`` naming them); 0 disables the check.
+        stuck (``RuntimeWarning`` naming them); 0 disables the check. Chains whose energies
+        have a split R-hat above :data:`MAX_ENERGY_RHAT` are reported as not converged (a
+        ``RuntimeWarning``: an unfinished warm-up, or a law that depends on the start).
     devices : None, "all", int, sequence of jax devices, or NamedSharding
         Split the chains over these devices (:func:`liesample.run.sharding.chain_sharding`); the
         number of chains must be a multiple of the number of devices. ``None``: one device.
@@ -242,8 +307,29 @@ def sample_chains(
         ``num_draws`` may be larger than before to extend it. Starts afresh if the file does not
         exist yet. The returned draws include the saved ones and equal those of one
         uninterrupted run.
+    observables : callable or dict of str to callable, optional
+        Functions of one chain's position, evaluated at every kept draw inside the compiled
+        loop (vmapped over chains; with ``thinning``, at the draw's own step only). A callable
+        may return an array or a pytree of arrays; a dict ``{name: function}`` gives a dict of
+        their values. ``ChainsResult.observables`` stacks them as ``(chains, draws, *shape)``.
+        They are written to ``output`` with the draws, and a resumed run must pass the same
+        observables (their names and shapes are checked). The draws do not depend on them.
+    keep_positions : bool
+        ``False`` stores only the observables (and info), not the positions (``positions`` is
+        then ``None``): a run's memory is then that of the observables.
+
+    Example: the magnetisation and energy of a spin lattice at every draw, no states kept::
+
+        result = sample_chains(
+            liesample.heisenberg_heat_bath(system, beta=1.0), key, starts, 1000,
+            observables={"m": lambda s: s.reshape(-1, 3).mean(0), "h": system.hamiltonian},
+            keep_positions=False,
+        )
+        result.observables["m"].shape  # (chains, 1000, 3)
     """
     initial_positions, num_chains = _as_positions(initial_positions)
+    observe, observables_key = _as_observables(observables, keep_positions)
+    observable_example = None if observe is None else _observable_shapes(observe, initial_positions)
     _check_run_arguments(num_draws, num_warmup, thinning, on_nonfinite, chunk_draws, adapt)
     rng_key = prng_key(rng_key)
     min_acceptance_rate = finite_float("min_acceptance_rate", min_acceptance_rate, nonnegative=True)
@@ -293,7 +379,13 @@ def sample_chains(
     previous = None
     if output is not None:
         store = _ChainStore(
-            output, rng_key, initial_positions, num_warmup=num_warmup, thinning=thinning
+            output,
+            rng_key,
+            initial_positions,
+            num_warmup=num_warmup,
+            thinning=thinning,
+            observables=observable_example,
+            keep_positions=keep_positions,
         )
         if store.exists():
             if not resume:
@@ -314,8 +406,23 @@ def sample_chains(
             states, keys
         )
 
+    if observe is None:
+        record = None  # the positions themselves (the default loop, unchanged)
+    elif keep_positions:
+        record = lambda position: (position, observe(position))
+    else:
+        record = observe
+
     def draws(state, key, first_step, count):
-        return run_draws(sampler, key, state, first_step, count, thinning, reduce_over_thinning)
+        return run_draws(
+            sampler, key, state, first_step, count, thinning, reduce_over_thinning, record
+        )
+
+    def split(recorded):
+        """``(positions, observables)`` of one chunk's recorded values."""
+        if observe is None:
+            return recorded, None
+        return recorded if keep_positions else (None, recorded)
 
     chunk = chunk_draws if chunk_draws is not None else max(1, math.ceil(num_draws / 20))
     run_chunk = jit(
@@ -337,15 +444,17 @@ def sample_chains(
     compiled = {}
     if remaining:
         for count in {min(chunk, remaining), remaining % chunk or chunk}:
+            recorded = () if observe is None else (observables_key, keep_positions)
             compiled[count] = _compiled_once(
-                ("draws", sampler, thinning, count, signature),
+                ("draws", sampler, thinning, count, signature, *recorded),
                 lambda count=count: run_chunk.lower(states, chain_keys, 0, count).compile(),
             )
 
-    positions, infos = [], []
+    positions, infos, observed = [], [], []
     if previous is not None:
         positions.append(previous[0])
         infos.append(previous[1])
+        observed.append(previous[2])
     start = time.perf_counter()
     if run_warmup:
         states = jax.block_until_ready(warmup(states, chain_keys, 0))
@@ -358,14 +467,16 @@ def sample_chains(
     )
     while done < num_draws:
         count = min(chunk, num_draws - done)
-        states, (chunk_positions, chunk_info) = compiled[count](
+        states, (chunk_recorded, chunk_info) = compiled[count](
             states, chain_keys, num_warmup + done * thinning
         )
-        chunk_positions, chunk_info = to_host((chunk_positions, chunk_info))
+        chunk_recorded, chunk_info = to_host((chunk_recorded, chunk_info))
+        chunk_positions, chunk_observed = split(chunk_recorded)
         positions.append(chunk_positions)
         infos.append(chunk_info)
+        observed.append(chunk_observed)
         if store is not None:
-            store.append(done, chunk_positions, chunk_info, to_host(states))
+            store.append(done, chunk_positions, chunk_info, to_host(states), chunk_observed)
         done += count
         bar.update(count)
         if store is not None and _after_chunk_hook is not None:
@@ -374,15 +485,24 @@ def sample_chains(
     wall_time = time.perf_counter() - start
 
     info = {name: np.concatenate([i[name] for i in infos], axis=1) for name in infos[0]}
+
+    def joined(chunks):
+        if chunks[0] is None:
+            return None
+        return jax.tree.map(lambda *pieces: np.concatenate(pieces, axis=1), *chunks)
+
     result = ChainsResult(
-        jax.tree.map(lambda *chunks: np.concatenate(chunks, axis=1), *positions),
+        joined(positions),
         info,
         wall_time,
         num_warmup + num_draws * thinning,
         dict(sampler.settings, num_warmup=num_warmup, adapted=adapting),
+        joined(observed),
     )
     _report_divergences(result, on_nonfinite)
     _report_stuck_chains(result, min_acceptance_rate)
+    groups = None if sampler.law_groups is None else sampler.law_groups(initial_positions)
+    _report_unconverged(result, groups)
     return result
 
 
@@ -449,6 +569,39 @@ def _report_stuck_chains(result: ChainsResult, threshold: float):
     )
 
 
+def split_rhat(values) -> float:
+    """Split R-hat (Gelman et al.) of ``values (chains, draws)``: NaN where it is undefined (one
+    chain, few draws, or no spread within chains)."""
+    values = np.asarray(values, dtype=float)
+    if values.ndim != 2 or values.shape[0] < 2 or values.shape[1] < 8:
+        return math.nan
+    half = values.shape[1] // 2
+    halves = np.concatenate([values[:, :half], values[:, -half:]])
+    within = np.mean(np.var(halves, axis=1, ddof=1))
+    between = half * np.var(np.mean(halves, axis=1), ddof=1)
+    if not (np.isfinite(within) and within > 0):
+        return math.nan
+    return float(np.sqrt(((half - 1) / half * within + between / half) / within))
+
+
+def _report_unconverged(result: ChainsResult, groups):
+    energy = result.info.get("energy")
+    if energy is None or np.ndim(energy) != 2:
+        return
+    groups = np.zeros(len(energy), int) if groups is None else np.asarray(groups)
+    rhats = [split_rhat(energy[groups == label]) for label in np.unique(groups)]
+    rhat = max((r for r in rhats if np.isfinite(r)), default=math.nan)
+    if rhat > MAX_ENERGY_RHAT:
+        warnings.warn(
+            f"the chains disagree: the split R-hat of their energy is {rhat:.3g} > "
+            f"{MAX_ENERGY_RHAT:g}, so they have not forgotten their starts or do not sample one "
+            "law. Run longer (num_warmup, num_draws), start the chains from more spread-out "
+            "points, or for an unadjusted sampler reduce step_size.",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+
+
 # --------------------------------------------------------------------------- saved runs
 
 
@@ -512,13 +665,16 @@ def _rebuild(layout, leaves):
     return tuple(items) if kind == "tuple" else items
 
 
-def _position_names(layout, num_leaves):
-    return ["position"] if layout is None else [f"position_{i}" for i in range(num_leaves)]
+def _position_names(layout, num_leaves, prefix="position"):
+    return [prefix] if layout is None else [f"{prefix}_{i}" for i in range(num_leaves)]
 
 
 def _to_stored(leaf):
-    """Complex draws are stored as a trailing (real, imag) axis (NetCDF has no complex type)."""
+    """Complex draws are stored as a trailing (real, imag) axis (NetCDF has no complex type),
+    booleans as ``uint8``."""
     leaf = np.asarray(leaf)
+    if leaf.dtype == bool:
+        return leaf.astype(np.uint8)
     return np.stack([leaf.real, leaf.imag], axis=-1) if np.iscomplexobj(leaf) else leaf
 
 
@@ -529,13 +685,40 @@ def _from_stored(variable, value):
     return value.astype(dtype)
 
 
-def _read_positions(f, layout, done):
+def _read_positions(f, layout, done, prefix="position"):
     names = sorted(
-        (name for name in f.variables if name == "position" or name.startswith("position_")),
-        key=lambda name: int(name[9:] or 0),
+        (name for name in f.variables if name == prefix or name.startswith(f"{prefix}_")),
+        key=lambda name: int(name[len(prefix) + 1 :] or 0),
     )
     leaves = [_from_stored(f.variables[n], np.asarray(f.variables[n][:, :done])) for n in names]
     return leaves[0] if layout is None else _rebuild(layout, leaves)
+
+
+def _read_observables(f, done):
+    """The observables saved in ``f`` (``None`` if the run recorded none)."""
+    layout = json.loads(f.attrs.get("observables_layout", '"none"'))
+    if layout == "none":
+        return None
+    return _read_positions(f, layout, done, prefix="observable")
+
+
+def _write_variables(f, prefix, layout, tree, dims_prefix):
+    """Create one variable per leaf of ``tree`` (``(chain, draw, *shape)``), named
+    :func:`_position_names`, with dims ``<dims_prefix(name)>_<j>``."""
+    leaves = jax.tree.leaves(tree)
+    for name, leaf in zip(_position_names(layout, len(leaves), prefix), leaves, strict=True):
+        stored = _to_stored(leaf)
+        dims = tuple(f"{dims_prefix(name)}_{j}" for j in range(stored.ndim - 2))
+        for dim, size in zip(dims, stored.shape[2:], strict=True):
+            f.dimensions[dim] = size
+        variable = f.create_variable(name, ("chain", "draw", *dims), stored.dtype)
+        variable.attrs["dtype"] = np.asarray(leaf).dtype.str
+
+
+def _append_variables(f, prefix, layout, tree, first_draw, end):
+    leaves = jax.tree.leaves(tree)
+    for name, leaf in zip(_position_names(layout, len(leaves), prefix), leaves, strict=True):
+        f.variables[name][:, first_draw:end] = _to_stored(leaf)
 
 
 class _ChainStore:
@@ -546,13 +729,26 @@ class _ChainStore:
     ``position_<i>`` per leaf (dims ``position_<i>_dim_<j>``; complex leaves with a trailing
     ``(real, imag)`` axis) and the structure as the JSON attribute ``position_layout``;
     ``info_<name>`` ``(chain, draw)``, and the states after the last saved chunk, ``state_<i>``
-    (leaf ``i`` of the state pytree, ``(chain, ...)``). Attributes: ``draws_done`` (written
-    last, so a chunk interrupted while being written is ignored), ``num_warmup``,
-    ``thinning``, ``key_data`` and a fingerprint of the initial positions. Each chunk opens and
-    closes the file, so a run killed between chunks leaves a valid file.
+    (leaf ``i`` of the state pytree, ``(chain, ...)``). Observables, if recorded, as
+    ``observable`` or ``observable_<i>`` (dims ``observable[_<i>]_dim_<j>``) with their
+    structure as the JSON attribute ``observables_layout`` (``"none"``: no observables); the
+    positions are absent when ``keep_positions`` (attribute, 0 or 1) is 0. Attributes:
+    ``draws_done`` (written last, so a chunk interrupted while being written is ignored),
+    ``num_warmup``, ``thinning``, ``key_data`` and a fingerprint of the initial positions. Each
+    chunk opens and closes the file, so a run killed between chunks leaves a valid file.
     """
 
-    def __init__(self, path, rng_key, initial_positions, *, num_warmup, thinning):
+    def __init__(
+        self,
+        path,
+        rng_key,
+        initial_positions,
+        *,
+        num_warmup,
+        thinning,
+        observables=None,
+        keep_positions=True,
+    ):
         self.path = os.fspath(path)
         self.key_data = _key_data(rng_key)
         self.layout = _layout(initial_positions)
@@ -562,6 +758,16 @@ class _ChainStore:
         self.num_chains = int(jax.tree.leaves(initial_positions)[0].shape[0])
         self.num_warmup = int(num_warmup)
         self.thinning = int(thinning)
+        self.keep_positions = bool(keep_positions)
+        # observables: shapes and dtypes of the recorded pytree (chain axis first), or None
+        self.observables_layout = "none" if observables is None else _layout(observables)
+        self.observables_signature = (
+            "none"
+            if observables is None
+            else json.dumps(
+                [[list(leaf.shape[1:]), leaf.dtype.str] for leaf in jax.tree.leaves(observables)]
+            )
+        )
         self.created = False
 
     def exists(self) -> bool:
@@ -573,9 +779,18 @@ class _ChainStore:
             "initial_positions_sha256": self.fingerprint,
             "num_warmup": self.num_warmup,
             "thinning": self.thinning,
+            "keep_positions": int(self.keep_positions),
+            "observables_layout": json.dumps(self.observables_layout),
+            "observables_signature": self.observables_signature,
+        }
+        # files written before observables existed: positions kept, no observables
+        defaults = {
+            "keep_positions": 1,
+            "observables_layout": '"none"',
+            "observables_signature": "none",
         }
         for name, value in expected.items():
-            saved = attrs.get(name)
+            saved = attrs.get(name, defaults.get(name))
             saved = saved.item() if isinstance(saved, np.ndarray) and saved.ndim == 0 else saved
             if saved != value:
                 raise ValueError(
@@ -588,8 +803,8 @@ class _ChainStore:
             )
 
     def load(self, states, num_draws):
-        """``(draws_done, states, (positions, info))`` of the saved run (``states`` gives the
-        pytree structure and dtypes)."""
+        """``(draws_done, states, (positions, info, observables))`` of the saved run (``states``
+        gives the pytree structure and dtypes)."""
         import h5netcdf
 
         with h5netcdf.File(self.path, "r") as f:
@@ -603,9 +818,12 @@ class _ChainStore:
             self.created = True
             if done == 0:
                 return 0, None, None
-            positions = _read_positions(f, self.layout, done)
-            if self.layout is not None:  # the caller's own node types (named tuples, …)
-                positions = jax.tree.unflatten(self.treedef, jax.tree.leaves(positions))
+            positions = None
+            if self.keep_positions:
+                positions = _read_positions(f, self.layout, done)
+                if self.layout is not None:  # the caller's own node types (named tuples, …)
+                    positions = jax.tree.unflatten(self.treedef, jax.tree.leaves(positions))
+            observables = _read_observables(f, done)
             info = {}
             for name, variable in f.variables.items():
                 if name.startswith("info_"):
@@ -625,22 +843,25 @@ class _ChainStore:
                         f"cannot resume from {self.path!r}: saved state leaf {i} has shape "
                         f"{saved[-1].shape}, the sampler's has {leaf.shape}"
                     )
-        return done, jax.tree.unflatten(treedef, saved), (positions, info)
+        return done, jax.tree.unflatten(treedef, saved), (positions, info, observables)
 
-    def _create(self, positions, info, states):
+    def _create(self, positions, info, states, observables):
         import h5netcdf
 
         with h5netcdf.File(self.path, "w") as f:
             f.dimensions = {"chain": self.num_chains, "draw": None}
-            leaves = jax.tree.leaves(positions)
-            for name, leaf in zip(_position_names(self.layout, len(leaves)), leaves, strict=True):
-                stored = _to_stored(leaf)
-                prefix = "event" if self.layout is None else f"{name}_dim"
-                dims = tuple(f"{prefix}_{j}" for j in range(stored.ndim - 2))
-                for dim, size in zip(dims, stored.shape[2:], strict=True):
-                    f.dimensions[dim] = size
-                variable = f.create_variable(name, ("chain", "draw", *dims), stored.dtype)
-                variable.attrs["dtype"] = np.asarray(leaf).dtype.str
+            if positions is not None:
+                _write_variables(
+                    f,
+                    "position",
+                    self.layout,
+                    positions,
+                    lambda name: "event" if self.layout is None else f"{name}_dim",
+                )
+            if observables is not None:
+                _write_variables(
+                    f, "observable", self.observables_layout, observables, "{}_dim".format
+                )
             for name, value in info.items():
                 stored = np.uint8 if value.dtype == bool else value.dtype
                 variable = f.create_variable(f"info_{name}", ("chain", "draw"), stored)
@@ -658,12 +879,16 @@ class _ChainStore:
             f.attrs["initial_positions_sha256"] = self.fingerprint
             f.attrs["num_warmup"] = self.num_warmup
             f.attrs["thinning"] = self.thinning
+            f.attrs["keep_positions"] = int(self.keep_positions)
+            f.attrs["observables_layout"] = json.dumps(self.observables_layout)
+            f.attrs["observables_signature"] = self.observables_signature
             f.attrs["key_data"] = self.key_data.reshape(-1)
             f.attrs["draws_done"] = 0
         self.created = True
 
-    def append(self, first_draw, positions, info, states):
-        """Write draws ``first_draw …`` and the states after them; then mark them done."""
+    def append(self, first_draw, positions, info, states, observables=None):
+        """Write draws ``first_draw …`` (positions and/or observables, info) and the states
+        after them; then mark them done."""
         import h5netcdf
 
         states = jax.tree.map(
@@ -675,13 +900,16 @@ class _ChainStore:
             states,
         )
         if not self.created:
-            self._create(positions, info, states)
-        leaves = jax.tree.leaves(positions)
-        end = first_draw + leaves[0].shape[1]
+            self._create(positions, info, states, observables)
+        end = first_draw + jax.tree.leaves((positions, observables))[0].shape[1]
         with h5netcdf.File(self.path, "a") as f:
             f.resize_dimension("draw", end)
-            for name, leaf in zip(_position_names(self.layout, len(leaves)), leaves, strict=True):
-                f.variables[name][:, first_draw:end] = _to_stored(leaf)
+            if positions is not None:
+                _append_variables(f, "position", self.layout, positions, first_draw, end)
+            if observables is not None:
+                _append_variables(
+                    f, "observable", self.observables_layout, observables, first_draw, end
+                )
             for name, value in info.items():
                 f.variables[f"info_{name}"][:, first_draw:end] = value
             for i, leaf in enumerate(jax.tree.leaves(states)):
@@ -693,8 +921,8 @@ def load_chains(path) -> ChainsResult:
     """The draws saved by ``sample_chains(..., output=path)`` (complete or interrupted).
 
     ``wall_time`` is ``nan`` (not recorded) and ``num_steps`` counts warm-up and saved draws.
-    Pytree positions come back as dicts, tuples and lists (named tuples as dicts of their
-    fields).
+    Pytree positions and observables come back as dicts, tuples and lists (named tuples as
+    dicts of their fields); ``positions`` is ``None`` for a run with ``keep_positions=False``.
     """
     import h5netcdf
 
@@ -703,14 +931,17 @@ def load_chains(path) -> ChainsResult:
             raise ValueError(f"{os.fspath(path)!r} is not a file written by sample_chains")
         done = int(f.attrs["draws_done"])
         layout = f.attrs.get("position_layout")
-        positions = _read_positions(f, None if layout is None else json.loads(layout), done)
+        positions = None
+        if int(f.attrs.get("keep_positions", 1)):
+            positions = _read_positions(f, None if layout is None else json.loads(layout), done)
+        observables = _read_observables(f, done)
         info = {
             name[5:]: np.asarray(v[:, :done]).astype(v.attrs["dtype"])
             for name, v in f.variables.items()
             if name.startswith("info_")
         }
         num_steps = int(f.attrs["num_warmup"]) + done * int(f.attrs["thinning"])
-    return ChainsResult(positions, info, math.nan, num_steps)
+    return ChainsResult(positions, info, math.nan, num_steps, observables=observables)
 
 
 def _saved_num_warmup(run_options) -> int | None:
@@ -770,7 +1001,16 @@ def sample(
     run_options
         The other keywords of :func:`sample_chains`: ``thinning``, ``progress``,
         ``chunk_draws``, ``on_nonfinite``, ``devices``, ``output``, ``resume``, ``adapt``,
-        ``min_acceptance_rate``; and ``exact_starts`` (bool, default False).
+        ``min_acceptance_rate``, ``observables``, ``keep_positions``; and ``exact_starts``
+        (bool, default False).
+
+    ``observables=`` (a function of one chain's position, or a dict ``{name: function}``)
+    records those values at every draw and adds them to ``posterior`` (a dict's keys name
+    them, a single array is ``observable``; dims ``<name>_dim_k``, or as ``event_dims`` maps
+    them for pytree positions), so that ``az.summary``, ESS and R-hat act on them; with
+    ``keep_positions=False`` the posterior holds only the observables. For example
+    ``sample(liesample.heisenberg_heat_bath(system, beta=1.0), key, starts, 1000,
+    observables={"h": system.hamiltonian}, keep_positions=False)`` gives ``posterior/h``.
 
     ArviZ's ESS and R-hat of these variables are those of the ambient coordinates (vector
     components, matrix entries), not of intrinsic coordinates on the group or sphere.
@@ -798,9 +1038,12 @@ def sample(
             stacklevel=2,
         )
     positions, _ = _as_positions(initial_positions)
+    keep_positions = run_options.get("keep_positions", True)
+    observe, _ = _as_observables(run_options.get("observables"), keep_positions)
     names = as_sampler(algorithm).draw_names
     if (
-        var_name is None
+        keep_positions
+        and var_name is None
         and event_dims is None
         and names is not None
         and is_single_array(positions)
@@ -811,9 +1054,18 @@ def sample(
     datatree = functools.partial(
         to_datatree, var_name=var_name, event_dims=event_dims, coords=coords
     )
+    example_observables = None
+    if observe is not None:
+        example_observables = jax.tree.map(
+            lambda leaf: np.zeros((leaf.shape[0], 1, *leaf.shape[1:]), leaf.dtype),
+            _observable_shapes(observe, positions),
+        )
+    example_positions = None
+    if keep_positions:
+        example_positions = jax.tree.map(lambda leaf: np.asarray(leaf)[:, None], positions)
     with warnings.catch_warnings():  # ArviZ remarks on a tree of one draw
         warnings.simplefilter("ignore", UserWarning)
-        datatree(jax.tree.map(lambda leaf: np.asarray(leaf)[:, None], positions))
+        datatree(example_positions, observables=example_observables)
 
     result = sample_chains(
         algorithm, rng_key, initial_positions, num_draws, num_warmup=num_warmup, **run_options
@@ -824,6 +1076,7 @@ def sample(
     return datatree(
         result.positions,
         result.info,
+        observables=result.observables,
         thinning=thinning,
         step_size=(result.settings or {}).get("step_size"),
         attrs={

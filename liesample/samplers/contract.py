@@ -195,6 +195,10 @@ class Sampler(blackjax.base.SamplingAlgorithm, DeclaresNoiseBlocks):
         How the step size is chosen and tuned in warm-up; ``None`` (default): nothing to tune.
     noise_blocks : liesample.integrators.chain_loop.NoiseBlocks or None
         How ``step`` consumes noise drawn in blocks; ``None`` (default): one key per step.
+    law_groups : callable or None
+        ``positions (chains, ...) -> labels (chains,)``: chains with one label sample one law
+        (the orbit samplers: one orbit), so the runner compares their energies (split R-hat)
+        only within a label. ``None`` (default): every chain samples the same law.
     draw_names : DrawNames or None
         The name and event dims of a single-array position in the ``DataTree`` of
         :func:`liesample.sample` (e.g. ``R`` with dims ``(row, col)`` on ``SO(3)``); ``None``
@@ -205,6 +209,7 @@ class Sampler(blackjax.base.SamplingAlgorithm, DeclaresNoiseBlocks):
     check_positions: Callable | None = None
     tuning: StepSizeTuning | None = None
     draw_names: DrawNames | None = None
+    law_groups: Callable | None = None
 
     def __new__(
         cls,
@@ -216,6 +221,7 @@ class Sampler(blackjax.base.SamplingAlgorithm, DeclaresNoiseBlocks):
         tuning=None,
         noise_blocks=None,
         draw_names=None,
+        law_groups=None,
     ):
         self = super().__new__(cls, init, step)
         self.settings = {} if settings is None else settings
@@ -223,6 +229,7 @@ class Sampler(blackjax.base.SamplingAlgorithm, DeclaresNoiseBlocks):
         self.tuning = tuning
         self.noise_blocks = noise_blocks
         self.draw_names = draw_names
+        self.law_groups = law_groups
         return self
 
 

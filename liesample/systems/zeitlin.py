@@ -29,7 +29,8 @@ so the vorticity ``ω = Σ ω_ℓm Y_ℓm`` (``ℓ < N``, ``Y_ℓm`` orthonormal
 **Hamiltonian.** ``P = Δ_N⁻¹ W`` (trace-free) and ``h(W) = ½ tr(PW) = −½⟨W, Δ_N⁻¹W⟩
 = ½ Σ_ℓm ω_ℓm² / (ℓ(ℓ+1)) ≥ 0``, the kinetic energy ``½∫|∇ψ|²`` of the band-limited flow.
 ``Δ_N⁻¹`` is applied by one batched tridiagonal solve over the ``2N − 1`` diagonals (O(N²));
-the coadjoint move costs O(N³) (``expm``).
+the coadjoint move costs O(N³): the exponential of a skew-Hermitian matrix by matrix products
+alone (:class:`SkewHermitianUnitary`) and two products.
 
 **Noise.** ``ĥ_ℓm(W) = ⟨W, ψ_ℓm⟩`` for ``1 ≤ ℓ ≤ L`` with ``ψ_ℓm = (ℓ(ℓ+1))^{−n/2} E_ℓm``,
 orthonormal in the ``⟨α, (−Δ)ⁿβ⟩`` inner product (the paper's choice, with ``n`` =

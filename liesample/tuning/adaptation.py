@@ -420,6 +420,15 @@ directions of others, so it is opt-in; ``angle > 0`` turns it on, adapted jointl
 CHEES_TARGET_ACCEPTANCE_RATE = magnetic_hmc.adaptation["target_acceptance_rate"]
 CHEES_LEARNING_RATE = 0.01
 CHEES_AVERAGING = 0.95  # running means of the ChEES estimates
+CHEES_MAX_TIME_PER_SD = math.pi
+"""Upper bound of the learnt ``T`` in units of ``√(tr Σ̃)``, ``Σ̃`` the target's covariance
+whitened by the current mass (estimated from the chains' spread): half a period of a Gaussian's
+slowest direction is at most ``π √(tr Σ̃)``, beyond which it turns back."""
+CHEES_MAX_PULL = 0.1
+"""The most (in ``log T``) the bound of :func:`_bound_log_time` lowers ``T`` per transition:
+a bound that dips for a few transitions (dual averaging trying a tiny ``ε``, chains that
+started together) cannot drag ``T`` far down, from where the gradient raises it by
+``2 · learning_rate`` at most."""
 
 
 class MagneticAdaptationInfo(NamedTuple):
@@ -511,6 +520,23 @@ def _log_efficiency_gradient(means, cost_slope):
     return jnp.where((chees > 0) & (independent > 0), ratio * 4.0 / (4.0 - r) - cost_slope, 0.0)
 
 
+def _bound_log_time(log_time, step_size, max_steps, means, index, num_chains):
+    """``log T`` pulled down towards ``log min(L_max ε, π √(tr Σ̃))`` when above it, by
+    :data:`CHEES_MAX_PULL` at most per transition.
+
+    ``tr Σ̃`` is the running mean of the chains' squared distance to their centre (``means[2]``
+    of :func:`_log_efficiency_gradient`), corrected for the running mean's start at 0 and for
+    the centre's estimate (``C/(C − 1)``): above ``π √(tr Σ̃)`` the slowest direction of a
+    Gaussian turns back (:data:`CHEES_MAX_TIME_PER_SD`).
+    """
+    weight = 1.0 - CHEES_AVERAGING ** (index + 1.0)
+    trace = means[2] / weight * num_chains / (num_chains - 1.0)
+    upper = jnp.log(max_steps * step_size)
+    spread = jnp.log(CHEES_MAX_TIME_PER_SD * jnp.sqrt(trace))
+    upper = jnp.where(jnp.isfinite(spread) & (trace > 0), jnp.minimum(upper, spread), upper)
+    return log_time - jnp.clip(log_time - upper, 0.0, CHEES_MAX_PULL)
+
+
 def _harmonic_mean(rates):
     """Harmonic mean of the chains' acceptance rates (0 if any is 0): one stuck chain is enough
     to lower the step size, as in ChEES-HMC."""
@@ -579,9 +605,20 @@ def magnetic_window_adaptation(
     then lets ``T`` drift; ChEES per unit length has a maximum but favours the fast
     directions. The gradient is dimensionless and bounded, so the step is plain stochastic
     ascent, not Adam (Adam's normalised steps keep their size where the mean gradient
-    vanishes, so ``T`` wanders around the optimum). The returned ``T`` is ``exp`` of the mean
-    of ``log T`` over the last slow window and the final fast window; ``integration_time=T``
-    fixes ``T`` instead.
+    vanishes, so ``T`` wanders around the optimum). The derivative is taken at the time
+    integrated, ``L ε`` (at least one step), not at ``u T``: below ``ε`` the two differ, and a
+    rule fed ``u T`` there sees no gain in a longer ``T`` and lets it shrink without end.
+    At ``T <= ε`` every transition is one step whatever ``T`` is, so ``T`` is not lowered
+    there (near the step's stability limit one step can look better than two to the gradient,
+    which would otherwise move ``T`` down without end). After each update ``T`` is pulled
+    down towards ``min(L_max ε, π √(tr Σ̃))`` when above it, ``tr Σ̃`` the running mean of the
+    chains' whitened squared distance to their centre
+    (:func:`_bound_log_time`): a Gaussian's slowest direction turns back after
+    ``π √(tr Σ̃)`` at most, so the noisy gradient cannot carry ``T`` far past it. The pull is
+    rate-limited, so that a momentary tiny ``ε`` does not drag ``T`` far down (transitions
+    never exceed ``L_max`` steps). The returned ``T`` is ``exp`` of the mean of ``log T``
+    over the last slow window and the final fast window; ``integration_time=T`` fixes ``T``
+    instead.
 
     Parameters
     ----------
@@ -650,7 +687,7 @@ def magnetic_window_adaptation(
 
         def one_step(carry, xs):
             states, da_state, log_time, means, inverse_mass, welford = carry
-            key, u, stage, window_end, _ = xs
+            key, u, stage, window_end, index = xs
             step_size = jnp.exp(da_state.log_step_size)
             strength = angle / step_size
             # angle 0: a concrete zero field, so the sampler takes the free drift (no expm)
@@ -680,7 +717,7 @@ def magnetic_window_adaptation(
                     info.is_accepted,
                     info.acceptance_rate,
                     inverse_mass,
-                    u * trajectory,
+                    steps * step_size,  # the time integrated (not u T: L >= 1 and ceil)
                 )
                 # Running means of the estimates, then their ratios (not the mean of ratios:
                 # one batch's ChEES can be near 0).
@@ -693,9 +730,10 @@ def magnetic_window_adaptation(
                 # The gradient is dimensionless (≈ +1 for too short, ≥ −1 for too long a
                 # trajectory), so plain stochastic ascent on log T with a fixed step.
                 update = learning_rate * jnp.clip(gradient, -2.0, 2.0)
+                # At T <= ε a transition is one step whatever T is: no lower T to move to.
+                update = jnp.where(trajectory <= step_size, jnp.maximum(update, 0.0), update)
                 log_time = jnp.where(jnp.isfinite(update), log_time + update, log_time)
-                cap = jnp.log(max_steps * step_size)
-                log_time = jnp.minimum(log_time, cap)
+                log_time = _bound_log_time(log_time, step_size, max_steps, means, index, num_chains)
             in_slow = (stage == 1) & adapt_mass
             welford = jax.tree.map(
                 lambda a, b: jnp.where(in_slow, a, b), _welford_batch(welford, after), welford

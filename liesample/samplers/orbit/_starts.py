@@ -100,6 +100,19 @@ def check_orbit_starts(system: LiePoissonSystem, positions):
     return casimirs
 
 
+def orbit_groups(system: LiePoissonSystem):
+    """The runner's ``law_groups`` hook: chains on one orbit (Casimirs equal to 12 decimals)
+    sample one Gibbs law."""
+
+    def groups(positions):
+        positions = jnp.asarray(positions, jnp.result_type(float))
+        casimirs = np.asarray(jax.vmap(system.casimirs)(positions)).reshape(len(positions), -1)
+        _, labels = np.unique(np.round(casimirs, 12), axis=0, return_inverse=True)
+        return labels.reshape(-1)
+
+    return groups
+
+
 def distinct_orbits(casimirs) -> np.ndarray:
     """Index of one start per distinct orbit (Casimirs equal to 12 decimals)."""
     rounded = np.round(np.asarray(casimirs, dtype=float).reshape(len(casimirs), -1), 12)

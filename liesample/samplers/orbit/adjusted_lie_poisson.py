@@ -24,8 +24,16 @@ symplectomorphism of the orbit, so it preserves the Liouville measure. With the 
 the MALA ratio with Gaussian densities. The construction needs ``ξ_i`` independent of ``μ``
 (linear noise ``ĥ_i = ⟨μ, ξ_i⟩``: rigid body, spins, the heavy top's six); with ``μ``-dependent
 gradients ``Φ`` is no longer an involution, so such systems are refused with a clear error
-(:func:`check_linear_noise`). Ergodicity needs the ``ξ_i`` to span the orbit's tangent
-directions, which holds for the systems above.
+(:func:`check_linear_noise`). Ergodicity needs the ``ξ_i`` and their brackets to span the
+orbit's tangent directions, which holds for the systems above and for Zeitlin's model with
+``noise_degree ≥ 2`` (:func:`liesample.systems.zeitlin.zeitlin_euler` refuses
+``noise_degree=1``: rigid rotations alone keep ``h`` fixed).
+
+**Cost per step.** One coadjoint move (``algebra.coadjoint_exp``: a group element and two
+products, for Zeitlin's ``u(N)`` an exponential by products alone,
+:class:`liesample.systems.zeitlin.SkewHermitianUnitary`), one gradient of ``h`` and one
+bracket ``ad*_{∇h}μ``. The Casimir drift in the Info is the system's ``step_casimir_error``
+where it declares one (a cheap invariant), so no eigenvalue problem is solved per step.
 
 The Hamiltonian drift is not part of the move: it preserves ``exp(−βh)`` by itself but is not
 reversible, and alone the noise + dissipation dynamics already has ``exp(−βh)`` as its
@@ -65,6 +73,7 @@ from liesample.samplers.orbit._starts import (
     check_orbit_starts,
     check_start_energy,
     distinct_orbits,
+    orbit_groups,
     orbit_init_fn,
 )
 
@@ -411,6 +420,7 @@ def as_top_level_api(
             check_positions=check_positions,
             tuning=tuning,
             noise_blocks=NoiseBlocks(noise_block_size, draw_block, block_step),
+            law_groups=orbit_groups(system),
         )
 
     tuning = StepSizeTuning(

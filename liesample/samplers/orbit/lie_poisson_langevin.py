@@ -45,6 +45,7 @@ from liesample.samplers.orbit._starts import (
     check_orbit_starts,
     check_start_energy,
     distinct_orbits,
+    orbit_groups,
     orbit_init_fn,
 )
 
@@ -369,6 +370,7 @@ def as_top_level_api(
         tuning=StepSizeTuning("rule", given, choose, rebuild),
         # Without noise nothing is drawn: the per-step loop is already lean.
         noise_blocks=NoiseBlocks(noise_block_size, draw_block, block_step) if scene.noise else None,
+        law_groups=orbit_groups(system),
     )
 
 

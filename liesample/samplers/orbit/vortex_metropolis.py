@@ -87,8 +87,7 @@ class VortexInfo(NamedTuple):
 def _check_system(system) -> PointVortexSystem:
     if not isinstance(system, PointVortexSystem):
         raise TypeError(
-            "system must be a point_vortices(...) PointVortexSystem, got "
-            f"{type(system).__name__}"
+            f"system must be a point_vortices(...) PointVortexSystem, got {type(system).__name__}"
         )
     return system
 

@@ -36,6 +36,7 @@ import numpy as np
 from liesample.foundation.validation import finite_float
 from liesample.geometry.algebras import so3
 from liesample.samplers.contract import Sampler
+from liesample.samplers.orbit._starts import orbit_groups
 from liesample.systems.heisenberg import (
     SpinLatticeSystem,
     colouring,
@@ -125,7 +126,7 @@ def spin_sampler(name: str, kernel, system: SpinLatticeSystem, beta, *parameters
         return kernel(rng_key, state, beta, *parameters)
 
     settings = {"sampler": name, "system": system.name, "beta": beta, **settings}
-    return Sampler(init_fn, step_fn, settings=settings)
+    return Sampler(init_fn, step_fn, settings=settings, law_groups=orbit_groups(system))
 
 
 class Sublattice(NamedTuple):
