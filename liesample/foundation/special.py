@@ -165,21 +165,10 @@ def _log_ive(order, kappa):
 
 
 def log_bessel_iv(order, kappa):
-    """``log I_ν(κ)`` for a fixed order ``ν ≥ 0`` and ``κ ≥ 0`` (module docstring).
-
-    Parameters
-    ----------
-    order : float
-        ``ν ≥ 0`` (a Python number, not traced).
-    kappa : array_like
-        ``κ ≥ 0``, any shape; may be traced.
-
-    Returns
-    -------
-    jax array, shape of ``kappa``
-        ``log I_ν(κ)`` (``−inf`` at ``κ = 0`` for ``ν > 0``); ``d/dκ log I_ν(κ) =
-        I_{ν+1}(κ)/I_ν(κ) + ν/κ`` and higher derivatives by ``jax.grad``/``jax.hessian``.
-    """
+    """``log I_ν(κ)`` for a fixed order ``ν ≥ 0`` and ``κ ≥ 0`` (module docstring), shaped like
+    ``kappa``; the arguments are those of :func:`log_bessel_iv_reduced`. ``−inf`` at ``κ = 0``
+    for ``ν > 0``; ``d/dκ log I_ν(κ) = I_{ν+1}(κ)/I_ν(κ) + ν/κ``, and higher derivatives, by
+    ``jax.grad``/``jax.hessian``."""
     return _log_iv(_order(order), kappa)
 
 

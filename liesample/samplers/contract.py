@@ -211,26 +211,35 @@ class Sampler(blackjax.base.SamplingAlgorithm, DeclaresNoiseBlocks):
     draw_names: DrawNames | None = None
     law_groups: Callable | None = None
 
-    def __new__(
-        cls,
-        init,
-        step,
-        *,
-        settings=None,
-        check_positions=None,
-        tuning=None,
-        noise_blocks=None,
-        draw_names=None,
-        law_groups=None,
-    ):
+    def __new__(cls, init, step, **hooks):
+        unknown = sorted(set(hooks) - set(HOOKS))
+        if unknown:
+            raise TypeError(f"Sampler declares no hook {unknown}; its hooks are {list(HOOKS)}")
         self = super().__new__(cls, init, step)
-        self.settings = {} if settings is None else settings
-        self.check_positions = check_positions
-        self.tuning = tuning
-        self.noise_blocks = noise_blocks
-        self.draw_names = draw_names
-        self.law_groups = law_groups
+        for name, default in HOOKS.items():
+            value = hooks.get(name)
+            setattr(self, name, default() if value is None and default else value)
         return self
+
+
+HOOKS = {
+    "settings": dict,
+    "check_positions": None,
+    "tuning": None,
+    "noise_blocks": None,
+    "draw_names": None,
+    "law_groups": None,
+}
+"""The hooks a :class:`Sampler` declares, each with the factory of its default (``None``:
+the default is ``None``); keyword arguments of ``Sampler(init, step, **hooks)``."""
+
+
+def rebuilt(build: Callable, source: str, *args, **kwargs) -> Sampler:
+    """``build(*args, **kwargs)`` recording ``source`` as its ``step_size_source`` setting (what a
+    :class:`StepSizeTuning`'s ``rebuild`` returns)."""
+    sampler = build(*args, **kwargs)
+    sampler.settings["step_size_source"] = source
+    return sampler
 
 
 def as_sampler(algorithm) -> Sampler:

@@ -40,14 +40,8 @@ from liesample.integrators.stability import (
     check_step_size,
     stiffness_on_orbits,
 )
-from liesample.samplers.contract import Sampler, StepSizeTuning, sampling_api
-from liesample.samplers.orbit._starts import (
-    check_orbit_starts,
-    check_start_energy,
-    distinct_orbits,
-    orbit_groups,
-    orbit_init_fn,
-)
+from liesample.samplers.contract import Sampler, StepSizeTuning, rebuilt, sampling_api
+from liesample.samplers.orbit import _starts
 
 __all__ = [
     "DEFAULT_BIAS_TOLERANCE",
@@ -111,7 +105,7 @@ def init(position, system: LiePoissonSystem, rng_key=None) -> LiePoissonState:
         with jax.ensure_compile_time_eval():
             energy = concrete_array(system.hamiltonian(jnp.asarray(value, jnp.result_type(float))))
         if energy is not None:  # None when staged out: the runner checks every start itself
-            check_start_energy(system, value, energy)
+            _starts.check_start_energy(system, value, energy)
     position = jnp.asarray(position, dtype=jnp.result_type(float))
     return LiePoissonState(position, system.casimirs(position), system.hamiltonian(position))
 
@@ -296,7 +290,7 @@ def as_top_level_api(
         positions = np.asarray(positions)
         if rng_key is None:
             positions = positions.astype(jnp.result_type(float))
-            orbits = distinct_orbits(check_orbit_starts(system, positions))
+            orbits = _starts.distinct_orbits(_starts.check_orbit_starts(system, positions))
             positions = positions[np.asarray(orbits)]
         choice = accuracy.default_step_size(
             system,
@@ -310,9 +304,7 @@ def as_top_level_api(
         return choice.step_size, "bias model: " + _source(choice)
 
     def rebuild(value, source):
-        tuned = as_top_level_api(system, **options, step_size=value)
-        tuned.settings["step_size_source"] = source
-        return tuned
+        return rebuilt(as_top_level_api, source, system, **options, step_size=value)
 
     @functools.cache
     def automatic():
@@ -344,7 +336,7 @@ def as_top_level_api(
         for chain in representatives:
             check_precision(system, beta, theta, positions[chain], positions.dtype)
 
-    init_fn = orbit_init_fn(init, system, check_orbits)
+    init_fn = _starts.orbit_init_fn(init, system, check_orbits)
 
     def step_fn(rng_key, state):
         return kernel(rng_key, state, current_step(), sigma, theta)
@@ -357,10 +349,12 @@ def as_top_level_api(
 
     def check_positions(positions, *, step_size_checks=True):
         positions = np.asarray(positions)
-        casimirs = check_orbit_starts(system, positions)
+        casimirs = _starts.check_orbit_starts(system, positions)
         if step_size_checks:
             dtype = jnp.result_type(float)
-            check_orbits(np.asarray(positions, dtype), distinct_orbits(casimirs), prefix=True)
+            check_orbits(
+                np.asarray(positions, dtype), _starts.distinct_orbits(casimirs), prefix=True
+            )
 
     return Sampler(
         init_fn,
@@ -370,7 +364,7 @@ def as_top_level_api(
         tuning=StepSizeTuning("rule", given, choose, rebuild),
         # Without noise nothing is drawn: the per-step loop is already lean.
         noise_blocks=NoiseBlocks(noise_block_size, draw_block, block_step) if scene.noise else None,
-        law_groups=orbit_groups(system),
+        law_groups=_starts.orbit_groups(system),
     )
 
 

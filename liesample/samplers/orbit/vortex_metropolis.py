@@ -36,7 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from liesample.foundation.validation import finite_float
-from liesample.samplers.contract import Sampler, StepSizeTuning, sampling_api
+from liesample.samplers.contract import Sampler, StepSizeTuning, rebuilt, sampling_api
 from liesample.systems.point_vortices import PointVortexSystem
 
 __all__ = [
@@ -239,15 +239,8 @@ def as_top_level_api(
 
     def rebuild(value, source):
         value = min(float(value), MAX_PROPOSAL_SCALE)
-        tuned = as_top_level_api(
-            system,
-            beta=beta,
-            proposal=proposal,
-            proposal_scale=value,
-            target_acceptance_rate=target,
-        )
-        tuned.settings["step_size_source"] = source
-        return tuned
+        options = {"proposal": proposal, "target_acceptance_rate": target}
+        return rebuilt(as_top_level_api, source, system, beta=beta, proposal_scale=value, **options)
 
     def at(value, beta=beta, settings=None, tuning=None):
         """The sampler with proposal scale ``value`` (a float, or traced in the warm-up)."""
