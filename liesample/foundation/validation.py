@@ -18,8 +18,11 @@ def float_array(value, requirement: str, error: type[Exception] = ValueError) ->
         raise error(f"{requirement}, got {value!r}") from None
 
 
-def finite_float(name: str, value, *, positive: bool = False, nonnegative: bool = False) -> float:
-    """``value`` as a Python float, or a ``ValueError``/``TypeError`` that says what is allowed."""
+def finite_float(
+    name: str, value, *, positive: bool = False, nonnegative: bool = False, rate: bool = False
+) -> float:
+    """``value`` as a Python float, or a ``ValueError``/``TypeError`` that says what is allowed
+    (``rate``: strictly between 0 and 1, as a target acceptance rate)."""
     if isinstance(value, bool) or np.ndim(value) != 0:
         raise TypeError(f"{name} must be a real scalar, got {value!r}")
     try:
@@ -32,6 +35,8 @@ def finite_float(name: str, value, *, positive: bool = False, nonnegative: bool 
         raise ValueError(f"{name} must be > 0, got {x}")
     if nonnegative and not x >= 0:
         raise ValueError(f"{name} must be >= 0, got {x}")
+    if rate and not 0.0 < x < 1.0:
+        raise ValueError(f"{name} must be in (0, 1), got {x}")
     return x
 
 

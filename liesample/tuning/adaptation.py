@@ -326,9 +326,7 @@ def window_adaptation(
         parameters.setdefault(key, value)
     if target_acceptance_rate is None:
         target_acceptance_rate = declared["target_acceptance_rate"]
-    target = finite_float("target_acceptance_rate", target_acceptance_rate)
-    if not 0.0 < target < 1.0:
-        raise ValueError(f"target_acceptance_rate must be in (0, 1), got {target}")
+    target = finite_float("target_acceptance_rate", target_acceptance_rate, rate=True)
     if "step_size" in parameters:
         raise TypeError("step_size is what window_adaptation tunes: give initial_step_size")
     unknown = set(parameters) - set(declared["parameters"])
@@ -648,9 +646,7 @@ def magnetic_window_adaptation(
     algorithm.build_kernel(**scheme)  # validates the scheme now
     angle = finite_float("angle", angle, nonnegative=True)
     finite_float("initial_step_size", initial_step_size, positive=True)
-    target = finite_float("target_acceptance_rate", target_acceptance_rate)
-    if not 0.0 < target < 1.0:
-        raise ValueError(f"target_acceptance_rate must be in (0, 1), got {target}")
+    target = finite_float("target_acceptance_rate", target_acceptance_rate, rate=True)
     if integration_time is not None:
         integration_time = finite_float("integration_time", integration_time, positive=True)
     initial_time = finite_float("initial_integration_time", initial_integration_time, positive=True)

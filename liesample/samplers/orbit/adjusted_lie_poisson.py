@@ -359,9 +359,7 @@ def as_top_level_api(
     sigma = finite_float("sigma", sigma, positive=True)
     if step_size is not None:
         step_size = finite_float("step_size", step_size, positive=True)
-    target = finite_float("target_acceptance_rate", target_acceptance_rate)
-    if not 0.0 < target < 1.0:
-        raise ValueError(f"target_acceptance_rate must be in (0, 1), got {target}")
+    target = finite_float("target_acceptance_rate", target_acceptance_rate, rate=True)
     noise_block_size = check_block_size(noise_block_size)
     noise_kernel = build_noise_kernel(system)
     kernel = _keyed(system, noise_kernel)

@@ -205,9 +205,7 @@ def as_top_level_api(
     given = proposal_scale is not None
     if given:
         proposal_scale = finite_float("proposal_scale", proposal_scale, positive=True)
-    target = finite_float("target_acceptance_rate", target_acceptance_rate)
-    if not 0.0 < target < 1.0:
-        raise ValueError(f"target_acceptance_rate must be in (0, 1), got {target}")
+    target = finite_float("target_acceptance_rate", target_acceptance_rate, rate=True)
     kernel = build_kernel(system, proposal)
     settings = {
         "sampler": "vortex_metropolis",
