@@ -13,22 +13,28 @@ large-``N`` limit (``docs/zeitlin.md``, "How β must scale with N"). The orbit i
 vorticity with an ``ℓ⁻³`` energy spectrum and ``‖W‖² = 1``; the chains start at points spread
 uniformly over the orbit (exact draws of the ``β = 0`` law), so the ``β = 0`` row is checked
 against the exact uniform-orbit spectrum
-(``liesample.targets.zeitlin.uniform_orbit_energy_spectrum``).
+(``liesample.targets.zeitlin.uniform_orbit_energy_spectrum``). The noise acts on every degree
+(``noise_degree = N − 1``; the Gibbs law does not depend on it, the mixing does). The ``ℓ = 1``
+share of the energy rises steeply near ``b ≈ −2``, where the chains also mix slowly (the
+energy–enstrophy estimate of the scale, ``docs/zeitlin.md``); the default ``b`` values avoid
+that point.
 
 The whole sweep is compiled once: the adjusted kernel takes ``β`` and the step as traced
 arguments, so the warm-up (dual averaging of one step per ``β``, shared by that ``β``'s chains,
 to the sampler's target acceptance rate; ``liesample.tuning.dual_averaging``) and the sampling
-are each one ``vmap`` over ``β`` and the chains, instead of one ``liesample.sample`` call (and
-two compilations) per ``β``. At ``β = 0`` every move is accepted, so there is no acceptance
-signal to tune on: that row keeps the step tuned at the smallest ``|β|``, and needs no warm-up
-(its starts are already exact draws).
+are each one ``vmap`` over ``β`` and the chains, instead of one ``liesample.sample`` call per
+``β`` (each compiles its own warm-up and sampling loops). Dual averaging starts from
+``dt = 1``. At ``β = 0`` every move is accepted, so there is no acceptance signal to tune on:
+that row keeps the step tuned at the smallest ``|β|``, and needs no warm-up (its starts are
+already exact draws).
 
-Prints a table (``b``, ``β``, ``E[h] ± MCSE``, the fraction of the energy in ``ℓ = 1``, R-hat,
-acceptance, step) and writes into ``--output`` (default ``condensation-output/``):
+Prints a table (``b``, ``β``, ``E[h] ± MCSE``, the ``ℓ = 1`` share of the energy
+``E[ε₁]/E[h] ± MCSE``, R-hat, acceptance, step) and writes into ``--output`` (default
+``condensation-output/``):
 
 - ``condensation_spectra.png``: the mean energy spectrum ``E[ε_ℓ]`` at every ``β`` (±2 MCSE
   bands; dashed: the exact ``β = 0`` spectrum);
-- ``condensation_fraction.png``: the ``ℓ = 1`` fraction of the energy against ``b``;
+- ``condensation_fraction.png``: the ``ℓ = 1`` share of the energy against ``b``;
 - ``condensation_vorticity.png``: vorticity snapshots (last draws of three chains) at the most
   negative and the most positive ``β``;
 - ``condensation_summary.json``: the table's numbers and the mean spectra with their MCSE.
@@ -138,7 +144,8 @@ def main(argv=None) -> int:
     parser.add_argument("--draws", type=int, default=400,
                         help="draws per chain, after as many warm-up steps (default 400)")
     parser.add_argument("--b", type=parse_b, default=parse_b(DEFAULT_B),
-                        help=f"values of b = β‖W‖²/(N² − 1), comma-separated (default {DEFAULT_B})")
+                        help=f"values of b = β‖W‖²/(N² − 1), comma-separated, written --b=-4,-1,0,1 "
+                             f"(default {DEFAULT_B})")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--output", "--out", type=Path, default=Path("condensation-output"))
     args = parser.parse_args(argv)
@@ -207,7 +214,7 @@ def main(argv=None) -> int:
           f"adjusted sampler, {seconds:.1f} s")
     print(f"exact at β = 0: E[h] = {exact.sum():.5f}, ℓ = 1 share E[ε₁]/E[h] = "
           f"{exact[0] / exact.sum():.4f}")
-    print(f"{'b':>6} {'β':>9} {'E[h] ± MCSE':>20} {'ℓ=1 fraction ± MCSE':>20} "
+    print(f"{'b':>6} {'β':>9} {'E[h] ± MCSE':>20} {'ℓ=1 share ± MCSE':>20} "
           f"{'R-hat':>6} {'accept':>6} {'step':>8}")
     for row in rows:
         print(f"{row['b']:+6.2f} {row['beta']:+9.2f} "

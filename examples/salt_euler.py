@@ -16,13 +16,12 @@ The two deterministic scenes are the SALT-Euler dynamics, ``liesample.lie_poisso
 ``systems.zeitlin_euler(N, noise_degree=L)`` with ``sigma = 0`` and the dissipation ``theta``
 derived from the ``L(L+2)`` transport modes (``docs/zeitlin.md``). The Gibbs draws come from
 the sampler ``liesample.recommended_sampler`` picks for this model, the Metropolis-adjusted
-``liesample.adjusted_lie_poisson``: exact at any step, it needs no step-bias control, and its
-automatic step is set on the start's orbit. The example steps its chains directly (to plot
-``h`` step by step) and prints ``E[h]`` over the second half with its MCSE and R-hat;
-``liesample.sample(sampler, key, starts, num_draws)`` would also tune the step in a warm-up
-(``examples/condensation.py`` tunes one step per ``β``). The unadjusted
-``liesample.lie_poisson_langevin`` at ``σ > 0`` is the SALT-Euler dynamics itself, with a
-step bias, and mixes far more slowly per second.
+``liesample.adjusted_lie_poisson`` (exact at any step, so no step bias to control), run by
+``liesample.sample``, whose warm-up tunes its step; it prints ``E[h]`` with its MCSE and R-hat.
+Its noise acts on every degree (``noise_degree = N − 1``): the Gibbs law does not depend on
+the noise, and low degrees alone mix the large scales slowly. The unadjusted
+``liesample.lie_poisson_langevin`` at ``σ > 0`` is the SALT-Euler dynamics itself; as a sampler
+it has a step bias and mixes far more slowly per second.
 
     .venv/bin/python examples/salt_euler.py [--size N] [--quick] [--out DIR]
 """
@@ -46,6 +45,7 @@ from matplotlib.figure import Figure
 import liesample
 from liesample.analysis.diagnostics import expectation_table
 from liesample.systems.zeitlin import random_vorticity, zeitlin_euler
+from liesample.systems.zeitlin_states import energy_spectrum
 
 NOISE_DEGREE = 4
 ENSTROPHY = 40.0  # ‖W‖² of the start (sets the time scale: turnover ~ 1/√enstrophy)
@@ -55,22 +55,22 @@ BETAS = (40.0, -40.0)  # the two temperatures of the Gibbs scene
 
 
 def run_chains(algorithm, starts, num_steps, rng_key, record_every):
-    """Run one chain per start; return recorded positions ``(C, T, N, N)``, energies and
-    acceptance rates ``(C, num_steps)``."""
+    """Run one chain per start; return recorded positions ``(C, T, N, N)`` and energies
+    ``(C, num_steps)``."""
 
     def chain(start, key):
         def body(state, k):
             state, info = algorithm.step(k, state)
-            return state, (state.position, info.energy, info.acceptance_rate)
+            return state, (state.position, info.energy)
 
-        _, (positions, energies, acceptance) = jax.lax.scan(
+        _, (positions, energies) = jax.lax.scan(
             body, algorithm.init(start), jax.random.split(key, num_steps)
         )
-        return positions[record_every - 1 :: record_every], energies, acceptance
+        return positions[record_every - 1 :: record_every], energies
 
     keys = jax.random.split(rng_key, len(starts))
-    result = liesample.jit(jax.vmap(chain))(jnp.asarray(starts), keys)
-    return tuple(np.asarray(x) for x in result)
+    positions, energies = liesample.jit(jax.vmap(chain))(jnp.asarray(starts), keys)
+    return np.asarray(positions), np.asarray(energies)
 
 
 def draw_map(fig, spec, harmonics, x, title, limit):
@@ -98,36 +98,43 @@ def main(argv=None) -> int:
     size = args.size or (6 if args.quick else 24)
     steps = 40 if args.quick else 1000
     gibbs_chains = 2 if args.quick else 4
-    gibbs_steps = 40 if args.quick else 2000
+    gibbs_draws = 40 if args.quick else 1000  # after as many warm-up steps
     noise_degree = min(2 if args.quick else NOISE_DEGREE, size - 1)
     args.out.mkdir(parents=True, exist_ok=True)
 
-    start = random_vorticity(size, seed=1, slope=1.0, enstrophy=0.5 * ENSTROPHY)
-    # the start's orbit is the default position: it sets the adjusted sampler's automatic step
-    system = zeitlin_euler(size, noise_degree=noise_degree, position=start)
+    system = zeitlin_euler(size, noise_degree=noise_degree)
     harmonics = system.params["harmonics"]
+    start = random_vorticity(size, seed=1, slope=1.0, enstrophy=0.5 * ENSTROPHY)
+    # The Gibbs law does not depend on the noise, only the mixing does: the sampler moves every
+    # degree (low degrees alone mix the large scales slowly).
+    gibbs_system = zeitlin_euler(size, noise_degree=size - 1)
     record = steps // 2
     key = jax.random.key(0)
 
     euler = liesample.lie_poisson_langevin(system, sigma=0.0, theta=0.0, step_size=STEP_SIZE)
-    euler_path, euler_energy, _ = run_chains(euler, start[None], steps, key, record)
+    euler_path, euler_energy = run_chains(euler, start[None], steps, key, record)
     descent = liesample.lie_poisson_langevin(
         system, sigma=0.0, theta=THETA, step_size=STEP_SIZE
     )
-    descent_path, descent_energy, _ = run_chains(descent, start[None], steps, key, record)
-    gibbs = {}  # β -> (positions (C, T, N, N), h (C, steps))
+    descent_path, descent_energy = run_chains(descent, start[None], steps, key, record)
+    gibbs = {}  # β -> (positions (C, D, N, N), h (C, D), energy spectra (C, D, N − 1))
     starts = np.repeat(start[None], gibbs_chains, axis=0)
     for index, beta in enumerate(BETAS):
-        sampler = liesample.recommended_sampler(system, beta=beta)
-        positions, energies, acceptance = run_chains(
-            sampler, starts, gibbs_steps, jax.random.key(index + 1), gibbs_steps // 10
+        sampler = liesample.recommended_sampler(gibbs_system, beta=beta)
+        tree = liesample.sample(
+            sampler, jax.random.key(index + 1), starts, gibbs_draws,
+            observables={"h": gibbs_system.hamiltonian, "spectrum": energy_spectrum},
         )
-        gibbs[beta] = (positions, energies)
-        row = expectation_table({"h": energies[:, gibbs_steps // 2 :]}).loc["h"]
-        print(f"β = {beta:+g} ({sampler.settings['sampler']}, step "
-              f"{sampler.settings['step_size']:.3g}, acceptance {acceptance.mean():.2f}): "
-              f"E[h] over the second half = {row['estimate']:.4f} ± {row['mcse']:.4f} (MCSE), "
-              f"R-hat {row['r_hat']:.3f}")
+        posterior = tree.posterior
+        (position_name,) = set(posterior.data_vars) - {"h", "spectrum"}
+        h = np.asarray(posterior["h"])
+        gibbs[beta] = (np.asarray(posterior[position_name]), h,
+                       np.asarray(posterior["spectrum"]))
+        row = expectation_table({"h": h}).loc["h"]
+        print(f"β = {beta:+g} ({tree.attrs['sampler']}): E[h] = {row['estimate']:.4f} ± "
+              f"{row['mcse']:.4f} (MCSE), R-hat {row['r_hat']:.3f}, acceptance "
+              f"{float(tree.sample_stats['acceptance_rate'].mean()):.2f}, tuned step "
+              f"{tree.attrs['step_size']:.3g}")
     print(f"h: start {float(system.hamiltonian(jnp.asarray(start))):.4f}, Euler end "
           f"{euler_energy[0, -1]:.4f}, descent end {descent_energy[0, -1]:.4f}")
 
@@ -162,12 +169,11 @@ def main(argv=None) -> int:
     ax_t.legend(fontsize=8)
     for beta in BETAS:
         for chain, trace in enumerate(gibbs[beta][1]):
-            ax_g.plot(np.arange(1, gibbs_steps + 1), trace, lw=0.6,
-                      color="C3" if beta < 0 else "C0",
+            ax_g.plot(trace, lw=0.6, color="C3" if beta < 0 else "C0",
                       label=f"β = {beta:+g}" if chain == 0 else None)
     ax_g.axhline(float(system.hamiltonian(jnp.asarray(start))), color="k", ls="--", lw=1,
                  label="start")
-    ax_g.set_xlabel("step")
+    ax_g.set_xlabel("draw (after warm-up)")
     ax_g.set_ylabel("h")
     ax_g.set_title("Gibbs chains (adjusted sampler)", fontsize=9)
     ax_g.legend(fontsize=8)
@@ -176,8 +182,7 @@ def main(argv=None) -> int:
     ax_l.semilogy(ell, spectrum(jnp.asarray(start)), "k.-", label="start")
     ax_l.semilogy(ell, spectrum(jnp.asarray(descent_path[0, -1])), ".-", label="after descent")
     for beta in BETAS:
-        draws = gibbs[beta][0][:, gibbs[beta][0].shape[1] // 2 :].reshape(-1, size, size)
-        ax_l.semilogy(ell, np.mean(spectrum(jnp.asarray(draws)), axis=0), ".-",
+        ax_l.semilogy(ell, gibbs[beta][2].mean(axis=(0, 1)), ".-",
                       label=f"Gibbs mean, β = {beta:+g}")
     ax_l.set_xlabel("degree ℓ")
     ax_l.set_ylabel("energy ε_ℓ")

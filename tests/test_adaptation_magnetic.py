@@ -219,3 +219,37 @@ def test_trajectory_length_far_too_long_is_brought_back():
     _, times = _scaled_gaussian_run(100.0)
     assert np.max(times[50:]) < 10.0, times[::25]
     assert 0.9 < times[-1] < 3.6, times[::25]
+
+
+@pytest.mark.slow  # a real posterior, ~300 compiled warm-up steps; cheaper siblings above
+def test_trajectory_length_does_not_collapse_on_a_bayesian_linear_regression():
+    # Regression (posteriordb's sblrc-blr, `benchmarks/posteriordb_models.py`): from these
+    # uniform(−2, 2) starts T fell to ~1e-5 (one step per transition) and stayed there. Near
+    # the step's stability limit one step looked better than two to the gradient, which moved
+    # T down without end below ε; T is no longer lowered at T <= ε.
+    numpyro = pytest.importorskip("numpyro")
+    del numpyro
+    import sys
+    from pathlib import Path
+
+    from jax.flatten_util import ravel_pytree
+    from numpyro.infer.util import initialize_model
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository root
+    from benchmarks import posteriordb_models as pdb
+
+    posterior = pdb.load("sblrc-blr")
+    init, potential_fn, _, _ = initialize_model(
+        jax.random.key(0), posterior.model, model_kwargs=posterior.model_kwargs()
+    )
+    flat, unravel = ravel_pytree(init.z)
+
+    def logdensity_fn(x):
+        return -potential_fn(unravel(x))
+
+    starts = jax.random.uniform(jax.random.key(0), (CHAINS, flat.shape[0]), minval=-2, maxval=2)
+    warmup = magnetic_window_adaptation(logdensity_fn)
+    (_, parameters), info = warmup.run(jax.random.key(100), starts, num_steps=300)
+    times = np.asarray(info.trajectory_length)
+    assert times[-1] > 3.0 * parameters["step_size"], times[::25]
+    assert parameters["num_integration_steps"] >= 3

@@ -470,3 +470,59 @@ def test_samplers_match_the_exact_orbit_law_n4(sampler):
         algorithm = liesample.adjusted_lie_poisson(system, beta=beta, sigma=1.0, step_size=0.3)
         means = _chain_means(system, algorithm, 16, 3000, 200, seed=6)
     _check_against_orbit_law(system, beta, means, num_samples=400_000)
+
+
+# ---------------------------------------------------------------------------------------------
+# The adjusted step's cost: structured exponential, no per-step eigenproblem, refused noise
+# ---------------------------------------------------------------------------------------------
+
+
+def test_noise_of_rigid_rotations_alone_is_refused():
+    """ℓ = 1 noise only rotates the sphere rigidly, which keeps h: refused for N ≥ 3 (N = 2:
+    the rotations are all of su(2) and h is a Casimir, so it stays allowed)."""
+    for size in (3, 8):
+        with pytest.raises(ValueError, match="noise_degree=1 cannot mix.*noise_degree >= 2"):
+            zeitlin_euler(size, noise_degree=1)
+    assert zeitlin_euler(2, noise_degree=1).num_noises == 3
+
+
+@pytest.mark.parametrize("scale", [0.0, 1e-3, 0.7, 5.0, 300.0])
+def test_skew_hermitian_exponential_is_expm_and_unitary(rng, scale):
+    """``group_element`` (products only) equals SciPy's ``expm`` to round-off times ‖Z‖, is
+    unitary to round-off at any ‖Z‖, and is differentiable in forward mode at Z = 0."""
+    size = 6
+    algebra = zeitlin_euler(size).algebra
+    zetas = jnp.asarray(rng.standard_normal((3, size, size)) * scale)
+    u = np.asarray(liesample.jit(algebra.group_element)(zetas))
+    for z, one in zip(np.asarray(algebra.to_matrix(zetas)), u):
+        assert np.max(np.abs(one - scipy.linalg.expm(-z))) < 1e-14 * max(1.0, scale * size)
+        assert np.max(np.abs(one @ one.conj().T - np.eye(size))) < 1e-14
+    direction = jnp.asarray(rng.standard_normal((size, size)))
+    _, tangent = jax.jvp(algebra.group_element, (jnp.zeros((size, size)),), (direction,))
+    np.testing.assert_allclose(tangent, -algebra.to_matrix(direction), atol=1e-15)
+
+
+def test_adjusted_zeitlin_step_solves_no_eigenproblem():
+    """The compiled adjusted step on Zeitlin's model calls no eigensolver, LU or triangular
+    solve (the per-step Casimir drift is ‖W‖²'s), and that drift is what the Info reports."""
+    system = zeitlin_euler(5, noise_degree=2)
+    algorithm = liesample.adjusted_lie_poisson(system, beta=1.0, step_size=0.5)
+    state = algorithm.init(jnp.asarray(system.default_position))
+    primitives = str(jax.make_jaxpr(algorithm.step)(jax.random.key(0), state))
+    for name in ("eigh", "lu", "triangular_solve", "svd"):
+        assert f"{name}[" not in primitives, name
+    new_state, info = liesample.jit(algorithm.step)(jax.random.key(1), state)
+    norm_sq = float(jnp.sum(new_state.position**2))
+    reference = float(state.reference_casimirs[-1])
+    drift = abs(norm_sq - reference) / max(reference, norm_sq)
+    assert float(info.casimir_error) == pytest.approx(drift, abs=1e-15)  # sums' round-off
+    assert float(system.casimir_error(new_state.position, state.reference_casimirs)) < 1e-13
+
+
+def test_noise_by_the_harmonic_transform_equals_the_dense_streams():
+    """With many noise directions ĥ goes through the O(N³) transform; same values as the dense
+    streams ψ_i (to round-off)."""
+    system = zeitlin_euler(8, noise_degree=7, noise_smoothness=2)
+    x = jnp.asarray(random_vorticity(8, seed=3))
+    dense = jnp.einsum("knm,nm->k", jnp.asarray(system.params["noise_streams"]), x)
+    np.testing.assert_allclose(system.noise_hamiltonians(x), dense, atol=1e-15)

@@ -333,6 +333,11 @@ def so3_from_su2(x):
     return jnp.stack([m1, m2, m3], -1)
 
 
+# Noise streams kept as dense (m, N, N) arrays up to this many entries, and evaluated by one
+# contraction while m ≤ this many times N (beyond, the O(N³) harmonic transform is cheaper).
+_MAX_DENSE_STREAM_ENTRIES = 1 << 22
+_DENSE_NOISE_DIRECTIONS_PER_N = 4
+
 # Taylor degree of the exponential and the largest norm it takes without a squaring: the
 # remainder θ^17/17! stays below the double-precision unit round-off 2^−53.
 _TAYLOR_DEGREE = 16
@@ -429,19 +434,36 @@ class ZeitlinSystem(LiePoissonSystem):
                 )
 
 
-def zeitlin_euler(size: int, noise_degree: int = 2, noise_smoothness: int = 1, position=None):
+def zeitlin_euler(
+    size: int, noise_degree: int | None = None, noise_smoothness: int = 1, position=None
+):
     """Zeitlin's su(N) Euler equations on the sphere with transport noise (module docstring).
+
+    **Choosing the noise.** The Gibbs law ``exp(−βh)`` on the orbit does not depend on the
+    noise: ``noise_degree`` and ``noise_smoothness`` set only how fast a sampler mixes, and any
+    ``L ≥ 2`` is exact with ``adjusted_lie_poisson``. The defaults force every resolved degree
+    (``L = N − 1``) with L²-orthonormal velocity fields (``n = 1``), measured with
+    ``benchmarks/zeitlin.py``: at ``β > 0`` every choice mixes every degree's energy within a
+    few steps; at ``β < 0`` energy must flow into ``ℓ = 1`` (condensation), and noise on the
+    large scales alone (small ``L``) reaches stationarity from points spread over the orbit in
+    many times more steps, and gives a lower ESS per step of the slowest degree, than noise on
+    every degree; smoother noise (``n = 2``) is slower there than ``n ≤ 1``. With the adjusted
+    sampler the noise costs one O(N³) harmonic transform per step whatever ``L``. The
+    unadjusted sampler's ``splitting`` integrator moves one noise direction at a time, so its
+    step costs ``L(L + 2)`` moves: pass a small ``noise_degree`` there.
 
     Parameters
     ----------
     size : int
         ``N ≥ 2``; the vorticity is resolved up to degree ``ℓ = N − 1``.
-    noise_degree : int
-        ``L``: noise Hamiltonians from the ``L(L+2)`` modes ``1 ≤ ℓ ≤ L`` (``L ≤ N − 1``).
+    noise_degree : int or None
+        ``L``: noise Hamiltonians from the ``L(L+2)`` modes ``1 ≤ ℓ ≤ L`` (``L ≤ N − 1``);
+        ``None`` (default): ``N − 1``, every resolved degree.
         ``L = 1`` is refused for ``N ≥ 3``: rigid rotations alone keep ``h`` fixed (for
         ``N = 2`` they are the whole algebra and ``h`` is a Casimir).
     noise_smoothness : int
-        ``n ≥ 0``: ``ψ_ℓm = (ℓ(ℓ+1))^{−n/2} E_ℓm`` is orthonormal in ``⟨α, (−Δ)ⁿβ⟩``.
+        ``n ≥ 0``: ``ψ_ℓm = (ℓ(ℓ+1))^{−n/2} E_ℓm`` is orthonormal in ``⟨α, (−Δ)ⁿβ⟩``
+        (default 1).
     position : array (N, N), optional
         Default start; :func:`random_vorticity` (seed 0, ``‖W‖² = 1``) when omitted.
 
@@ -449,11 +471,15 @@ def zeitlin_euler(size: int, noise_degree: int = 2, noise_smoothness: int = 1, p
     -------
     LiePoissonSystem
         Algebra ``u(N)`` (:class:`liesample.geometry.algebras.Unitary`); Casimirs the spectrum of
-        ``iW`` and ``‖W‖²``. ``system.params["harmonics"]`` is the :class:`QuantisedHarmonics`.
+        ``iW`` and ``‖W‖²``. ``system.params["harmonics"]`` is the :class:`QuantisedHarmonics`;
+        ``system.params["noise_streams"]`` the ``ψ_i`` as an ``(m, N, N)`` array, or ``None``
+        where that would be large (many directions at large ``N``).
         ``system.reference(beta, position)`` is the exact orbit law by Haar importance sampling
         (:class:`liesample.targets.zeitlin.UnitaryOrbitLaw`), for small ``N``.
     """
     size = _check_size(size)
+    if noise_degree is None:
+        noise_degree = size - 1
     for name, value, low, high in (
         ("noise_degree", noise_degree, 1, size - 1),
         ("noise_smoothness", noise_smoothness, 0, None),
@@ -471,16 +497,29 @@ def zeitlin_euler(size: int, noise_degree: int = 2, noise_smoothness: int = 1, p
         )
     harmonics = quantised_harmonics(size)
     algebra = SkewHermitianUnitary(size)
-    modes = harmonics.basis(noise_degree, 1)
-    ell = harmonics.degrees[1 : (noise_degree + 1) ** 2]
-    streams = modes * (ell * (ell + 1.0))[:, None, None] ** (-0.5 * noise_smoothness)
-    streams.setflags(write=False)
+    num_noises = (noise_degree + 1) ** 2 - 1
+    ell = harmonics.degrees[1 : num_noises + 1]
+    weights = (ell * (ell + 1.0)) ** (-0.5 * noise_smoothness)
+    # The streams ψ_i as dense matrices (m N² floats) where that is small; the noise is then one
+    # contraction, O(m N²). With many directions the harmonic transform, O(N³), is cheaper.
+    streams = None
+    if num_noises * size * size <= _MAX_DENSE_STREAM_ENTRIES:
+        streams = harmonics.basis(noise_degree, 1) * weights[:, None, None]
+        streams.setflags(write=False)
 
     def hamiltonian(x):
         return harmonics.energy(x)
 
-    def noise_hamiltonians(x):
-        return jnp.einsum("knm,...nm->...k", jnp.asarray(streams, dtype=x.dtype), x)
+    if streams is not None and num_noises <= _DENSE_NOISE_DIRECTIONS_PER_N * size:
+
+        def noise_hamiltonians(x):
+            return jnp.einsum("knm,...nm->...k", jnp.asarray(streams, dtype=x.dtype), x)
+
+    else:
+
+        def noise_hamiltonians(x):
+            coefficients = harmonics.coefficients(x)[..., 1 : num_noises + 1]
+            return coefficients * jnp.asarray(weights, dtype=coefficients.dtype)
 
     def reference(beta, position):
         return UnitaryOrbitLaw(
@@ -495,7 +534,7 @@ def zeitlin_euler(size: int, noise_degree: int = 2, noise_smoothness: int = 1, p
         algebra=algebra,
         hamiltonian=hamiltonian,
         noise_hamiltonians=noise_hamiltonians,
-        num_noises=len(streams),
+        num_noises=num_noises,
         event_shape=(size, size),
         default_position=position,
         reference=reference,
