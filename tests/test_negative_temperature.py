@@ -110,3 +110,25 @@ def test_heavy_top_refuses_beta_where_its_law_is_not_normalisable(beta):
     for build in (liesample.lie_poisson_langevin, liesample.adjusted_lie_poisson):
         with pytest.raises(ValueError, match="not normalisable"):
             build(system, beta=beta)
+
+
+def test_adjusted_zeitlin_at_beta_zero_keeps_a_bounded_step_and_the_uniform_law():
+    """At β = 0 every proposal is accepted: the warm-up's step stays bounded
+    (``MAX_STEP_FACTOR`` times the construction's step) and the energy is that of the uniform
+    law on the orbit."""
+    from liesample.samplers.orbit.adjusted_lie_poisson import MAX_STEP_FACTOR
+
+    system = systems.zeitlin_euler(3, noise_degree=2, position=random_vorticity(3, seed=2))
+    law = system.reference(0.0, system.default_position)
+    sampler = liesample.adjusted_lie_poisson(system, beta=0.0)
+    starts = law.orbit_samples(np.random.default_rng(1), 8)
+    tree = liesample.sample(sampler, jax.random.key(7), starts, 300, progress=False)
+    assert tree.attrs["step_size"] <= MAX_STEP_FACTOR * sampler.settings["step_size"] * (1 + 1e-12)
+    energy = tree.sample_stats["energy"].values
+    assert np.all(np.isfinite(energy))
+    exact, exact_error, _ = law.expectations(
+        lambda x: np.asarray(system.hamiltonian(jnp.asarray(x)))[:, None], num_samples=100_000
+    )
+    means = energy.mean(axis=1)
+    mcse = means.std(ddof=1) / math.sqrt(len(means))
+    assert abs(means.mean() - exact[0]) < 4.5 * math.hypot(mcse, exact_error[0])

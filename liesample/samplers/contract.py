@@ -157,6 +157,9 @@ class StepSizeTuning(NamedTuple):
         ``at`` as arrays of the positions' dtype: one compiled warm-up serves every value.
     target_acceptance_rate : float or None
         What ``"dual_averaging"`` aims at.
+    max_step_size : float or None
+        The largest step ``"dual_averaging"`` may use (where every proposal is accepted, at
+        ``β = 0`` say, it would grow the step without bound); ``None``: no bound.
     """
 
     method: str
@@ -166,6 +169,7 @@ class StepSizeTuning(NamedTuple):
     at: Callable | None = None
     parameters: dict | None = None
     target_acceptance_rate: float | None = None
+    max_step_size: float | None = None
 
 
 class DrawNames(NamedTuple):

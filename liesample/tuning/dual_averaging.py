@@ -15,6 +15,7 @@ The steps are those of :func:`liesample.integrators.chain_loop.run_steps` (chain
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import jax
@@ -48,13 +49,13 @@ class _WarmupState(NamedTuple):
     adaptation: object  # blackjax's DualAveragingAdaptationState, the same in every chain
 
 
-def _adaptive(sampler_at, update):
+def _adaptive(sampler_at, update, max_step_size):
     """The warm-up as a sampler on ``_WarmupState``: one step of the sampler at the current
-    step size, then the dual-averaging update with the mean acceptance over the chains (the
-    step's info is that mean)."""
+    step size (at most ``max_step_size``), then the dual-averaging update with the mean
+    acceptance over the chains (the step's info is that mean)."""
 
     def move(advance, state):
-        sampler = sampler_at(jnp.exp(state.adaptation.log_step_size))
+        sampler = sampler_at(jnp.minimum(jnp.exp(state.adaptation.log_step_size), max_step_size))
         chain, info = advance(sampler, state.chain)
         rate = jax.lax.pmean(info.acceptance_rate, _CHAINS)
         return _WarmupState(chain, update(state.adaptation, rate)), rate
@@ -83,6 +84,7 @@ def dual_averaging(
     num_steps: int,
     target_acceptance_rate,
     parameters=None,
+    max_step_size=None,
 ) -> DualAveragingResult:
     """Tune the step size shared by the chains over ``num_steps`` warm-up steps.
 
@@ -104,20 +106,23 @@ def dual_averaging(
     parameters : dict, optional
         The sampler's other parameters (``StepSizeTuning.parameters``), passed to
         ``sampler_at`` as arrays of the positions' dtype.
+    max_step_size : float, optional
+        The largest step used and returned (``StepSizeTuning.max_step_size``).
     """
     init, update, final = dual_averaging_adaptation(target_acceptance_rate)
     first_kept = num_steps // 2
+    cap = math.inf if max_step_size is None else float(max_step_size)
 
     def accumulate(step, state, rate, total):
         del state
         return total + jnp.where(step >= first_kept, rate, 0.0)
 
     def chain(key, state, adaptation, parameters):
-        warmup = _adaptive(lambda step_size: sampler_at(step_size, **parameters), update)
+        warmup = _adaptive(lambda step_size: sampler_at(step_size, **parameters), update, cap)
         start = _WarmupState(state, adaptation)
         zero = jnp.zeros((), adaptation.log_step_size.dtype)
         end, total = run_steps(warmup, key, start, 0, num_steps, accumulate, zero)
-        return end.chain, final(end.adaptation), total / (num_steps - first_kept)
+        return end.chain, jnp.minimum(final(end.adaptation), cap), total / (num_steps - first_kept)
 
     @jit
     def run(chain_keys, states, initial, parameters):

@@ -77,6 +77,7 @@ def warm_up(sampler: Sampler, rng_key, chain_keys, states, initial_positions, nu
         num_warmup,
         tuning.target_acceptance_rate,
         tuning.parameters,
+        tuning.max_step_size,
     )
     target = tuning.target_acceptance_rate
     source = (

@@ -297,6 +297,11 @@ _DEFAULT_SOURCE = "default: kappa = 1.3 m^(-1/3) (no warm-up adaptation)"
 _ON_DEFAULT = "; on the orbit of the system's default position"
 
 
+MAX_STEP_FACTOR = 100.0
+"""The warm-up's step is at most this many times the construction's step (given, or the
+rule's on the default position)."""
+
+
 def _default_step_size(system, beta, sigma, position) -> float:
     """``κ = 1.3 m^{−1/3}`` in units of the stiffness on the orbit of ``position`` (module
     docstring), or ``0.4/σ²`` where ``h`` is flat along the noise (no stiffness)."""
@@ -431,6 +436,9 @@ def as_top_level_api(
         at=at,
         parameters={"sigma": sigma, "beta": beta},
         target_acceptance_rate=target,
+        # beyond this the noise alone crosses the orbit many times per step; at β = 0 every
+        # proposal is accepted and dual averaging would grow the step without bound
+        max_step_size=MAX_STEP_FACTOR * step_size,
     )
     return at(step_size, settings=settings, tuning=tuning)
 

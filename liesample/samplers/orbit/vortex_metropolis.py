@@ -258,6 +258,7 @@ def as_top_level_api(
         at=at,
         parameters={"beta": beta},
         target_acceptance_rate=target,
+        max_step_size=MAX_PROPOSAL_SCALE,
     )
     return at(settings["step_size"], settings=settings, tuning=tuning)
 
