@@ -34,7 +34,10 @@ def generic_noise(mu):
 
 
 def lagrange_top(noise=invariant_noise, **changes):
-    return heavy_top(**(LAGRANGE | changes), split_hamiltonian=True).with_noise(noise)
+    # a noise sharing the symmetry keeps Π₃: it reaches only Π₃'s level set, on purpose
+    reach = "level_set" if noise is invariant_noise else "test"
+    top = heavy_top(**(LAGRANGE | changes), split_hamiltonian=True)
+    return top.with_noise(noise, noise_reach=reach)
 
 
 def pi3_drift_along_sampler(system, integrator="splitting", beta=2.0, sigma=1.0, dt=0.05):

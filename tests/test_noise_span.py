@@ -66,3 +66,19 @@ def test_nonlinear_noise_that_only_rotates_rigidly_is_refused():
     assert span.rank == 3 and span.orbit_dimension == 6
     with pytest.raises(ValueError, match="cannot reach its orbit"):
         liesample.lie_poisson_langevin(rigid, beta=1.0, step_size=0.01)
+
+
+def test_a_symmetric_noise_is_refused_unless_declared_to_keep_its_level_set():
+    """Stochastic Noether: noise along Π₃ and Γ₃ keeps Π₃. Tested, it is refused (it cannot
+    reach the orbit); declared with ``noise_reach="level_set"``, it is accepted."""
+    top = systems.heavy_top(inertia=(1.0, 1.0, 2.0))
+
+    def symmetric(mu):
+        return jnp.stack([mu[2], mu[5]])
+
+    with pytest.raises(ValueError, match="noise_reach='level_set'"):
+        liesample.lie_poisson_langevin(top.with_noise(symmetric), beta=1.0, step_size=0.05)
+    kept = top.with_noise(symmetric, noise_reach="level_set")
+    liesample.lie_poisson_langevin(kept, beta=1.0, step_size=0.05)
+    with pytest.raises(ValueError, match="noise_reach must be one of"):
+        top.with_noise(symmetric, noise_reach="sometimes")

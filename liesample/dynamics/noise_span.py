@@ -182,5 +182,7 @@ def check_noise_reaches_orbit(system) -> None:
             f"brackets span {span.rank} of the orbit's {span.orbit_dimension} directions at a "
             "generic point, so the chain stays on a sub-manifold and does not sample "
             "exp(−βh). Add noise directions that do not commute among themselves (for "
-            "spherical-harmonic noise: degree 2 or more), e.g. with system.with_noise(...)"
+            "spherical-harmonic noise: degree 2 or more), e.g. with system.with_noise(...); "
+            "a noise that keeps a conserved quantity on purpose is declared with "
+            "with_noise(..., noise_reach='level_set')"
         )

@@ -18,7 +18,9 @@ from liesample.dynamics.noise_span import check_noise_reaches_orbit
 from liesample.foundation.validation import concrete_array
 from liesample.geometry.algebras import LieAlgebra
 
-__all__ = ["LiePoissonSystem", "count_noises"]
+__all__ = ["NOISE_REACH", "LiePoissonSystem", "count_noises"]
+
+NOISE_REACH = ("test", "orbit", "level_set")
 
 
 @dataclass(frozen=True, eq=False)
@@ -90,11 +92,13 @@ class LiePoissonSystem:
         at a time and then evaluates only that direction, so a piece costs one noise function
         instead of ``m``. Only with the default grouping (``noise_groups=None``). ``None``
         (default): every piece goes through ``noise_hamiltonians``.
-    noise_reaches_orbits : bool
-        ``True`` where the noise is known to reach every direction of every orbit (the
-        library's systems, each with its argument); ``False`` (default, and after
-        :meth:`with_noise`): :meth:`check_noise` runs the rank test of
-        :mod:`liesample.dynamics.noise_span` once, when a sampler is built.
+    noise_reach : {"test", "orbit", "level_set"}
+        What the noise reaches. ``"orbit"``: every direction of every orbit, known (the
+        library's systems, each with its arguments). ``"level_set"``: on purpose only the level
+        set of a conserved quantity through the start (stochastic Noether, paper
+        ``prop:stoch-noether``): the chain samples ``exp(−βh)`` restricted to it. ``"test"``
+        (default, and after :meth:`with_noise` unless told): :meth:`check_noise` runs the rank
+        test of :mod:`liesample.dynamics.noise_span` once, when a sampler is built.
     """
 
     name: str
@@ -114,7 +118,7 @@ class LiePoissonSystem:
     hamiltonian_pieces: tuple[Callable, ...] | None = None
     curvature_bound: bool = True
     single_noise_hamiltonian: Callable | None = None
-    noise_reaches_orbits: bool = False
+    noise_reach: str = "test"
 
     def __post_init__(self):
         if self.single_noise_hamiltonian is not None and self.noise_groups is not None:
@@ -132,13 +136,19 @@ class LiePoissonSystem:
             if set(np.unique(labels)) != set(range(int(labels.max()) + 1)):
                 raise ValueError("noise_groups labels must be 0, 1, …, G−1 with none missing")
 
-    def with_noise(self, noise_hamiltonians: Callable, noise_groups=None) -> LiePoissonSystem:
+    def with_noise(
+        self, noise_hamiltonians: Callable, noise_groups=None, *, noise_reach: str = "test"
+    ) -> LiePoissonSystem:
         """The same system driven by other unit-strength noise Hamiltonians ``μ ↦ (ĥ_1, …, ĥ_m)``.
 
         The dissipation follows (it is always derived from the noise); ``m`` is read off the
         function at ``default_position``. ``noise_groups`` applies to the new directions
-        (default: each direction its own group).
+        (default: each direction its own group). ``noise_reach="level_set"`` declares a noise
+        that keeps a conserved quantity on purpose (see the class docstring); by default the
+        new noise is tested when a sampler is built.
         """
+        if noise_reach not in NOISE_REACH:
+            raise ValueError(f"noise_reach must be one of {NOISE_REACH}, got {noise_reach!r}")
         num_noises = count_noises(noise_hamiltonians, self.default_position, "noise_hamiltonians")
         return replace(
             self,
@@ -146,14 +156,14 @@ class LiePoissonSystem:
             num_noises=num_noises,
             noise_groups=noise_groups,
             single_noise_hamiltonian=None,  # it evaluated the old functions
-            noise_reaches_orbits=False,
+            noise_reach=noise_reach,
         )
 
     def check_noise(self) -> None:
         """Raise ``ValueError`` where the noise provably cannot reach the whole orbit (the rank
         test of :func:`liesample.dynamics.noise_span.check_noise_reaches_orbit`), unless the
-        system declares ``noise_reaches_orbits``."""
-        if not self.noise_reaches_orbits:
+        system declares what its noise reaches (``noise_reach``)."""
+        if self.noise_reach == "test":
             check_noise_reaches_orbit(self)
 
     @property

@@ -121,7 +121,7 @@ def heavy_top(
         event_shape=(6,),
         default_position=np.concatenate([np.zeros(3), default_gamma]),
         reference=reference,
-        noise_reaches_orbits=True,  # linear noise along every axis of the algebra
+        noise_reach="orbit",  # linear noise along every axis of the algebra
         check_beta=check_beta,
         component_names=("Π₁", "Π₂", "Π₃", "Γ₁", "Γ₂", "Γ₃"),
         params={"inertia": moments, "mgl": mgl, "chi": tuple(chi_vector), "gravity": gravity},

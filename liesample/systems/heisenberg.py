@@ -270,7 +270,7 @@ def heisenberg(
         event_shape=(*shape, 3),
         default_position=default_position,
         reference=reference,
-        noise_reaches_orbits=True,  # three linear noises per spin span every sphere
+        noise_reach="orbit",  # three linear noises per spin span every sphere
         component_names=("s_x", "s_y", "s_z"),
         params={
             "shape": shape,

@@ -347,7 +347,7 @@ def point_vortices(circulations, max_degree: int = 2, radius: float = 1.0) -> Po
         check_beta=check_beta,
         # ℓ ≤ L transport with L >= 2: brackets of the ℓ = 2 fields reach every degree, and the
         # Hamiltonian fields of all degrees move distinct vortices independently
-        noise_reaches_orbits=True,
+        noise_reach="orbit",
         curvature_bound=False,  # h is singular at collisions: substepping handles stiffness
         circulations=gamma,
         radius=radius,

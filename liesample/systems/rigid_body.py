@@ -78,7 +78,7 @@ def rigid_body(inertia=(1.0, 2.0, 4.0), split_hamiltonian: bool = False) -> LieP
         event_shape=(3,),
         default_position=np.array([1.0, 1.0, 1.0]) / np.sqrt(3.0),
         reference=reference,
-        noise_reaches_orbits=True,  # linear noise along every axis of the algebra
+        noise_reach="orbit",  # linear noise along every axis of the algebra
         component_names=("μ₁", "μ₂", "μ₃"),
         params={"inertia": moments},
         hamiltonian_pieces=kinetic_pieces(inverse_inertia, lambda mu: mu)

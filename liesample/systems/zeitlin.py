@@ -442,8 +442,8 @@ def zeitlin_euler(
     **Choosing the noise.** The Gibbs law ``exp(−βh)`` on the orbit does not depend on the
     noise: ``noise_degree`` and ``noise_smoothness`` set only how fast a sampler mixes, and any
     ``L ≥ 2`` is exact with ``adjusted_lie_poisson``. The defaults force every resolved degree
-    (``L = N − 1``) with L²-orthonormal velocity fields (``n = 1``), measured with
-    ``benchmarks/zeitlin.py``: at ``β > 0`` every choice mixes every degree's energy within a
+    (``L = N − 1``) with L²-orthonormal velocity fields (``n = 1``), as measured (the project's
+    Zeitlin benchmark): at ``β > 0`` every choice mixes every degree's energy within a
     few steps; at ``β < 0`` energy must flow into ``ℓ = 1`` (condensation), and noise on the
     large scales alone (small ``L``) reaches stationarity from points spread over the orbit in
     many times more steps, and gives a lower ESS per step of the slowest degree, than noise on
@@ -540,7 +540,7 @@ def zeitlin_euler(
         reference=reference,
         # the ℓ ≤ L modes with L >= 2 generate su(N) under brackets (checked by the rank test of
         # liesample.dynamics.noise_span in tests/test_noise_span.py)
-        noise_reaches_orbits=True,
+        noise_reach="orbit",
         params={
             "N": size,
             "noise_degree": noise_degree,
