@@ -1,5 +1,6 @@
 """`liesample demo` writes its report, plots and draws, and refuses bad parameters cleanly."""
 
+import pytest
 import xarray as xr
 
 from liesample.cli import main
@@ -61,6 +62,7 @@ def test_demo_fails_when_every_step_diverges(tmp_path, capsys):
     assert "diverged" in capsys.readouterr().err
 
 
+@pytest.mark.slow  # a table detail; the failing-run exit code runs by default
 def test_isotropic_demo_leaves_out_the_constant_energy(tmp_path, capsys):
     """An isotropic body's h is constant on the orbit: no E[h] row (its R-hat is meaningless)."""
     argv = ["demo", "--inertia", "2", "2", "2", "--time", "100", "--chains", "2"]

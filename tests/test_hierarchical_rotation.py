@@ -77,6 +77,7 @@ def _within(draws, exact, name, z=5.0):
     assert abs(float(draws.mean()) - exact) < z * mcse, (name, float(draws.mean()), exact, mcse)
 
 
+@pytest.mark.slow  # a latent concentration inside a model runs by default (test_numpyro_distributions)
 def test_latent_concentration_posterior_matches_quadrature_with_four_chains():
     y = simulate()
     mcmc = MCMC(

@@ -25,7 +25,7 @@ def _z(tree, values, exact):
     return (values.reshape(-1, values.shape[-1]).mean(0) - exact) / mcse
 
 
-@pytest.mark.parametrize("beta", [-2.0, -6.0])
+@pytest.mark.parametrize("beta", [-2.0, pytest.param(-6.0, marks=pytest.mark.slow)])
 def test_adjusted_rigid_body_at_negative_beta_by_the_default_path(beta):
     """The restricted Gaussian at β < 0 concentrates on the largest-inertia axis (maximum
     energy); the adjusted sampler tunes its step by dual averaging and is exact."""
@@ -80,6 +80,7 @@ def test_heat_bath_spin_chain_at_negative_beta():
     assert abs(float(z[0])) < 4.5, z
 
 
+@pytest.mark.slow  # the default path at β < 0 runs by default on the rigid body and the spin chain
 def test_zeitlin_n3_at_negative_beta_by_the_default_path():
     """Zeitlin su(3) at β < 0 (energy pushed into the largest scale): the adjusted sampler with
     no step size given matches the exact orbit law (Haar importance sampling)."""
@@ -112,6 +113,7 @@ def test_heavy_top_refuses_beta_where_its_law_is_not_normalisable(beta):
             build(system, beta=beta)
 
 
+@pytest.mark.slow  # dual averaging on Zeitlin runs by default in the condensation example
 def test_adjusted_zeitlin_at_beta_zero_keeps_a_bounded_step_and_the_uniform_law():
     """At β = 0 every proposal is accepted: the warm-up's step stays bounded
     (``MAX_STEP_FACTOR`` times the construction's step) and the energy is that of the uniform

@@ -615,6 +615,7 @@ def test_vortex_metropolis_matches_an_independent_metropolis_many_chains(beta, p
     _onsager_check(beta, 4096, 300, published=published)
 
 
+@pytest.mark.slow  # the registry runs its contract, the Onsager example its tuned warm-up
 def test_vortex_metropolis_tunes_its_proposal_and_follows_the_contract():
     """The warm-up tunes ``proposal_scale`` to the target acceptance; a given scale is kept;
     the carried energy is ``h`` of the state; bad input is refused by name."""

@@ -113,7 +113,18 @@ def test_every_posterior_has_a_transcription():
     assert set(STAN) == set(pdb.POSTERIORS) == set(pdb.SPECS)
 
 
-@pytest.fixture(scope="module", params=pdb.POSTERIORS)
+# Two posteriors by default (one with a bound that depends on another parameter); every one in
+# make test-slow.
+DEFAULT_POSTERIORS = ("eight_schools-eight_schools_noncentered", "garch-garch11")
+
+
+@pytest.fixture(
+    scope="module",
+    params=[
+        name if name in DEFAULT_POSTERIORS else pytest.param(name, marks=pytest.mark.slow)
+        for name in pdb.POSTERIORS
+    ],
+)
 def posterior(request):
     return pdb.load(request.param)
 

@@ -32,6 +32,7 @@ def test_nonlinear_noise_gets_the_langevin_sampler():
     assert sampler.settings["sampler"] == "lie_poisson_langevin"
 
 
+@pytest.mark.slow  # the default path is tested per sampler (test_negative_temperature, ...)
 def test_recommended_sampler_runs_by_the_default_path():
     system = systems.rigid_body((1.0, 2.0, 3.0))
     target = system.reference(2.0, system.default_position)

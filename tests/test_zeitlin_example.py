@@ -9,6 +9,7 @@ GIBBS_LINE = re.compile(r"^β = ([+-]\d+) \((\w+)\W.*?E\[h\][^=]*= ([\d.]+) ±",
 
 # --quick is a smoke run (40 draws from one start): the runner rightly warns that its chains
 # have not converged
+@pytest.mark.slow  # its Gibbs scene's adjusted sampling is what the condensation example tests
 @pytest.mark.filterwarnings("ignore:the chains disagree")
 def test_salt_euler_example_runs(tmp_path, capsys, run_example):
     assert run_example("salt_euler", ["--quick", "--out", str(tmp_path)]) == 0
