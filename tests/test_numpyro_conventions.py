@@ -137,6 +137,7 @@ def test_init_to_value_starts_where_told():
     assert float(state.potential_energy) == pytest.approx(-float(logdensity), rel=1e-12)
 
 
+@pytest.mark.slow  # the refusals, init_to_value and the extra fields run by default
 def test_other_init_strategies_start_on_the_manifold():
     state, _ = _start(init_to_value(values={"scale": 0.5}), key=2)  # mu: init_to_uniform
     assert float(state.z["scale"]) == pytest.approx(np.log(0.5), abs=1e-15)
@@ -168,6 +169,7 @@ def gaussian_potential(x):
     return 0.5 * delta @ PRECISION @ delta
 
 
+@pytest.mark.slow  # the refusals, init_to_value and the extra fields run by default
 def test_potential_fn_with_dense_mass_recovers_a_correlated_gaussian():
     """Model-free use as in numpyro.infer.HMC: init_params per chain, draws are ``z``; the
     dense mass adapts to the covariance; find_heuristic_step_size and trajectory_length."""
@@ -217,6 +219,7 @@ def correlated_sites_model():
     numpyro.sample("mu", VonMisesFisher(NORTH, 2.0))
 
 
+@pytest.mark.slow  # the refusals, init_to_value and the extra fields run by default
 def test_dense_mass_joins_euclidean_sites_of_a_model():
     """``dense_mass=[("a", "b")]``: one dense block over two sites (a sphere site beside it);
     exact moments of the Gaussian and of the vMF's ``E[μ_z] = coth κ − 1/κ``; num_steps."""

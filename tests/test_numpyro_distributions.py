@@ -129,6 +129,7 @@ def test_a_latent_concentration_inside_a_model():
     assert np.allclose(R.T @ R, np.eye(3), atol=1e-12) and np.linalg.det(R) == pytest.approx(1.0)
 
 
+@pytest.mark.slow  # traced parameters under jit run by default
 def test_matrix_fisher_draws_for_a_traced_or_batched_F_are_exact():
     F = _proper_F([3.0, 1.0, -0.5], 2)
     draws = jax.jit(lambda F, key: MatrixFisher(F).sample(key, (4000,)))(F, jax.random.key(3))

@@ -196,6 +196,7 @@ def _pair_law_check(
     assert stats.kstest(c, law.cdf).pvalue > 1e-3
 
 
+@pytest.mark.slow  # the exact pair law of vortex_metropolis runs by default
 def test_pair_law_like_signed_full_scene():
     """``Γ = (1, 1)``, ``β = 4π`` (exponent 1, exact ``E[x₁·x₂] = −1/3``), Hamiltonian drift on,
     collision-safe splitting."""

@@ -96,7 +96,7 @@ def _vmf(d, k):
     return jax.vmap(log_c)(k), jax.vmap(jax.grad(log_c))(k), mean
 
 
-@pytest.mark.parametrize("d", [2, 3, 4, 5, 10])
+@pytest.mark.parametrize("d", [2, 3, pytest.param(4, marks=pytest.mark.slow), 5, 10])
 def test_vmf_normaliser_matches_scipy_and_its_derivatives(d):
     k = np.concatenate([[0.0], np.geomspace(1e-8, 1e5, 200)])
     log_c, slope, mean = (np.asarray(a) for a in _vmf(d, k))
