@@ -69,11 +69,12 @@ def _orthonormal_extension(basis: np.ndarray, candidates: np.ndarray, scale: flo
     return u[:, s > _RELATIVE_RANK_TOLERANCE * max(scale, 1e-300)]
 
 
-def _generic_point(system):
-    mu0 = jnp.asarray(system.default_position, dtype=jnp.float64)
-    rng = np.random.default_rng(_SEED)
-    zeta = jnp.asarray(0.7 * rng.standard_normal(mu0.shape), mu0.dtype)
-    return system.algebra.coadjoint_exp(zeta, mu0)
+def _orbit_point(system, mu, seed: int, size: float):
+    """``Ad*_{exp ζ} μ`` for a fixed random ``ζ`` of entries ``N(0, size²)``: on the orbit of
+    ``μ``, generic."""
+    rng = np.random.default_rng(seed)
+    zeta = jnp.asarray(size * rng.standard_normal(mu.shape), mu.dtype)
+    return system.algebra.coadjoint_exp(zeta, mu)
 
 
 def noise_span(system) -> NoiseSpan | None:
@@ -84,7 +85,7 @@ def noise_span(system) -> NoiseSpan | None:
 
 
 def _noise_span(system) -> NoiseSpan | None:
-    mu = _generic_point(system)
+    mu = _orbit_point(system, jnp.asarray(system.default_position, jnp.float64), _SEED, 0.7)
     shape, size = mu.shape, int(np.prod(mu.shape))
     if size > MAX_COORDINATES:
         return None
@@ -101,18 +102,12 @@ def _noise_span(system) -> NoiseSpan | None:
 
     gradients = jax.jacrev(lambda m: jnp.ravel(system.noise_hamiltonians(m)))
     at_mu = np.asarray(gradients(mu)).reshape(-1, size)  # (m, size)
-    other = _generic_point_shifted(system, mu)
+    other = _orbit_point(system, mu, _SEED + 1, 0.5)
     at_other = np.asarray(gradients(other)).reshape(-1, size)
     linear = np.allclose(at_mu, at_other, rtol=1e-9, atol=1e-12 * max(np.max(np.abs(at_mu)), 1))
     if linear:
         return _linear_span(algebra, shape, mu, at_mu, tangent, scale, orbit_dimension)
     return _nonlinear_span(system, mu, shape, tangent, scale, orbit_dimension)
-
-
-def _generic_point_shifted(system, mu):
-    rng = np.random.default_rng(_SEED + 1)
-    zeta = jnp.asarray(0.5 * rng.standard_normal(mu.shape), mu.dtype)
-    return system.algebra.coadjoint_exp(zeta, mu)
 
 
 def _padded(rows: np.ndarray) -> np.ndarray:

@@ -193,6 +193,11 @@ class LiePoissonSystem:
         drift = jnp.abs(self.casimirs(mu) - reference_casimirs) / scale
         return jnp.max(drift, initial=0.0)
 
+    def step_casimir_error(self, mu, reference_casimirs):
+        """The Casimir drift a sampler reports at every step: :meth:`casimir_error`, unless a
+        system overrides it with a cheaper invariant (Zeitlin's ``‖W‖²``)."""
+        return self.casimir_error(mu, reference_casimirs)
+
     def check_position(self, position, name: str = "position"):
         """Reject a state of the wrong shape, non-finite, or on a degenerate orbit (one of the
         ``positive_casimirs`` is ``≤ 0``)."""

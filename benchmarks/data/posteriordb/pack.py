@@ -21,15 +21,10 @@ from pathlib import Path
 import numpy as np
 
 OUT = Path(__file__).resolve().parent
-POSTERIORS = (
-    "eight_schools-eight_schools_noncentered",
-    "arK-arK",
-    "gp_pois_regr-gp_pois_regr",
-    "kidiq-kidscore_momiq",
-    "mesquite-logmesquite",
-    "garch-garch11",
-    "sblrc-blr",
-)
+sys.path.insert(0, str(OUT.parents[2]))
+
+from benchmarks.posteriordb_models import POSTERIORS  # the one list
+
 PDB = "posterior_database"
 
 

@@ -221,7 +221,7 @@ def build_noise_kernel(system: LiePoissonSystem):
     (:func:`check_linear_noise`).
     """
     check_linear_noise(system)
-    casimir_error = _per_step_casimir_error(system)
+    casimir_error = system.step_casimir_error
 
     def kernel(noise, state: AdjustedLiePoissonState, step_size, sigma, beta):
         normals, accept = noise[:-1], noise[-1]
@@ -259,13 +259,6 @@ def build_noise_kernel(system: LiePoissonSystem):
         return new_state, info
 
     return kernel
-
-
-def _per_step_casimir_error(system: LiePoissonSystem):
-    """The Casimir drift reported each step: the system's ``step_casimir_error`` where it
-    declares one (a cheap invariant, e.g. ``‖W‖²`` for Zeitlin's model, whose full spectrum
-    costs an eigenvalue problem per step), else ``casimir_error``."""
-    return getattr(system, "step_casimir_error", system.casimir_error)
 
 
 def _draw_noise(system, rng_key, shape, dtype):
