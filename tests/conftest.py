@@ -1,7 +1,19 @@
 import importlib.util
+import os
 from pathlib import Path
 
-import jax
+# The suite is compile-bound: thousands of small programs, each run briefly. XLA's LLVM back end
+# then spends more time optimising machine code than the tests spend running it, so the tests
+# compile with its cheap setting. This changes rounding (FMA contraction), never the HLO passes
+# (liesample.jit's miscompile guard is one), so every test still checks the same programs;
+# tests/test_draws_unchanged.py compares draws the way a user's process compiles them.
+# LIESAMPLE_TEST_FULL_OPTIMIZATION=1 runs the suite with XLA's default optimisation.
+FAST_COMPILE_FLAGS = "--xla_backend_optimization_level=0 --xla_llvm_disable_expensive_passes=true"
+USER_XLA_FLAGS = os.environ.setdefault("LIESAMPLE_USER_XLA_FLAGS", os.environ.get("XLA_FLAGS", ""))
+if os.environ.get("LIESAMPLE_TEST_FULL_OPTIMIZATION") != "1":
+    os.environ["XLA_FLAGS"] = f"{USER_XLA_FLAGS} {FAST_COMPILE_FLAGS}".strip()
+
+import jax  # after XLA_FLAGS: the CPU back end reads them once
 import pytest
 
 # Tests run in float64 (ARCHITECTURE.md, "Habits"); float32 has its own stability tests.

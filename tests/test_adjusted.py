@@ -209,8 +209,6 @@ def _rigid_like(noise_hamiltonians, hamiltonian=None):
         algebra=so3,
         hamiltonian=hamiltonian or (lambda mu: 0.5 * jnp.sum(inverse_inertia * mu * mu)),
         noise_hamiltonians=noise_hamiltonians,
-        num_noises=3,
-        event_shape=(3,),
         default_position=np.array([1.0, 1.0, 1.0]) / np.sqrt(3.0),
     )
 

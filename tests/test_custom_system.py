@@ -4,9 +4,12 @@
 import importlib.util
 from pathlib import Path
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
+import liesample
+from liesample.dynamics.system import LiePoissonSystem, coordinate_noise
 from liesample.geometry.algebras import so3
 from liesample.systems import lie_poisson_system
 
@@ -51,3 +54,36 @@ def test_system_is_inferred_from_the_functions():
 def test_bad_declarations(arguments, match):
     with pytest.raises((ValueError, TypeError), match=match):
         lie_poisson_system(*arguments)
+
+
+def test_declaration_reads_noise_count_and_shape_off_the_default_position():
+    """Left out, the noise is ``ĥ_i = μ_i`` along every coordinate and ``m``, the event shape
+    follow from ``default_position``; the library's linear-noise systems use that default."""
+    system = LiePoissonSystem(
+        name="free body",
+        algebra=so3,
+        hamiltonian=lambda mu: 0.5 * jnp.sum(mu * mu),
+        default_position=np.ones((2, 3)),
+    )
+    assert system.noise_hamiltonians is coordinate_noise
+    assert system.num_noises == 6 and system.event_shape == (2, 3)
+    np.testing.assert_array_equal(coordinate_noise(jnp.arange(6.0).reshape(2, 3)), np.arange(6.0))
+    assert liesample.systems.rigid_body().num_noises == 3
+    assert liesample.systems.heavy_top().num_noises == 6
+    assert liesample.systems.heisenberg((4,)).num_noises == 12
+    with pytest.raises(ValueError, match="1-D array"):
+        LiePoissonSystem(
+            name="bad",
+            algebra=so3,
+            hamiltonian=lambda mu: 0.0,
+            default_position=np.ones(3),
+            noise_hamiltonians=lambda mu: mu[None],
+        )
+
+
+def test_checked_beta_names_what_is_wrong():
+    assert liesample.systems.rigid_body().checked_beta(-2) == -2.0
+    with pytest.raises(ValueError, match="beta must be finite"):
+        liesample.systems.rigid_body().checked_beta(float("nan"))
+    with pytest.raises(ValueError, match="heavy top"):
+        liesample.systems.heavy_top().checked_beta(0.0)

@@ -541,8 +541,9 @@ def plot_spectra(
     return _save(fig, path)
 
 
-def plot_vorticity(values, theta, phi, path, *, labels: Sequence[str] | None = None,
-                   title: str | None = None):
+def plot_vorticity(
+    values, theta, phi, path, *, labels: Sequence[str] | None = None, title: str | None = None
+):
     """Vorticity maps ``ω(θ, φ)`` (latitude–longitude), one panel per field, one colour scale
     symmetric about 0.
 
@@ -570,8 +571,9 @@ def plot_vorticity(values, theta, phi, path, *, labels: Sequence[str] | None = N
     latitude, longitude = 90.0 - np.degrees(theta), np.degrees(phi)
     image = None
     for i, field in enumerate(fields):
-        image = axes[i].pcolormesh(longitude, latitude, field, cmap="RdBu_r", vmin=-scale,
-                                   vmax=scale, shading="nearest")
+        image = axes[i].pcolormesh(
+            longitude, latitude, field, cmap="RdBu_r", vmin=-scale, vmax=scale, shading="nearest"
+        )
         axes[i].set_xlabel("longitude (°)")
         axes[i].set_ylabel("latitude (°)")
         if labels is not None:

@@ -15,12 +15,19 @@ import jax.numpy as jnp
 import numpy as np
 
 from liesample.dynamics.noise_span import check_noise_reaches_orbit
-from liesample.foundation.validation import concrete_array
+from liesample.foundation.validation import concrete_array, finite_float
 from liesample.geometry.algebras import LieAlgebra
 
-__all__ = ["NOISE_REACH", "LiePoissonSystem", "count_noises"]
+__all__ = ["NOISE_REACH", "LiePoissonSystem", "coordinate_noise", "count_noises"]
 
 NOISE_REACH = ("test", "orbit", "level_set")
+
+
+def coordinate_noise(mu):
+    """The linear noise ``ĥ_i(μ) = μ_i``, one per coordinate of the state (flattened): on a
+    dual Lie algebra, the noise along every basis direction (paper, ``eq:poisson-langevin-eq``
+    with ``Φ_i = e_i``)."""
+    return jnp.ravel(mu)
 
 
 @dataclass(frozen=True, eq=False)
@@ -35,16 +42,17 @@ class LiePoissonSystem:
         Bracket, coadjoint action and Casimirs.
     hamiltonian : callable
         ``μ ↦ h(μ)``, a scalar.
+    default_position : array
+        A valid initial state; its shape is the shape of every state (``event_shape``).
     noise_hamiltonians : callable
         ``μ ↦ (ĥ_1(μ), …, ĥ_m(μ))``, unit-strength noise Hamiltonians; the noise is ``σ ĥ_i`` and
         the dissipation is derived from the same functions (paper,
-        ``eq:poisson-langevin-eq``).
-    num_noises : int
-        ``m``.
-    event_shape : tuple of int
-        Shape of one state ``μ``.
-    default_position : array
-        A valid initial state.
+        ``eq:poisson-langevin-eq``). Default :func:`coordinate_noise`: ``ĥ_i(μ) = μ_i``, one
+        linear noise per coordinate of the state (rotations about every axis of the algebra).
+    num_noises : int, optional
+        ``m``; read off ``noise_hamiltonians`` at ``default_position`` when left out.
+    event_shape : tuple of int, optional
+        Shape of one state ``μ``; ``default_position``'s shape when left out.
     reference : callable or None
         ``(beta, position) ↦`` the exact Gibbs law on the orbit through ``position``, or ``None``.
     component_names : tuple of str
@@ -104,13 +112,13 @@ class LiePoissonSystem:
     name: str
     algebra: LieAlgebra
     hamiltonian: Callable
-    noise_hamiltonians: Callable
-    num_noises: int
-    event_shape: tuple[int, ...]
     default_position: Any
-    reference: Callable | None = None
+    noise_hamiltonians: Callable = coordinate_noise
     component_names: tuple[str, ...] = ()
     params: dict = field(default_factory=dict)
+    num_noises: int | None = None
+    event_shape: tuple[int, ...] | None = None
+    reference: Callable | None = None
     noise_groups: Any = None
     positive_casimirs: tuple[int, ...] | None = None
     casimir_scale: Callable | None = None
@@ -121,6 +129,14 @@ class LiePoissonSystem:
     noise_reach: str = "test"
 
     def __post_init__(self):
+        # frozen: the derived fields are set once, here
+        if self.event_shape is None:
+            object.__setattr__(self, "event_shape", tuple(np.shape(self.default_position)))
+        if self.num_noises is None:
+            num_noises = count_noises(
+                self.noise_hamiltonians, self.default_position, "noise_hamiltonians"
+            )
+            object.__setattr__(self, "num_noises", num_noises)
         if self.single_noise_hamiltonian is not None and self.noise_groups is not None:
             raise ValueError(
                 "single_noise_hamiltonian applies when each noise direction is its own group: "
@@ -158,6 +174,14 @@ class LiePoissonSystem:
             single_noise_hamiltonian=None,  # it evaluated the old functions
             noise_reach=noise_reach,
         )
+
+    def checked_beta(self, beta) -> float:
+        """``β`` as a float: finite, and admissible for the system (``check_beta``), or a
+        ``ValueError`` that says why not."""
+        beta = finite_float("beta", beta)
+        if self.check_beta is not None:
+            self.check_beta(beta)
+        return beta
 
     def check_noise(self) -> None:
         """Raise ``ValueError`` where the noise provably cannot reach the whole orbit (the rank

@@ -196,6 +196,7 @@ def _ratio(order, kappa):
 
 # --------------------------------------------------------------------------- order 0, fast
 
+
 @jax.custom_jvp
 def log_bessel_i0(y):
     """``log I₀(y)`` for ``y ≥ 0`` from ``jax.scipy.special.i0e`` (Chebyshev expansions, cheaper

@@ -314,9 +314,7 @@ class CotangentBundle:
         leaves = self._leaves(momentum)
         masses = self._leaves(self.inverse_mass)
         terms = [
-            0.5 * jnp.sum(m * p**2)
-            for p, m, e in zip(leaves, masses, self.euclidean)
-            if not e
+            0.5 * jnp.sum(m * p**2) for p, m, e in zip(leaves, masses, self.euclidean) if not e
         ]
         if self.metric is not None:
             terms.append(self.metric.kinetic_energy(self._flat(leaves)))

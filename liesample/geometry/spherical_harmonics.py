@@ -262,8 +262,7 @@ def transport_mode(x, max_degree: int, index):
 # ---------------------------------------------------------------------------------------------
 
 
-def gauss_legendre_grid(max_degree: int, num_theta: int | None = None,
-                        num_phi: int | None = None):
+def gauss_legendre_grid(max_degree: int, num_theta: int | None = None, num_phi: int | None = None):
     """A grid on which :func:`harmonic_analysis` is exact for degree ``≤ L``.
 
     Returns ``(theta, phi, weights)``: ``num_theta ≥ L + 1`` Gauss–Legendre colatitudes
@@ -298,8 +297,9 @@ def _legendre_table(theta, max_degree):
     rows = [current]
     for ell in range(1, max_degree + 1):
         shifted = np.concatenate([np.zeros_like(current[:, :1]), current[:, :-1]], axis=1)
-        previous, current = current, a[ell] * z[:, None] * current - b[ell] * previous + (
-            c[ell] * shifted
+        previous, current = (
+            current,
+            a[ell] * z[:, None] * current - b[ell] * previous + (c[ell] * shifted),
         )
         rows.append(current)
     q = np.stack(rows, axis=1)  # [t, ℓ, m]

@@ -466,33 +466,19 @@ def richardson_romberg_run(
     beta,
     observables: Callable,
     *,
-    step_size,
-    initial_positions,
-    rng_key,
-    total_time,
-    burn_in=0.0,
     integrator=DEFAULT_INTEGRATOR,
-    sigma=1.0,
     order=None,
+    **run_options,
 ) -> RichardsonRomberg:
     """Run coupled chains at ``step_size`` and ``step_size/2`` and extrapolate.
 
-    ``order`` defaults to the integrator's declared weak order. Arguments as in
-    :func:`coupled_ergodic_averages`.
+    ``order`` defaults to the integrator's declared weak order. ``run_options`` (``step_size``,
+    ``initial_positions``, ``rng_key``, ``total_time``, and optionally ``burn_in``, ``sigma``)
+    are those of :func:`coupled_ergodic_averages`.
     """
     integrator = get_integrator(integrator)
     averages = coupled_ergodic_averages(
-        system,
-        beta,
-        observables,
-        step_size=step_size,
-        levels=2,
-        integrator=integrator,
-        sigma=sigma,
-        initial_positions=initial_positions,
-        rng_key=rng_key,
-        total_time=total_time,
-        burn_in=burn_in,
+        system, beta, observables, levels=2, integrator=integrator, **run_options
     )
     result = richardson_romberg(
         averages.chain_means[:, 0],

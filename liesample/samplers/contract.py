@@ -61,6 +61,7 @@ __all__ = [
     "CONTRACT_FIELDS",
     "REDUCE_OVER_THINNING",
     "SAMPLE_STATS_NAMES",
+    "BasicInfo",
     "DrawNames",
     "Sampler",
     "SamplerInfo",
@@ -79,6 +80,18 @@ CONTRACT_FIELDS = ("is_divergent", "acceptance_rate", "energy")
 @runtime_checkable
 class SamplerInfo(Protocol):
     """The Info contract as a protocol (the module docstring gives the meanings)."""
+
+    is_divergent: jax.Array
+    acceptance_rate: jax.Array
+    energy: jax.Array
+
+
+class BasicInfo(NamedTuple):
+    """An ``info`` with the contract's fields only, for samplers that report nothing more (the
+    spin and vortex sweeps): ``is_divergent`` (the step produced a non-finite state or energy,
+    and the chain kept its state), ``acceptance_rate`` (the fraction of the step's proposals
+    accepted: 1 for rejection-free moves, 0 for a divergent step), ``energy`` (``h`` of the
+    chain's state after the step)."""
 
     is_divergent: jax.Array
     acceptance_rate: jax.Array

@@ -16,9 +16,11 @@ Its orbit is the sphere ``|μ| = r`` and its Gibbs law there is the von Mises–
 
 Steps for your own system:
 
-1. Rename the constructor and fill in ``hamiltonian`` and ``noise_hamiltonians`` (JAX
-   functions of ``μ``; the state may carry leading axes, e.g. ``(N, 3)`` for ``N`` copies of
-   so(3)*, see :mod:`liesample.systems.heisenberg`).
+1. Rename the constructor and fill in ``hamiltonian`` (a JAX function of ``μ``; the state may
+   carry leading axes, e.g. ``(N, 3)`` for ``N`` copies of so(3)*, see
+   :mod:`liesample.systems.heisenberg`). The noise defaults to ``ĥ_i = e_i·μ`` along every
+   coordinate (:func:`liesample.dynamics.system.coordinate_noise`); pass
+   ``noise_hamiltonians=`` for another.
 2. Pick the algebra from :mod:`liesample.geometry.algebras` (``so3``, ``se3``, ``unitary(N)``
    or ``StructureConstants`` for any other).
 3. Give the exact reference if there is one (from :mod:`liesample.targets`, or a new module
@@ -64,9 +66,6 @@ def moment_in_field(field=(0.0, 0.0, 1.0)) -> LiePoissonSystem:
     def hamiltonian(mu):
         return -jnp.sum(jnp.asarray(b, mu.dtype) * mu, axis=-1)
 
-    def noise_hamiltonians(mu):
-        return mu  # ĥ_i = e_i·μ
-
     def reference(beta, position):
         radius = float(np.linalg.norm(np.asarray(position)))
         return VonMisesFisherLaw(mean_direction=b / strength, kappa=float(beta) * radius * strength)
@@ -75,9 +74,6 @@ def moment_in_field(field=(0.0, 0.0, 1.0)) -> LiePoissonSystem:
         name="moment in a field",
         algebra=so3,
         hamiltonian=hamiltonian,
-        noise_hamiltonians=noise_hamiltonians,
-        num_noises=3,
-        event_shape=(3,),
         default_position=np.array([1.0, 0.0, 0.0]),
         reference=reference,
         component_names=("μ₁", "μ₂", "μ₃"),

@@ -76,8 +76,7 @@ class MagneticScene(Scene):
 
 @dataclass(frozen=True, eq=False)
 class ChargedParticleSystem:
-    """What the charged particle declares: structure, ``h``, noise; built by
-    :func:`charged_particle`.
+    """What :func:`charged_particle` declares: the structure, ``h`` and the noise.
 
     Attributes
     ----------
@@ -312,9 +311,7 @@ class ChargedParticleDynamics:
         structure, mass = self.structure, self.system.mass
         if not callable(structure.magnetic_term):
             field = structure.magnetic_term if structure.magnetic else None
-            bundle = cotangent_bundle(
-                Euclidean((self.system.dimension,)), 1.0 / mass, field
-            )
+            bundle = cotangent_bundle(Euclidean((self.system.dimension,)), 1.0 / mass, field)
             flows = {f: bundle.kinetic_flow(f * step_size) for f in fractions(BAOAB, "A")}
             return _carrying(drift(bundle, flows))
 
@@ -391,9 +388,9 @@ def _derived_friction_rate(system: ChargedParticleSystem, sde: PoissonLangevinSD
         sde.structure, sde.hamiltonian, sde.noise_hamiltonians, 1.0, 0.0, sde.scene
     )
     with jax.ensure_compile_time_eval():
-        dissipation, fields = jit(
-            jax.vmap(lambda z: (sde.dissipation(z), unit.noise_fields(z)))
-        )(jnp.asarray(probes))
+        dissipation, fields = jit(jax.vmap(lambda z: (sde.dissipation(z), unit.noise_fields(z))))(
+            jnp.asarray(probes)
+        )
     dissipation, fields = np.asarray(dissipation), np.asarray(fields[0])
     momenta = probes[:, n:]
     gamma = -float(np.sum(dissipation[:, n:] * momenta) / np.sum(momenta * momenta))

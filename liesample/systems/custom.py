@@ -8,7 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from liesample.dynamics.system import LiePoissonSystem, count_noises
+from liesample.dynamics.system import LiePoissonSystem
 from liesample.geometry.algebras import LieAlgebra
 
 __all__ = ["LiePoissonSystem", "lie_poisson_system"]
@@ -59,8 +59,6 @@ def lie_poisson_system(
         algebra=algebra,
         hamiltonian=hamiltonian,
         noise_hamiltonians=noise_hamiltonians,
-        num_noises=count_noises(noise_hamiltonians, position, "noise_hamiltonians"),
-        event_shape=position.shape,
         default_position=position,
         **options,
     )

@@ -84,9 +84,6 @@ def heavy_top(
         if gravity:
             pieces += (lambda mu: jnp.sum(gravity_vector * mu[..., 3:]),)
 
-    def noise_hamiltonians(mu):
-        return mu  # ĥ_i = ⟨Π, e_i⟩, ĥ_{3+j} = ⟨Γ, e_j⟩
-
     def casimir_scale(mu):
         # |Π·Γ| ≤ ½|μ|² and |Γ|² ≤ |μ|²: the size of the round-off in either Casimir.
         return jnp.full(mu.shape[:-1] + (2,), jnp.sum(mu * mu, axis=-1)[..., None])
@@ -116,9 +113,6 @@ def heavy_top(
         name="heavy top",
         algebra=se3,
         hamiltonian=hamiltonian,
-        noise_hamiltonians=noise_hamiltonians,
-        num_noises=6,
-        event_shape=(6,),
         default_position=np.concatenate([np.zeros(3), default_gamma]),
         reference=reference,
         noise_reach="orbit",  # linear noise along every axis of the algebra

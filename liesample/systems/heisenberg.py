@@ -235,7 +235,6 @@ def heisenberg(
         )
     field = _field(field)
     anisotropy = finite_float("anisotropy", anisotropy)
-    num_sites = math.prod(shape)
     has_field = bool(np.any(field != 0.0))
 
     def hamiltonian(s):
@@ -245,9 +244,6 @@ def heisenberg(
         if anisotropy != 0.0:
             h = h - anisotropy * jnp.sum(s[..., 2] ** 2)
         return h
-
-    def noise_hamiltonians(s):
-        return jnp.reshape(s, (-1,))  # ĥ_{k,i} = e_i·s_k, index 3k + i
 
     exact_chain = len(shape) == 1 and not has_field and anisotropy == 0.0
 
@@ -265,10 +261,7 @@ def heisenberg(
         name=f"Heisenberg {geometry} {'x'.join(map(str, shape))}",
         algebra=so3,
         hamiltonian=hamiltonian,
-        noise_hamiltonians=noise_hamiltonians,
-        num_noises=3 * num_sites,
-        event_shape=(*shape, 3),
-        default_position=default_position,
+        default_position=default_position,  # noise ĥ_{k,i} = e_i·s_k, index 3k + i
         reference=reference,
         noise_reach="orbit",  # three linear noises per spin span every sphere
         component_names=("s_x", "s_y", "s_z"),

@@ -62,9 +62,6 @@ def rigid_body(inertia=(1.0, 2.0, 4.0), split_hamiltonian: bool = False) -> LieP
     def hamiltonian(mu):
         return 0.5 * jnp.sum(inverse_inertia * mu * mu)
 
-    def noise_hamiltonians(mu):
-        return mu  # ĥ_i = e_i·μ: rotations about the body axes
-
     def reference(beta, position):
         radius = float(np.linalg.norm(np.asarray(position)))
         return RestrictedGaussian(inertia=moments, beta=float(beta), radius=radius)
@@ -73,9 +70,6 @@ def rigid_body(inertia=(1.0, 2.0, 4.0), split_hamiltonian: bool = False) -> LieP
         name="rigid body",
         algebra=so3,
         hamiltonian=hamiltonian,
-        noise_hamiltonians=noise_hamiltonians,
-        num_noises=3,
-        event_shape=(3,),
         default_position=np.array([1.0, 1.0, 1.0]) / np.sqrt(3.0),
         reference=reference,
         noise_reach="orbit",  # linear noise along every axis of the algebra

@@ -135,8 +135,9 @@ def vortex_blobs(size: int, centres, strengths, widths=0.2) -> np.ndarray:
     theta, phi, weights = gauss_legendre_grid(size - 1, 2 * size, 4 * size)
     sin_theta = np.sin(theta)[:, None]
     points = np.stack(
-        np.broadcast_arrays(sin_theta * np.cos(phi), sin_theta * np.sin(phi),
-                            np.cos(theta)[:, None]),
+        np.broadcast_arrays(
+            sin_theta * np.cos(phi), sin_theta * np.sin(phi), np.cos(theta)[:, None]
+        ),
         axis=-1,
     )
     cosines = np.einsum("tpi,ki->tpk", points, centres)
@@ -144,8 +145,13 @@ def vortex_blobs(size: int, centres, strengths, widths=0.2) -> np.ndarray:
     return vorticity_from_grid(values, theta, size, weights)
 
 
-def rossby_haurwitz(size: int, degree: int = 4, order: int = 4, amplitude: float = 1.0,
-                    angular_velocity: float = 1.0) -> np.ndarray:
+def rossby_haurwitz(
+    size: int,
+    degree: int = 4,
+    order: int = 4,
+    amplitude: float = 1.0,
+    angular_velocity: float = 1.0,
+) -> np.ndarray:
     """A Rossby–Haurwitz wave: solid rotation ``ω = 2Ω cos θ`` plus ``amplitude · Y_ℓ^m``;
     real coordinates ``(N, N)``.
 
@@ -185,8 +191,14 @@ def rossby_haurwitz_angular_velocity(degree: int, angular_velocity: float = 1.0)
     return omega * (1.0 - 2.0 / (degree * (degree + 1)))
 
 
-def spectral_vorticity(size: int, spectrum: Callable | np.ndarray, seed: int = 0, *,
-                       energy: float | None = None, enstrophy: float | None = None) -> np.ndarray:
+def spectral_vorticity(
+    size: int,
+    spectrum: Callable | np.ndarray,
+    seed: int = 0,
+    *,
+    energy: float | None = None,
+    enstrophy: float | None = None,
+) -> np.ndarray:
     """A vorticity with the energy spectrum ``ε_ℓ`` exactly and random phases; real coordinates
     ``(N, N)``.
 
@@ -202,14 +214,15 @@ def spectral_vorticity(size: int, spectrum: Callable | np.ndarray, seed: int = 0
     values = np.asarray(values, dtype=float)
     if values.shape != degrees.shape or not np.all(np.isfinite(values)) or np.any(values < 0):
         raise ValueError(
-            f"spectrum must give {size - 1} finite values >= 0 (ℓ = 1 … {size - 1}), "
-            f"got {values!r}"
+            f"spectrum must give {size - 1} finite values >= 0 (ℓ = 1 … {size - 1}), got {values!r}"
         )
     if energy is not None and enstrophy is not None:
         raise ValueError("give at most one of energy and enstrophy")
     weight = degrees * (degrees + 1.0)
-    for name, target, total in (("energy", energy, values.sum()),
-                                ("enstrophy", enstrophy, np.sum(weight * values))):
+    for name, target, total in (
+        ("energy", energy, values.sum()),
+        ("enstrophy", enstrophy, np.sum(weight * values)),
+    ):
         if target is not None:
             target = finite_float(name, target)
             if target < 0 or total == 0:

@@ -20,6 +20,7 @@
 from __future__ import annotations
 
 import dataclasses
+import itertools
 
 import jax.numpy as jnp
 import numpy as np
@@ -81,8 +82,9 @@ class VonMisesFisherLaw:
     kappa: float
 
     def __post_init__(self):
-        object.__setattr__(self, "mean_direction", _unit_vector("mean_direction",
-                                                                self.mean_direction))
+        object.__setattr__(
+            self, "mean_direction", _unit_vector("mean_direction", self.mean_direction)
+        )
         object.__setattr__(self, "kappa", finite_float("kappa", self.kappa, nonnegative=True))
 
     @property
@@ -101,12 +103,35 @@ class VonMisesFisherLaw:
         return self.mean_resultant_length * self.mean_direction
 
 
-def _matrix_fisher_kernel(s, k, u):
-    """``K_k(u)·e^{−shift}``: the integrand of ``c(s)`` in its ``k``-th form, scaled."""
+def _matrix_fisher_kernel(s, k):
+    """The integrand ``K_k`` of ``c(s)`` in its ``k``-th form as ``(log_peak, scaled)``:
+    ``K_k = e^{log_peak} · scaled(1 − u, 1 + u)``, ``log_peak`` the largest exponent of
+    ``I₀ I₀ e^{s_k u}`` (the exponent ``a + b + s_k u`` is linear in ``u``, largest at an end
+    point), so ``scaled ≤ 1``. ``scaled`` takes ``1 ∓ u`` themselves, never their difference
+    from ``±1``: the integrand's boundary layers, of width down to ``1/max|s|``, sit there."""
     i, j = [m for m in range(3) if m != k]
-    a = 0.5 * abs(s[i] - s[j]) * (1.0 - u)
-    b = 0.5 * abs(s[i] + s[j]) * (1.0 + u)
-    return 0.5 * special.ive(0, a) * special.ive(0, b), a + b + s[k] * u
+    half_difference, half_sum = 0.5 * abs(s[i] - s[j]), 0.5 * abs(s[i] + s[j])
+    slope = half_sum - half_difference + s[k]  # d(a + b + s_k u)/du
+    log_peak = max(2.0 * half_sum + s[k], 2.0 * half_difference - s[k])  # at u = 1, u = −1
+
+    def scaled(one_minus_u, one_plus_u):
+        decay = slope * one_minus_u if slope >= 0.0 else -slope * one_plus_u
+        bessels = special.ive(0, half_difference * one_minus_u)
+        return 0.5 * bessels * special.ive(0, half_sum * one_plus_u) * np.exp(-decay)
+
+    return log_peak, scaled
+
+
+def _end_layer_edges(s) -> np.ndarray:
+    """Break points ``t`` of ``[0, 1]``, ``t`` the distance ``1 ∓ u`` from an end point of
+    ``[−1, 1]``: for large singular values ``K_k`` varies on scales down to ``1/max|s|`` next to
+    ``u = ±1`` (the decay of its exponential away from the peak, ``I₀``'s ``O(1)`` argument
+    range), far below what one adaptive rule on the whole interval resolves (a layer of width
+    ``1e−4`` falls between its nodes and its mass is lost). The pieces shrink geometrically,
+    by 4, down to below ``1e−3/max|s|``."""
+    scale = 1.0 + 2.0 * float(np.max(np.abs(s)))
+    depth = max(int(np.ceil(np.log(1e3 * scale) / np.log(4.0))), 1)
+    return np.concatenate([[0.0], 4.0 ** -np.arange(depth, -1, -1)])  # 0, 4^−depth, …, 1
 
 
 @dataclasses.dataclass(frozen=True)
@@ -134,17 +159,26 @@ class MatrixFisherLaw:
         return u * np.array([1.0, 1.0, det_u]), s, v * np.array([1.0, 1.0, det_v])
 
     def _integrals(self, s, k):
-        nodes = np.linspace(-1.0, 1.0, 3)
-        shift = max(_matrix_fisher_kernel(s, k, u)[1] for u in nodes)
+        """``(z, dz, log_peak)``: ``c = z e^{log_peak}``, ``∂c/∂s_k = dz e^{log_peak}`` (the
+        ``k``-th form, :func:`_matrix_fisher_kernel`), by adaptive quadrature on each half of
+        ``[−1, 1]`` in the distance ``t`` from its end point, piece by piece
+        (:func:`_end_layer_edges`)."""
+        log_peak, scaled = _matrix_fisher_kernel(s, k)
 
-        def f(u, power):
-            scaled, exponent = _matrix_fisher_kernel(s, k, u)
-            return u**power * scaled * np.exp(exponent - shift)
+        def right(t, power):  # u = 1 − t
+            return (1.0 - t) ** power * scaled(t, 2.0 - t)
 
-        opts = dict(epsabs=1e-14, epsrel=1e-12, limit=200)  # the scaled integrand is <= 1
-        z = integrate.quad(f, -1.0, 1.0, args=(0,), **opts)[0]
-        dz = integrate.quad(f, -1.0, 1.0, args=(1,), **opts)[0]
-        return z, dz, shift
+        def left(t, power):  # u = t − 1
+            return (t - 1.0) ** power * scaled(2.0 - t, t)
+
+        edges = _end_layer_edges(s)
+        opts = {"epsabs": 1e-300, "epsrel": 1e-13, "limit": 100}  # scaled integrand <= 1
+        z = dz = 0.0
+        for half in (right, left):
+            for lo, hi in itertools.pairwise(edges):
+                z += integrate.quad(half, lo, hi, args=(0,), **opts)[0]
+                dz += integrate.quad(half, lo, hi, args=(1,), **opts)[0]
+        return z, dz, log_peak
 
     def log_normalizer(self) -> float:
         """``log ∫_{SO(3)} exp(tr(FᵀR)) dR`` (Haar probability measure; 0 for ``F = 0``)."""

@@ -217,9 +217,7 @@ def _acg_envelope(lam):
 def _log_acceptance_ratio(x, A, omega, log_M):
     """``log[f*(x) / (M g*(x))]`` with ``f* = exp(−xᵀAx)``, ``g* = (xᵀΩx)^{−q/2}``; ≤ 0."""
     q = x.shape[-1]
-    return (
-        -jnp.sum(A * x * x, axis=-1) + 0.5 * q * jnp.log(jnp.sum(omega * x * x, axis=-1)) - log_M
-    )
+    return -jnp.sum(A * x * x, axis=-1) + 0.5 * q * jnp.log(jnp.sum(omega * x * x, axis=-1)) - log_M
 
 
 @partial(jit, static_argnames=("num_samples",))

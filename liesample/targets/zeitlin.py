@@ -38,7 +38,7 @@ __all__ = [
 
 def haar_unitaries(rng: np.random.Generator, num: int, size: int) -> np.ndarray:
     """``num`` i.i.d. Haar-distributed ``size × size`` unitaries, shape ``(num, size, size)``."""
-    z = (rng.standard_normal((num, size, size)) + 1j * rng.standard_normal((num, size, size)))
+    z = rng.standard_normal((num, size, size)) + 1j * rng.standard_normal((num, size, size))
     q, r = np.linalg.qr(z / np.sqrt(2.0))
     phases = np.diagonal(r, axis1=-2, axis2=-1)
     return q * (phases / np.abs(phases))[:, None, :]
@@ -83,8 +83,9 @@ class UnitaryOrbitLaw:
         w = u @ _to_matrix(self.position) @ np.conj(np.swapaxes(u, -1, -2))
         return _from_matrix(w)
 
-    def expectations(self, functions: Callable, num_samples: int = 200_000, seed: int = 0,
-                     batch: int = 20_000):
+    def expectations(
+        self, functions: Callable, num_samples: int = 200_000, seed: int = 0, batch: int = 20_000
+    ):
         """``(E_π[f], standard error)`` for ``f = functions(x)`` of shape ``(K, p)`` on a stack.
 
         Self-normalised importance sampling; the standard error is the delta-method one,

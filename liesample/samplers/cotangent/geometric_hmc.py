@@ -76,7 +76,9 @@ def check_integer(name, value):
         raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
 
 
-def check_options(momentum_persistence, divergence_threshold, persistent):
+def check_options(momentum_persistence, divergence_threshold, persistent) -> tuple:
+    """``(divergence_threshold, momentum_persistence, persistent)``, checked: the options a
+    transition takes after its step count."""
     value = concrete_array(momentum_persistence)
     if np.ndim(momentum_persistence) != 0 or (value is not None and not 0.0 <= value < 1.0):
         raise ValueError(
@@ -85,6 +87,7 @@ def check_options(momentum_persistence, divergence_threshold, persistent):
     check_divergence_threshold(divergence_threshold)
     if not isinstance(persistent, bool):
         raise TypeError(f"persistent must be a bool, got {persistent!r}")
+    return divergence_threshold, momentum_persistence, persistent
 
 
 def transition(
@@ -134,8 +137,7 @@ def build_kernel(
     inverse_mass_matrix=None, magnetic_field=None) -> (state, info)``; parameters may be
     traced (adaptation): the kinetic–magnetic exponential is then computed per transition."""
     scheme = hamiltonian_scheme(integrator)
-    check_options(momentum_persistence, divergence_threshold, persistent)
-    options = (divergence_threshold, momentum_persistence, persistent)
+    options = check_options(momentum_persistence, divergence_threshold, persistent)
 
     def kernel(
         rng_key,
@@ -213,10 +215,9 @@ def as_top_level_api(
     """
     check_positive_step_size(step_size)
     check_integer("num_integration_steps", num_integration_steps)
-    check_options(momentum_persistence, divergence_threshold, persistent)
+    options = check_options(momentum_persistence, divergence_threshold, persistent)
     scheme = hamiltonian_scheme(integrator)
     move = make_move(logdensity_fn, space, step_size, inverse_mass_matrix, magnetic_field, scheme)
-    options = (divergence_threshold, momentum_persistence, persistent)
 
     settings = space_settings(
         "geometric_hmc",

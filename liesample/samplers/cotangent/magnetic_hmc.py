@@ -188,8 +188,7 @@ def build_kernel(
     which mean the schemes with their coefficients and the exact kinetic+magnetic drift.
     """
     scheme = _scheme(integrator)
-    check_options(momentum_persistence, divergence_threshold, persistent)
-    options = (divergence_threshold, momentum_persistence, persistent)
+    options = check_options(momentum_persistence, divergence_threshold, persistent)
 
     def kernel(
         rng_key,
@@ -235,11 +234,12 @@ def as_top_level_api(
     magnetic_field,
     *,
     divergence_threshold: float = 1000.0,
+    integrator="leapfrog",
     momentum_persistence: float = 0.0,
     persistent: bool = True,
-    integrator="leapfrog",
 ) -> Sampler:
-    """Magnetic HMC: the arguments of ``blackjax.hmc`` plus ``magnetic_field``.
+    """Magnetic HMC: the arguments of ``blackjax.hmc`` (in its order) plus ``magnetic_field``,
+    ``momentum_persistence`` and ``persistent``.
 
     Parameters
     ----------
@@ -256,15 +256,15 @@ def as_top_level_api(
         see :func:`liesample.default_magnetic_field`.
     divergence_threshold : float
         ``ΔH`` above which a transition is flagged divergent (default 1000).
+    integrator : str or sequence of (effect, fraction) pairs
+        The scheme of one step, as for :func:`liesample.geometric_hmc`: ``"leapfrog"``
+        (default), ``"minimal_norm"``, a palindromic coefficient list of ``"B"`` and ``"A"``,
+        or BlackJAX's ``velocity_verlet`` / ``mclachlan``.
     momentum_persistence : float in [0, 1)
         ``α`` of the partial momentum refreshment; 0 (default) refreshes fully.
     persistent : bool
         Apply the ``(p, s) ↦ (−p, −s)`` flip after each Metropolis step (default ``True``; see
         the module docstring).
-    integrator : str or sequence of (effect, fraction) pairs
-        The scheme of one step, as for :func:`liesample.geometric_hmc`: ``"leapfrog"``
-        (default), ``"minimal_norm"``, a palindromic coefficient list of ``"B"`` and ``"A"``,
-        or BlackJAX's ``velocity_verlet`` / ``mclachlan``.
 
     Returns
     -------
@@ -275,10 +275,9 @@ def as_top_level_api(
     """
     d = check_parameters(step_size, inverse_mass_matrix, magnetic_field)
     check_integer("num_integration_steps", num_integration_steps)
-    check_options(momentum_persistence, divergence_threshold, persistent)
+    options = check_options(momentum_persistence, divergence_threshold, persistent)
     scheme = _scheme(integrator)
     move = euclidean_move(step_size, inverse_mass_matrix, magnetic_field, scheme)
-    options = (divergence_threshold, momentum_persistence, persistent)
 
     def init_fn(position, rng_key=None):
         state = init(position, logdensity_fn, rng_key)

@@ -18,7 +18,19 @@ from liesample.foundation.compile import jit
 from liesample.foundation.validation import concrete_array
 from liesample.samplers.contract import PositionCheck, first_bad_chain, raise_first_bad
 
-__all__ = ["check_orbit_starts", "check_start_energy", "distinct_orbits", "orbit_init_fn"]
+__all__ = [
+    "check_orbit_starts",
+    "check_start_energy",
+    "distinct_orbits",
+    "orbit_init_fn",
+    "orbit_settings",
+]
+
+
+def orbit_settings(name: str, system: LiePoissonSystem, beta, **settings) -> dict:
+    """What every orbit sampler reports first in ``settings``: its name, the system and ``β``;
+    then ``settings`` in order."""
+    return {"sampler": name, "system": system.name, "beta": beta, **settings}
 
 
 def orbit_init_fn(init, system: LiePoissonSystem, check_orbits):
@@ -77,9 +89,11 @@ def check_orbit_starts(system: LiePoissonSystem, positions):
     if batched is not None:
         batched(positions, "initial_positions")
     else:
-        chosen = casimirs if system.positive_casimirs is None else casimirs[
-            ..., list(system.positive_casimirs)
-        ]
+        chosen = (
+            casimirs
+            if system.positive_casimirs is None
+            else casimirs[..., list(system.positive_casimirs)]
+        )
         nondegenerate = np.all(chosen.reshape(len(positions), -1) > 0, axis=1)
         raise_first_bad(
             [PositionCheck(nondegenerate, "lies on a degenerate orbit")],

@@ -75,6 +75,7 @@ from liesample.samplers.orbit._starts import (
     distinct_orbits,
     orbit_groups,
     orbit_init_fn,
+    orbit_settings,
 )
 
 __all__ = [
@@ -314,7 +315,8 @@ def as_top_level_api(
     target_acceptance_rate=DEFAULT_TARGET_ACCEPTANCE_RATE,
     noise_block_size: int = DEFAULT_NOISE_BLOCK_SIZE,
 ) -> Sampler:
-    """Metropolis-adjusted Lie–Poisson sampler of ``exp(−βh)`` on the orbit of the initial state.
+    """Metropolis-adjusted Lie–Poisson sampler of ``exp(−βh)`` on the orbit of the initial
+    state, exact at every step size (module notes).
 
     Parameters
     ----------
@@ -350,9 +352,7 @@ def as_top_level_api(
     """
     if not isinstance(system, LiePoissonSystem):
         raise TypeError(f"system must be a LiePoissonSystem, got {type(system).__name__}")
-    beta = finite_float("beta", beta)
-    if system.check_beta is not None:
-        system.check_beta(beta)
+    beta = system.checked_beta(beta)
     system.check_noise()
     sigma = finite_float("sigma", sigma, positive=True)
     if step_size is not None:
@@ -361,16 +361,16 @@ def as_top_level_api(
     noise_block_size = check_block_size(noise_block_size)
     noise_kernel = build_noise_kernel(system)
     kernel = _keyed(system, noise_kernel)
-    settings = {
-        "sampler": "adjusted_lie_poisson",
-        "system": system.name,
-        "beta": beta,
-        "sigma": sigma,
-        "step_size": step_size,
-        "step_size_source": "given",
-        "target_acceptance_rate": target,
-        "noise_block_size": noise_block_size,
-    }
+    settings = orbit_settings(
+        "adjusted_lie_poisson",
+        system,
+        beta,
+        sigma=sigma,
+        step_size=step_size,
+        step_size_source="given",
+        target_acceptance_rate=target,
+        noise_block_size=noise_block_size,
+    )
     given = step_size is not None
     if not given:
         step_size = _default_step_size(system, beta, sigma, system.default_position)

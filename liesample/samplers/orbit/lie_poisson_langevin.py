@@ -271,18 +271,18 @@ def as_top_level_api(
         "noise_block_size": noise_block_size,
     }
     given = step_size is not None
-    settings = {
-        "sampler": "lie_poisson_langevin",
-        "system": system.name,
-        "beta": beta,
-        "sigma": sigma,
-        "theta": theta,
-        "integrator": integrator.name,
-        "stability": stability,
-        "step_size": step_size,
-        "step_size_source": "given" if given else _UNCHOSEN,
-        "noise_block_size": noise_block_size,
-    }
+    settings = _starts.orbit_settings(
+        "lie_poisson_langevin",
+        system,
+        beta,
+        sigma=sigma,
+        theta=theta,
+        integrator=integrator.name,
+        stability=stability,
+        step_size=step_size,
+        step_size_source="given" if given else _UNCHOSEN,
+        noise_block_size=noise_block_size,
+    )
 
     def choose(positions, rng_key=None):
         """The bias model's step for the starts ``positions``: without a key (no warm-up) on
@@ -298,7 +298,7 @@ def as_top_level_api(
             sigma=sigma,
             integrator=integrator,
             initial_positions=positions,
-            rng_key=jax.random.key(0) if rng_key is None else rng_key,
+            rng_key=rng_key,  # None: key(0)
             relative_tolerance=bias_tolerance,
         )
         return choice.step_size, "bias model: " + _source(choice)

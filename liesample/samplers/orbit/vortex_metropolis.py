@@ -36,7 +36,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from liesample.foundation.validation import finite_float
-from liesample.samplers.contract import Sampler, StepSizeTuning, rebuilt, sampling_api
+from liesample.samplers.contract import BasicInfo, Sampler, StepSizeTuning, rebuilt, sampling_api
+from liesample.samplers.orbit._starts import orbit_settings
 from liesample.systems.point_vortices import PointVortexSystem
 
 __all__ = [
@@ -69,19 +70,9 @@ class VortexState(NamedTuple):
     energy: jax.Array
 
 
-class VortexInfo(NamedTuple):
-    """What one sweep did.
-
-    is_divergent : the sweep produced a non-finite state or energy; the chain kept its state.
-    acceptance_rate : fraction of the ``N`` proposals accepted (0 for a divergent sweep).
-    energy : ``h`` of the chain's state after the sweep.
-    num_accepted : how many of the ``N`` proposals were accepted.
-    """
-
-    is_divergent: jax.Array
-    acceptance_rate: jax.Array
-    energy: jax.Array
-    num_accepted: jax.Array
+VortexInfo = BasicInfo
+"""What one sweep did: the Info contract's fields only (``acceptance_rate``: the fraction of the
+``N`` single-vortex proposals accepted)."""
 
 
 def _check_system(system) -> PointVortexSystem:
@@ -154,7 +145,7 @@ def build_kernel(system: PointVortexSystem, proposal: str = "rotation"):
         energy = jnp.where(divergent, state.energy, energy)
         accepted = jnp.where(divergent, 0, accepted)
         rate = accepted.astype(dtype) / num_vortices
-        return VortexState(x, energy), VortexInfo(divergent, rate, energy, accepted)
+        return VortexState(x, energy), VortexInfo(divergent, rate, energy)
 
     return kernel
 
@@ -197,9 +188,7 @@ def as_top_level_api(
         ``liesample.sample``. It declares ``tuning`` (dual averaging of ``proposal_scale``).
     """
     _check_system(system)
-    beta = finite_float("beta", beta)
-    if system.check_beta is not None:
-        system.check_beta(beta)
+    beta = system.checked_beta(beta)
     if proposal not in PROPOSALS:
         raise ValueError(f"proposal must be one of {PROPOSALS}, got {proposal!r}")
     given = proposal_scale is not None
@@ -207,15 +196,15 @@ def as_top_level_api(
         proposal_scale = finite_float("proposal_scale", proposal_scale, positive=True)
     target = finite_float("target_acceptance_rate", target_acceptance_rate, rate=True)
     kernel = build_kernel(system, proposal)
-    settings = {
-        "sampler": "vortex_metropolis",
-        "system": system.name,
-        "beta": beta,
-        "proposal": proposal,
-        "step_size": proposal_scale if given else DEFAULT_PROPOSAL_SCALE,
-        "step_size_source": "given" if given else _SOURCE_DEFAULT,
-        "target_acceptance_rate": target,
-    }
+    settings = orbit_settings(
+        "vortex_metropolis",
+        system,
+        beta,
+        proposal=proposal,
+        step_size=proposal_scale if given else DEFAULT_PROPOSAL_SCALE,
+        step_size_source="given" if given else _SOURCE_DEFAULT,
+        target_acceptance_rate=target,
+    )
 
     def init_fn(position, rng_key=None):
         return init(position, system, rng_key)
@@ -250,15 +239,9 @@ def as_top_level_api(
             init_fn, step_fn, settings=settings, check_positions=check_positions, tuning=tuning
         )
 
+    # dual averaging of the proposal scale at ``target``, up to MAX_PROPOSAL_SCALE
     tuning = StepSizeTuning(
-        "dual_averaging",
-        given,
-        choose,
-        rebuild,
-        at=at,
-        parameters={"beta": beta},
-        target_acceptance_rate=target,
-        max_step_size=MAX_PROPOSAL_SCALE,
+        "dual_averaging", given, choose, rebuild, at, {"beta": beta}, target, MAX_PROPOSAL_SCALE
     )
     return at(settings["step_size"], settings=settings, tuning=tuning)
 

@@ -35,8 +35,8 @@ import numpy as np
 
 from liesample.foundation.validation import finite_float
 from liesample.geometry.algebras import so3
-from liesample.samplers.contract import Sampler
-from liesample.samplers.orbit._starts import orbit_groups
+from liesample.samplers.contract import BasicInfo, Sampler
+from liesample.samplers.orbit._starts import orbit_groups, orbit_settings
 from liesample.systems.heisenberg import (
     SpinLatticeSystem,
     colouring,
@@ -72,18 +72,8 @@ class SpinState(NamedTuple):
     position: jax.Array
 
 
-class SpinInfo(NamedTuple):
-    """What one step did.
-
-    is_divergent : the step produced a non-finite state or energy; the chain kept its state.
-    acceptance_rate : fraction of accepted proposals (1 for rejection-free moves, 0 for a
-        divergent step).
-    energy : ``h`` of the chain's state after the step.
-    """
-
-    is_divergent: jax.Array
-    acceptance_rate: jax.Array
-    energy: jax.Array
+SpinInfo = BasicInfo
+"""What one step of a spin sampler did: the Info contract's fields only."""
 
 
 def check_spin_system(system) -> dict:
@@ -125,7 +115,7 @@ def spin_sampler(name: str, kernel, system: SpinLatticeSystem, beta, *parameters
     def step_fn(rng_key, state):
         return kernel(rng_key, state, beta, *parameters)
 
-    settings = {"sampler": name, "system": system.name, "beta": beta, **settings}
+    settings = orbit_settings(name, system, beta, **settings)
     return Sampler(init_fn, step_fn, settings=settings, law_groups=orbit_groups(system))
 
 
@@ -239,4 +229,3 @@ def check_sweeps(name: str, value) -> int:
     if value < 0:
         raise ValueError(f"{name} must be a non-negative int (sweeps per step), got {value!r}")
     return int(value)
-

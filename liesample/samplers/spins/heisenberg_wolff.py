@@ -184,6 +184,4 @@ def as_top_level_api(system: SpinLatticeSystem, *, beta) -> Sampler:
     return spin_sampler("heisenberg_wolff", kernel, system, beta)
 
 
-heisenberg_wolff = sampling_api(
-    as_top_level_api, init, build_kernel, "heisenberg_wolff", __name__
-)
+heisenberg_wolff = sampling_api(as_top_level_api, init, build_kernel, "heisenberg_wolff", __name__)
