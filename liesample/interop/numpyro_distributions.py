@@ -55,6 +55,7 @@ except ImportError as error:  # an optional integration module
     ) from error
 
 import math
+from typing import ClassVar
 
 import jax
 import jax.numpy as jnp
@@ -150,7 +151,7 @@ def _wood_cosine(key, kappa, d):
 class VonMisesFisher(Distribution):
     """von Mises–Fisher law on the unit sphere ``S^{d−1}`` (module docstring)."""
 
-    arg_constraints = {
+    arg_constraints: ClassVar[dict] = {
         "mean_direction": constraints.sphere,
         "concentration": constraints.nonnegative,
     }
@@ -239,7 +240,10 @@ class Bingham(Distribution):
     default). Antipodally symmetric: the mean is 0; :meth:`second_moment` is ``E[x xᵀ]``.
     """
 
-    arg_constraints = {"concentration": constraints.real_vector, "orientation": rotation}
+    arg_constraints: ClassVar[dict] = {
+        "concentration": constraints.real_vector,
+        "orientation": rotation,
+    }
     support = constraints.sphere
 
     def __init__(self, concentration, orientation=None, *, validate_args=None):
@@ -393,7 +397,7 @@ class MatrixFisher(Distribution):
     batch.
     """
 
-    arg_constraints = {"F": constraints.independent(constraints.real, 2)}
+    arg_constraints: ClassVar[dict] = {"F": constraints.independent(constraints.real, 2)}
     support = rotation
 
     def __init__(self, F, *, validate_args=None):
