@@ -48,8 +48,9 @@ def rng():
 @pytest.mark.parametrize("size", [3])
 def test_unitary_algebra_identities(rng, size):
     algebra = Unitary(size)
-    ops = {op: liesample.jit(getattr(algebra, op)) for op in ("bracket", "ad_star",
-                                                              "coadjoint_exp")}
+    ops = {
+        op: liesample.jit(getattr(algebra, op)) for op in ("bracket", "ad_star", "coadjoint_exp")
+    }
     mu, xi, eta = rng.normal(size=(3, size, size))
     scale = np.linalg.norm(mu) * np.linalg.norm(xi) * np.linalg.norm(eta)
     # ⟨ad*_ξ μ, η⟩ = ⟨μ, [ξ, η]⟩, and the real-coordinate sum is −tr(WΞ)
@@ -107,8 +108,14 @@ class Compiled:
 
     def __init__(self, size):
         self.raw = quantised_harmonics(size)
-        for op in ("laplacian", "inverse_laplacian", "coefficients", "from_coefficients",
-                   "energy", "energy_spectrum"):
+        for op in (
+            "laplacian",
+            "inverse_laplacian",
+            "coefficients",
+            "from_coefficients",
+            "energy",
+            "energy_spectrum",
+        ):
             setattr(self, op, liesample.jit(getattr(self.raw, op)))
 
     def __getattr__(self, name):
@@ -132,9 +139,7 @@ def test_laplacian_is_the_su2_casimir_with_spectrum_l_l_plus_1(rng, size):
     algebra = Unitary(size)
     x = rng.normal(size=(size, size))
     w = algebra.to_matrix(x)
-    by_commutators = -sum(
-        s @ (s @ w - w @ s) - (s @ w - w @ s) @ s for s in spin_matrices(size)
-    )
+    by_commutators = -sum(s @ (s @ w - w @ s) - (s @ w - w @ s) @ s for s in spin_matrices(size))
     assert np.allclose(basis.laplacian(x), algebra.from_matrix(by_commutators), atol=1e-12)
     e = basis.basis(size - 1, 0)
     ell = basis.degrees
@@ -164,8 +169,9 @@ def test_symbols_of_the_basis_are_positive_multiples_of_the_real_harmonics(rng, 
         theta, phi = math.acos(rng.uniform(-1, 1)), rng.uniform(0, 2 * math.pi)
         state = scipy.linalg.expm(-1j * phi * sz) @ scipy.linalg.expm(-1j * theta * sy)[:, 0]
         symbols.append(np.real(np.einsum("i,kij,j->k", state.conj(), -1j * e, state)))
-        points.append([math.sin(theta) * math.cos(phi), math.sin(theta) * math.sin(phi),
-                       math.cos(theta)])
+        points.append(
+            [math.sin(theta) * math.cos(phi), math.sin(theta) * math.sin(phi), math.cos(theta)]
+        )
     harmonics = np.asarray(real_spherical_harmonics(jnp.asarray(points), size - 1))
     for k in range(size * size):
         ratio = np.array(symbols)[:, k] / harmonics[:, k]
@@ -327,6 +333,7 @@ def test_isospectral_midpoint_is_modin_viviani():
     algebra = system.algebra
     h = 0.05
     w0 = np.asarray(algebra.to_matrix(jnp.asarray(EULER_START)))
+
     def p_of(w):
         return np.asarray(algebra.to_matrix(basis.inverse_laplacian(algebra.from_matrix(w))))
 
@@ -418,8 +425,9 @@ def _chain_means(system, algorithm, num_chains, num_steps, burn_in, seed):
 def _check_against_orbit_law(system, beta, means, num_samples=100_000):
     law = system.reference(beta, system.default_position)
     exact, exact_error, ess = law.expectations(
-        lambda x: np.concatenate([np.asarray(system.hamiltonian(jnp.asarray(x)))[:, None],
-                                  _observables(x)], -1),
+        lambda x: np.concatenate(
+            [np.asarray(system.hamiltonian(jnp.asarray(x)))[:, None], _observables(x)], -1
+        ),
         num_samples=num_samples,
         seed=11,
     )
@@ -517,6 +525,25 @@ def test_adjusted_zeitlin_step_solves_no_eigenproblem():
     drift = abs(norm_sq - reference) / max(reference, norm_sq)
     assert float(info.casimir_error) == pytest.approx(drift, abs=1e-15)  # sums' round-off
     assert float(system.casimir_error(new_state.position, state.reference_casimirs)) < 1e-13
+
+
+def test_unadjusted_zeitlin_step_on_the_orbit_solves_no_eigenproblem():
+    """``lie_poisson_langevin`` with an orbit integrator reports the cheap ‖W‖² drift and calls
+    no eigensolver; an integrator that leaves the orbit still reports the whole spectrum's."""
+    system = zeitlin_euler(5, noise_degree=2)
+    state = None
+    for integrator, eigensolver in (("rkmk_heun", False), ("euler_heun", True)):
+        algorithm = liesample.lie_poisson_langevin(
+            system, beta=1.0, step_size=0.01, integrator=integrator
+        )
+        state = algorithm.init(jnp.asarray(system.default_position))
+        primitives = str(jax.make_jaxpr(algorithm.step)(jax.random.key(0), state))
+        assert ("eigh[" in primitives) == eigensolver, integrator
+        new_state, info = liesample.jit(algorithm.step)(jax.random.key(1), state)
+        expected = (system.casimir_error if eigensolver else system.step_casimir_error)(
+            new_state.position, state.reference_casimirs
+        )
+        assert float(info.casimir_error) == pytest.approx(float(expected), abs=1e-15)
 
 
 def test_noise_by_the_harmonic_transform_equals_the_dense_streams():
