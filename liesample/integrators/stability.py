@@ -85,8 +85,11 @@ def noise_curvatures(system, mu, directions=None):
     """``h''_i(μ)``, the second derivative of ``h`` along each noise flow, shape ``(m,)`` (or
     only for the noise directions listed in ``directions``)."""
     mu = jnp.asarray(mu)
-    directions_all = jax.jacrev(system.noise_hamiltonians)(mu).reshape((-1, *mu.shape))
-    directions = directions_all if directions is None else directions_all[directions]
+    # only the gradients asked for: one pullback each, never the whole (m, dim) Jacobian
+    values, pullback = jax.vjp(system.noise_hamiltonians, mu)
+    rows = jnp.eye(values.shape[0], dtype=values.dtype)
+    rows = rows if directions is None else rows[jnp.asarray(directions)]
+    directions = jax.vmap(lambda row: pullback(row)[0])(rows)
 
     def along(xi):
         def h_at(phi):
