@@ -72,8 +72,11 @@ def test_adapted_parameters_are_valid(adapted):
     trajectory = float(info.trajectory_length[-1])
     assert parameters["num_integration_steps"] == int(np.ceil(trajectory / step_size))
     assert states.position.shape == (CHAINS, 3)
-    # During the warm-up the field turned the whitened velocity by `angle` per step.
-    np.testing.assert_allclose(np.asarray(info.strength * info.step_size), 0.5, rtol=1e-12)
+    # The field is off up to the end of the first slow window (step 99 of 400, when the mass is
+    # first set); from there on it turned the whitened velocity by `angle` per step.
+    angle_per_step = np.asarray(info.strength * info.step_size)
+    np.testing.assert_array_equal(angle_per_step[:100], 0.0)
+    np.testing.assert_allclose(angle_per_step[100:], 0.5, rtol=1e-12)
     assert np.all(np.asarray(info.num_integration_steps) >= 1)
     # The sampler the parameters are for builds (checks included).
     liesample.magnetic_hmc(logdensity_fn=lambda x: -0.5 * x @ x, **parameters)
@@ -219,6 +222,28 @@ def test_trajectory_length_far_too_long_is_brought_back():
     _, times = _scaled_gaussian_run(100.0)
     assert np.max(times[50:]) < 10.0, times[::25]
     assert 0.9 < times[-1] < 3.6, times[::25]
+
+
+def test_step_size_does_not_collapse_under_the_field_from_far_starts():
+    # Regression (posteriordb's gp_pois_regr and blr at angle 0.25: ε fell to ~3e-4 and T sat
+    # at the step cap). The field is scaled to the step (angle / ε), which the stiff pair sets,
+    # so it is strong for the slow pair: from far starts the chains circled along level sets
+    # (E × B drift) instead of descending, the first slow window's variance counted the circles
+    # (M⁻¹ 10-40 times the variance of the slow pair here), and the step set for that mass was
+    # a quarter of angle 0's. The field is now off until the first mass update.
+    scales = jnp.array([0.01, 0.01, 1.0, 1.0])
+
+    def logdensity_fn(x):
+        return -0.5 * jnp.sum((x / scales) ** 2)
+
+    starts = 20.0 * jax.random.normal(jax.random.key(0), (CHAINS, 4))  # ~20 sd of the slow pair
+    warmup = magnetic_window_adaptation(logdensity_fn, angle=0.25)
+    (_, parameters), info = warmup.run(jax.random.key(1), starts, num_steps=200)
+    imm = np.asarray(parameters["inverse_mass_matrix"])
+    np.testing.assert_allclose(imm, np.asarray(scales) ** 2, rtol=0.5)
+    # Whitened, the target is N(0, I): the leapfrog is stable below ε = 2, and 0.65 acceptance
+    # is near ε = 1 (angle 0 adapts ε ≈ 0.8 here; the collapsed warm-up ended at 0.24).
+    assert 0.5 < parameters["step_size"] < 2.0, np.asarray(info.step_size)[::20]
 
 
 @pytest.mark.slow  # a real posterior, ~300 compiled warm-up steps; cheaper siblings above

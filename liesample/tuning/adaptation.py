@@ -32,9 +32,10 @@ size, as in ``blackjax.window_adaptation``).
 
 **Magnetic HMC** (``liesample.window_adaptation(liesample.magnetic_hmc, logdensity_fn)``, i.e.
 :func:`magnetic_window_adaptation`): several chains tuned together on the same schedule; the
-field is re-derived from the current mass and step size at every step (a fixed rotation angle
-per leapfrog step), so the step size is dual-averaged with the field on, and the trajectory
-length is learnt by a ChEES-type rule over jittered lengths; sample with
+field is off until the first slow window closes (the chains converge and the first mass is
+estimated without it), then re-derived from the current mass and step size at every step (a
+fixed rotation angle per leapfrog step), so the step size is dual-averaged with the field on,
+and the trajectory length is learnt by a ChEES-type rule over jittered lengths; sample with
 :func:`liesample.samplers.cotangent.magnetic_hmc.jittered_magnetic_hmc`.
 """
 
@@ -542,6 +543,24 @@ def _harmonic_mean(rates):
     return jnp.where(jnp.all(rates > 0), 1.0 / jnp.mean(1.0 / jnp.maximum(rates, 1e-30)), 0.0)
 
 
+def _field_from(ends) -> int:
+    """Last warm-up step without the field: the end of the first slow window (``-1``, the field
+    on throughout, when the schedule has no slow window).
+
+    The field is scaled to the step (``angle / ε`` in the whitened frame) and the step is set by
+    the stiffest direction, so relative to the slower directions the field is strong, and a
+    strong field turns a force into a drift across it, along the level sets of ``log π``
+    (``E × B`` drift). Chains started far from the typical set then barely descend: they slide
+    along level sets, far out along weakly bound directions; the first slow window's variance
+    counts that excursion, the mass it gives calls for a much smaller step, which strengthens
+    the field further, and the step collapses. Without the field the chains converge and the
+    first mass is the target's; dual averaging restarts there (when the mass is adapted), with
+    the field on. The field changes the dynamics, never the target: every transition is exact.
+    """
+    closes = np.flatnonzero(ends)
+    return int(closes[0]) if closes.size else -1
+
+
 def _welford_batch(welford, x):
     """Chan et al.'s update of ``(mean, m2, count)`` with a batch ``x`` of shape ``(n, d)``."""
     mean, m2, count = welford
@@ -587,9 +606,11 @@ def magnetic_window_adaptation(
     **Schedule.** Stan's windows (as :func:`window_adaptation`), all chains sharing one set of
     parameters: the step size is dual-averaged towards ``target_acceptance_rate`` of the
     harmonic mean of the chains' acceptance probabilities *with the field on*; the inverse mass
-    is the regularised variance of every chain's draws in a slow window; at every step the
-    field is ``default_magnetic_field(M⁻¹, angle / ε)`` for the current ``M⁻¹`` and ``ε``, so the
-    whitened velocity turns by ``angle`` rad per leapfrog step throughout the warm-up.
+    is the regularised variance of every chain's draws in a slow window. The field is off up to
+    the end of the first slow window (:func:`_field_from`: a field scaled to the step slows the
+    chains' convergence and would spoil the first mass); from there on, at every step, it is
+    ``default_magnetic_field(M⁻¹, angle / ε)`` for the current ``M⁻¹`` and ``ε``, so the
+    whitened velocity turns by ``angle`` rad per leapfrog step.
 
     **Trajectory length (ChEES).** Each transition integrates for ``t = u T`` with ``u`` from the
     base-2 Halton sequence (the same for every chain), ``L = ceil(t / ε)`` steps; ``log T`` is
@@ -680,12 +701,15 @@ def magnetic_window_adaptation(
             average_from = num_steps // 2
         jitter = _van_der_corput(num_steps)
         time0 = integration_time if integration_time is not None else initial_time
+        # The field is off until the first mass update (the end of the first slow window):
+        # see :func:`_field_from`.
+        field_on = np.arange(num_steps) > _field_from(ends)
 
         def one_step(carry, xs):
             states, da_state, log_time, means, inverse_mass, welford = carry
-            key, u, stage, window_end, index = xs
+            key, u, stage, window_end, index, on = xs
             step_size = jnp.exp(da_state.log_step_size)
-            strength = angle / step_size
+            strength = jnp.where(on, angle / step_size, 0.0)
             # angle 0: a concrete zero field, so the sampler takes the free drift (no expm)
             field = zero_field if angle == 0.0 else _field(rotation, inverse_mass, strength)
             trajectory = jnp.exp(log_time)
@@ -764,6 +788,7 @@ def magnetic_window_adaptation(
             jnp.asarray(stages),
             jnp.asarray(ends),
             jnp.arange(num_steps),
+            jnp.asarray(field_on),
         )
 
         @jit
