@@ -342,17 +342,27 @@ _DENSE_NOISE_DIRECTIONS_PER_N = 4
 # remainder θ^17/17! stays below the double-precision unit round-off 2^−53.
 _TAYLOR_DEGREE = 16
 _TAYLOR_RADIUS = 0.8
-_TAYLOR_COEFFICIENTS = tuple(1.0 / math.factorial(k) for k in range(_TAYLOR_DEGREE + 1))
+# Coefficients of (e^A − I)/A = Σ_k A^k/(k+1)!, k < _TAYLOR_DEGREE.
+_EXPM1_COEFFICIENTS = tuple(1.0 / math.factorial(k + 1) for k in range(_TAYLOR_DEGREE))
 
 
 def _skew_hermitian_exponential(a):
     """``e^{A}`` for skew-Hermitian ``A`` (complex ``(..., N, N)``) by matrix products alone.
 
-    Scaling and squaring specialised to the unitary group: ``A/2^s`` with ``s`` the fewest
-    halvings that bring a norm bound (the smaller of the 1-norm and the Frobenius norm, both
-    ``≥ ‖A‖₂``; chosen per matrix, not differentiated) within ``_TAYLOR_RADIUS``; its degree-16
-    Taylor polynomial by Paterson–Stockmeyer in ``A⁴`` (seven products); ``s`` squarings; one
-    Newton–Schulz step back onto the unitary group.
+    Scaling and squaring specialised to the unitary group, carried out on ``X = e^{A} − I``
+    rather than on ``e^{A}``: ``A/2^s`` with ``s`` the fewest halvings that bring a norm bound
+    (the smaller of the 1-norm and the Frobenius norm, both ``≥ ‖A‖₂``; chosen per matrix, not
+    differentiated) within ``_TAYLOR_RADIUS``; ``X = A·Σ_k A^k/(k+1)!`` to degree 16, by
+    Paterson–Stockmeyer in ``A⁴``; ``s`` squarings ``X ← 2X + X²``; one Newton–Schulz step
+    towards the polar factor, ``U ← U(3 − U*U)/2`` with ``U*U − I = X + X* + X*X``; then
+    ``U = I + X``.
+
+    Why ``X``: next to ``I`` the entries of ``U*U − I`` are below the resolution of numbers
+    near 1, so a Newton–Schulz step on ``U`` itself cannot see its own unitarity error. That
+    error is systematic for a move repeated along one direction (a splitting moves along the
+    same noise field every step), and the Casimirs then drift linearly in the number of
+    steps; on ``X`` the step removes it, and what remains is random round-off.
+
     No LAPACK call (no linear solve, as a Padé approximant needs), so nothing waits on a
     threaded BLAS; batched over leading axes (a matrix that needs fewer squarings keeps its
     value while the others square). Unitary to round-off; the value is accurate to round-off
@@ -371,22 +381,24 @@ def _skew_hermitian_exponential(a):
     a2 = a @ a
     a3 = a2 @ a
     a4 = a2 @ a2
-    c = _TAYLOR_COEFFICIENTS
+    c = _EXPM1_COEFFICIENTS
 
     def block(j):  # Σ_{i<4} c_{4j+i} Aⁱ
         return c[4 * j] * eye + c[4 * j + 1] * a + c[4 * j + 2] * a2 + c[4 * j + 3] * a3
 
-    power = c[_TAYLOR_DEGREE] * a4 + block(3)
-    for j in (2, 1, 0):
-        power = power @ a4 + block(j)
+    series = block(_TAYLOR_DEGREE // 4 - 1)
+    for j in range(_TAYLOR_DEGREE // 4 - 2, -1, -1):
+        series = series @ a4 + block(j)
+    x = a @ series  # e^{A} − I
 
-    def square(i, u):
-        return jnp.where((i < squarings)[..., None, None], u @ u, u)
+    def square(i, x):  # (I + X)² = I + (2X + X²)
+        return jnp.where((i < squarings)[..., None, None], 2.0 * x + x @ x, x)
 
-    u = jax.lax.fori_loop(0, jnp.max(squarings), square, power)
-    # Each squaring doubles the round-off of unitarity; one Newton–Schulz step towards the
-    # polar factor, U(3 − U*U)/2, squares that error away (two products).
-    return u - 0.5 * u @ (jnp.conj(jnp.swapaxes(u, -1, -2)) @ u - eye)
+    x = jax.lax.fori_loop(0, jnp.max(squarings), square, x)
+    x_star = jnp.conj(jnp.swapaxes(x, -1, -2))
+    unitarity_error = x + x_star + x_star @ x  # U*U − I, never formed from U
+    x = x - 0.5 * unitarity_error - 0.5 * x @ unitarity_error
+    return eye + x
 
 
 @dataclass(frozen=True, init=False)
