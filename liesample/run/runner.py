@@ -584,12 +584,25 @@ def split_rhat(values) -> float:
     return float(np.sqrt(((half - 1) / half * within + between / half) / within))
 
 
+def _varies(values) -> bool:
+    """Whether ``values`` vary by more than ``1e-9`` of their size (more than round-off)."""
+    values = np.asarray(values, dtype=float)
+    finite = values[np.isfinite(values)]
+    return finite.size > 0 and np.ptp(finite) > 1e-9 * max(np.max(np.abs(finite)), 1e-300)
+
+
 def _report_unconverged(result: ChainsResult, groups):
     energy = result.info.get("energy")
     if energy is None or np.ndim(energy) != 2:
         return
     groups = np.zeros(len(energy), int) if groups is None else np.asarray(groups)
-    rhats = [split_rhat(energy[groups == label]) for label in np.unique(groups)]
+    # An energy constant to round-off (a Casimir, as for the isotropic rigid body) says nothing
+    # about mixing: its R-hat would compare round-off.
+    rhats = [
+        split_rhat(energy[groups == label])
+        for label in np.unique(groups)
+        if _varies(energy[groups == label])
+    ]
     rhat = max((r for r in rhats if np.isfinite(r)), default=math.nan)
     if rhat > MAX_ENERGY_RHAT:
         warnings.warn(
