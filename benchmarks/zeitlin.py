@@ -869,7 +869,13 @@ def report(out_dir: Path, md_dir: Path) -> str:
     for name in ("adjusted", "noise"):
         part = out_dir / f"zeitlin_{name}.json"
         extra[name] = common.read_json(part) if part.exists() else None
-    return report_section(common.read_json(path), link, **extra)
+    text = report_section(common.read_json(path), link, **extra)
+    exponential = out_dir / "zeitlin_exponential.json"
+    if exponential.exists():  # its own script (benchmarks/zeitlin_exponential.py), a subsection
+        from benchmarks import zeitlin_exponential  # it imports this module's helpers
+
+        text += "\n" + zeitlin_exponential.section(common.read_json(exponential))
+    return text
 
 
 if __name__ == "__main__":
