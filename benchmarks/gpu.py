@@ -1,6 +1,9 @@
 """The accelerator run: chains per second on one device, for the two cheapest and the costliest
 state of the benchmarks, with the same code as on a CPU.
 
+A suite of ``benchmarks/run.py`` (``benchmarks/suites.py``) that measures only where JAX has a
+GPU: on a CPU-only machine ``run`` says so and keeps the stored ``gpu.json``. Alone::
+
     .venv/bin/python benchmarks/gpu.py --out benchmarks/results/gpu.json          # any device
     .venv/bin/python benchmarks/gpu.py --quick --out /tmp/gpu.json                # smoke run
 
@@ -11,8 +14,8 @@ Two measurements, compilation excluded (each is run once to compile, then timed,
 - **Zeitlin**: ``liesample.adjusted_lie_poisson`` on ``zeitlin_euler(N, noise_degree=2)`` at a
   given step, N = 32, 64, 128, for several numbers of chains: seconds per chain-step.
 
-The device kind and the jax version are recorded with the rows; ``benchmarks/RESULTS.md`` quotes
-them next to the CPU numbers of the same suites.
+The device kind and the jax version are recorded with the rows; the section (``report``) quotes
+them next to the CPU numbers of the scale-out and Zeitlin suites.
 """
 
 from __future__ import annotations
@@ -32,10 +35,29 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np
 
 import liesample
-from benchmarks import scaling
+from benchmarks import common, scaling
+
+SUITE = {"order": 65, "title": "one GPU: rigid-body throughput and the adjusted Zeitlin step"}
 
 ZEITLIN_BETA = 1.0
 ZEITLIN_STEP = 0.1
+# The stored run (jax 0.11.2) predates recording the CUDA major version; it used CUDA 13.
+STORED_CUDA = "13"
+
+# Prose of the section, from the stored H200 run (the tables are rebuilt from the JSON).
+RIGID_NOTE = """\
+The best CPU figure of the scale-out suite on the 2-core VM is 1.82e6 chain-steps/s (1 000
+chains): the H200 is about 120× that at 10⁵ chains."""
+
+ZEITLIN_NOTE = """\
+One chain is latency-bound (about 0.3 ms a step at every N). Batched, the GPU is 2.6× the CPU
+at N = 64 and 10× at N = 128, but at N = 32 it is slower than the CPU, and a batched step costs
+far more than its matrix work: a separate measurement in the same lease gave 0.49 ms for the
+structured exponential of 64 matrices 32 × 32 and 1.2 ms for 64 of 128 × 128, against about
+70 ms for one batched step at N = 32, with `noise_degree=2` and with every degree alike. Where
+the rest goes on the GPU (a loop with a data-dependent trip count, host round trips in the
+noise blocks, or the Metropolis bookkeeping) was not found in this lease; it is the next thing
+to profile there."""
 
 
 def zeitlin_rows(sizes, chains_list, num_steps: int):
@@ -43,9 +65,7 @@ def zeitlin_rows(sizes, chains_list, num_steps: int):
     rows = []
     for size in sizes:
         system = liesample.systems.zeitlin_euler(size, noise_degree=2)
-        sampler = liesample.adjusted_lie_poisson(
-            system, beta=ZEITLIN_BETA, step_size=ZEITLIN_STEP
-        )
+        sampler = liesample.adjusted_lie_poisson(system, beta=ZEITLIN_BETA, step_size=ZEITLIN_STEP)
         for chains in chains_list:
             starts = np.tile(system.default_position, (chains, 1, 1))
             best = np.inf
@@ -65,12 +85,140 @@ def zeitlin_rows(sizes, chains_list, num_steps: int):
                     best = min(best, result.wall_time if np.isfinite(result.wall_time) else elapsed)
             per = best / (chains * num_steps)
             rows.append(
-                {"N": size, "chains": chains, "steps": num_steps, "seconds": best,
-                 "seconds_per_chain_step": per,
-                 "acceptance": float(np.mean(result.info["acceptance_rate"]))}  # fmt: skip
+                {
+                    "N": size,
+                    "chains": chains,
+                    "steps": num_steps,
+                    "seconds": best,
+                    "seconds_per_chain_step": per,
+                    "acceptance": float(np.mean(result.info["acceptance_rate"])),
+                }
             )
             print(f"  N={size:>4} chains={chains:>5}  {per:.3e} s per chain-step", flush=True)
     return rows
+
+
+def _cuda_major():
+    """The CUDA major version of the installed jax CUDA plugin, or ``None``."""
+    from importlib import metadata
+
+    for major in (13, 12, 11):
+        try:
+            metadata.version(f"jax-cuda{major}-plugin")
+        except metadata.PackageNotFoundError:
+            continue
+        return str(major)
+    return None
+
+
+def measure(quick: bool) -> dict:
+    """Both measurements on the default device, as the rows of ``gpu.json``."""
+    device = jax.devices()[0]
+    print(f"device: {device.device_kind} ({jax.default_backend()}), jax {jax.__version__}")
+    if quick:
+        rigid = scaling.measure((1, 100), repeats=1)
+        zeitlin = zeitlin_rows((8,), (4,), 20)
+    else:
+        rigid = scaling.measure((100, 10_000, 100_000, 1_000_000))
+        zeitlin = zeitlin_rows((32, 64, 128), (1, 64, 256), 40)
+    return {
+        "device": device.device_kind,
+        "backend": jax.default_backend(),
+        "jax": jax.__version__,
+        "cuda": _cuda_major(),
+        "mode": "quick" if quick else "full",
+        "zeitlin_beta": ZEITLIN_BETA,
+        "zeitlin_step_size": ZEITLIN_STEP,
+        "rigid_body": rigid,
+        "zeitlin_adjusted": zeitlin,
+    }
+
+
+def run(out_dir: Path, quick: bool, log=print) -> None:
+    """Measure and write ``gpu.json``, only where JAX has a GPU (else keep the stored file)."""
+    if jax.default_backend() != "gpu":
+        log(f"no GPU (jax backend {jax.default_backend()}): gpu.json kept, nothing measured")
+        return
+    path = common.write_json(out_dir / "gpu.json", measure(quick))
+    log(f"wrote {path}")
+
+
+def _short_e(value: float, digits: int) -> str:
+    """``1.43e6`` rather than ``1.43e+06``."""
+    mantissa, exponent = f"{value:.{digits}e}".split("e")
+    return f"{mantissa}e{int(exponent)}"
+
+
+def _spaced(number: int) -> str:
+    """``10 000``: thousands separated by a space."""
+    return f"{number:,}".replace(",", " ")
+
+
+def report(out_dir: Path, md_dir: Path) -> str:
+    """Section from ``gpu.json`` (with the CPU column from ``zeitlin_adjusted.json``), if any."""
+    path = out_dir / "gpu.json"
+    if not path.exists():
+        return ""
+    data = common.read_json(path)
+    device = data["device"]
+    short = device.removeprefix("NVIDIA ")
+    cuda = data.get("cuda", STORED_CUDA)
+    toolkit = f" with CUDA {cuda}" if cuda else ""
+    lines = [
+        "## One GPU: rigid-body throughput and the adjusted Zeitlin step",
+        "",
+        (
+            "`benchmarks/gpu.py --out benchmarks/results/gpu.json`, run once on an "
+            f"**{device}** (jax"
+        ),
+        (
+            f"{data['jax']}{toolkit}, float64), the same code as on the CPU. "
+            "Compilation is excluded; each row"
+        ),
+        "is the best of the timed repeats.",
+        "",
+        "Rigid body (`lie_poisson_langevin`, dt = 0.05, the rows of the scale-out suite):",
+        "",
+        f"| chains | chain-steps/s ({short}) |",
+        "|---:|---:|",
+    ]
+    for row in data["rigid_body"]:
+        lines.append(f"| {_spaced(row['chains'])} | {_short_e(row['chain_steps_per_second'], 2)} |")
+    zeitlin = data["zeitlin_adjusted"]
+    chains_list = sorted({row["chains"] for row in zeitlin})
+    cpu_path = out_dir / "zeitlin_adjusted.json"
+    cpu = (
+        {
+            row["N"]: row["seconds_per_chain_step"]
+            for row in common.read_json(cpu_path)["one_thread"]
+        }
+        if cpu_path.exists()
+        else {}
+    )
+    beta = data.get("zeitlin_beta", ZEITLIN_BETA)
+    step = data.get("zeitlin_step_size", ZEITLIN_STEP)
+    lines += [
+        "",
+        RIGID_NOTE,
+        "",
+        (
+            "Adjusted Zeitlin step (`adjusted_lie_poisson`, `zeitlin_euler(N, noise_degree=2)`, "
+            f"β = {beta:g},"
+        ),
+        f"given step {step:g}), seconds per chain-step:",
+        "",
+        "| N | "
+        + " | ".join(f"{c} chain" + ("s" if c > 1 else "") for c in chains_list)
+        + " | CPU VM, this session's Zeitlin section |",
+        "|---:|" + "---:|" * (len(chains_list) + 1),
+    ]
+    per = {(row["N"], row["chains"]): row["seconds_per_chain_step"] for row in zeitlin}
+    for size in sorted({row["N"] for row in zeitlin}):
+        cells = [_short_e(per[size, c], 1) if (size, c) in per else "–" for c in chains_list]
+        cells.append(_short_e(cpu[size], 1) if size in cpu else "–")
+        lines.append(f"| {size} | " + " | ".join(cells) + " |")
+    lines += ["", ZEITLIN_NOTE, ""]
+    return "\n".join(lines)
 
 
 def main(argv=None):
@@ -78,21 +226,7 @@ def main(argv=None):
     parser.add_argument("--out", type=Path, required=True, help="JSON file to write")
     parser.add_argument("--quick", action="store_true", help="small sizes (smoke run)")
     args = parser.parse_args(argv)
-    device = jax.devices()[0]
-    print(f"device: {device.device_kind} ({jax.default_backend()}), jax {jax.__version__}")
-    if args.quick:
-        rigid = scaling.measure((1, 100), repeats=1)
-        zeitlin = zeitlin_rows((8,), (4,), 20)
-    else:
-        rigid = scaling.measure((100, 10_000, 100_000, 1_000_000))
-        zeitlin = zeitlin_rows((32, 64, 128), (1, 64, 256), 40)
-    data = {
-        "device": device.device_kind,
-        "backend": jax.default_backend(),
-        "jax": jax.__version__,
-        "rigid_body": rigid,
-        "zeitlin_adjusted": zeitlin,
-    }
+    data = measure(args.quick)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(data, indent=2))
     print(f"wrote {args.out}")

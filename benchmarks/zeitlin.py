@@ -77,7 +77,7 @@ from liesample.samplers.orbit.adjusted_lie_poisson import init as adjusted_init
 from liesample.systems.zeitlin import isospectral_midpoint, random_vorticity, zeitlin_euler
 
 _WORKER_FLAG = "LIESAMPLE_ZEITLIN_BENCH_WORKER"
-SUITE = {"order": 60, "title": "Zeitlin su(N) Euler on the sphere"}
+SUITE = {"order": 70, "title": "Zeitlin su(N) Euler on the sphere"}
 
 ENSTROPHY_PER_MODE = 1.0  # ‖W‖² = N: the vorticity's amplitude does not grow with N
 EULER_STEP = 0.01
