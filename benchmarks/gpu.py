@@ -156,10 +156,13 @@ def _spaced(number: int) -> str:
 
 def report(out_dir: Path, md_dir: Path) -> str:
     """Section from ``gpu.json`` (with the CPU column from ``zeitlin_adjusted.json``), if any."""
-    path = out_dir / "gpu.json"
-    if not path.exists():
+    if not (out_dir / "gpu.json").exists():
         return ""
-    data = common.read_json(path)
+    return section(common.read_json(out_dir / "gpu.json"), out_dir)
+
+
+def section(data: dict, out_dir: Path) -> str:
+    """The Markdown section of one ``gpu.json`` (``out_dir`` holds the CPU suite's JSON)."""
     device = data["device"]
     short = device.removeprefix("NVIDIA ")
     cuda = data.get("cuda", STORED_CUDA)
