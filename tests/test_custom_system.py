@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import liesample
-from liesample.dynamics.system import LiePoissonSystem, coordinate_noise
+from liesample.dynamics.system import LiePoissonSystem, checked_beta, coordinate_noise
 from liesample.geometry.algebras import so3
 from liesample.systems import lie_poisson_system
 
@@ -82,8 +82,8 @@ def test_declaration_reads_noise_count_and_shape_off_the_default_position():
 
 
 def test_checked_beta_names_what_is_wrong():
-    assert liesample.systems.rigid_body().checked_beta(-2) == -2.0
+    assert checked_beta(liesample.systems.rigid_body(), -2) == -2.0
     with pytest.raises(ValueError, match="beta must be finite"):
-        liesample.systems.rigid_body().checked_beta(float("nan"))
+        checked_beta(liesample.systems.rigid_body(), float("nan"))
     with pytest.raises(ValueError, match="heavy top"):
-        liesample.systems.heavy_top().checked_beta(0.0)
+        checked_beta(liesample.systems.heavy_top(), 0.0)

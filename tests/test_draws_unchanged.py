@@ -85,6 +85,11 @@ np.savez(sys.argv[1], **arrays)
 """
 
 
+def reference_labels(reference) -> set:
+    """The run labels of the stored arrays (``<label>/position…`` and ``<label>/energy``)."""
+    return {name.rsplit("/position", 1)[0].removesuffix("/energy") for name in reference}
+
+
 @pytest.fixture(scope="module")
 def draws_now(reference, tmp_path_factory):
     """``draws_now(label)``: the run's arrays from the current code, compiled as in a user's
@@ -95,10 +100,11 @@ def draws_now(reference, tmp_path_factory):
     def draws(label):
         if label not in made:
             kind = label.split("/")[0] + "/"
-            labels = sorted(
-                {name.split("/position")[0].removesuffix("/energy") for name in reference}
-            )
-            labels = [name for name in labels if name.startswith(kind) and name in RUNS]
+            labels = [
+                name
+                for name in sorted(reference_labels(reference))
+                if name.startswith(kind) and name in RUNS
+            ]
             out = tmp_path_factory.mktemp("draws") / "draws.npz"
             env = {**os.environ, "XLA_FLAGS": USER_XLA_FLAGS}
             subprocess.run(
@@ -115,7 +121,7 @@ def draws_now(reference, tmp_path_factory):
 
 
 def test_every_row_has_a_reference(reference):
-    labels = {name.rsplit("/position", 1)[0].removesuffix("/energy") for name in reference}
+    labels = reference_labels(reference)
     assert {f"sampler/{name}" for name in cases.SAMPLER_NAMES} <= labels
     assert {f"system/{name}" for name in cases.SYSTEM_NAMES} <= labels
 

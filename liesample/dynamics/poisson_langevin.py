@@ -25,7 +25,7 @@ import jax
 import jax.numpy as jnp
 
 from liesample.dynamics.sde import PoissonLangevinSDE
-from liesample.dynamics.system import LiePoissonSystem
+from liesample.dynamics.system import LiePoissonSystem, checked_beta
 from liesample.foundation.validation import finite_float
 from liesample.geometry.poisson import LiePoissonStructure
 
@@ -79,9 +79,7 @@ def make_dynamics(system, *, beta=None, sigma=1.0, theta=None, hamiltonian=True)
     if sigma > 0:
         if beta is None:
             raise ValueError("beta is required when sigma > 0 (the target is exp(-beta*h))")
-        beta = finite_float("beta", beta)
-        if system.check_beta is not None:
-            system.check_beta(beta)
+        beta = checked_beta(system, beta)
         if system.check_noise is not None:
             system.check_noise()
         if theta is not None:

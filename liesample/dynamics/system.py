@@ -18,7 +18,7 @@ from liesample.dynamics.noise_span import check_noise_reaches_orbit
 from liesample.foundation.validation import concrete_array, finite_float
 from liesample.geometry.algebras import LieAlgebra
 
-__all__ = ["NOISE_REACH", "LiePoissonSystem", "coordinate_noise", "count_noises"]
+__all__ = ["NOISE_REACH", "LiePoissonSystem", "checked_beta", "coordinate_noise", "count_noises"]
 
 NOISE_REACH = ("test", "orbit", "level_set")
 
@@ -175,14 +175,6 @@ class LiePoissonSystem:
             noise_reach=noise_reach,
         )
 
-    def checked_beta(self, beta) -> float:
-        """``β`` as a float: finite, and admissible for the system (``check_beta``), or a
-        ``ValueError`` that says why not."""
-        beta = finite_float("beta", beta)
-        if self.check_beta is not None:
-            self.check_beta(beta)
-        return beta
-
     def check_noise(self) -> None:
         """Raise ``ValueError`` where the noise provably cannot reach the whole orbit (the rank
         test of :func:`liesample.dynamics.noise_span.check_noise_reaches_orbit`), unless the
@@ -244,6 +236,16 @@ class LiePoissonSystem:
                 f"{name} lies on a degenerate orbit (a Casimir that must be > 0, e.g. |μ|², "
                 f"is {np.min(casimirs):.3g}): {value}; choose a nonzero state"
             )
+
+
+def checked_beta(system, beta) -> float:
+    """``β`` as a float: finite, and admissible for ``system`` (its ``check_beta``, ``None`` or
+    ``β ↦ None`` raising where ``exp(−βh)`` is not normalisable), or a ``ValueError`` that says
+    why not. ``system`` is a :class:`LiePoissonSystem` or any declaration with ``check_beta``."""
+    beta = finite_float("beta", beta)
+    if system.check_beta is not None:
+        system.check_beta(beta)
+    return beta
 
 
 def count_noises(noise_hamiltonians, position, name: str) -> int:

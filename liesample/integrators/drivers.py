@@ -33,7 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from liesample.dynamics.poisson_langevin import PoissonLangevin, Scene
-from liesample.dynamics.system import LiePoissonSystem
+from liesample.dynamics.system import LiePoissonSystem, checked_beta
 from liesample.foundation.compile import jit
 from liesample.foundation.validation import finite_float
 from liesample.integrators.orbit import DEFAULT_INTEGRATOR, get_integrator
@@ -239,7 +239,7 @@ def simulate(
         )
     theta = 0.0
     if beta is not None:
-        beta = finite_float("beta", beta)
+        beta = checked_beta(system, beta)
         if sigma == 0:
             raise ValueError(
                 "beta needs noise (sigma > 0); for a noise-free dissipative flow "
@@ -250,8 +250,6 @@ def simulate(
                 "the derived dissipation balances standard Brownian noise only (d[S] = dt); "
                 f"got driver {driver!r} with beta — drop beta or the driver"
             )
-        if system.check_beta is not None:
-            system.check_beta(beta)
         theta = 0.5 * beta * sigma**2
     scene = Scene(hamiltonian=hamiltonian, dissipation=theta != 0.0, noise=sigma > 0)
     integrator = get_integrator(integrator)

@@ -598,11 +598,8 @@ def _report_unconverged(result: ChainsResult, groups):
     groups = np.zeros(len(energy), int) if groups is None else np.asarray(groups)
     # An energy constant to round-off (a Casimir, as for the isotropic rigid body) says nothing
     # about mixing: its R-hat would compare round-off.
-    rhats = [
-        split_rhat(energy[groups == label])
-        for label in np.unique(groups)
-        if _varies(energy[groups == label])
-    ]
+    chains = [energy[groups == label] for label in np.unique(groups)]
+    rhats = [split_rhat(group) for group in chains if _varies(group)]
     rhat = max((r for r in rhats if np.isfinite(r)), default=math.nan)
     if rhat > MAX_ENERGY_RHAT:
         warnings.warn(

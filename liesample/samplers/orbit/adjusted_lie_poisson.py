@@ -64,7 +64,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from liesample.dynamics.poisson_langevin import PoissonLangevin, Scene
-from liesample.dynamics.system import LiePoissonSystem
+from liesample.dynamics.system import LiePoissonSystem, checked_beta
 from liesample.foundation.validation import concrete_array, finite_float
 from liesample.integrators.chain_loop import DEFAULT_NOISE_BLOCK_SIZE, NoiseBlocks, check_block_size
 from liesample.integrators.stability import check_precision, stiffness
@@ -352,7 +352,7 @@ def as_top_level_api(
     """
     if not isinstance(system, LiePoissonSystem):
         raise TypeError(f"system must be a LiePoissonSystem, got {type(system).__name__}")
-    beta = system.checked_beta(beta)
+    beta = checked_beta(system, beta)
     system.check_noise()
     sigma = finite_float("sigma", sigma, positive=True)
     if step_size is not None:

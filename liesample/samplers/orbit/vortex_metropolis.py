@@ -35,6 +35,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from liesample.dynamics.system import checked_beta
 from liesample.foundation.validation import finite_float
 from liesample.samplers.contract import BasicInfo, Sampler, StepSizeTuning, rebuilt, sampling_api
 from liesample.samplers.orbit._starts import orbit_settings
@@ -188,7 +189,7 @@ def as_top_level_api(
         ``liesample.sample``. It declares ``tuning`` (dual averaging of ``proposal_scale``).
     """
     _check_system(system)
-    beta = system.checked_beta(beta)
+    beta = checked_beta(system, beta)
     if proposal not in PROPOSALS:
         raise ValueError(f"proposal must be one of {PROPOSALS}, got {proposal!r}")
     given = proposal_scale is not None
