@@ -15,6 +15,11 @@ by a ``factor``). A
 truncated ``normal``/``cauchy`` on a ``<lower=0>`` parameter is NumPyro's half law: the same
 density up to a constant.
 
+The centred eight schools has the non-centred program's reference draws (posteriordb's
+``reference_posterior_name``: the law of ``(mu, tau, theta)`` is the same). ``diamonds`` is
+stored gzipped (its design is 5000 x 25). One toy is not from posteriordb: ``resonance``
+(``x ~ normal(0, 0.003)`` beside O(1) parameters), with exact moments (:data:`EXACT`).
+
 :func:`load` returns a :class:`Posterior`; :func:`flatten` turns site values into the
 reference's coordinates and :meth:`Posterior.latent` turns reference coordinates back into the
 values of the sample sites (inverting the transformed parameters).
@@ -22,6 +27,7 @@ values of the sample sites (inverting the transformed parameters).
 
 from __future__ import annotations
 
+import gzip
 import json
 import re
 from collections.abc import Callable
@@ -45,6 +51,13 @@ POSTERIORS = (
     "mesquite-logmesquite",
     "garch-garch11",
     "sblrc-blr",
+    "diamonds-diamonds",
+    "eight_schools-eight_schools_centered",
+    "kilpisjarvi_mod-kilpisjarvi",
+    "low_dim_gauss_mix-low_dim_gauss_mix",
+    "hmm_example-hmm_example",
+    "arma-arma11",
+    "earnings-earn_height",
 )
 
 
@@ -138,6 +151,117 @@ def blr(data):
     numpyro.sample("y", dist.Normal(x @ beta, sigma), obs=y)
 
 
+def diamonds(data):
+    """``diamonds.stan`` (brms): 24 slopes on the centred design, Student-t intercept and
+    half-Student-t ``sigma`` (Stan's ``student_t_lpdf - student_t_lccdf(0 | …)``)."""
+    xc = data["Xc"]
+    b = numpyro.sample("b", dist.Normal(0.0, 1.0).expand([xc.shape[1]]))
+    intercept = numpyro.sample("Intercept", dist.StudentT(3.0, 8.0, 10.0))
+    sigma = numpyro.sample("sigma", dist.FoldedDistribution(dist.StudentT(3.0, 0.0, 10.0)))
+    numpyro.sample("Y", dist.Normal(intercept + xc @ b, sigma), obs=data["Y"])
+
+
+def eight_schools_centered(data):
+    """``eight_schools_centered.stan``: ``theta ~ normal(mu, tau)``, the funnel. The law of
+    ``(mu, tau, theta)`` is the non-centred program's: posteriordb gives its draws as the
+    reference."""
+    sigma, y = data["sigma"], data["y"]
+    tau = numpyro.sample("tau", dist.HalfCauchy(5.0))
+    mu = numpyro.sample("mu", dist.Normal(0.0, 5.0))
+    theta = numpyro.sample("theta", dist.Normal(mu, tau).expand([len(y)]))
+    numpyro.sample("y", dist.Normal(theta, sigma), obs=y)
+
+
+def kilpisjarvi(data):
+    """``kilpisjarvi.stan``: a linear trend in the year (not centred), so ``alpha`` and
+    ``beta`` are correlated near −1 with sds ~4000 apart; flat ``sigma``."""
+    alpha = numpyro.sample("alpha", dist.Normal(data["pmualpha"], data["psalpha"]))
+    beta = numpyro.sample("beta", dist.Normal(data["pmubeta"], data["psbeta"]))
+    sigma = numpyro.sample("sigma", _flat(constraints.positive))
+    numpyro.sample("y", dist.Normal(alpha + beta * data["x"], sigma), obs=data["y"])
+
+
+def low_dim_gauss_mix(data):
+    """``low_dim_gauss_mix.stan``: two normals, ordered means, ``log_mix(theta, …)``."""
+    mu = numpyro.sample("mu", _flat(constraints.ordered_vector, (2,)))
+    numpyro.factor("mu_prior", jnp.sum(dist.Normal(0.0, 2.0).log_prob(mu)))
+    sigma = numpyro.sample("sigma", dist.HalfNormal(2.0).expand([2]))
+    theta = numpyro.sample("theta", dist.Beta(5.0, 5.0))
+    mixing = dist.Categorical(probs=jnp.stack([theta, 1.0 - theta]))
+    numpyro.sample("y", dist.MixtureSameFamily(mixing, dist.Normal(mu, sigma)), obs=data["y"])
+
+
+def hmm_example(data):
+    """``hmm_example.stan``: two-state Gaussian HMM, forward algorithm. ``theta1``, ``theta2``
+    are flat on the simplex (a Dirichlet(1, 1)); the program's priors name ``mu[1]`` and
+    ``mu[2]``, so it has two states."""
+    y = data["y"]
+    theta1 = numpyro.sample("theta1", dist.Dirichlet(jnp.ones(2)))
+    theta2 = numpyro.sample("theta2", dist.Dirichlet(jnp.ones(2)))
+    mu = numpyro.sample("mu", _flat(constraints.positive_ordered_vector, (2,)))
+    prior = dist.Normal(jnp.array([3.0, 10.0]), 1.0).log_prob(mu)
+    numpyro.factor("mu_prior", jnp.sum(prior))
+    log_transition = jnp.log(jnp.stack([theta1, theta2]))  # [from j, to k]
+    emission = dist.Normal(mu, 1.0).log_prob(y[:, None])  # (N, K)
+
+    def forward(gamma, emitted):
+        gamma = jax.nn.logsumexp(gamma[:, None] + log_transition, axis=0) + emitted
+        return gamma, None
+
+    gamma, _ = jax.lax.scan(forward, emission[0], emission[1:])
+    numpyro.factor("y", jax.nn.logsumexp(gamma))
+
+
+def arma11(data):
+    """``arma11.stan``: ARMA(1, 1), ``err[t] = y[t] - mu - phi y[t-1] - theta err[t-1]``."""
+    y = data["y"]
+    mu = numpyro.sample("mu", dist.Normal(0.0, 10.0))
+    phi = numpyro.sample("phi", dist.Normal(0.0, 2.0))
+    theta = numpyro.sample("theta", dist.Normal(0.0, 2.0))
+    sigma = numpyro.sample("sigma", dist.HalfCauchy(2.5))
+    first = y[0] - (mu + phi * mu)  # err[0] taken as 0
+
+    def error(previous, pair):
+        y_previous, y_now = pair
+        err = y_now - (mu + phi * y_previous + theta * previous)
+        return err, err
+
+    _, rest = jax.lax.scan(error, first, (y[:-1], y[1:]))
+    err = jnp.concatenate([first[None], rest])
+    numpyro.sample("err", dist.Normal(0.0, sigma), obs=err)
+
+
+def earn_height(data):
+    """``earn_height.stan``: earnings (dollars) on height, flat priors: ``beta[1]`` ~ 1e4 and
+    ``beta[2]`` ~ 1e2 in sd, correlated near −1."""
+    beta = numpyro.sample("beta", _flat(constraints.real, (2,)))
+    sigma = numpyro.sample("sigma", _flat(constraints.positive))
+    mean = beta[0] + beta[1] * data["height"]
+    numpyro.sample("earn", dist.Normal(mean, sigma), obs=data["earn"])
+
+
+def resonance(data):
+    """The resonance toy (not from posteriordb): ``x ~ normal(0, 0.003)`` beside three
+    standard normals and a ``gamma(4, 4)``. A fixed integration time near π/2 in a metric
+    that over-estimates ``x``'s variance puts ``x`` near a half-period (issue 28)."""
+    numpyro.sample("x", dist.Normal(0.0, data["scale"]))
+    numpyro.sample("y", dist.Normal(0.0, 1.0).expand([3]))
+    numpyro.sample("s", dist.Gamma(4.0, 4.0))
+
+
+RESONANCE_STAN = """parameters {
+  real x;
+  vector[3] y;
+  real<lower=0> s;
+}
+model {
+  x ~ normal(0, 0.003);
+  y ~ normal(0, 1);
+  s ~ gamma(4, 4);
+}
+"""
+
+
 # --------------------------------------------------------------------------- data
 
 
@@ -154,6 +278,11 @@ def _mesquite_data(raw):
 
 
 PREDICTORS_LOGGED = ("diam1", "diam2", "canopy_height", "total_height", "density")
+
+
+def _diamonds_data(raw):
+    x = np.asarray(raw["X"], float)[:, 1:]  # the first column is the intercept's
+    return {"Xc": x - x.mean(axis=0), "Y": np.asarray(raw["Y"], float)}
 
 
 def _arrays(*names, integer=()):
@@ -211,6 +340,21 @@ SPECS = {
     "mesquite-logmesquite": _Spec(logmesquite, _mesquite_data, ("beta", "sigma")),
     "garch-garch11": _Spec(garch11, _arrays("y", "sigma1"), ("mu", "alpha0", "alpha1", "beta1")),
     "sblrc-blr": _Spec(blr, _arrays("X", "y"), ("beta", "sigma")),
+    "diamonds-diamonds": _Spec(diamonds, _diamonds_data, ("b", "Intercept", "sigma")),
+    "eight_schools-eight_schools_centered": _Spec(
+        eight_schools_centered, _arrays("y", "sigma"), ("theta", "mu", "tau")
+    ),
+    "kilpisjarvi_mod-kilpisjarvi": _Spec(
+        kilpisjarvi,
+        _arrays("x", "y", "pmualpha", "psalpha", "pmubeta", "psbeta"),
+        ("alpha", "beta", "sigma"),
+    ),
+    "low_dim_gauss_mix-low_dim_gauss_mix": _Spec(
+        low_dim_gauss_mix, _arrays("y"), ("mu", "sigma", "theta")
+    ),
+    "hmm_example-hmm_example": _Spec(hmm_example, _arrays("y"), ("theta1", "theta2", "mu")),
+    "arma-arma11": _Spec(arma11, _arrays("y"), ("mu", "phi", "theta", "sigma")),
+    "earnings-earn_height": _Spec(earn_height, _arrays("earn", "height"), ("beta", "sigma")),
 }
 
 
@@ -302,8 +446,10 @@ class Posterior:
 
 
 def load(name: str) -> Posterior:
-    """The posterior ``name`` (one of :data:`POSTERIORS`)."""
-    record = json.loads((DATA_DIR / f"{name}.json").read_text())
+    """The posterior ``name`` (one of :data:`NAMES`)."""
+    if name in EXACT:
+        return EXACT[name]()
+    record = read_record(name)
     spec = SPECS[name]
     data = spec.prepare(record["data"])
     ref = record["reference"]
@@ -323,3 +469,43 @@ def load(name: str) -> Posterior:
         stan_code=record["stan_code"],
         _latent=None if spec.latent is None else spec.latent(data),
     )
+
+
+def read_record(name: str) -> dict:
+    """The stored record of a posteriordb posterior (data as posteriordb ships it, Stan
+    program, reference summary); a large one is stored gzipped."""
+    path = DATA_DIR / f"{name}.json"
+    if path.exists():
+        return json.loads(path.read_text())
+    return json.loads(gzip.decompress(path.with_suffix(".json.gz").read_bytes()))
+
+
+RESONANCE_SCALE = 0.003
+
+
+def resonance_posterior() -> Posterior:
+    """The resonance toy with its exact moments (reference MCSE 0) and 20 exact draws."""
+    scale = RESONANCE_SCALE
+    keys = ["x", "y[1]", "y[2]", "y[3]", "s"]
+    rng = np.random.default_rng(28)
+    draws = np.column_stack(
+        [scale * rng.standard_normal(20), rng.standard_normal((20, 3)), rng.gamma(4.0, 0.25, 20)]
+    )
+    return Posterior(
+        name=RESONANCE,
+        model=resonance,
+        data={"scale": np.asarray(scale)},
+        reported=("x", "y", "s"),
+        keys=keys,
+        mean=np.array([0.0, 0.0, 0.0, 0.0, 1.0]),
+        sd=np.array([scale, 1.0, 1.0, 1.0, 0.5]),
+        mcse_mean=np.zeros(5),
+        reference_info={"method": "exact", "num_chains": 0, "num_draws": 0},
+        draws_sample=draws,
+        stan_code=RESONANCE_STAN,
+    )
+
+
+RESONANCE = "resonance-normal_0.003"
+EXACT = {RESONANCE: resonance_posterior}  # toy posteriors with exact references
+NAMES = (*POSTERIORS, *EXACT)

@@ -6,11 +6,14 @@ For each posterior: the data, the Stan program, and a summary of the reference d
 parameter: mean, sd, posteriordb's bulk/tail ESS and R-hat, the MCSE of the mean as
 ``sd / sqrt(bulk ESS)``) plus two draws of each reference chain (its first and last), which
 ``tests/test_posteriordb_models.py`` evaluates the models at. The full draws (10 chains x 1000)
-are not kept.
+are not kept. A record larger than ``GZIP_ABOVE`` characters is written gzipped
+(``<posterior>.json.gz``). A posterior whose posteriordb entry names another posterior's
+reference draws (``reference_posterior_name``) gets those.
 """
 
 from __future__ import annotations
 
+import gzip
 import io
 import json
 import subprocess
@@ -26,6 +29,7 @@ sys.path.insert(0, str(OUT.parents[2]))
 from benchmarks.posteriordb_models import POSTERIORS  # the one list
 
 PDB = "posterior_database"
+GZIP_ABOVE = 200_000  # characters: a larger record (diamonds' 5000 x 25 design) is gzipped
 
 
 def main(repo: str, commit: str = "HEAD") -> None:
@@ -44,8 +48,11 @@ def main(repo: str, commit: str = "HEAD") -> None:
         post = json.loads(show(f"{PDB}/posteriors/{name}.json"))
         data = unzip_json(f"{PDB}/data/data/{post['data_name']}.json.zip")
         stan = show(f"{PDB}/models/stan/{post['model_name']}.stan").decode()
-        chains = unzip_json(f"{PDB}/reference_posteriors/draws/draws/{name}.json.zip")
-        info = json.loads(show(f"{PDB}/reference_posteriors/draws/info/{name}.info.json"))
+        # posteriordb names the posterior whose draws are this one's reference (the centred
+        # eight schools points to the non-centred one: the same law of (mu, tau, theta)).
+        reference = post.get("reference_posterior_name") or name
+        chains = unzip_json(f"{PDB}/reference_posteriors/draws/draws/{reference}.json.zip")
+        info = json.loads(show(f"{PDB}/reference_posteriors/draws/info/{reference}.info.json"))
         names = list(chains[0])
         draws = np.array([[chain[k] for k in names] for chain in chains])  # (chain, key, draw)
         flat = draws.transpose(1, 0, 2).reshape(len(names), -1)
@@ -62,6 +69,7 @@ def main(repo: str, commit: str = "HEAD") -> None:
             "model_name": post["model_name"],
             "data_name": post["data_name"],
             "source": f"github.com/stan-dev/posteriordb@{resolved}",
+            "reference_posterior": reference,
             "stan_code": stan,
             "data": data,
             "reference": {
@@ -80,7 +88,11 @@ def main(repo: str, commit: str = "HEAD") -> None:
                 k: draws[:, i, [0, -1]].reshape(-1).tolist() for i, k in enumerate(names)
             },
         }
-        (OUT / f"{name}.json").write_text(json.dumps(record, indent=1) + "\n")
+        text = json.dumps(record, indent=1) + "\n"
+        if len(text) > GZIP_ABOVE:
+            (OUT / f"{name}.json.gz").write_bytes(gzip.compress(text.encode(), mtime=0))
+        else:
+            (OUT / f"{name}.json").write_text(text)
         print(name, len(names), "parameters")
 
 
