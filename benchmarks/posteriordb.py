@@ -1,4 +1,6 @@
-"""Real posteriors from posteriordb: liesample's samplers against NumPyro and BlackJAX NUTS.
+"""Real posteriors from posteriordb (and a resonance toy): ``MCMC(GeometricHMC(model))`` with its
+defaults against ``MCMC(NUTS(model))``, side by side, and in the full run BlackJAX NUTS and
+``magnetic_hmc`` beside them.
 
 A suite of ``benchmarks/run.py`` (``benchmarks/suites.py``); alone::
 
@@ -6,31 +8,35 @@ A suite of ``benchmarks/run.py`` (``benchmarks/suites.py``); alone::
     .venv/bin/python -m benchmarks.posteriordb --quick    # smoke run (benchmarks/results/quick/)
 
 Writes ``posteriordb.json`` and ``posteriordb.png``. The posteriors, their NumPyro models and
-the reference summaries (from posteriordb's Stan reference draws) are in
-``benchmarks/posteriordb_models.py`` and ``benchmarks/data/posteriordb/``.
+the reference summaries (from posteriordb's Stan reference draws; exact moments for the toy) are
+in ``benchmarks/posteriordb_models.py`` and ``benchmarks/data/posteriordb/``.
 
 Every sampler starts its ``NUM_CHAINS`` chains from the same points (uniform in ``(-2, 2)`` in
 NumPyro's unconstrained coordinates, as ``init_to_uniform``), warms up for ``num_warmup``
 transitions per chain and then draws ``num_draws`` per chain:
 
-- ``numpyro nuts``: ``numpyro.infer.NUTS`` (its windowed adaptation, diagonal mass, target
-  acceptance 0.8), each chain adapting on its own;
-- ``liesample GeometricHMC``: ``liesample.numpyro_mcmc.GeometricHMC`` on the model (every
-  site Euclidean here, in NumPyro's unconstrained coordinates; ``T = π/2``, each chain adapting
-  step size and mass on its own);
-- ``blackjax nuts``: ``blackjax.window_adaptation(blackjax.nuts, …)`` run on every chain
-  (vmapped), on the flattened unconstrained log density;
-- ``magnetic_hmc``: ``liesample.magnetic_window_adaptation`` on the chains together (step
-  size, diagonal mass, field ``angle`` and the ChEES trajectory length), then
-  ``liesample.jittered_magnetic_hmc``; one row per angle in ``ANGLES`` (0 is the default).
+- ``numpyro nuts``: ``numpyro.infer.MCMC(NUTS(model))``, NumPyro's defaults (windowed
+  adaptation, diagonal mass, target acceptance 0.8);
+- ``liesample GeometricHMC``: ``numpyro.infer.MCMC(liesample.numpyro_mcmc.GeometricHMC(model))``
+  with the kernel's defaults (every site Euclidean here, in NumPyro's unconstrained
+  coordinates);
+- full run only: ``blackjax nuts`` (``blackjax.window_adaptation(blackjax.nuts, …)`` on every
+  chain, vmapped, on the flattened unconstrained log density) and ``magnetic_hmc``
+  (``liesample.magnetic_window_adaptation`` on the chains together, then
+  ``liesample.jittered_magnetic_hmc``; one row per angle in ``ANGLES``).
 
-The NumPyro kernels run through their ``init``/``sample`` methods in one compiled scan per
-phase (as ``MCMC(chain_method="vectorized")`` does), so that compilation can be timed apart.
+The two ``MCMC`` rows run with ``chain_method=CHAIN_METHOD`` (``"sequential"``: what
+``MCMC``'s default ``"parallel"`` falls back to on one device), interleaved in one process:
+both warm-ups, then both sampling phases, the order alternating from one posterior to the
+next, so that the load of a shared machine falls on both. Their seconds are the sampling
+phase's wall time less the compilation JAX reports in that phase (``jax.monitoring``'s compile
+events).
+
 Per posterior and sampler: the minimum over the reference's parameters (constrained, as Stan
-reports them) of ArviZ's bulk and tail ESS, per gradient evaluation of the sampling phase and
-per second of the sampling phase (compilation excluded; vectorised NUTS chains advance in
-lockstep, so a step lasts as long as the longest tree); the largest R-hat; and the error of
-each posterior mean and sd against the reference in reference-sd units, with
+reports them) of ArviZ's bulk and tail ESS, per gradient evaluation of the sampling phase
+(``num_steps``) and per second of it; the largest rank-normalised split R-hat; every posterior
+sd against the reference (a ratio off 1 by more than ``SD_TOLERANCE`` is warned about and
+flagged, beside ArviZ's MCSE of the sd); and each mean's error,
 ``z = (mean − reference mean) / √(MCSE² + reference MCSE²)``.
 """
 
@@ -38,6 +44,7 @@ from __future__ import annotations
 
 import sys
 import time
+import warnings
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
@@ -51,7 +58,7 @@ import blackjax
 import jax.numpy as jnp
 import numpy as np
 from jax.flatten_util import ravel_pytree
-from numpyro.infer import NUTS
+from numpyro.infer import MCMC, NUTS
 from numpyro.infer.util import initialize_model
 
 import liesample
@@ -59,33 +66,33 @@ from benchmarks import common, suites
 from benchmarks import posteriordb_models as pdb
 from liesample.numpyro_mcmc import GeometricHMC
 
-SUITE = {"order": 45, "title": "posteriordb: GeometricHMC and magnetic HMC vs NUTS"}
+SUITE = {"order": 45, "title": "posteriordb: MCMC(GeometricHMC) vs MCMC(NUTS), and magnetic HMC"}
 
 NUM_CHAINS = 4
-ANGLES = (liesample.tuning.adaptation.DEFAULT_ANGLE, 0.25)
+CHAIN_METHOD = "sequential"
+ANGLES = (0.0, 0.25)  # magnetic_hmc's field angle: 0 (the default) and 0.25
 Z_LIMIT = 4.0  # a mean further than this many MCSEs from the reference is flagged
+SD_TOLERANCE = 0.10  # a posterior sd off the reference by more than this fraction is warned
 RHAT_LIMIT = 1.01  # a larger R-hat is named in the verdict
-GOAL = 1.0  # ESS per gradient against the better NUTS
-QUICK_POSTERIORS = ("eight_schools-eight_schools_noncentered", "kidiq-kidscore_momiq")
+GOAL = 1.0  # ESS per gradient against NumPyro NUTS, where NUTS is healthy
+PAIR = ("numpyro nuts", "liesample GeometricHMC")  # the interleaved MCMC rows
 NUTS_LABELS = ("numpyro nuts", "blackjax nuts")
+QUICK_POSTERIORS = (
+    pdb.RESONANCE,
+    "diamonds-diamonds",
+    "eight_schools-eight_schools_noncentered",
+)
 NOTES = (
     "Left out: `wells_data-wells_dist` and `radon_mn-radon_pooled` have no reference draws in "
-    "posteriordb; `garch-garch11` and `sblrc-blr` stand in for them. GARCH(1,1)'s "
-    "`beta1` is bounded by `1 − alpha1`, a bound that depends on another parameter: "
-    "`GeometricHMC` builds each Euclidean site's bijection from the support the model gives at "
-    "every evaluation, as NumPyro's potential does (`tests/test_numpyro_dependent_support.py`), "
-    "so its log density is the model's there too. `magnetic_hmc` at angle 0.25: in earlier "
-    "runs the shared step size collapsed in the warm-up on gp_pois_regr and blr (final ε "
-    "2e-4 and 1e-3, L ≈ 570): a field scaled to the step is strong against the slow "
-    "directions early in the warm-up, chains started far out slid along level sets instead "
-    "of descending, and the first mass estimate counted that excursion and forced a tiny "
-    "step. The field is now off until the first slow window closes. In this run ε at angle "
-    "0.25 is 0.031 on gp_pois_regr and 0.19 on blr, near angle 0's 0.028 and 0.22, and blr "
-    "meets the target (3.66×). gp_pois_regr at angle 0.25 still mixes slowly: 0.34× the "
-    "better NUTS's ESS per gradient, R-hat 1.067, largest mean error 0.13 reference sd "
-    "(within 4 MCSE, but the MCSE is wide at that R-hat); arK at angle 0.25 misses narrowly "
-    "(0.91×). Every mean of every row is within 4 MCSE. The angle-0 (default) rows draw the "
-    "same as before the change."
+    "posteriordb; `garch-garch11` and `sblrc-blr` stand in for them. The centred eight schools "
+    "is scored against the non-centred program's reference draws (posteriordb's "
+    "`reference_posterior_name`: the same law of `mu`, `tau`, `theta`). The resonance toy's "
+    "reference is exact. GARCH(1,1)'s `beta1` is bounded by `1 − alpha1`, a bound that "
+    "depends on another parameter: `GeometricHMC` builds each Euclidean site's bijection from "
+    "the support the model gives at every evaluation, as NumPyro's potential does "
+    "(`tests/test_numpyro_dependent_support.py`). An sd ratio is flagged at "
+    "|ratio − 1| > 10 % whatever its MCSE: with few draws a healthy run can be flagged by "
+    "chance, and the MCSE column says how likely that is."
 )
 
 
@@ -136,46 +143,115 @@ def timed(executable, *args):
 # --------------------------------------------------------------------------- samplers
 
 
-def run_numpyro_kernel(kernel, setup, key, num_warmup, num_draws):
-    """A NumPyro ``MCMCKernel`` on ``NUM_CHAINS`` vectorised chains, warm-up then sampling,
-    each phase one compiled scan."""
-    kwargs = setup.kwargs
-    keys = jax.random.split(key, NUM_CHAINS)
-    state = kernel.init(keys, num_warmup, setup.start_params, (), kwargs)
+class CompileClock:
+    """Seconds of compilation that JAX reports (tracing, lowering, XLA) while it is active."""
 
-    def phase(length):
-        def scan(state):
-            def body(state, _):
-                state = kernel.sample(state, (), kwargs)
-                return state, (state.z, state.num_steps, state.diverging)
+    EVENTS = (
+        "/jax/core/compile/jaxpr_trace_duration",
+        "/jax/core/compile/jaxpr_to_mlir_module_duration",
+        "/jax/core/compile/backend_compile_duration",
+    )
 
-            return jax.lax.scan(body, state, None, length=length)
+    def __init__(self):
+        self.seconds = 0.0
 
-        return scan
+    def _listen(self, event, duration, **_):
+        if event in self.EVENTS:
+            self.seconds += duration
 
-    warm, warm_compile = compiled(phase(num_warmup), state)
-    (state, (_, warm_steps, _)), warm_seconds = timed(warm, state)
-    draw, draw_compile = compiled(phase(num_draws), state)
-    (state, (z, steps, diverging)), seconds = timed(draw, state)
-    postprocess = kernel.postprocess_fn((), kwargs)
-    values = liesample.jit(jax.vmap(jax.vmap(postprocess)))(jax.tree.map(_chains_first, z))
-    step_size = getattr(state, "step_size", None)
-    if step_size is None:
-        step_size = state.adapt_state.step_size
-    return {
-        "draws": pdb.flatten(values, setup.posterior.keys, batch_ndim=2),
-        "gradients": int(np.sum(steps)),
-        "warmup_gradients": int(np.sum(warm_steps)),
-        "seconds": seconds,
-        "warmup_seconds": warm_seconds,
-        "compile_seconds": warm_compile + draw_compile,
-        "divergences": int(np.sum(diverging)),
-        "step_size": float(np.median(np.asarray(step_size))),
+    def __enter__(self):
+        jax.monitoring.register_event_duration_secs_listener(self._listen)
+        return self
+
+    def __exit__(self, *exc):
+        jax.monitoring.unregister_event_duration_listener(self._listen)
+
+
+class MCMCRun:
+    """One kernel through ``numpyro.infer.MCMC``: :meth:`warmup` and :meth:`sample` are
+    called apart, so that two kernels' phases interleave."""
+
+    def __init__(self, kernel, setup, key, num_warmup, num_draws):
+        self.setup, self.keys = setup, jax.random.split(key)
+        self.mcmc = MCMC(
+            kernel,
+            num_warmup=num_warmup,
+            num_samples=num_draws,
+            num_chains=NUM_CHAINS,
+            chain_method=CHAIN_METHOD,
+            progress_bar=False,
+        )
+        self.out = {}
+
+    def _phase(self, key, **options):
+        with CompileClock() as clock:
+            start = time.perf_counter()
+            getattr(self.mcmc, options.pop("method"))(
+                key, extra_fields=("num_steps",), **options, **self.setup.kwargs
+            )
+            jax.block_until_ready(self.mcmc.last_state)
+            wall = time.perf_counter() - start
+        return wall - clock.seconds, clock.seconds
+
+    def warmup(self):
+        seconds, compile_seconds = self._phase(
+            self.keys[0],
+            method="warmup",
+            collect_warmup=True,
+            init_params=self.setup.start_params,
+        )
+        self.out.update(
+            warmup_seconds=seconds,
+            compile_seconds=compile_seconds,
+            warmup_gradients=int(np.sum(self.mcmc.get_extra_fields()["num_steps"])),
+        )
+
+    def sample(self):
+        seconds, compile_seconds = self._phase(self.keys[1], method="run")
+        fields = self.mcmc.get_extra_fields(group_by_chain=True)
+        values = self.mcmc.get_samples(group_by_chain=True)
+        steps = final_step_sizes(self.mcmc.last_state)
+        self.out.update(
+            draws=pdb.flatten(values, self.setup.posterior.keys, batch_ndim=2),
+            gradients=int(np.sum(fields["num_steps"])),
+            seconds=seconds,
+            compile_seconds=self.out["compile_seconds"] + compile_seconds,
+            divergences=int(np.sum(fields["diverging"])),
+            step_size=float(np.median(steps)),
+            step_sizes=steps.tolist(),
+        )
+
+
+def final_step_sizes(state):
+    """Each chain's adapted step size (NumPyro's ``adapt_state.step_size``)."""
+    adapt = getattr(state, "adapt_state", None)
+    step = getattr(adapt, "step_size", None)
+    if step is None:
+        step = getattr(state, "step_size", np.nan)
+    return np.atleast_1d(np.asarray(step, float)).reshape(-1)
+
+
+def run_pair(setup, key, num_warmup, num_draws, first):
+    """NumPyro NUTS and GeometricHMC through ``MCMC``, interleaved: both warm-ups, then both
+    sampling phases, ``PAIR[first]`` first each time. ``label -> result`` (or the error)."""
+    kernels = {
+        "numpyro nuts": lambda: NUTS(setup.posterior.model),
+        "liesample GeometricHMC": lambda: GeometricHMC(setup.posterior.model),
     }
-
-
-def _chains_first(leaf):
-    return jnp.swapaxes(leaf, 0, 1)  # scan gives (draws, chains, ...)
+    order = PAIR if first == 0 else PAIR[::-1]
+    runs, failed = {}, {}
+    for j, label in enumerate(PAIR):
+        key_j = jax.random.fold_in(key, j)
+        runs[label] = MCMCRun(kernels[label](), setup, key_j, num_warmup, num_draws)
+    for phase in ("warmup", "sample"):
+        for label in order:
+            if label in failed:
+                continue
+            try:
+                getattr(runs[label], phase)()
+            except Exception as error:  # noqa: BLE001  (a failure is a result: recorded)
+                failed[label] = error
+    return {label: failed.get(label, runs[label].out) for label in PAIR}
 
 
 def run_flat_chains(sampler_for, params, states, setup, key, num_draws):
@@ -254,24 +330,16 @@ def run_magnetic(setup, key, num_warmup, num_draws, angle):
     }
 
 
-def samplers():
-    """``label -> run(setup, key, num_warmup, num_draws)``, in table order."""
-    out = {
-        "numpyro nuts": lambda s, k, w, n: run_numpyro_kernel(NUTS(s.posterior.model), s, k, w, n),
-        "blackjax nuts": run_blackjax_nuts,
-        "liesample GeometricHMC": lambda s, k, w, n: run_numpyro_kernel(
-            GeometricHMC(s.posterior.model), s, k, w, n
-        ),
-    }
+def extra_samplers():
+    """The full run's other rows: ``label -> run(setup, key, num_warmup, num_draws)``."""
+    out = {"blackjax nuts": run_blackjax_nuts}
     for angle in ANGLES:
-        label = magnetic_label(angle)
-        out[label] = lambda s, k, w, n, a=angle: run_magnetic(s, k, w, n, a)
+        out[magnetic_label(angle)] = lambda s, k, w, n, a=angle: run_magnetic(s, k, w, n, a)
     return out
 
 
 def magnetic_label(angle):
-    default = ", default" if angle == liesample.tuning.adaptation.DEFAULT_ANGLE else ""
-    return f"magnetic_hmc (angle {angle:g}{default})"
+    return f"magnetic_hmc (angle {angle:g}{', default' if angle == 0 else ''})"
 
 
 # --------------------------------------------------------------------------- summaries
@@ -282,16 +350,18 @@ def summarise(posterior, label, run):
     ess_bulk = np.asarray(azs.ess(x, method="bulk", sample_dims=(0, 1)))
     ess_tail = np.asarray(azs.ess(x, method="tail", sample_dims=(0, 1), prob=(0.05, 0.95)))
     ess_mean = np.asarray(azs.ess(x, method="mean", sample_dims=(0, 1)))
+    mcse_sd = np.asarray(azs.mcse(x, method="sd", sample_dims=(0, 1)))
     rhat = np.asarray(azs.rhat(x, sample_dims=(0, 1)))
     flat = x.reshape(-1, x.shape[-1])
     mean, sd = flat.mean(0), flat.std(0, ddof=1)
     mcse = sd / np.sqrt(np.maximum(ess_mean, 1.0))
     z = (mean - posterior.mean) / np.sqrt(mcse**2 + posterior.mcse_mean**2)
-    mean_error = (mean - posterior.mean) / posterior.sd
-    sd_error = (sd - posterior.sd) / posterior.sd
-    worst = int(np.argmax(np.abs(z)))
+    sd_ratio = sd / posterior.sd
+    off = np.abs(sd_ratio - 1.0) > SD_TOLERANCE
+    worst, worst_sd = int(np.argmax(np.abs(z))), int(np.argmax(np.abs(sd_ratio - 1.0)))
     gradients = max(run["gradients"], 1)
-    row = {
+    keys = posterior.keys
+    return {
         "posterior": posterior.name,
         "sampler": label,
         **run,
@@ -299,23 +369,54 @@ def summarise(posterior, label, run):
         "ess_tail_min": float(ess_tail.min()),
         "ess_bulk_per_gradient": float(ess_bulk.min()) / gradients,
         "ess_tail_per_gradient": float(ess_tail.min()) / gradients,
-        "ess_bulk_per_second": float(ess_bulk.min()) / run["seconds"],
+        "ess_bulk_per_second": float(ess_bulk.min()) / max(run["seconds"], 1e-9),
         "gradients_per_draw": run["gradients"] / (x.shape[0] * x.shape[1]),
         "rhat_max": float(np.nanmax(rhat)),
-        "max_abs_mean_error_sd": float(np.max(np.abs(mean_error))),
-        "max_abs_sd_error_sd": float(np.max(np.abs(sd_error))),
+        "rhat_worst_parameter": keys[int(np.nanargmax(rhat))],
+        "max_abs_mean_error_sd": float(np.max(np.abs((mean - posterior.mean) / posterior.sd))),
         "max_abs_z_mean": float(np.abs(z[worst])),
-        "worst_parameter": posterior.keys[worst],
+        "worst_parameter": keys[worst],
         "means_within_z_limit": bool(np.all(np.abs(z) <= Z_LIMIT)),
-        "mean_error_sd": dict(zip(posterior.keys, mean_error.tolist())),
-        "sd_error_sd": dict(zip(posterior.keys, sd_error.tolist())),
-        "z_mean": dict(zip(posterior.keys, z.tolist())),
+        "worst_sd_ratio": float(sd_ratio[worst_sd]),
+        "worst_sd_parameter": keys[worst_sd],
+        "worst_sd_ratio_mcse": float(mcse_sd[worst_sd] / posterior.sd[worst_sd]),
+        "sd_off": {k: float(r) for k, r, o in zip(keys, sd_ratio, off) if o},
+        "sd_ratio": dict(zip(keys, sd_ratio.tolist())),
+        "sd_ratio_mcse": dict(zip(keys, (mcse_sd / posterior.sd).tolist())),
+        "z_mean": dict(zip(keys, z.tolist())),
+        "rhat": dict(zip(keys, rhat.tolist())),
+        "ess_bulk": dict(zip(keys, ess_bulk.tolist())),
     }
-    return row
+
+
+def warn_sd(row, log):
+    """Warn (and log) when a posterior sd is off the reference by more than SD_TOLERANCE."""
+    if not row["sd_off"]:
+        return
+    named = ", ".join(
+        f"{k} {r:.2f}× (MCSE {row['sd_ratio_mcse'][k]:.2f})" for k, r in row["sd_off"].items()
+    )
+    message = (
+        f"posteriordb {row['posterior']} / {row['sampler']}: posterior sd off the reference by "
+        f"more than {SD_TOLERANCE:.0%}: {named}"
+    )
+    log(f"  WARNING {message}")
+    warnings.warn(message, stacklevel=2)
+
+
+def healthy(row):
+    """No divergence, R-hat at most RHAT_LIMIT, every mean within Z_LIMIT MCSE and every sd
+    within SD_TOLERANCE of the reference."""
+    return (
+        row["divergences"] == 0
+        and row["rhat_max"] <= RHAT_LIMIT
+        and row["means_within_z_limit"]
+        and not row["sd_off"]
+    )
 
 
 def add_ratios(rows):
-    """ESS per gradient and per second against each NUTS and the better of the two."""
+    """ESS per gradient and per second against each NUTS row of the posterior."""
     nuts = {r["sampler"]: r for r in rows if r["sampler"] in NUTS_LABELS}
     for row in rows:
         for label, ref in nuts.items():
@@ -326,8 +427,7 @@ def add_ratios(rows):
             row[f"vs_{key}_nuts_ess_per_second"] = ratio(
                 row["ess_bulk_per_second"], ref["ess_bulk_per_second"]
             )
-        best = max(r["ess_bulk_per_gradient"] for r in nuts.values())
-        row["vs_best_nuts_ess_per_gradient"] = ratio(row["ess_bulk_per_gradient"], best)
+        row["numpyro_nuts_healthy"] = "numpyro nuts" in nuts and healthy(nuts["numpyro nuts"])
 
 
 def ratio(a, b):
@@ -337,11 +437,13 @@ def ratio(a, b):
 def log_row(log, row):
     log(
         f"  {row['sampler']:<36} ESS/grad {row['ess_bulk_per_gradient']:.2e} "
-        f"(x{row['vs_best_nuts_ess_per_gradient']:.2f} best NUTS)  ESS/s "
-        f"{row['ess_bulk_per_second']:8.1f}  R-hat {row['rhat_max']:.3f}  "
-        f"|dmean|/sd {row['max_abs_mean_error_sd']:.3f}  |dsd|/sd {row['max_abs_sd_error_sd']:.3f}"
-        f"  max|z| {row['max_abs_z_mean']:.1f} ({row['worst_parameter']})  "
-        f"div {row['divergences']}  {row['seconds']:.1f} s"
+        f"(x{row.get('vs_numpyro_nuts_ess_per_gradient', float('nan')):.2f} NumPyro NUTS)  "
+        f"ESS/s {row['ess_bulk_per_second']:8.1f}  R-hat {row['rhat_max']:.3f}  "
+        f"sd {row['worst_sd_ratio']:.2f}x ({row['worst_sd_parameter']})  "
+        f"max|z| {row['max_abs_z_mean']:.1f} ({row['worst_parameter']})  "
+        f"div {row['divergences']}  eps {common.format_g(min(row.get('step_sizes') or [row['step_size']]))}"
+        f"-{common.format_g(max(row.get('step_sizes') or [row['step_size']]))}  "
+        f"{row['seconds']:.1f} s"
     )
 
 
@@ -350,10 +452,10 @@ def log_row(log, row):
 
 def run(out_dir: Path, quick: bool, log=print, names=None) -> None:
     start = time.perf_counter()
-    num_warmup = 200 if quick else 1000
-    num_draws = 200 if quick else 1000
+    num_warmup = 300 if quick else 1000
+    num_draws = 300 if quick else 1000
     if names is None:
-        names = QUICK_POSTERIORS if quick else pdb.POSTERIORS
+        names = QUICK_POSTERIORS if quick else pdb.NAMES
     key = jax.random.key(20261126)
     results, failures, posteriors = [], [], {}
     for index, name in enumerate(names):
@@ -362,28 +464,37 @@ def run(out_dir: Path, quick: bool, log=print, names=None) -> None:
         setup = Setup(posterior, pkey)
         log(f"posterior: {name} (d = {setup.dimension})")
         posteriors[name] = {"reference": posterior.reference_info, "dimension": setup.dimension}
+        outs = run_pair(setup, jax.random.fold_in(pkey, 10), num_warmup, num_draws, index % 2)
+        if not quick:
+            for j, (label, fn) in enumerate(extra_samplers().items()):
+                try:
+                    outs[label] = fn(setup, jax.random.fold_in(pkey, 20 + j), num_warmup, num_draws)
+                except Exception as error:  # noqa: BLE001  (a failure is a result: recorded)
+                    outs[label] = error
         rows = []
-        for j, (label, fn) in enumerate(samplers().items()):
-            try:
-                out = fn(setup, jax.random.fold_in(pkey, 10 + j), num_warmup, num_draws)
-            except Exception as error:  # noqa: BLE001  (a failure is a result: recorded)
-                failures.append({"posterior": name, "sampler": label, "error": repr(error)})
-                log(f"  {label}: FAILED {error!r}")
-                continue
-            rows.append(summarise(posterior, label, out))
+        for label, out in outs.items():
+            if isinstance(out, Exception):
+                failures.append({"posterior": name, "sampler": label, "error": repr(out)})
+                log(f"  {label}: FAILED {out!r}")
+            else:
+                rows.append(summarise(posterior, label, out))
         add_ratios(rows)
         for row in rows:
             log_row(log, row)
+            warn_sd(row, log)
         results += rows
     data = {
         "description": __doc__,
         "machine": common.machine_info(),
         "mode": "quick" if quick else "full",
         "num_chains": NUM_CHAINS,
+        "chain_method": CHAIN_METHOD,
         "num_warmup": num_warmup,
         "num_draws": num_draws,
         "angles": ANGLES,
         "z_limit": Z_LIMIT,
+        "sd_tolerance": SD_TOLERANCE,
+        "rhat_limit": RHAT_LIMIT,
         "goal": GOAL,
         "posteriors": posteriors,
         "results": results,
@@ -410,13 +521,15 @@ def plot(data, path):
     labels = list(dict.fromkeys(r["sampler"] for r in rows))
     fig, axes = plt.subplots(1, 2, figsize=(15, 5))
     width = 0.8 / max(len(labels), 1)
-    for ax, key, title in (
-        (axes[0], "ess_bulk_per_gradient", "min bulk ESS per gradient (sampling phase)"),
-        (axes[1], "max_abs_mean_error_sd", "max |mean − reference| / reference sd"),
-    ):
+    panels = (
+        (axes[0], lambda r: r["ess_bulk_per_gradient"], "min bulk ESS per gradient (sampling)"),
+        (axes[1], lambda r: abs(r["worst_sd_ratio"] - 1.0), "max |sd / reference sd − 1|"),
+    )
+    axes[1].axhline(data["sd_tolerance"], color="k", lw=0.8, ls="--")
+    for ax, value, title in panels:
         for j, label in enumerate(labels):
             values = [
-                next((r[key] for r in rows if r["posterior"] == n and r["sampler"] == label), 0)
+                next((value(r) for r in rows if r["posterior"] == n and r["sampler"] == label), 0)
                 for n in names
             ]
             ax.bar(np.arange(len(names)) + j * width, values, width, label=label)
@@ -445,87 +558,138 @@ def trajectory(row):
     return f"{row['num_integration_steps']} ({row['trajectory_length']:.2g})"
 
 
+def step_sizes(row):
+    """The median adapted step size, and the range over chains when they differ by > 2×."""
+    steps = row.get("step_sizes") or [row["step_size"]]
+    text = common.format_g(row["step_size"])
+    if max(steps) > 2 * min(steps):
+        text += f" ({common.format_g(min(steps))}–{common.format_g(max(steps))})"
+    return text
+
+
+def sd_cell(row):
+    flag = f" ⚠ {len(row['sd_off'])} off" if row["sd_off"] else ""
+    return (
+        f"{row['worst_sd_ratio']:.2f} ± {row['worst_sd_ratio_mcse']:.2f} "
+        f"({row['worst_sd_parameter']}){flag}"
+    )
+
+
+def table_row(r):
+    flag = "" if r["means_within_z_limit"] else " ⚠"
+    return (
+        f"| {short_name(r['posterior'])} | {r['sampler']} | {step_sizes(r)} | {trajectory(r)} | "
+        f"{r['gradients_per_draw']:.1f} | {r['ess_bulk_per_gradient']:.2e} | "
+        f"{r.get('vs_numpyro_nuts_ess_per_gradient', float('nan')):.2f} | "
+        f"{common.format_g(r['ess_bulk_per_second'])} | "
+        f"{r.get('vs_numpyro_nuts_ess_per_second', float('nan')):.2f} | "
+        f"{r['rhat_max']:.3f} ({r['rhat_worst_parameter']}) | {sd_cell(r)} | "
+        f"{r['max_abs_z_mean']:.1f} ({r['worst_parameter']}){flag} | "
+        f"{r['divergences']} | {r['warmup_gradients']} |"
+    )
+
+
+def verdict(name, rows, data):
+    """One posterior's verdict on the non-NUTS rows against NumPyro NUTS."""
+    parts = []
+    for label, r in rows.items():
+        if label in NUTS_LABELS:
+            continue
+        vs = r.get("vs_numpyro_nuts_ess_per_gradient", float("nan"))
+        goal = "met" if vs >= data["goal"] else "missed"
+        if not r["numpyro_nuts_healthy"]:
+            goal = "NUTS unhealthy"
+        checks = []
+        if r["sd_off"]:
+            checks.append("sd " + ", ".join(f"{k} {v:.2f}×" for k, v in r["sd_off"].items()))
+        if not r["means_within_z_limit"]:
+            checks.append(f"mean {r['worst_parameter']} at {r['max_abs_z_mean']:.1f} MCSE")
+        if r["rhat_max"] > data["rhat_limit"]:
+            checks.append(f"R-hat {r['rhat_max']:.3f}")
+        parts.append(f"{label} {vs:.2f}× ({goal}; {'; '.join(checks) or 'checks ok'})")
+    return f"{short_name(name)}: " + ", ".join(parts)
+
+
 def report(out_dir: Path, md_dir: Path) -> str:
     path = out_dir / "posteriordb.json"
     if not path.exists():
         return ""
     data = common.read_json(path)
+    if "sd_tolerance" not in data:  # written by the earlier version of this suite
+        return (
+            "## posteriordb: MCMC(GeometricHMC) against MCMC(NUTS) on real posteriors\n\n"
+            f"`{path.name}` was written by an earlier version of `benchmarks/posteriordb.py`; "
+            "rerun it (`python -m benchmarks.posteriordb`) to fill this section.\n"
+        )
     rel = common.relative_link(out_dir / "posteriordb.png", md_dir)
     machine = data["machine"]
     lines = [
-        "## posteriordb: GeometricHMC and magnetic HMC against NUTS on real posteriors",
+        "## posteriordb: MCMC(GeometricHMC) against MCMC(NUTS) on real posteriors",
         "",
         (
             f"From `benchmarks/posteriordb.py` ({machine['date_utc']}, {data['mode']} mode, "
             f"{data['total_seconds']:.0f} s on {machine['usable_cpus']} shared CPU cores "
-            f"({machine.get('cpu_model', '')}), JAX {machine.get('jax', '')}: wall times are rough "
-            "and other jobs shared the cores; ESS per gradient does not depend on the "
-            f"machine). Posteriors, data and reference draws from "
-            "[posteriordb](https://github.com/stan-dev/posteriordb) (BSD 3-Clause; "
-            "`benchmarks/data/posteriordb/`); each model written again in NumPyro "
+            f"({machine.get('cpu_model', '')}), JAX {machine.get('jax', '')}, liesample "
+            f"{machine.get('git_commit', '')}: wall times are rough and other jobs shared the "
+            "cores; ESS per gradient does not depend on the machine). Posteriors, data and "
+            "reference draws from [posteriordb](https://github.com/stan-dev/posteriordb) (BSD "
+            "3-Clause; `benchmarks/data/posteriordb/`), each model written again in NumPyro "
             "(`benchmarks/posteriordb_models.py`, checked against the Stan program by "
-            "`tests/test_posteriordb_models.py`). Every sampler starts "
+            "`tests/test_posteriordb_models.py`); the resonance toy (x ~ normal(0, 0.003) "
+            "beside O(1) parameters) has exact moments. Every sampler starts "
             f"{data['num_chains']} chains from the same uniform(−2, 2) unconstrained points, "
             f"warms up for {data['num_warmup']} transitions per chain and draws "
-            f"{data['num_draws']} per chain. NumPyro NUTS and `GeometricHMC` (every site "
-            "Euclidean, T = π/2) adapt each chain on its own; BlackJAX NUTS runs "
-            "`blackjax.window_adaptation` on every chain (vmapped); `magnetic_hmc` is "
-            "`liesample.magnetic_window_adaptation` on the chains together (ChEES trajectory "
-            "length) then `jittered_magnetic_hmc`, on the flattened unconstrained log density. "
-            "ESS: the minimum over the reference's (constrained) parameters of ArviZ's bulk "
-            "ESS, per gradient of the sampling phase and per second of it (compilation "
-            "excluded); `L (T)`: `magnetic_hmc`'s adapted maximum number of steps and "
-            "trajectory length; `Δmean`, `Δsd`: the largest |error| of a posterior mean or sd in "
-            "reference-sd units; `|z|`: the largest |error of a mean| / √(MCSE² + reference "
-            f"MCSE²), flagged when above {data['z_limit']:g}."
+            f"{data['num_draws']} per chain. `numpyro nuts` is `MCMC(NUTS(model))` and "
+            "`liesample GeometricHMC` is `MCMC(GeometricHMC(model))`, both with their "
+            f"defaults and `chain_method={data['chain_method']!r}`, interleaved (both "
+            "warm-ups, then both sampling phases); BlackJAX NUTS and `magnetic_hmc` (full mode "
+            "only) run after them on the flattened unconstrained log density. ε: the median "
+            "adapted step size over chains (their range when it spans more than 2×); ESS: the "
+            "minimum over the reference's (constrained) parameters of ArviZ's bulk ESS, per "
+            "gradient and per second of the sampling phase (compilation excluded); `sd ratio`: "
+            "the posterior sd over the reference's for the parameter furthest from 1, ± ArviZ's "
+            f"MCSE of the sd, flagged ⚠ (and warned) when off by more than "
+            f"{data['sd_tolerance']:.0%}; `|z|`: the largest |error of a mean| / √(MCSE² + "
+            f"reference MCSE²), flagged above {data['z_limit']:g}."
         ),
         "",
         (
             "| posterior | sampler | ε | L (T) | grads/draw | ESS/grad | vs NumPyro NUTS "
-            "| vs BlackJAX NUTS | ESS/s | R-hat | max Δmean/sd | max Δsd/sd | max abs z "
-            "| div. | warm-up grads |"
+            "| ESS/s | ESS/s vs NumPyro NUTS | R-hat | sd ratio | max abs z | div. "
+            "| warm-up grads |"
         ),
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        *(table_row(r) for r in data["results"]),
+        "",
     ]
-    for r in data["results"]:
-        flag = "" if r["means_within_z_limit"] else " ⚠"
-        lines.append(
-            f"| {short_name(r['posterior'])} | {r['sampler']} | "
-            f"{common.format_g(r['step_size'])} | {trajectory(r)} | "
-            f"{r['gradients_per_draw']:.1f} | "
-            f"{r['ess_bulk_per_gradient']:.2e} | "
-            f"{r.get('vs_numpyro_nuts_ess_per_gradient', float('nan')):.2f} | "
-            f"{r.get('vs_blackjax_nuts_ess_per_gradient', float('nan')):.2f} | "
-            f"{common.format_g(r['ess_bulk_per_second'])} | {r['rhat_max']:.3f} | "
-            f"{r['max_abs_mean_error_sd']:.3f} | {r['max_abs_sd_error_sd']:.3f} | "
-            f"{r['max_abs_z_mean']:.1f} ({r['worst_parameter']}){flag} | "
-            f"{r['divergences']} | {r['warmup_gradients']} |"
-        )
-    lines.append("")
-    verdicts = []
-    for name in dict.fromkeys(r["posterior"] for r in data["results"]):
-        rows = {r["sampler"]: r for r in data["results"] if r["posterior"] == name}
-        parts = []
-        for label, r in rows.items():
-            if label in NUTS_LABELS:
-                continue
-            goal = r["vs_best_nuts_ess_per_gradient"] >= data["goal"]
-            means = "means ok" if r["means_within_z_limit"] else "a mean off"
-            if r["rhat_max"] > RHAT_LIMIT:
-                means += f", R-hat {r['rhat_max']:.3f}"
-            parts.append(
-                f"{label} {r['vs_best_nuts_ess_per_gradient']:.2f}x "
-                f"({'met' if goal else 'missed'}, {means})"
-            )
-        verdicts.append(f"{short_name(name)}: " + ", ".join(parts))
+    verdicts = [
+        verdict(name, {r["sampler"]: r for r in data["results"] if r["posterior"] == name}, data)
+        for name in dict.fromkeys(r["posterior"] for r in data["results"])
+    ]
     lines += [
         (
-            f"Target: ≥ {data['goal']:g}× the better NUTS's ESS per gradient on every "
-            f"posterior, with every mean within {data['z_limit']:g} MCSE of the reference "
-            f"(an R-hat above {RHAT_LIMIT} is named). " + "; ".join(verdicts) + "."
+            f"Target: ≥ {data['goal']:g}× NumPyro NUTS's ESS per gradient wherever NUTS is "
+            f"healthy (no divergence, R-hat ≤ {data['rhat_limit']}, every mean within "
+            f"{data['z_limit']:g} MCSE and every sd within {data['sd_tolerance']:.0%}), with "
+            "every sd within that tolerance. " + "; ".join(verdicts) + "."
         ),
         "",
     ]
+    off = [r for r in data["results"] if r["sd_off"]]
+    if off:
+        lines.append(
+            "Posterior sds off the reference by more than "
+            f"{data['sd_tolerance']:.0%} (ratio ± MCSE): "
+            + "; ".join(
+                f"{short_name(r['posterior'])} / {r['sampler']}: "
+                + ", ".join(
+                    f"{k} {v:.2f} ± {r['sd_ratio_mcse'][k]:.2f}" for k, v in r["sd_off"].items()
+                )
+                for r in off
+            )
+            + "."
+        )
+        lines.append("")
     if data["failures"]:
         lines.append(
             "Failed runs: "
