@@ -77,6 +77,8 @@ RHAT_LIMIT = 1.01  # a larger R-hat is named in the verdict
 GOAL = 1.0  # ESS per gradient against NumPyro NUTS, where NUTS is healthy
 PAIR = ("numpyro nuts", "liesample GeometricHMC")  # the interleaved MCMC rows
 NUTS_LABELS = ("numpyro nuts", "blackjax nuts")
+# The toy is cheap and its trap needs the full warm-up's mass windows: full length in either mode.
+FULL_LENGTH_IN_QUICK = (pdb.RESONANCE,)
 QUICK_POSTERIORS = (
     pdb.RESONANCE,
     "diamonds-diamonds",
@@ -184,13 +186,18 @@ class MCMCRun:
         self.out = {}
 
     def _phase(self, key, **options):
-        with CompileClock() as clock:
+        """Run one phase; its seconds less compilation, the compilation, and the warnings the
+        kernel raised (kept in ``out["sampler_warnings"]``)."""
+        with CompileClock() as clock, warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
             start = time.perf_counter()
             getattr(self.mcmc, options.pop("method"))(
                 key, extra_fields=("num_steps",), **options, **self.setup.kwargs
             )
             jax.block_until_ready(self.mcmc.last_state)
             wall = time.perf_counter() - start
+        seen = self.out.setdefault("sampler_warnings", [])
+        seen += [m for m in dict.fromkeys(str(w.message) for w in caught) if m not in seen]
         return wall - clock.seconds, clock.seconds
 
     def warmup(self):
@@ -231,7 +238,7 @@ def final_step_sizes(state):
     return np.atleast_1d(np.asarray(step, float)).reshape(-1)
 
 
-def run_pair(setup, key, num_warmup, num_draws, first):
+def run_pair(setup, key, num_warmup, num_draws, first, log):
     """NumPyro NUTS and GeometricHMC through ``MCMC``, interleaved: both warm-ups, then both
     sampling phases, ``PAIR[first]`` first each time. ``label -> result`` (or the error)."""
     kernels = {
@@ -247,10 +254,12 @@ def run_pair(setup, key, num_warmup, num_draws, first):
         for label in order:
             if label in failed:
                 continue
+            start = time.perf_counter()
             try:
                 getattr(runs[label], phase)()
             except Exception as error:  # noqa: BLE001  (a failure is a result: recorded)
                 failed[label] = error
+            log(f"  {label}: {phase} {time.perf_counter() - start:.0f} s (compilation included)")
     return {label: failed.get(label, runs[label].out) for label in PAIR}
 
 
@@ -357,6 +366,11 @@ def summarise(posterior, label, run):
     mcse = sd / np.sqrt(np.maximum(ess_mean, 1.0))
     z = (mean - posterior.mean) / np.sqrt(mcse**2 + posterior.mcse_mean**2)
     sd_ratio = sd / posterior.sd
+    chain_sd_ratio = x.std(axis=1, ddof=1) / posterior.sd  # (chains, K)
+    centred = x - x.mean(axis=1, keepdims=True)
+    lag1 = np.mean(
+        np.sum(centred[:, 1:] * centred[:, :-1], axis=1) / np.sum(centred**2, axis=1), axis=0
+    )  # each parameter's lag-1 autocorrelation, averaged over chains
     off = np.abs(sd_ratio - 1.0) > SD_TOLERANCE
     worst, worst_sd = int(np.argmax(np.abs(z))), int(np.argmax(np.abs(sd_ratio - 1.0)))
     gradients = max(run["gradients"], 1)
@@ -380,6 +394,9 @@ def summarise(posterior, label, run):
         "worst_sd_ratio": float(sd_ratio[worst_sd]),
         "worst_sd_parameter": keys[worst_sd],
         "worst_sd_ratio_mcse": float(mcse_sd[worst_sd] / posterior.sd[worst_sd]),
+        "worst_sd_chain_ratios": chain_sd_ratio[:, worst_sd].tolist(),
+        "lag1_min": float(lag1.min()),
+        "lag1_min_parameter": keys[int(np.argmin(lag1))],
         "sd_off": {k: float(r) for k, r, o in zip(keys, sd_ratio, off) if o},
         "sd_ratio": dict(zip(keys, sd_ratio.tolist())),
         "sd_ratio_mcse": dict(zip(keys, (mcse_sd / posterior.sd).tolist())),
@@ -389,8 +406,8 @@ def summarise(posterior, label, run):
     }
 
 
-def warn_sd(row, log):
-    """Warn (and log) when a posterior sd is off the reference by more than SD_TOLERANCE."""
+def warn_sd(row):
+    """Warn when a posterior sd is off the reference by more than SD_TOLERANCE."""
     if not row["sd_off"]:
         return
     named = ", ".join(
@@ -400,7 +417,6 @@ def warn_sd(row, log):
         f"posteriordb {row['posterior']} / {row['sampler']}: posterior sd off the reference by "
         f"more than {SD_TOLERANCE:.0%}: {named}"
     )
-    log(f"  WARNING {message}")
     warnings.warn(message, stacklevel=2)
 
 
@@ -440,20 +456,22 @@ def log_row(log, row):
         f"(x{row.get('vs_numpyro_nuts_ess_per_gradient', float('nan')):.2f} NumPyro NUTS)  "
         f"ESS/s {row['ess_bulk_per_second']:8.1f}  R-hat {row['rhat_max']:.3f}  "
         f"sd {row['worst_sd_ratio']:.2f}x ({row['worst_sd_parameter']})  "
+        f"lag1 {row['lag1_min']:.2f} ({row['lag1_min_parameter']})  "
         f"max|z| {row['max_abs_z_mean']:.1f} ({row['worst_parameter']})  "
-        f"div {row['divergences']}  eps {common.format_g(min(row.get('step_sizes') or [row['step_size']]))}"
-        f"-{common.format_g(max(row.get('step_sizes') or [row['step_size']]))}  "
-        f"{row['seconds']:.1f} s"
+        f"div {row['divergences']}  eps {step_sizes(row)}  {row['seconds']:.1f} s"
     )
 
 
 # --------------------------------------------------------------------------- run
 
 
+def lengths(name, quick):
+    """``(num_warmup, num_draws)`` per chain for the posterior ``name``."""
+    return (300, 300) if quick and name not in FULL_LENGTH_IN_QUICK else (1000, 1000)
+
+
 def run(out_dir: Path, quick: bool, log=print, names=None) -> None:
     start = time.perf_counter()
-    num_warmup = 300 if quick else 1000
-    num_draws = 300 if quick else 1000
     if names is None:
         names = QUICK_POSTERIORS if quick else pdb.NAMES
     key = jax.random.key(20261126)
@@ -462,9 +480,17 @@ def run(out_dir: Path, quick: bool, log=print, names=None) -> None:
         posterior = pdb.load(name)
         pkey = jax.random.fold_in(key, index)
         setup = Setup(posterior, pkey)
-        log(f"posterior: {name} (d = {setup.dimension})")
-        posteriors[name] = {"reference": posterior.reference_info, "dimension": setup.dimension}
-        outs = run_pair(setup, jax.random.fold_in(pkey, 10), num_warmup, num_draws, index % 2)
+        num_warmup, num_draws = lengths(name, quick)
+        log(f"posterior: {name} (d = {setup.dimension}, {num_warmup} + {num_draws} per chain)")
+        posteriors[name] = {
+            "reference": posterior.reference_info,
+            "dimension": setup.dimension,
+            "num_warmup": num_warmup,
+            "num_draws": num_draws,
+        }
+        outs = run_pair(
+            setup, jax.random.fold_in(pkey, 10), num_warmup, num_draws, index % 2, log
+        )
         if not quick:
             for j, (label, fn) in enumerate(extra_samplers().items()):
                 try:
@@ -481,7 +507,7 @@ def run(out_dir: Path, quick: bool, log=print, names=None) -> None:
         add_ratios(rows)
         for row in rows:
             log_row(log, row)
-            warn_sd(row, log)
+            warn_sd(row)
         results += rows
     data = {
         "description": __doc__,
@@ -489,8 +515,6 @@ def run(out_dir: Path, quick: bool, log=print, names=None) -> None:
         "mode": "quick" if quick else "full",
         "num_chains": NUM_CHAINS,
         "chain_method": CHAIN_METHOD,
-        "num_warmup": num_warmup,
-        "num_draws": num_draws,
         "angles": ANGLES,
         "z_limit": Z_LIMIT,
         "sd_tolerance": SD_TOLERANCE,
@@ -538,10 +562,7 @@ def plot(data, path):
         ax.set_xticklabels([short_name(n) for n in names], rotation=20, ha="right")
         ax.set_title(title)
         ax.legend(fontsize=8)
-    fig.suptitle(
-        f"posteriordb, {data['num_chains']} chains x {data['num_warmup']} warm-up x "
-        f"{data['num_draws']} draws"
-    )
+    fig.suptitle(f"posteriordb, {data['num_chains']} chains, {describe_lengths(data)}")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -569,9 +590,10 @@ def step_sizes(row):
 
 def sd_cell(row):
     flag = f" ⚠ {len(row['sd_off'])} off" if row["sd_off"] else ""
+    chains = row["worst_sd_chain_ratios"]
     return (
         f"{row['worst_sd_ratio']:.2f} ± {row['worst_sd_ratio_mcse']:.2f} "
-        f"({row['worst_sd_parameter']}){flag}"
+        f"({row['worst_sd_parameter']}; chains {min(chains):.2f}–{max(chains):.2f}){flag}"
     )
 
 
@@ -584,6 +606,7 @@ def table_row(r):
         f"{common.format_g(r['ess_bulk_per_second'])} | "
         f"{r.get('vs_numpyro_nuts_ess_per_second', float('nan')):.2f} | "
         f"{r['rhat_max']:.3f} ({r['rhat_worst_parameter']}) | {sd_cell(r)} | "
+        f"{r['lag1_min']:.2f} ({r['lag1_min_parameter']}) | "
         f"{r['max_abs_z_mean']:.1f} ({r['worst_parameter']}){flag} | "
         f"{r['divergences']} | {r['warmup_gradients']} |"
     )
@@ -608,6 +631,64 @@ def verdict(name, rows, data):
             checks.append(f"R-hat {r['rhat_max']:.3f}")
         parts.append(f"{label} {vs:.2f}× ({goal}; {'; '.join(checks) or 'checks ok'})")
     return f"{short_name(name)}: " + ", ".join(parts)
+
+
+def describe_lengths(data):
+    """``"W transitions per chain and draws D"``, naming the posteriors with other lengths."""
+    by_length = {}
+    for name, info in data["posteriors"].items():
+        by_length.setdefault((info["num_warmup"], info["num_draws"]), []).append(name)
+    (common_length, _), *others = sorted(by_length.items(), key=lambda kv: -len(kv[1]))
+    text = f"{common_length[0]} transitions per chain and draws {common_length[1]}"
+    for (warmup, draws), names in others:
+        text += f" ({', '.join(map(short_name, names))}: {warmup} and {draws})"
+    return text
+
+
+def findings(data):
+    """Paragraphs after the table: the sds off the reference, the samplers' own warnings and
+    the failed runs."""
+    lines = []
+    off = [r for r in data["results"] if r["sd_off"]]
+    if off:
+        lines.append(
+            "Posterior sds off the reference by more than "
+            f"{data['sd_tolerance']:.0%} (ratio ± MCSE): "
+            + "; ".join(
+                f"{short_name(r['posterior'])} / {r['sampler']}: "
+                + ", ".join(
+                    f"{k} {v:.2f} ± {r['sd_ratio_mcse'][k]:.2f}" for k, v in r["sd_off"].items()
+                )
+                for r in off
+            )
+            + "."
+        )
+        lines.append("")
+    warned = [r for r in data["results"] if r.get("sampler_warnings")]
+    lines.append(
+        "Warnings the samplers raised through `MCMC`: "
+        + (
+            "; ".join(
+                f"{short_name(r['posterior'])} / {r['sampler']}: "
+                + " | ".join(m[:300] for m in r["sampler_warnings"])
+                for r in warned
+            )
+            if warned
+            else "none"
+        )
+        + "."
+    )
+    lines.append("")
+    if data["failures"]:
+        lines.append(
+            "Failed runs: "
+            + "; ".join(
+                f"{f['posterior']} / {f['sampler']}: {f['error']}" for f in data["failures"]
+            )
+            + "."
+        )
+        lines.append("")
+    return lines
 
 
 def report(out_dir: Path, md_dir: Path) -> str:
@@ -638,8 +719,7 @@ def report(out_dir: Path, md_dir: Path) -> str:
             "`tests/test_posteriordb_models.py`); the resonance toy (x ~ normal(0, 0.003) "
             "beside O(1) parameters) has exact moments. Every sampler starts "
             f"{data['num_chains']} chains from the same uniform(−2, 2) unconstrained points, "
-            f"warms up for {data['num_warmup']} transitions per chain and draws "
-            f"{data['num_draws']} per chain. `numpyro nuts` is `MCMC(NUTS(model))` and "
+            f"warms up for {describe_lengths(data)}. `numpyro nuts` is `MCMC(NUTS(model))` and "
             "`liesample GeometricHMC` is `MCMC(GeometricHMC(model))`, both with their "
             f"defaults and `chain_method={data['chain_method']!r}`, interleaved (both "
             "warm-ups, then both sampling phases); BlackJAX NUTS and `magnetic_hmc` (full mode "
@@ -649,16 +729,19 @@ def report(out_dir: Path, md_dir: Path) -> str:
             "gradient and per second of the sampling phase (compilation excluded); `sd ratio`: "
             "the posterior sd over the reference's for the parameter furthest from 1, ± ArviZ's "
             f"MCSE of the sd, flagged ⚠ (and warned) when off by more than "
-            f"{data['sd_tolerance']:.0%}; `|z|`: the largest |error of a mean| / √(MCSE² + "
-            f"reference MCSE²), flagged above {data['z_limit']:g}."
+            f"{data['sd_tolerance']:.0%}, with the range of that ratio over single chains; "
+            "`lag-1`: the most negative lag-1 autocorrelation of a parameter (averaged over "
+            "chains; near −1 when a fixed integration time sits at a half-period); `|z|`: the "
+            "largest |error of a mean| / √(MCSE² + reference MCSE²), flagged above "
+            f"{data['z_limit']:g}."
         ),
         "",
         (
             "| posterior | sampler | ε | L (T) | grads/draw | ESS/grad | vs NumPyro NUTS "
-            "| ESS/s | ESS/s vs NumPyro NUTS | R-hat | sd ratio | max abs z | div. "
+            "| ESS/s | ESS/s vs NumPyro NUTS | R-hat | sd ratio | lag-1 | max abs z | div. "
             "| warm-up grads |"
         ),
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
         *(table_row(r) for r in data["results"]),
         "",
     ]
@@ -675,30 +758,7 @@ def report(out_dir: Path, md_dir: Path) -> str:
         ),
         "",
     ]
-    off = [r for r in data["results"] if r["sd_off"]]
-    if off:
-        lines.append(
-            "Posterior sds off the reference by more than "
-            f"{data['sd_tolerance']:.0%} (ratio ± MCSE): "
-            + "; ".join(
-                f"{short_name(r['posterior'])} / {r['sampler']}: "
-                + ", ".join(
-                    f"{k} {v:.2f} ± {r['sd_ratio_mcse'][k]:.2f}" for k, v in r["sd_off"].items()
-                )
-                for r in off
-            )
-            + "."
-        )
-        lines.append("")
-    if data["failures"]:
-        lines.append(
-            "Failed runs: "
-            + "; ".join(
-                f"{f['posterior']} / {f['sampler']}: {f['error']}" for f in data["failures"]
-            )
-            + "."
-        )
-        lines.append("")
+    lines += findings(data)
     lines += [NOTES, "", f"![posteriordb benchmark]({rel})", ""]
     return "\n".join(lines)
 
