@@ -71,6 +71,11 @@ def test_messages_name_elements_and_say_what_cannot_be_checked():
     assert "no two chains sample one law" in alone
     (few,) = convergence_warnings({"mu": iid[:, :3]})
     assert "cannot be checked with 3 draw(s)" in few
+    broken = iid.copy()
+    broken[0, 5, 1] = np.nan
+    assert convergence_warnings({"mu": broken}) == [
+        "1 element(s) hold non-finite draws and were not checked"
+    ]
     complex_draws = iid + 1j * modes
     assert "U.imag[" in convergence_warnings({"U": complex_draws})[0]
 

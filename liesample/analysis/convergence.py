@@ -29,6 +29,7 @@ MIN_ESS_PER_CHAIN = 100
 _MIN_DRAWS = 4  # split chains need at least two draws per half
 _TAIL_PROB = (0.05, 0.95)
 _SHOWN = 5  # elements named per message
+_BATCH_VALUES = 2**22  # draws of the elements checked at once
 
 
 def _split(x):
@@ -157,33 +158,48 @@ def _chains_text(chains):
     return shown + (f", … ({len(chains)} in all)" if len(chains) > 6 else "")
 
 
-def _rows(variables, groups):
-    """One row per checked element and law group: ``(name, r_hat, ess_bulk, ess_tail,
-    chains)``, and the number of elements left out as not finite."""
-    rows, not_finite = [], 0
+def _real_parts(variables):
+    """``(name, array)`` for every variable, complex ones as their ``.real`` and ``.imag``."""
     for name, values in variables.items():
         values = np.asarray(values)
-        parts = (
-            {f"{name}.real": values.real, f"{name}.imag": values.imag}
-            if np.iscomplexobj(values)
-            else {name: values}
-        )
-        for part, array in parts.items():
-            chains, draws = array.shape[:2]
-            names = np.array(_element_names(part, array.shape[2:]), dtype=object)
-            x = np.moveaxis(array.reshape(chains, draws, -1).astype(float), -1, 0)
+        if np.iscomplexobj(values):
+            yield f"{name}.real", values.real
+            yield f"{name}.imag", values.imag
+        else:
+            yield name, values
+
+
+def _group_rows(x, names, group):
+    """Rows ``(name, r_hat, ess_bulk, ess_tail, chains)`` of the elements of ``x (elements,
+    chains of group, draws)`` that are finite and vary, and the count of non-finite ones."""
+    finite = np.isfinite(x).all((1, 2))
+    x, names = x[finite], names[finite]
+    flat = x.reshape(len(x), -1)
+    size = np.max(np.abs(flat), axis=1, initial=1e-300)
+    varies = np.ptp(flat, axis=1) > 1e-9 * size  # constants (Casimirs) say nothing
+    if not varies.any():
+        return [], int(np.sum(~finite))
+    r_hat, bulk, tail = rank_diagnostics(x[varies])
+    rows = [(n, r, b, t, group) for n, r, b, t in zip(names[varies], r_hat, bulk, tail)]
+    return rows, int(np.sum(~finite))
+
+
+def _rows(variables, groups):
+    """One row per checked element and law group: ``(name, r_hat, ess_bulk, ess_tail,
+    chains)``, and the number of elements left out as not finite. Elements are taken in
+    batches of about :data:`_BATCH_VALUES` draws, which bounds the temporaries' memory."""
+    rows, not_finite = [], 0
+    for name, array in _real_parts(variables):
+        chains, draws = array.shape[:2]
+        names = np.array(_element_names(name, array.shape[2:]), dtype=object)
+        flat = array.reshape(chains, draws, -1)
+        batch = max(1, _BATCH_VALUES // (chains * draws))
+        for first in range(0, flat.shape[-1], batch):
+            x = np.moveaxis(flat[..., first : first + batch].astype(float), -1, 0)
             for group in groups:
-                values_g = x[:, group]
-                finite = np.isfinite(values_g).all((1, 2))
-                not_finite += int(np.sum(~finite))
-                values_g, kept = values_g[finite], names[finite]
-                flat = values_g.reshape(len(values_g), -1)
-                size = np.max(np.abs(flat), axis=1, initial=1e-300)
-                varies = np.ptp(flat, axis=1) > 1e-9 * size  # constants (Casimirs) say nothing
-                if not varies.any():
-                    continue
-                r_hat, bulk, tail = rank_diagnostics(values_g[varies])
-                rows += [(n, r, b, t, group) for n, r, b, t in zip(kept[varies], r_hat, bulk, tail)]
+                found, bad = _group_rows(x[:, group], names[first : first + batch], group)
+                rows += found
+                not_finite += bad
     return rows, not_finite
 
 
