@@ -93,6 +93,18 @@ def test_mirror_modes_on_the_sphere_warn():
     assert len(messages) == 1 and "R-hat > 1.01" in messages[0] and "mu[2]" in messages[0]
 
 
+@pytest.mark.slow
+def test_rigid_body_chains_at_opposite_minima_warn():
+    """β = 40, chains at ±e₃ (equal energies, so the energy's R-hat cannot see it): the pooled
+    E[μ₃] of a 3/1 split is ~0.5, the exact one 0."""
+    system = liesample.systems.rigid_body(inertia=(1.0, 2.0, 4.0))
+    sampler = liesample.adjusted_lie_poisson(system, beta=40.0)
+    starts = jnp.array([[0.0, 0.0, 1.0]] * 3 + [[0.0, 0.0, -1.0]])
+    tree, messages = _sample(sampler, starts, 200, num_warmup=200)
+    assert float(tree.posterior["mu"].sel(component="z").mean()) > 0.3
+    assert len(messages) == 1 and "R-hat > 1.01" in messages[0] and "mu[2]" in messages[0]
+
+
 def test_split_mixture_warns():
     """Equal Gaussians at ±8, chains split 3/1: the pooled mean is ~4, the exact one 0."""
 
