@@ -9,8 +9,8 @@ prob=(0.05, 0.95))``), and returns a message for each kind of failure: R-hat abo
 drifting target) or an ESS below :data:`MIN_ESS_PER_CHAIN` per chain. ArviZ computes these one
 element at a time in Python; here every element of a variable is computed in one pass of array
 operations (ranks by one sort, autocovariances by one FFT, Geyer's truncation by cumulative
-reductions), so a lattice's thousands of elements cost little. tests/test_convergence_checks.py
-checks that the values agree with ArviZ's.
+reductions), so a lattice's thousands of elements cost little; the values are ArviZ's to
+round-off.
 """
 
 from __future__ import annotations
