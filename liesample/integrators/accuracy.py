@@ -28,6 +28,7 @@ from __future__ import annotations
 import functools
 import math
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
@@ -53,8 +54,11 @@ __all__ = [
     "coupled_ergodic_averages",
     "default_step_size",
     "ergodic_averages",
+    "largest_accurate_stability_number",
+    "linear_sd_bias",
     "richardson_romberg",
     "richardson_romberg_run",
+    "warn_given_step",
 ]
 
 # A difference counts as measured when it is at least this many standard errors from zero.
@@ -795,3 +799,86 @@ def default_step_size(
 def _distinct(starts):
     _, first = np.unique(starts.reshape(len(starts), -1), axis=0, return_index=True)
     return starts[np.sort(first)]
+
+
+# --------------------------------------------------------------------------- a given step's bias
+
+# The step of each built-in scheme on the scalar Ornstein-Uhlenbeck equation
+# dφ = −λφ dt + σ dW, with z = λ dt: φ' = R(z) φ + b(z) σ ΔW (Heun feeds one increment to both
+# stages; every piece of ``splitting`` is Heun along one noise direction).
+_LINEAR_STEPS = {
+    "lie_euler": lambda z: (1.0 - z, 1.0),
+    "rkmk_heun": lambda z: (1.0 - z + 0.5 * z * z, 1.0 - 0.5 * z),
+    "splitting": lambda z: (1.0 - z + 0.5 * z * z, 1.0 - 0.5 * z),
+}
+
+
+def linear_sd_bias(integrator, stability_number) -> float | None:
+    """The relative error of the stationary sd along the stiffest noise direction, from the
+    linearised dynamics at the stability number ``κ = step_size·θ·max|h''|``
+    (:mod:`liesample.integrators.stability`): no pilot run, one formula.
+
+    Along one noise direction the SDE linearises to ``dφ = −λφ dt + σ dW`` with ``λ = θ h''``
+    (the stability module's derivation), whose law is ``N(0, σ²/2λ)``. A scheme's step there is
+    ``φ' = R(κ) φ + b(κ) σ ΔW``, whose stationary variance is ``b² σ² dt / (1 − R²)``; the ratio
+    to the exact one is ``2κ b² / (1 − R²)`` (Heun, ``splitting``'s pieces:
+    ``(2 − κ)/(2 − κ + κ²/2)``, sd too small; Lie–Euler: ``2/(2 − κ)``, too large). At the
+    stiffest direction this is the largest error a near-Gaussian law sees; it leaves out what
+    the linear model cannot see (the Hamiltonian drift, non-commuting noise directions, a
+    far-from-Gaussian law), so it indicates a given step's accuracy, it does not certify it.
+
+    Returns ``sqrt(ratio) − 1`` (e.g. ``-0.1``: 10 % too small), ``None`` for an integrator
+    without a declared linear step (``euler_heun``, user schemes) or ``κ`` outside
+    ``(0, stability limit)``.
+    """
+    integrator = get_integrator(integrator)
+    linear = _LINEAR_STEPS.get(integrator.name)
+    limit = integrator.stability_limit
+    kappa = float(stability_number)
+    if linear is None or limit is None or not 0.0 < kappa < limit:
+        return None
+    r, b = linear(kappa)
+    return math.sqrt(2.0 * kappa * b * b / (1.0 - r * r)) - 1.0
+
+
+def largest_accurate_stability_number(integrator, tolerance) -> float | None:
+    """The largest ``κ`` at which :func:`linear_sd_bias` is within ``tolerance`` (bisection; the
+    error grows with ``κ``), ``None`` where the integrator has no linear model."""
+    integrator = get_integrator(integrator)
+    if integrator.name not in _LINEAR_STEPS or integrator.stability_limit is None:
+        return None
+    low, high = 0.0, integrator.stability_limit
+    for _ in range(60):
+        middle = 0.5 * (low + high)
+        low, high = (
+            (middle, high)
+            if abs(linear_sd_bias(integrator, middle)) <= tolerance
+            else (
+                low,
+                middle,
+            )
+        )
+    return low
+
+
+def warn_given_step(integrator, step_size, stability_number, tolerance) -> float | None:
+    """:func:`linear_sd_bias` of a given step, with a ``UserWarning`` naming a step within
+    ``tolerance`` (and the other ways out) when its magnitude exceeds ``tolerance``."""
+    bias = linear_sd_bias(integrator, stability_number)
+    if bias is None or abs(bias) <= tolerance:
+        return bias
+    accurate = largest_accurate_stability_number(integrator, tolerance)
+    warnings.warn(
+        f"step_size={step_size:.4g} (given) has the stability number κ = "
+        f"{stability_number:.3g}: linearised along the stiffest noise direction, the "
+        f"{get_integrator(integrator).name} scheme's stationary sd is "
+        f"{abs(bias):.0%} too {'small' if bias < 0 else 'large'}, beyond bias_tolerance="
+        f"{tolerance:g} (liesample.integrators.accuracy.linear_sd_bias; the law's own error "
+        f"is often smaller, but not within the tolerance by any guarantee). Use step_size <= "
+        f"{step_size * accurate / stability_number:.3g} (κ <= {accurate:.3g}), leave step_size "
+        "unset for the bias model's choice, or use liesample.adjusted_lie_poisson (exact at "
+        "any step)",
+        UserWarning,
+        stacklevel=4,
+    )
+    return bias

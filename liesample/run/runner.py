@@ -39,6 +39,7 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm.auto import tqdm
 
+from liesample.analysis.convergence import convergence_warnings
 from liesample.foundation.compile import jit
 from liesample.foundation.validation import (
     finite_float,
@@ -612,6 +613,17 @@ def _report_unconverged(result: ChainsResult, groups):
         )
 
 
+def _report_convergence(posterior, groups):
+    """One ``UserWarning`` with the messages of
+    :func:`liesample.analysis.convergence.convergence_warnings` on every element of every
+    variable of ``posterior`` (a tree's group: positions and observables), within each law
+    group."""
+    variables = {name: variable.values for name, variable in posterior.data_vars.items()}
+    messages = convergence_warnings(variables, groups)
+    if messages:
+        warnings.warn("convergence checks: " + "; ".join(messages) + ".", UserWarning, stacklevel=3)
+
+
 # --------------------------------------------------------------------------- saved runs
 
 
@@ -1025,6 +1037,12 @@ def sample(
     ArviZ's ESS and R-hat of these variables are those of the ambient coordinates (vector
     components, matrix entries), not of intrinsic coordinates on the group or sphere.
 
+    Every element of every posterior variable is then checked
+    (:func:`liesample.analysis.convergence.convergence_warnings`, within the sampler's law
+    groups): one ``UserWarning`` names those whose rank-normalised split R-hat is above 1.01
+    or whose bulk or tail ESS is below 100 per chain, and says when one chain or too few draws
+    make the checks impossible.
+
     Example: ``sample(liesample.adjusted_lie_poisson(system, beta=1.0), key, starts, 1000)``
     tunes the step size by dual averaging in a warm-up of 1000 steps, then samples.
     """
@@ -1083,7 +1101,7 @@ def sample(
     settings = {
         k: v for k, v in (result.settings or {}).items() if k not in ("num_warmup", "step_size")
     }
-    return datatree(
+    tree = datatree(
         result.positions,
         result.info,
         observables=result.observables,
@@ -1098,3 +1116,6 @@ def sample(
             **(attrs or {}),
         },
     )
+    law_groups = as_sampler(algorithm).law_groups
+    _report_convergence(tree.posterior, None if law_groups is None else law_groups(positions))
+    return tree

@@ -218,7 +218,11 @@ def as_top_level_api(
         ``bias_tolerance`` of itself. :func:`liesample.sample` chooses it from the run's starts
         (in the warm-up under ``num_warmup=N``, with a key of the run) and records it in the
         run's attributes; used directly (``init``, ``step``), the sampler chooses it once, on
-        the orbit of the system's default position.
+        the orbit of the system's default position. Every step's stationary sd error along the
+        stiffest noise direction, linearised at its stability number
+        (:func:`liesample.integrators.accuracy.linear_sd_bias`, no pilot run), is recorded as
+        ``linear_sd_bias``; a given step whose error exceeds ``bias_tolerance`` warns, naming
+        a step within it.
     integrator : str or Integrator
         One of ``liesample.integrators.INTEGRATORS``; default ``"splitting"``.
     theta : float, optional
@@ -232,8 +236,8 @@ def as_top_level_api(
         ``ValueError`` naming the largest allowed step; ``"warn"`` a ``UserWarning`` (the chain then samples a
         wrong law); ``"off"`` no check. The mode is recorded in the run's attributes.
     bias_tolerance : float
-        Relative bias tolerance of the automatic step size (default
-        :data:`DEFAULT_BIAS_TOLERANCE` = 0.05 posterior sd).
+        Relative bias tolerance of the automatic step size, and of a given step's
+        ``linear_sd_bias`` (default :data:`DEFAULT_BIAS_TOLERANCE` = 0.05 posterior sd).
     noise_block_size : int
         Steps whose Brownian increments are drawn at once in :func:`liesample.sample` and the
         other drivers (default 32; :mod:`liesample.integrators.chain_loop`). Block ``b`` of chain
@@ -339,6 +343,12 @@ def as_top_level_api(
                     raise ValueError(f"initial_positions[{chain}]: {error}") from None
             settings["stability_number"] = float(np.max(kappas))
             settings["stability_limit"] = limit
+            # a given step's bias, from the linear model at κ (no pilot run)
+            settings["linear_sd_bias"] = (
+                accuracy.warn_given_step(integrator, dt, float(np.max(kappas)), bias_tolerance)
+                if settings["step_size_source"] == "given"
+                else accuracy.linear_sd_bias(integrator, float(np.max(kappas)))
+            )
         for chain in representatives:
             check_precision(system, beta, theta, positions[chain], positions.dtype)
 
