@@ -1,8 +1,8 @@
 """Long runs lose nothing: ``output=`` saves every chunk, ``resume=True`` continues after a kill.
 
 The interrupted run is a subprocess that kills itself with SIGKILL right after chunk ``k`` has
-been saved (the runner's test hook ``_after_chunk_hook``), which is deterministic and as abrupt
-as a crash or a pre-empted job: no ``finally`` runs, nothing is flushed. Resuming from the file
+been saved (``sample_chains``' ``callback``), which is deterministic and as abrupt as a crash or
+a pre-empted job: no ``finally`` runs, nothing is flushed. Resuming from the file
 must then give the draws of one uninterrupted run *exactly*, because draw ``d`` of chain ``c``
 uses the key ``fold_in(key_c, step)`` and the saved state is the exact state after the last
 saved chunk.
@@ -22,6 +22,7 @@ import xarray as xr
 import liesample
 from liesample.run import runner
 from liesample.run.runner import load_chains, sample_chains
+from liesample.run.store import RunFileError
 
 SYSTEM = liesample.systems.rigid_body((1.0, 2.0, 4.0))
 STARTS = np.array([[0.6, 1.0, 0.8], [1.0, 0.0, 0.0], [0.0, -2.0, 0.5]])
@@ -38,20 +39,18 @@ SCRIPT = textwrap.dedent(
     jax.config.update("jax_enable_x64", True)
     import numpy as np
     import liesample
-    from liesample.run import runner
 
     def kill(draws_done):
         if draws_done >= {KILL_AFTER} * {RUN["chunk_draws"]}:
             os.kill(os.getpid(), signal.SIGKILL)
 
-    runner._after_chunk_hook = kill
     algorithm = liesample.lie_poisson_langevin(
         liesample.systems.rigid_body((1.0, 2.0, 4.0)), beta=3.0, step_size=0.05,
         integrator="lie_euler",
     )
     liesample.sample_chains(
         algorithm, jax.random.key({KEY_SEED}), np.array({STARTS.tolist()}), {NUM_DRAWS},
-        output=sys.argv[1], progress=False, **{RUN!r},
+        output=sys.argv[1], progress=False, callback=kill, **{RUN!r},
     )
     print("NOT KILLED")
     """
@@ -84,19 +83,21 @@ def test_killed_run_resumes_to_the_same_draws(tmp_path, uninterrupted):
     # What survived the kill: exactly the first KILL_AFTER chunks, readable as they are.
     saved = load_chains(path)
     saved_draws = KILL_AFTER * RUN["chunk_draws"]
-    assert saved.positions.shape == (3, saved_draws, 3)
-    np.testing.assert_array_equal(saved.positions, uninterrupted.positions[:, :saved_draws])
-    assert saved.num_steps == RUN["num_warmup"] + saved_draws * RUN["thinning"]
-    with xr.open_dataset(path, engine="h5netcdf") as dataset:
-        assert dataset.sizes["draw"] == saved_draws
+    assert saved.posterior["mu"].shape == (3, saved_draws, 3)
+    np.testing.assert_array_equal(saved.posterior["mu"], uninterrupted.positions[:, :saved_draws])
+    assert saved.attrs["num_steps"] == RUN["num_warmup"] + saved_draws * RUN["thinning"]
+    with xr.open_datatree(path, engine="h5netcdf") as tree:
+        assert tree["posterior"].sizes["draw"] == saved_draws
+    assert os.path.exists(f"{path}.lock")  # the killed run's lock file is left: it blocks nothing
 
     resumed = run(output=path, resume=True)
     np.testing.assert_array_equal(resumed.positions, uninterrupted.positions)
     np.testing.assert_array_equal(resumed.info["is_divergent"], uninterrupted.info["is_divergent"])
     np.testing.assert_allclose(resumed.info["energy"], uninterrupted.info["energy"], rtol=4e-16)
     assert resumed.num_steps == uninterrupted.num_steps
-    # …and the file now holds the whole run.
-    np.testing.assert_array_equal(load_chains(path).positions, uninterrupted.positions)
+    # …and the file now holds the whole run; the lock is gone.
+    np.testing.assert_array_equal(load_chains(path).posterior["mu"], uninterrupted.positions)
+    assert not os.path.exists(f"{path}.lock")
 
 
 def test_saved_run_equals_returned_run_and_can_be_extended(tmp_path, uninterrupted, monkeypatch):
@@ -104,9 +105,9 @@ def test_saved_run_equals_returned_run_and_can_be_extended(tmp_path, uninterrupt
     first = run(num_draws=12, output=path)
     np.testing.assert_array_equal(first.positions, uninterrupted.positions[:, :12])
     saved = load_chains(path)
-    np.testing.assert_array_equal(saved.positions, first.positions)
-    np.testing.assert_array_equal(saved.info["is_divergent"], first.info["is_divergent"])
-    assert saved.info["is_divergent"].dtype == bool
+    np.testing.assert_array_equal(saved.posterior["mu"], first.positions)
+    np.testing.assert_array_equal(saved.sample_stats["diverging"], first.info["is_divergent"])
+    assert saved.sample_stats["diverging"].dtype == bool
     # Extend the same run to more draws; the progress bar starts at the saved draws.
     bars = []
 
