@@ -20,9 +20,8 @@ import pytest
 import xarray as xr
 
 import liesample
-from liesample.run import runner
+from liesample.run import loop
 from liesample.run.runner import load_chains, sample_chains
-from liesample.run.store import RunFileError
 
 SYSTEM = liesample.systems.rigid_body((1.0, 2.0, 4.0))
 STARTS = np.array([[0.6, 1.0, 0.8], [1.0, 0.0, 0.0], [0.0, -2.0, 0.5]])
@@ -56,6 +55,28 @@ SCRIPT = textwrap.dedent(
     """
 )
 
+# The same run killed in the middle of writing chunk KILL_AFTER + 1: its draws and the state
+# after it are written, the commit is not (the checksum of that chunk's stored draws is the
+# store's last step before the commit).
+MIDWRITE = SCRIPT.replace(
+    "def kill(draws_done):",
+    textwrap.dedent(
+        f"""
+        from liesample.run import store
+        digest, calls = store._chunk_digest, []
+
+        def dying_digest(arrays):
+            calls.append(1)
+            if len(calls) == 2 * {KILL_AFTER} + 1:  # two digests per saved chunk
+                os.kill(os.getpid(), signal.SIGKILL)
+            return digest(arrays)
+
+        store._chunk_digest = dying_digest
+
+        def kill(draws_done):"""
+    ),
+).replace("if draws_done >=", "if False and draws_done >=")
+
 ALGORITHM = liesample.lie_poisson_langevin(SYSTEM, beta=3.0, step_size=0.05, integrator="lie_euler")
 
 
@@ -69,10 +90,11 @@ def uninterrupted():
     return run()
 
 
-def test_killed_run_resumes_to_the_same_draws(tmp_path, uninterrupted):
+@pytest.mark.parametrize("script", [SCRIPT, MIDWRITE], ids=["between chunks", "while writing"])
+def test_killed_run_resumes_to_the_same_draws(tmp_path, uninterrupted, script):
     path = tmp_path / "run.nc"
     completed = subprocess.run(
-        [sys.executable, "-c", SCRIPT, str(path)],
+        [sys.executable, "-c", script, str(path)],
         check=False,
         capture_output=True,
         text=True,
@@ -86,8 +108,9 @@ def test_killed_run_resumes_to_the_same_draws(tmp_path, uninterrupted):
     assert saved.posterior["mu"].shape == (3, saved_draws, 3)
     np.testing.assert_array_equal(saved.posterior["mu"], uninterrupted.positions[:, :saved_draws])
     assert saved.attrs["num_steps"] == RUN["num_warmup"] + saved_draws * RUN["thinning"]
-    with xr.open_datatree(path, engine="h5netcdf") as tree:
-        assert tree["posterior"].sizes["draw"] == saved_draws
+    if script is SCRIPT:  # killed between chunks: the file as the last chunk closed it
+        with xr.open_datatree(path, engine="h5netcdf") as tree:
+            assert tree["posterior"].sizes["draw"] == saved_draws
     assert os.path.exists(f"{path}.lock")  # the killed run's lock file is left: it blocks nothing
 
     resumed = run(output=path, resume=True)
@@ -122,7 +145,7 @@ def test_saved_run_equals_returned_run_and_can_be_extended(tmp_path, uninterrupt
         def close(self):
             pass
 
-    monkeypatch.setattr(runner, "tqdm", RecordingBar)
+    monkeypatch.setattr(loop, "tqdm", RecordingBar)
     extended = run(output=path, resume=True, progress=True)
     np.testing.assert_array_equal(extended.positions, uninterrupted.positions)
     assert (bars[0].start, bars[0].n, bars[0].total) == (12, NUM_DRAWS, NUM_DRAWS)

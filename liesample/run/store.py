@@ -23,6 +23,7 @@ refused with its path and what is wrong (:class:`RunFileError`).
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -64,16 +65,30 @@ def check_output_path(output, resume: bool) -> str:
     return path
 
 
+@contextlib.contextmanager
 def _open(path, mode="r"):
+    """The file at ``path`` opened with h5netcdf; any error reading or writing it is raised
+    naming the path (:class:`RunFileError`, or ``OSError`` for a write)."""
     import h5netcdf
 
     try:
-        return h5netcdf.File(path, mode)
+        f = h5netcdf.File(path, mode)
     except (OSError, ValueError) as error:
+        if mode != "r":
+            raise OSError(f"cannot write the run file {path!r}: {error}") from None
         raise RunFileError(
             f"{path!r} is not a readable NetCDF-4 (HDF5) file: it is empty, truncated or of "
             f"another kind ({error})"
         ) from None
+    try:
+        with f:
+            yield f
+    except RunFileError:
+        raise
+    except (OSError, KeyError, IndexError, TypeError, ValueError) as error:
+        if mode != "r":
+            raise OSError(f"cannot write the run file {path!r}: {error!r}") from None
+        raise RunFileError(f"{path!r} is incomplete or corrupt: {error!r}") from None
 
 
 def _run_group(f, path):
@@ -145,34 +160,31 @@ def verify(f, path) -> dict:
     done, chunks = commit.get("draws_done"), commit.get("chunks")
     if not all(isinstance(v, int) and v >= 0 for v in (done, chunks)):
         raise RunFileError(f"{path!r}: draws_done {done!r} and chunks {chunks!r} are invalid")
-    try:
-        ends = np.asarray(group.variables["chunk_end"][:chunks]).tolist()
-        sums = np.asarray(group.variables["chunk_sha256"][:chunks])
-        sizes = {f.groups[g].dimensions["draw"].size for g in _tree_groups(f)}
-        if len(ends) != chunks or any(b <= a for a, b in zip([0, *ends], ends, strict=False)):
-            raise RunFileError(f"{path!r}: its chunk table {ends} is not increasing")
-        if (ends[-1] if ends else 0) != done:
+    ends = np.asarray(group.variables["chunk_end"][:chunks]).tolist()
+    sums = np.asarray(group.variables["chunk_sha256"][:chunks])
+    sizes = {f.groups[g].dimensions["draw"].size for g in _tree_groups(f)}
+    if len(ends) != chunks or any(b <= a for a, b in zip([0, *ends], ends, strict=False)):
+        raise RunFileError(f"{path!r}: its chunk table {ends} is not increasing")
+    if (ends[-1] if ends else 0) != done:
+        raise RunFileError(
+            f"{path!r}: draws_done = {done} disagrees with its saved chunks, which end at "
+            f"draw {ends[-1] if ends else 0}: the file was edited or is corrupt"
+        )
+    if min(sizes, default=0) < done:
+        raise RunFileError(f"{path!r}: it holds {min(sizes)} draws, draws_done = {done}")
+    for k, (first, end) in enumerate(zip([0, *ends], ends, strict=False)):
+        if _chunk_digest(_stored_slices(f, first, end)) != bytes(sums[k]):
             raise RunFileError(
-                f"{path!r}: draws_done = {done} disagrees with its saved chunks, which end at "
-                f"draw {ends[-1] if ends else 0}: the file was edited or is corrupt"
+                f"{path!r}: chunk {k} (draws {first} to {end - 1}) does not match its "
+                "checksum: the file was edited or is corrupt"
             )
-        if min(sizes, default=0) < done:
-            raise RunFileError(f"{path!r}: it holds {min(sizes)} draws, draws_done = {done}")
-        for k, (first, end) in enumerate(zip([0, *ends], ends, strict=False)):
-            if _chunk_digest(_stored_slices(f, first, end)) != bytes(sums[k]):
-                raise RunFileError(
-                    f"{path!r}: chunk {k} (draws {first} to {end - 1}) does not match its "
-                    "checksum: the file was edited or is corrupt"
-                )
-        if done and _chunk_digest(_state_arrays(group, commit["state_slot"])).hex() != commit.get(
-            "state_sha256"
-        ):
-            raise RunFileError(
-                f"{path!r}: the saved chain states do not match their checksum: the file was "
-                "edited or is corrupt, and the run cannot be resumed"
-            )
-    except (OSError, KeyError, IndexError, TypeError) as error:
-        raise RunFileError(f"{path!r} is incomplete or corrupt: {error!r}") from None
+    if done and _chunk_digest(_state_arrays(group, commit["state_slot"])).hex() != commit.get(
+        "state_sha256"
+    ):
+        raise RunFileError(
+            f"{path!r}: the saved chain states do not match their checksum: the file was "
+            "edited or is corrupt, and the run cannot be resumed"
+        )
     return commit
 
 
@@ -241,9 +253,9 @@ class RunFile:
     @classmethod
     def open(cls, output, resume: bool) -> RunFile:
         """Check ``output`` (:func:`check_output_path`) and take its lock, before any work."""
-        path = check_output_path(output, resume)
-        lock = OutputLock(path).acquire()
-        try:  # the file may have appeared before the lock was ours
+        path = check_output_path(output, resume=True)
+        lock = OutputLock(path).acquire()  # a writer at work is named before anything else
+        try:
             check_output_path(path, resume)
         except Exception:
             lock.release()
