@@ -102,7 +102,9 @@ def sample_chains(
     num_draws : int
         Draws kept per chain, each ``thinning`` steps apart, after ``num_warmup`` steps.
     num_warmup : int
-        Steps run and discarded before the first draw; the adaptation happens there.
+        Steps run and discarded before the first draw; the adaptation happens there. Default
+        ``0`` here: this loop runs exactly the steps asked for. :func:`sample` means the same
+        by ``num_warmup`` but defaults to a warm-up as long as the run and warns at ``0``.
     adapt : None, True or False
         Warm-up adaptation of the step size, as the sampler declares it (``tuning``, run by
         :func:`liesample.tuning.warmup.warm_up`). ``None`` (default): adapt a sampler built
@@ -128,16 +130,23 @@ def sample_chains(
         Split the chains over these devices (:func:`liesample.run.sharding.chain_sharding`); the
         number of chains must be a multiple of the number of devices. ``None``: one device.
     output : str or path, optional
-        NetCDF file to which each chunk of draws and info, and the chain states after it, are
-        written as soon as the chunk is done (:func:`load_chains` reads it back, so does
-        ``xarray.open_dataset``). Refuses an existing file unless ``resume=True``. Pytree
-        positions made of dicts (string keys), tuples and lists are saved leaf by leaf.
+        NetCDF-4 file to which each chunk of draws and info, and the chain states after it, are
+        written as soon as the chunk is done: an ArviZ ``DataTree`` with the groups, names and
+        attributes of :func:`sample`'s tree (:func:`load_chains` reads it back, verified;
+        ``xarray.open_datatree`` too), plus a ``liesample_run`` group with what a resume needs
+        (:mod:`liesample.run.store`). One run at a time writes a path (a lock; a second writer
+        is refused at once, naming the holder). Refused before any compilation if its
+        directory is missing, or if it exists and ``resume`` is False.
     resume : bool
-        Continue the run saved in ``output``: same ``algorithm``, ``rng_key``,
-        ``initial_positions``, ``num_warmup`` and ``thinning`` (checked, except the algorithm);
-        ``num_draws`` may be larger than before to extend it. Starts afresh if the file does not
-        exist yet. The returned draws include the saved ones and equal those of one
-        uninterrupted run.
+        Continue the run saved in ``output``: the same sampler and settings, ``rng_key``,
+        ``initial_positions``, ``num_warmup``, ``thinning`` and observables, checked against the
+        fingerprint in the file (:mod:`liesample.run.provenance`; each differing field is named
+        with both values), and every saved chunk against its checksum. ``num_draws`` may be
+        larger than before to extend it. Starts afresh if the file does not exist yet. The
+        returned draws include the saved ones and equal those of one uninterrupted run.
+    callback : callable, optional
+        ``callback(draws_done)`` after each chunk (saved first when ``output`` is given): to
+        report progress elsewhere, or stop a run by raising (what was saved stays resumable).
     observables : callable or dict of str to callable, optional
         Functions of one chain's position, evaluated at every kept draw inside the compiled
         loop (vmapped over chains; with ``thinning``, at the draw's own step only). A callable
@@ -204,11 +213,14 @@ def sample(
     algorithm, rng_key, initial_positions, num_draws
         As for :func:`sample_chains`.
     num_warmup : int, optional
-        Steps run and discarded before the first draw (the sampler adapts there). Default:
-        as many steps as the draws span (``num_draws * thinning``): chains started from
+        Steps run and discarded before the first draw (the sampler adapts there), as in
+        :func:`sample_chains`; only the default differs: as many steps as the draws span
+        (``num_draws * thinning``; on a resume, the saved run's): chains started from
         arbitrary points forget their starts before anything is kept, and a sampler built
         without a step size tunes it there. ``0`` keeps every step from the starts and warns,
-        unless ``exact_starts=True`` says the starts are already draws from the target.
+        unless ``exact_starts=True``.
+    exact_starts : bool
+        The starts are already draws from the target (no warning at ``num_warmup=0``).
     var_name, event_dims
         Name and event dims of single-array positions. Default: the sampler's declaration
         (``R`` with dims ``(row, col)`` for ``SO(n)``, ``U`` for ``SU(n)``), else ``mu`` with
@@ -223,8 +235,8 @@ def sample(
     run_options
         The other keywords of :func:`sample_chains`: ``thinning``, ``progress``,
         ``chunk_draws``, ``on_nonfinite``, ``devices``, ``output``, ``resume``, ``adapt``,
-        ``min_acceptance_rate``, ``observables``, ``keep_positions``; and ``exact_starts``
-        (bool, default False).
+        ``min_acceptance_rate``, ``observables``, ``keep_positions``, ``callback``. With
+        ``output=``, the file holds this tree as it grows (:func:`load_chains`).
 
     ``observables=`` (a function of one chain's position, or a dict ``{name: function}``)
     records those values at every draw and adds them to ``posterior`` (a dict's keys name
