@@ -162,7 +162,7 @@ def demo(args) -> int:
             "integrator": args.integrator,
         },
     )
-    wall_time = tree.attrs["wall_time_seconds"]
+    wall_time = tree.attrs["sampling_time"]
     mu = tree.posterior["mu"].values
     stats = tree.sample_stats
     exact_moments = np.asarray(target.second_moments())

@@ -35,7 +35,7 @@ SYSTEM = liesample.systems.heisenberg((LENGTH,))
 ALGORITHM = liesample.heisenberg_heat_bath(SYSTEM, beta=1.0)
 STARTS = np.tile(np.array([0.0, 0.0, 1.0]), (3, LENGTH, 1))
 KEY = jax.random.key(5)
-RUN = {"num_warmup": 5, "thinning": 2, "chunk_draws": 4, "progress": False}
+RUN = {"num_warmup": 5, "thinning": 2, "chunk_draws": 4, "progress_bar": False}
 NUM_DRAWS = 12
 
 

@@ -49,7 +49,7 @@ SCRIPT = textwrap.dedent(
     )
     liesample.sample_chains(
         algorithm, jax.random.key({KEY_SEED}), np.array({STARTS.tolist()}), {NUM_DRAWS},
-        output=sys.argv[1], progress=False, callback=kill, **{RUN!r},
+        output=sys.argv[1], progress_bar=False, callback=kill, **{RUN!r},
     )
     print("NOT KILLED")
     """
@@ -81,7 +81,7 @@ ALGORITHM = liesample.lie_poisson_langevin(SYSTEM, beta=3.0, step_size=0.05, int
 
 
 def run(num_draws=NUM_DRAWS, **kwargs):
-    kwargs = {**RUN, "progress": False, **kwargs}
+    kwargs = {**RUN, "progress_bar": False, **kwargs}
     return sample_chains(ALGORITHM, jax.random.key(KEY_SEED), STARTS, num_draws, **kwargs)
 
 
@@ -135,20 +135,29 @@ def test_saved_run_equals_returned_run_and_can_be_extended(tmp_path, uninterrupt
     bars = []
 
     class RecordingBar:
-        def __init__(self, *args, total, initial=0, **kwargs):
-            self.total, self.n, self.start = total, initial, initial
+        """What the bar shows: each phase, then the draws (the saved ones first)."""
+
+        def __init__(self, *args, total, **kwargs):
+            self.total, self.shown = total, []
             bars.append(self)
 
+        def set_description(self, text, refresh=True):
+            self.shown.append(text)
+
         def update(self, count):
-            self.n += count
+            self.shown.append(count)
 
         def close(self):
             pass
 
     monkeypatch.setattr(loop, "tqdm", RecordingBar)
-    extended = run(output=path, resume=True, progress=True)
+    extended = run(output=path, resume=True, progress_bar=True)
     np.testing.assert_array_equal(extended.positions, uninterrupted.positions)
-    assert (bars[0].start, bars[0].n, bars[0].total) == (12, NUM_DRAWS, NUM_DRAWS)
+    (bar,) = bars
+    assert bar.total == NUM_DRAWS
+    assert bar.shown == [
+        "3 chains: checking the starts", "3 chains: compiling", "3 chains: sampling", 12, 4, 4
+    ]  # fmt: skip
     again = run(output=path, resume=True)  # nothing left to do: the saved run comes back
     np.testing.assert_array_equal(again.positions, uninterrupted.positions)
 
@@ -189,7 +198,7 @@ def test_sample_writes_and_resumes(tmp_path, uninterrupted):
     exist yet starts afresh."""
     path = tmp_path / "tree.nc"
     assert not os.path.exists(path)
-    kwargs = {"output": path, "resume": True, "progress": False, **RUN}
+    kwargs = {"output": path, "resume": True, "progress_bar": False, **RUN}
     liesample.sample(ALGORITHM, jax.random.key(KEY_SEED), STARTS, 8, **kwargs)
     tree = liesample.sample(ALGORITHM, jax.random.key(KEY_SEED), STARTS, NUM_DRAWS, **kwargs)
     np.testing.assert_array_equal(np.asarray(tree.posterior["mu"]), uninterrupted.positions)
@@ -199,7 +208,7 @@ def test_an_adapted_run_resumes_to_the_same_draws(tmp_path):
     """Warm-up adaptation is deterministic given the key: a resumed run re-derives the same step
     size (dual averaging of the adjusted sampler) and continues to the uninterrupted draws."""
     algorithm = liesample.adjusted_lie_poisson(SYSTEM, beta=3.0)
-    kwargs = {"num_warmup": 30, "thinning": 2, "chunk_draws": 4, "progress": False}
+    kwargs = {"num_warmup": 30, "thinning": 2, "chunk_draws": 4, "progress_bar": False}
     key = jax.random.key(KEY_SEED)
     whole = sample_chains(algorithm, key, STARTS, 12, **kwargs)
     assert whole.settings["step_size_source"].startswith("warm-up dual averaging")

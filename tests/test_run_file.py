@@ -35,7 +35,7 @@ SETTINGS = {"beta": 3.0, "sigma": 1.0, "step_size": 0.05, "integrator": "lie_eul
 ALGORITHM = liesample.lie_poisson_langevin(liesample.systems.rigid_body(INERTIA), **SETTINGS)
 STARTS = np.array([[0.6, 1.0, 0.8], [1.0, 0.0, 0.0], [0.0, -2.0, 0.5]])
 KEY = jax.random.key(5)
-RUN = {"chunk_draws": 4, "progress": False}
+RUN = {"chunk_draws": 4, "progress_bar": False}
 
 
 def run(path, num_draws=8, algorithm=ALGORITHM, **kwargs):
@@ -233,7 +233,7 @@ TWO_WRITERS = textwrap.dedent(
     )
     try:
         liesample.sample_chains(algorithm, jax.random.key(5), np.array([[0.6, 1.0, 0.8]]), 8,
-                                chunk_draws=4, progress=False, output=path)
+                                chunk_draws=4, progress_bar=False, output=path)
     except OutputLockedError as error:
         print("REFUSED", error)
         sys.exit(3)

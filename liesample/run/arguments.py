@@ -170,3 +170,24 @@ def check_finite_starts(initial_positions, num_chains):
     )
     if not finite.all():
         raise ValueError(f"initial_positions[{int(np.argmin(finite))}] must be finite")
+
+
+def as_log_likelihood(log_likelihood):
+    """``log_likelihood`` (a dict ``{observed variable: function of the position}`` giving each
+    observation's log-likelihood) as a hashable tuple of ``(name, function)`` pairs, or
+    ``None``."""
+    if log_likelihood is None:
+        return None
+    if not isinstance(log_likelihood, dict) or not log_likelihood:
+        raise TypeError(
+            "log_likelihood must be a non-empty dict {observed variable name: function of the "
+            "position returning the pointwise log-likelihoods}, got "
+            f"{type(log_likelihood).__name__}"
+        )
+    for name, function in log_likelihood.items():
+        if not isinstance(name, str) or not name or not callable(function):
+            raise TypeError(
+                f"log_likelihood[{name!r}] must be a function of the position under a "
+                f"non-empty string name, got {type(function).__name__}"
+            )
+    return tuple(log_likelihood.items())

@@ -9,6 +9,7 @@ the run file (:mod:`liesample.run.store`) as soon as it is done.
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import functools
 import math
@@ -30,6 +31,7 @@ from liesample.run.provenance import adapted_fingerprint, run_fingerprint
 from liesample.run.sharding import chain_sharding, shard_chains, to_host
 from liesample.run.store import Layout, RunFile
 from liesample.samplers.contract import (
+    HOOKS,
     SAMPLE_STATS_NAMES,
     Sampler,
     as_sampler,
@@ -46,7 +48,8 @@ class ChainsResult:
     (compilation excluded; on a resumed run, the time of this session only), the sampler's
     ``settings`` after warm-up (step size and how it was chosen, stability mode, …), and the
     ``observables`` recorded at each draw (the pytree the ``observables`` option returns, each
-    leaf ``(chains, draws, *shape)``; ``None`` without that option)."""
+    leaf ``(chains, draws, *shape)``; ``None`` without that option), and the pointwise
+    ``log_likelihood`` (name -> ``(chains, draws, *shape)``; ``None`` without that option)."""
 
     positions: np.ndarray
     info: dict
@@ -54,6 +57,7 @@ class ChainsResult:
     num_steps: int
     settings: dict = None
     observables: object = None
+    log_likelihood: dict = None
 
 
 @dataclass(frozen=True)
@@ -62,7 +66,7 @@ class RunOptions:
 
     num_warmup: int = 0
     thinning: int = 1
-    progress: bool = True
+    progress_bar: bool = True
     chunk_draws: int | None = None
     on_nonfinite: str = "warn"
     devices: object = None
@@ -73,6 +77,7 @@ class RunOptions:
     observables: object = None
     keep_positions: bool = True
     callback: Callable | None = None
+    log_likelihood: Mapping | None = None
 
 
 @dataclass(frozen=True)
@@ -100,11 +105,14 @@ class TreeSpec:
             return dataclasses.replace(self, var_name=names.var_name, event_dims=names.event_dims)
         return self
 
-    def build(self, positions, info, observables, settings, *, thinning, attrs):
-        """The ``DataTree`` of these draws: ``attrs`` (the run's) then the spec's own."""
+    def build(
+        self, positions, info, observables, settings, *, thinning, attrs, log_likelihood=None
+    ):
+        """The ``DataTree`` of these draws: ``attrs`` (the run's) then the spec's own; a
+        ``log_likelihood`` group (ArviZ's, for ``loo`` and ``compare``) when it is given."""
         from liesample.analysis.diagnostics import to_datatree
 
-        return to_datatree(
+        tree = to_datatree(
             positions,
             info,
             var_name=self.var_name,
@@ -115,26 +123,48 @@ class TreeSpec:
             step_size=settings.get("step_size"),
             attrs={**attrs, **(self.attrs or {})},
         )
+        if log_likelihood is not None:
+            from arviz_base import from_dict
 
-    def example(self, positions, observable_shapes):
+            dims = {name: [f"{name}_dim_{k}" for k in range(np.ndim(v) - 2)]
+                    for name, v in log_likelihood.items()}  # fmt: skip
+            group = from_dict({"log_likelihood": log_likelihood}, dims=dims)["log_likelihood"]
+            group.attrs.update(tree["posterior"].attrs)
+            tree["log_likelihood"] = group
+        return tree
+
+    def example(self, positions, observable_shapes, log_likelihood_shapes=None):
         """A tree of one draw per chain: the names, dims and coords checked on the starts."""
         if positions is not None:
             positions = jax.tree.map(lambda leaf: np.asarray(leaf)[:, None], positions)
-        if observable_shapes is not None:
-            observable_shapes = jax.tree.map(
-                lambda leaf: np.zeros((leaf.shape[0], 1, *leaf.shape[1:]), leaf.dtype),
-                observable_shapes,
-            )
+        observable_shapes, log_likelihood_shapes = jax.tree.map(
+            lambda leaf: np.zeros((leaf.shape[0], 1, *leaf.shape[1:]), leaf.dtype),
+            (observable_shapes, log_likelihood_shapes),
+        )
         with warnings.catch_warnings():  # ArviZ remarks on a tree of one draw
             warnings.simplefilter("ignore", UserWarning)
-            tree = self.build(positions, None, observable_shapes, {}, thinning=1, attrs={})
-        return tree, positions, observable_shapes
+            tree = self.build(positions, None, observable_shapes, {}, thinning=1, attrs={},
+                              log_likelihood=log_likelihood_shapes)  # fmt: skip
+        return tree, positions, observable_shapes, log_likelihood_shapes
+
+
+def _library_version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("liesample")
+    except PackageNotFoundError:  # run from a source tree that is not installed
+        return "unknown"
 
 
 def run_attrs(settings, *, on_nonfinite, wall_time, num_steps) -> dict:
-    """The attributes of a run's tree: wall time, steps, warm-up, the sampler's settings."""
+    """The attributes of a run's tree: ArviZ's ``sampling_time`` (seconds, compilation
+    excluded) and ``inference_library`` (and its version), the steps, the warm-up, the sampler's
+    settings. (NetCDF has no boolean attribute: ``adapted`` is stored as 0 or 1.)"""
     return {
-        "wall_time_seconds": wall_time,
+        "sampling_time": wall_time,
+        "inference_library": "liesample",
+        "inference_library_version": _library_version(),
         "num_steps": num_steps,
         "num_warmup": settings.get("num_warmup"),
         "on_nonfinite": on_nonfinite,
@@ -151,25 +181,72 @@ def _observe(observables):
     return lambda position: {name: f(position) for name, f in functions.items()}
 
 
+def scalar_info(sampler: Sampler, position) -> Sampler:
+    """``sampler`` whose ``info`` keeps only the fields that are one number per step (a scalar
+    array), in a named tuple: a plain BlackJAX algorithm's info may hold nested states and
+    per-coordinate arrays (NUTS: the trajectory's end states, the momentum), which are dropped
+    by this rule. A sampler whose info is already all scalars, or that steps through noise
+    blocks, is returned as it is."""
+    if sampler.noise_blocks is not None:
+        return sampler
+    state = jax.eval_shape(sampler.init, position)
+    _, info = jax.eval_shape(sampler.step, jax.random.key(0), state)
+    fields = info._asdict() if hasattr(info, "_asdict") else dict(vars(info))
+    kept = [name for name, v in fields.items() if getattr(v, "shape", None) == ()]
+    if hasattr(info, "_asdict") and len(kept) == len(fields):
+        return sampler
+    Info = collections.namedtuple(f"Scalar{type(info).__name__}", kept)
+
+    def step(rng_key, state):
+        state, info = sampler.step(rng_key, state)
+        return state, Info(*(getattr(info, name) for name in kept))
+
+    hooks = {name: getattr(sampler, name) for name in HOOKS}
+    return Sampler(sampler.init, step, **hooks)
+
+
 @functools.partial(jit, static_argnames=("sampler", "num_steps"))
 def _run_warmup(states, keys, first_step, *, sampler, num_steps):
     """``num_steps`` steps of every chain from ``first_step``, discarded (the warm-up)."""
     return jax.vmap(lambda s, k: run_steps(sampler, k, s, first_step, num_steps)[0])(states, keys)
 
 
+DRAWS = ("positions", "observables", "log_likelihood")
+"""What a chunk records besides ``info``."""
+
+
+def _recorder(observables, log_likelihood, keep_positions):
+    """What is recorded at each draw: ``None`` for the positions alone (the default loop), else
+    a function of the position giving a dict with ``"positions"`` (if kept),
+    ``"observables"`` and ``"log_likelihood"`` (if asked for)."""
+    observe, pointwise = _observe(observables), _observe(log_likelihood)
+    if observe is None and pointwise is None:
+        return None
+
+    def record(position):
+        recorded = {"positions": position} if keep_positions else {}
+        if observe is not None:
+            recorded["observables"] = observe(position)
+        if pointwise is not None:
+            recorded["log_likelihood"] = pointwise(position)
+        return recorded
+
+    return record
+
+
 @functools.partial(
-    jit, static_argnames=("sampler", "count", "thinning", "observables", "keep_positions")
-)
-def _run_chunk(states, keys, first_step, *, sampler, count, thinning, observables, keep_positions):
-    """``count`` draws of every chain, ``thinning`` steps apart, from ``first_step``: the
-    positions (or the observables, or both) and the per-draw info."""
-    observe = _observe(observables)
-    if observe is None:
-        record = None  # the positions themselves (the default loop, unchanged)
-    elif keep_positions:
-        record = lambda position: (position, observe(position))
-    else:
-        record = observe
+    jit,
+    static_argnames=(
+        "sampler", "count", "thinning", "observables", "log_likelihood", "keep_positions"
+    ),
+)  # fmt: skip
+def _run_chunk(
+    states, keys, first_step, *, sampler, count, thinning, observables, log_likelihood,
+    keep_positions,
+):  # fmt: skip
+    """``count`` draws of every chain, ``thinning`` steps apart, from ``first_step``: what
+    :func:`_recorder` records, and the per-draw info."""
+    record = _recorder(observables, log_likelihood, keep_positions)
     return jax.vmap(
         lambda s, k: run_draws(
             sampler, k, s, first_step, count, thinning, reduce_over_thinning, record
@@ -191,6 +268,12 @@ class _Run:
             if self.observe is None
             else arguments.observable_shapes(self.observe, self.positions)
         )
+        self.log_likelihood_key = arguments.as_log_likelihood(o.log_likelihood)
+        self.log_likelihood_shapes = (
+            None
+            if self.log_likelihood_key is None
+            else arguments.observable_shapes(_observe(self.log_likelihood_key), self.positions)
+        )
         arguments.check_run_arguments(
             num_draws, o.num_warmup, o.thinning, o.on_nonfinite, o.chunk_draws, o.adapt
         )
@@ -205,8 +288,17 @@ class _Run:
         arguments.check_finite_starts(self.positions, self.num_chains)
         self.sharding = chain_sharding(o.devices, self.num_chains)
         self.algorithm, self.num_draws, self.options = algorithm, int(num_draws), o
-        self.sampler = as_sampler(algorithm)
+        self.sampler = scalar_info(as_sampler(algorithm), arguments.take_chain(self.positions, 0))
         self.spec, self.store = spec, None
+        # shown from the start: the phases before the first draw take most of a short run
+        self.bar = tqdm(
+            total=self.num_draws, disable=not o.progress_bar, unit="draw", dynamic_ncols=True
+        )
+        self.phase("checking the starts")
+
+    def phase(self, name):
+        """Name what the run is doing now on the progress bar."""
+        self.bar.set_description(f"{self.num_chains} chains: {name}", refresh=True)
 
     def _open(self):
         """Open the run file (refused here, before any compilation, if it cannot be ours), and
@@ -217,7 +309,9 @@ class _Run:
             self.spec = self.store.names(self.spec)
         self.spec = self.spec.named_for(self.sampler, self.positions, o.keep_positions)
         self.example = self.spec.example(
-            self.positions if o.keep_positions else None, self.observable_shapes
+            self.positions if o.keep_positions else None,
+            self.observable_shapes,
+            self.log_likelihood_shapes,
         )
         if self.store is not None:
             self.fingerprint = self._fingerprint()
@@ -244,6 +338,7 @@ class _Run:
         states, self.chain_keys = shard_chains((states, chain_keys), self.sharding)
         self.run_warmup = o.num_warmup > 0
         if adapting:
+            self.phase("warm-up (adapting)")
             # From the initial states and deterministic given rng_key: a resumed run re-derives
             # the same parameters.
             sampler, adapted = warm_up(
@@ -258,7 +353,11 @@ class _Run:
 
     def _fingerprint(self):
         tree = self.example[0]
-        variables = {name: list(tree["posterior"][name].dims) for name in tree["posterior"]}
+        variables = {
+            f"{group}/{name}": list(tree[group][name].dims)
+            for group in tree.children
+            for name in tree[group].data_vars
+        }
         return run_fingerprint(
             self.algorithm,
             dict(self.sampler.settings),
@@ -268,6 +367,7 @@ class _Run:
             thinning=self.options.thinning,
             keep_positions=self.options.keep_positions,
             observe=self.observe,
+            log_likelihood=_observe(self.log_likelihood_key),
             variables=variables,
             names=[self.spec.var_name, self.spec.event_dims],
         )
@@ -281,8 +381,8 @@ class _Run:
         self.store.check(self.fingerprint)
         if not self.store.exists:
             return 0, None
-        _, positions, observables = self.example
-        layout = Layout(positions, observables, self.spec.var_name or "mu")
+        _, positions, observables, log_likelihood = self.example
+        layout = Layout(positions, observables, log_likelihood, self.spec.var_name or "mu")
         done, states, previous = self.store.resume(self.states, layout, self.num_draws)
         if done:
             self.states = shard_chains(states, self.sharding)
@@ -293,6 +393,7 @@ class _Run:
         """The executables of this run (the warm-up, one chunk length and the last partial
         one), compiled before the timed loop; ``jax.jit``'s cache keeps them for a next run."""
         o = self.options
+        self.phase("compiling")
         self.chunk = o.chunk_draws or max(1, math.ceil(self.num_draws / 20))
         args = (self.states, self.chain_keys, 0)
         if self.run_warmup:
@@ -309,51 +410,42 @@ class _Run:
                     count=count,
                     thinning=o.thinning,
                     observables=self.observables_key,
+                    log_likelihood=self.log_likelihood_key,
                     keep_positions=o.keep_positions,
                 ).compile()
 
-    def _split(self, recorded):
-        """``(positions, observables)`` of one chunk's recorded values."""
-        if self.observe is None:
-            return recorded, None
-        return recorded if self.options.keep_positions else (None, recorded)
+    def _split(self, recorded, info):
+        """One chunk's draws: ``positions``, ``info``, ``observables``, ``log_likelihood``."""
+        if self.observables_key is None and self.log_likelihood_key is None:
+            recorded = {"positions": recorded}  # the default loop records the positions alone
+        return {name: recorded.get(name) for name in DRAWS} | {"info": info}
 
     def loop(self, done, previous):
-        """Run the chunks from draw ``done``, saving each; ``(positions, infos, observed)``
-        lists of chunks (the saved run's first) and the wall time."""
+        """Run the chunks from draw ``done``, saving each; the list of chunks (the saved run's
+        first: dicts as :meth:`_split` makes them) and the wall time."""
         o = self.options
-        chunks = ([], [], [])
-        if previous is not None:
-            for pieces, piece in zip(chunks, previous, strict=True):
-                pieces.append(piece)
+        chunks = [] if previous is None else [previous]
         start = time.perf_counter()
-        states = self.states
+        states, bar = self.states, self.bar
         if self.run_warmup:
+            self.phase("warm-up")
             states = jax.block_until_ready(self.warmup(states, self.chain_keys, 0))
-        bar = tqdm(
-            total=self.num_draws,
-            initial=done,
-            disable=not o.progress,
-            unit="draw",
-            desc=f"{self.num_chains} chains",
-        )
+        self.phase("sampling")
+        if done:
+            bar.update(done)  # the draws already saved
         wall_time = None  # until the last chunk: the file's attributes record the same
         while done < self.num_draws:
             count = min(self.chunk, self.num_draws - done)
             first_step = o.num_warmup + done * o.thinning
             states, recorded = self.executables[count](states, self.chain_keys, first_step)
-            recorded, info = to_host(recorded)
+            chunks.append(self._split(*to_host(recorded)))
             wall_time = time.perf_counter() - start
-            positions, observed = self._split(recorded)
-            for pieces, piece in zip(chunks, (positions, info, observed), strict=True):
-                pieces.append(piece)
             done += count
             if self.store is not None:
-                self._save(done - count, done, (positions, info, observed), states, wall_time)
+                self._save(done - count, done, chunks[-1], states, wall_time)
             bar.update(count)
             if o.callback is not None:
                 o.callback(done)
-        bar.close()
         if wall_time is None:  # nothing ran (a finished run resumed): the warm-up's time
             wall_time = time.perf_counter() - start
         return chunks, wall_time
@@ -361,7 +453,6 @@ class _Run:
     def _save(self, first, end, draws, states, wall_time):
         """Write the draws ``first … end`` to the run file, with the tree's attributes then."""
         o = self.options
-        positions, info, observed = draws
         attrs = run_attrs(
             self.settings,
             on_nonfinite=o.on_nonfinite,
@@ -371,29 +462,38 @@ class _Run:
         with warnings.catch_warnings():  # ArviZ remarks on a chunk with few draws
             warnings.filterwarnings("ignore", "Found chain dimension", UserWarning)
             tree = self.spec.build(
-                positions, info, observed, self.settings, thinning=o.thinning, attrs=attrs
+                draws["positions"],
+                draws["info"],
+                draws["observables"],
+                self.settings,
+                thinning=o.thinning,
+                attrs=attrs,
+                log_likelihood=draws["log_likelihood"],
             )
-        names = {SAMPLE_STATS_NAMES.get(k, k): [k, np.asarray(v).dtype.str] for k, v in info.items()}
+        names = {
+            SAMPLE_STATS_NAMES.get(k, k): [k, np.asarray(v).dtype.str]
+            for k, v in draws["info"].items()
+        }
         self.store.append(first, tree, names, to_host(states), self.fingerprint)
 
     def finish(self, chunks, wall_time) -> ChainsResult:
         """The result of the whole run, after the post-run checks."""
         o = self.options
-        positions, infos, observed = chunks
-        info = {name: np.concatenate([i[name] for i in infos], axis=1) for name in infos[0]}
 
-        def joined(pieces):
+        def joined(name):
+            pieces = [chunk[name] for chunk in chunks]
             if pieces[0] is None:
                 return None
             return jax.tree.map(lambda *parts: np.concatenate(parts, axis=1), *pieces)
 
         result = ChainsResult(
-            joined(positions),
-            info,
+            joined("positions"),
+            joined("info"),
             wall_time,
             o.num_warmup + self.num_draws * o.thinning,
             self.settings,
-            joined(observed),
+            joined("observables"),
+            joined("log_likelihood"),
         )
         groups = self.sampler.law_groups
         groups = None if groups is None else groups(self.positions)
@@ -432,6 +532,7 @@ def run_chains(algorithm, rng_key, initial_positions, num_draws, options, spec) 
         run.compile(done)
         chunks, wall_time = run.loop(done, previous)
     finally:
+        run.bar.close()
         if run.store is not None:
             run.store.close()
     return run.finish(chunks, wall_time)

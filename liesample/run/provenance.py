@@ -90,6 +90,7 @@ def run_fingerprint(
     thinning,
     keep_positions,
     observe,
+    log_likelihood,
     variables,
     names,
 ) -> dict:
@@ -97,7 +98,7 @@ def run_fingerprint(
 
     ``variables``: the recorded variables' names and dims in the ``DataTree``
     (``{group/name: dims}``); ``observe``: the observables' function of one position, or
-    ``None``; ``names``: the ``[var_name, event_dims]`` that named them (adopted on resume)."""
+    ``None``; ``log_likelihood``: the pointwise log-likelihoods' function, or ``None``; ``names``: the ``[var_name, event_dims]`` that named them (adopted on resume)."""
     first = jax.tree.map(lambda leaf: jnp.asarray(leaf)[0], initial_positions)
     fields = {
         "format": FORMAT,
@@ -113,6 +114,9 @@ def run_fingerprint(
         "variables": json.dumps(variables, sort_keys=True),
         "names": json.dumps(names),
         "observables_jaxpr_sha256": None if observe is None else jaxpr_hash(observe, first),
+        "log_likelihood_jaxpr_sha256": (
+            None if log_likelihood is None else jaxpr_hash(log_likelihood, first)
+        ),
     }
     return fields
 

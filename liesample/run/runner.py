@@ -63,6 +63,19 @@ __all__ = [
 ]
 
 
+def _progress_bar(progress_bar, progress, stacklevel=3) -> bool:
+    """``progress_bar``, or the deprecated ``progress`` when it is given (with a warning)."""
+    if progress is None:
+        return progress_bar
+    warnings.warn(
+        "progress= is deprecated and will be removed in the next release: pass progress_bar= "
+        "(the name BlackJAX and NumPyro use)",
+        DeprecationWarning,
+        stacklevel=stacklevel,
+    )
+    return progress
+
+
 def sample_chains(
     algorithm,
     rng_key,
@@ -71,7 +84,7 @@ def sample_chains(
     *,
     num_warmup: int = 0,
     thinning: int = 1,
-    progress: bool = True,
+    progress_bar: bool = True,
     chunk_draws: int | None = None,
     on_nonfinite: str = "warn",
     devices=None,
@@ -82,6 +95,8 @@ def sample_chains(
     observables=None,
     keep_positions: bool = True,
     callback: Callable | None = None,
+    log_likelihood: dict | None = None,
+    progress: bool | None = None,
 ) -> ChainsResult:
     """Run ``len(initial_positions)`` chains of ``algorithm`` in parallel (``jax.vmap``).
 
@@ -113,9 +128,10 @@ def sample_chains(
         averaging to its target acceptance); ``True``: adapt even a given step size; ``False``:
         never. A step size left unset and not adapted is the sampler's own choice for the
         run's starts (:func:`liesample.tuning.warmup.choose_from_starts`).
-    progress : bool
-        Show a progress bar (tqdm) over the draws (on a resumed run it starts at the draws
-        already saved).
+    progress_bar : bool
+        Show a progress bar (tqdm) from the start of the run: its phase (checking the starts,
+        warm-up, compiling, sampling), then the draws and their rate (on a resumed run from the
+        draws already saved). ``progress=`` is its deprecated former name.
     chunk_draws : int, optional
         Draws per compiled chunk (default: about 20 chunks); also the unit of saving.
     on_nonfinite : {"warn", "raise"}
@@ -147,6 +163,11 @@ def sample_chains(
     callback : callable, optional
         ``callback(draws_done)`` after each chunk (saved first when ``output`` is given): to
         report progress elsewhere, or stop a run by raising (what was saved stays resumable).
+    log_likelihood : dict of str to callable, optional
+        ``{observed variable: function of one chain's position}`` giving each observation's
+        log-likelihood (an array), recorded at every draw like ``observables``
+        (``ChainsResult.log_likelihood``), saved and resumed with them; :func:`sample` puts them
+        in ArviZ's ``log_likelihood`` group, so ``arviz_stats.loo`` and ``compare`` work.
     observables : callable or dict of str to callable, optional
         Functions of one chain's position, evaluated at every kept draw inside the compiled
         loop (vmapped over chains; with ``thinning``, at the draw's own step only). A callable
@@ -170,7 +191,7 @@ def sample_chains(
     options = RunOptions(
         num_warmup=num_warmup,
         thinning=thinning,
-        progress=progress,
+        progress_bar=_progress_bar(progress_bar, progress),
         chunk_draws=chunk_draws,
         on_nonfinite=on_nonfinite,
         devices=devices,
@@ -181,6 +202,7 @@ def sample_chains(
         observables=observables,
         keep_positions=keep_positions,
         callback=callback,
+        log_likelihood=log_likelihood,
     )
     return run_chains(algorithm, rng_key, initial_positions, num_draws, options, TreeSpec())
 
@@ -203,8 +225,9 @@ def sample(
 
     The tree has ``posterior/<var_name>`` with dims ``(chain, draw, *event_dims)`` and
     ``sample_stats`` under ArviZ's names (``diverging``, ``acceptance_rate``, ``energy``, and
-    the sampler's own fields such as ``casimir_error``); its attributes record the wall time,
-    the number of steps, the sampler's settings (``sampler``, ``step_size`` and
+    the sampler's own fields such as ``casimir_error``); its attributes record ArviZ's
+    ``sampling_time``, ``inference_library`` and its version, the number of steps, the
+    sampler's settings (``sampler``, ``step_size`` and
     ``step_size_source``, ``stability`` mode and ``stability_number``, …), whether the warm-up
     adapted, and ``attrs``.
 
@@ -233,9 +256,10 @@ def sample(
     coords, attrs
         Coordinates by dim name, and extra attributes for the tree.
     run_options
-        The other keywords of :func:`sample_chains`: ``thinning``, ``progress``,
+        The other keywords of :func:`sample_chains`: ``thinning``, ``progress_bar``,
         ``chunk_draws``, ``on_nonfinite``, ``devices``, ``output``, ``resume``, ``adapt``,
-        ``min_acceptance_rate``, ``observables``, ``keep_positions``, ``callback``. With
+        ``min_acceptance_rate``, ``observables``, ``keep_positions``, ``callback``,
+        ``log_likelihood`` (the tree's ``log_likelihood`` group, for ``az.loo``). With
         ``output=``, the file holds this tree as it grows (:func:`load_chains`).
 
     ``observables=`` (a function of one chain's position, or a dict ``{name: function}``)
@@ -252,6 +276,10 @@ def sample(
     Example: ``sample(liesample.adjusted_lie_poisson(system, beta=1.0), key, starts, 1000)``
     tunes the step size by dual averaging in a warm-up of 1000 steps, then samples.
     """
+    if "progress" in run_options:
+        run_options["progress_bar"] = _progress_bar(
+            run_options.get("progress_bar", True), run_options.pop("progress"), stacklevel=3
+        )
     unknown = sorted(set(run_options) - {f.name for f in dataclasses.fields(RunOptions)})
     if unknown or "num_warmup" in run_options:
         raise TypeError(
@@ -293,4 +321,5 @@ def sample(
         result.settings,
         thinning=options.thinning,
         attrs=attrs,
+        log_likelihood=result.log_likelihood,
     )

@@ -303,8 +303,9 @@ class RunFile:
             )
 
     def resume(self, states, layout, num_draws):
-        """``(draws_done, states, (positions, info, observables))`` of the saved run, verified
-        (``None`` for the last two when nothing is saved). ``states`` gives the state's
+        """``(draws_done, states, draws)`` of the saved run, verified; ``draws`` is a dict with
+        ``positions``, ``info``, ``observables``, ``log_likelihood`` (``None`` for the last two
+        items when nothing is saved). ``states`` gives the state's
         structure and dtypes; ``layout`` is the :class:`Layout` of the run's variables."""
         with _open(self.path) as f:
             commit = verify(f, self.path)
@@ -324,9 +325,7 @@ class RunFile:
                 key: np.asarray(stats[name][:, :done]).astype(dtype)
                 for name, (key, dtype) in names.items()
             }
-            posterior = f.groups["posterior"].variables
-            positions = layout.read_positions(posterior, done)
-            observables = layout.read_observables(posterior, done)
+            draws = layout.read(f, done) | {"info": info}
             saved = _state_arrays(group, self.state_slot)
         leaves, treedef = jax.tree.flatten(states)
         restored = []
@@ -340,7 +339,7 @@ class RunFile:
                     f"cannot resume from {self.path!r}: saved state {name} has shape "
                     f"{restored[-1].shape}, the sampler's has {leaf.shape}"
                 )
-        return done, jax.tree.unflatten(treedef, restored), (positions, info, observables)
+        return done, jax.tree.unflatten(treedef, restored), draws
 
     def append(self, first, tree, info_names, states, fingerprint):
         """Write the draws ``first …`` of ``tree`` (a ``DataTree`` of this chunk: the groups
@@ -422,10 +421,11 @@ class RunFile:
 
 
 class Layout:
-    """Where a run's positions and observables sit in the ``posterior`` group: for each leaf
-    (in ``jax.tree.leaves`` order) its variable, or its ``.real`` and ``.imag`` variables."""
+    """Where a run's recorded draws sit in the file: for each leaf of the positions and of the
+    observables (in ``jax.tree.leaves`` order) its ``posterior`` variable, or its ``.real`` and
+    ``.imag`` variables; each pointwise log-likelihood under its name in ``log_likelihood``."""
 
-    def __init__(self, positions, observables, var_name):
+    def __init__(self, positions, observables, log_likelihood, var_name):
         from liesample.analysis.diagnostics import pytree_variables
         from liesample.foundation.validation import is_single_array
 
@@ -440,23 +440,27 @@ class Layout:
             dtypes = [np.asarray(leaf).dtype for leaf in jax.tree.leaves(tree)]
             return jax.tree.structure(tree), list(grouped.values()), dtypes
 
-        self.positions = leaves_of(positions, var_name)
-        self.observables = leaves_of(observables, "observable")
+        self.trees = {
+            "positions": ("posterior", leaves_of(positions, var_name)),
+            "observables": ("posterior", leaves_of(observables, "observable")),
+            "log_likelihood": (
+                "log_likelihood",
+                None if log_likelihood is None else leaves_of(dict(log_likelihood), None),
+            ),
+        }
 
-    @staticmethod
-    def _read(layout, variables, done):
-        if layout is None:
-            return None
-        treedef, names, dtypes = layout
-        leaves = []
-        for parts, dtype in zip(names, dtypes, strict=True):
-            values = [np.asarray(variables[name][:, :done]) for name in parts]
-            leaf = values[0] if len(values) == 1 else values[0] + 1j * values[1]
-            leaves.append(leaf.astype(dtype))
-        return jax.tree.unflatten(treedef, leaves)
-
-    def read_positions(self, variables, done):
-        return self._read(self.positions, variables, done)
-
-    def read_observables(self, variables, done):
-        return self._read(self.observables, variables, done)
+    def read(self, f, done) -> dict:
+        """The first ``done`` draws of each recorded tree (``None`` where none is recorded)."""
+        read = {}
+        for name, (group, layout) in self.trees.items():
+            if layout is None:
+                read[name] = None
+                continue
+            variables, (treedef, names, dtypes) = f.groups[group].variables, layout
+            leaves = []
+            for parts, dtype in zip(names, dtypes, strict=True):
+                values = [np.asarray(variables[part][:, :done]) for part in parts]
+                leaf = values[0] if len(values) == 1 else values[0] + 1j * values[1]
+                leaves.append(leaf.astype(dtype))
+            read[name] = jax.tree.unflatten(treedef, leaves)
+        return read
