@@ -522,9 +522,11 @@ def _variables(result: ChainsResult, var_name: str) -> dict[str, np.ndarray]:
     return variables
 
 
-def run_chains(algorithm, rng_key, initial_positions, num_draws, options, spec) -> ChainsResult:
-    """:func:`sample_chains` with its keywords as ``options`` (:class:`RunOptions`) and the
-    run file's names as ``spec`` (:class:`TreeSpec`); :func:`sample` calls it with its own."""
+def run_chains(algorithm, rng_key, initial_positions, num_draws, options, spec):
+    """:func:`liesample.run.runner.sample_chains` with its keywords as ``options``
+    (:class:`RunOptions`) and the names of the draws as ``spec`` (:class:`TreeSpec`);
+    ``(result, spec)``, the spec as the run named the draws (completed by the sampler's
+    declared names, or on a resume the saved run's)."""
     run = _Run(algorithm, rng_key, initial_positions, num_draws, options, spec)
     try:
         run.start()
@@ -535,4 +537,4 @@ def run_chains(algorithm, rng_key, initial_positions, num_draws, options, spec) 
         run.bar.close()
         if run.store is not None:
             run.store.close()
-    return run.finish(chunks, wall_time)
+    return run.finish(chunks, wall_time), run.spec

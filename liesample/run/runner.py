@@ -49,7 +49,6 @@ from liesample.run.checks import (
 )
 from liesample.run.loop import ChainsResult, RunOptions, TreeSpec, run_attrs, run_chains
 from liesample.run.store import load_chains, saved_num_warmup
-from liesample.samplers.contract import as_sampler
 
 __all__ = [
     "DEFAULT_MIN_ACCEPTANCE_RATE",
@@ -61,6 +60,9 @@ __all__ = [
     "sample_chains",
     "split_rhat",
 ]
+
+
+_OPTIONS = {f.name for f in dataclasses.fields(RunOptions)} - {"progress_bar"}
 
 
 def _progress_bar(progress_bar, progress, stacklevel=3) -> bool:
@@ -104,11 +106,10 @@ def sample_chains(
     ----------
     algorithm : blackjax.base.SamplingAlgorithm
         ``init(position)`` and ``step(rng_key, state) -> (state, info)``; ``state.position``
-        is recorded. liesample's samplers (:class:`liesample.samplers.contract.Sampler`) also
-        declare a vectorised check of every start, their settings, how their step size is
-        tuned (run by :mod:`liesample.tuning.warmup`) and their noise blocks; any other
-        algorithm is read as a ``Sampler`` with the defaults
-        (:func:`liesample.samplers.contract.as_sampler`).
+        is recorded, and the fields of ``info`` that are one number per step (NUTS' nested
+        states and momentum are dropped). liesample's samplers
+        (:class:`liesample.samplers.contract.Sampler`) also declare checks of the starts,
+        settings, step-size tuning and noise blocks; any other algorithm gets the defaults.
     rng_key : jax.random.key or jax.random.PRNGKey
     initial_positions : array ``(chains, *event_shape)``, or a pytree of such arrays
         A pytree (dict, tuple, named tuple; e.g. the positions of ``liesample.geometric_hmc``
@@ -121,13 +122,11 @@ def sample_chains(
         ``0`` here: this loop runs exactly the steps asked for. :func:`sample` means the same
         by ``num_warmup`` but defaults to a warm-up as long as the run and warns at ``0``.
     adapt : None, True or False
-        Warm-up adaptation of the step size, as the sampler declares it (``tuning``, run by
-        :func:`liesample.tuning.warmup.warm_up`). ``None`` (default): adapt a sampler built
-        without ``step_size`` when ``num_warmup > 0`` (the unadjusted sampler then chooses its
-        step from the bias model on the run's starts, the adjusted one tunes it by dual
-        averaging to its target acceptance); ``True``: adapt even a given step size; ``False``:
-        never. A step size left unset and not adapted is the sampler's own choice for the
-        run's starts (:func:`liesample.tuning.warmup.choose_from_starts`).
+        Warm-up adaptation of the step size, as the sampler declares it
+        (:func:`liesample.tuning.warmup.warm_up`). ``None`` (default): adapt a sampler built
+        without ``step_size`` when ``num_warmup > 0``; ``True``: adapt even a given step size;
+        ``False``: never. A step size left unset and not adapted is the sampler's own choice
+        for the run's starts (:func:`liesample.tuning.warmup.choose_from_starts`).
     progress_bar : bool
         Show a progress bar (tqdm) from the start of the run: its phase (checking the starts,
         warm-up, compiling, sampling), then the draws and their rate (on a resumed run from the
@@ -138,43 +137,34 @@ def sample_chains(
         What to do if any step diverged (``info.is_divergent``: a non-finite state or energy):
         a ``RuntimeWarning`` naming the chains, or :class:`NonFiniteStateError`.
     min_acceptance_rate : float
-        Chains whose mean ``acceptance_rate`` over the draws is below this are reported as
-        stuck (``RuntimeWarning`` naming them); 0 disables the check. Chains whose energies
-        have a split R-hat above :data:`MAX_ENERGY_RHAT` are reported as not converged (a
-        ``RuntimeWarning``: an unfinished warm-up, or a law that depends on the start).
+        Chains whose mean ``acceptance_rate`` is below this are reported as stuck; 0 disables
+        the check. The other post-run checks: :mod:`liesample.run.checks`.
     devices : None, "all", int, sequence of jax devices, or NamedSharding
         Split the chains over these devices (:func:`liesample.run.sharding.chain_sharding`); the
         number of chains must be a multiple of the number of devices. ``None``: one device.
     output : str or path, optional
-        NetCDF-4 file to which each chunk of draws and info, and the chain states after it, are
-        written as soon as the chunk is done: an ArviZ ``DataTree`` with the groups, names and
-        attributes of :func:`sample`'s tree (:func:`load_chains` reads it back, verified;
-        ``xarray.open_datatree`` too), plus a ``liesample_run`` group with what a resume needs
-        (:mod:`liesample.run.store`). One run at a time writes a path (a lock; a second writer
-        is refused at once, naming the holder). Refused before any compilation if its
-        directory is missing, or if it exists and ``resume`` is False.
+        NetCDF-4 file written chunk by chunk: the ArviZ ``DataTree`` of :func:`sample` (read by
+        :func:`load_chains`, verified) plus what a resume needs (:mod:`liesample.run.store`).
+        One run writes a path at a time (a second is refused at once, naming the holder);
+        refused before compiling if its directory is missing, or if it exists and ``resume``
+        is False.
     resume : bool
-        Continue the run saved in ``output``: the same sampler and settings, ``rng_key``,
-        ``initial_positions``, ``num_warmup``, ``thinning`` and observables, checked against the
-        fingerprint in the file (:mod:`liesample.run.provenance`; each differing field is named
-        with both values), and every saved chunk against its checksum. ``num_draws`` may be
-        larger than before to extend it. Starts afresh if the file does not exist yet. The
-        returned draws include the saved ones and equal those of one uninterrupted run.
+        Continue the run saved in ``output`` (bitwise the draws of one uninterrupted run; a
+        larger ``num_draws`` extends it; no file yet: start afresh). What made it is checked
+        (:mod:`liesample.run.provenance`: sampler, settings, key, starts, …; each differing
+        field named with both values), and every saved chunk against its checksum.
     callback : callable, optional
         ``callback(draws_done)`` after each chunk (saved first when ``output`` is given): to
         report progress elsewhere, or stop a run by raising (what was saved stays resumable).
     log_likelihood : dict of str to callable, optional
         ``{observed variable: function of one chain's position}`` giving each observation's
-        log-likelihood (an array), recorded at every draw like ``observables``
-        (``ChainsResult.log_likelihood``), saved and resumed with them; :func:`sample` puts them
+        log-likelihood, recorded at every draw like ``observables``; :func:`sample` puts them
         in ArviZ's ``log_likelihood`` group, so ``arviz_stats.loo`` and ``compare`` work.
     observables : callable or dict of str to callable, optional
         Functions of one chain's position, evaluated at every kept draw inside the compiled
-        loop (vmapped over chains; with ``thinning``, at the draw's own step only). A callable
-        may return an array or a pytree of arrays; a dict ``{name: function}`` gives a dict of
-        their values. ``ChainsResult.observables`` stacks them as ``(chains, draws, *shape)``.
-        They are written to ``output`` with the draws, and a resumed run must pass the same
-        observables (their names and shapes are checked). The draws do not depend on them.
+        loop. A callable may return an array or a pytree of arrays; a dict ``{name: function}``
+        gives a dict of their values, stacked as ``(chains, draws, *shape)``. Saved and
+        resumed with the draws, which do not depend on them.
     keep_positions : bool
         ``False`` stores only the observables (and info), not the positions (``positions`` is
         then ``None``): a run's memory is then that of the observables.
@@ -188,23 +178,9 @@ def sample_chains(
         )
         result.observables["m"].shape  # (chains, 1000, 3)
     """
-    options = RunOptions(
-        num_warmup=num_warmup,
-        thinning=thinning,
-        progress_bar=_progress_bar(progress_bar, progress),
-        chunk_draws=chunk_draws,
-        on_nonfinite=on_nonfinite,
-        devices=devices,
-        output=output,
-        resume=resume,
-        adapt=adapt,
-        min_acceptance_rate=min_acceptance_rate,
-        observables=observables,
-        keep_positions=keep_positions,
-        callback=callback,
-        log_likelihood=log_likelihood,
-    )
-    return run_chains(algorithm, rng_key, initial_positions, num_draws, options, TreeSpec())
+    options = {name: v for name, v in locals().items() if name in _OPTIONS}  # the keywords
+    options = RunOptions(**options, progress_bar=_progress_bar(progress_bar, progress))
+    return run_chains(algorithm, rng_key, initial_positions, num_draws, options, TreeSpec())[0]
 
 
 def sample(
@@ -227,9 +203,8 @@ def sample(
     ``sample_stats`` under ArviZ's names (``diverging``, ``acceptance_rate``, ``energy``, and
     the sampler's own fields such as ``casimir_error``); its attributes record ArviZ's
     ``sampling_time``, ``inference_library`` and its version, the number of steps, the
-    sampler's settings (``sampler``, ``step_size`` and
-    ``step_size_source``, ``stability`` mode and ``stability_number``, …), whether the warm-up
-    adapted, and ``attrs``.
+    sampler's settings (``sampler``, ``step_size`` and how it was chosen, ``stability``, …),
+    whether the warm-up adapted, and ``attrs``.
 
     Parameters
     ----------
@@ -262,25 +237,43 @@ def sample(
         ``log_likelihood`` (the tree's ``log_likelihood`` group, for ``az.loo``). With
         ``output=``, the file holds this tree as it grows (:func:`load_chains`).
 
-    ``observables=`` (a function of one chain's position, or a dict ``{name: function}``)
-    records those values at every draw and adds them to ``posterior`` (a dict's keys name
-    them, a single array is ``observable``; dims ``<name>_dim_k``, or as ``event_dims`` maps
-    them for pytree positions), so that ``az.summary``, ESS and R-hat act on them; with
-    ``keep_positions=False`` the posterior holds only the observables. For example
-    ``sample(liesample.heisenberg_heat_bath(system, beta=1.0), key, starts, 1000,
-    observables={"h": system.hamiltonian}, keep_positions=False)`` gives ``posterior/h``.
-
-    ArviZ's ESS and R-hat of these variables are those of the ambient coordinates (vector
-    components, matrix entries), not of intrinsic coordinates on the group or sphere.
+    ``observables=`` adds its values to ``posterior`` (a dict's keys name them, a single
+    array is ``observable``; dims ``<name>_dim_k``), so that ``az.summary``, ESS and R-hat act
+    on them; with ``keep_positions=False`` the posterior holds only the observables. ESS and
+    R-hat are those of the ambient coordinates (vector components, matrix entries).
 
     Example: ``sample(liesample.adjusted_lie_poisson(system, beta=1.0), key, starts, 1000)``
     tunes the step size by dual averaging in a warm-up of 1000 steps, then samples.
     """
+    options = _sample_options(run_options, num_draws, num_warmup, exact_starts)
+    spec = TreeSpec(var_name, event_dims, coords, attrs)
+    result, spec = run_chains(algorithm, rng_key, initial_positions, num_draws, options, spec)
+    attrs = run_attrs(
+        result.settings,
+        on_nonfinite=options.on_nonfinite,
+        wall_time=result.wall_time,
+        num_steps=result.num_steps,
+    )
+    return spec.build(
+        result.positions,
+        result.info,
+        result.observables,
+        result.settings,
+        thinning=options.thinning,
+        attrs=attrs,
+        log_likelihood=result.log_likelihood,
+    )
+
+
+def _sample_options(run_options, num_draws, num_warmup, exact_starts) -> RunOptions:
+    """:func:`sample`'s keywords as the :class:`RunOptions` of its run: ``num_warmup`` as long
+    as the run unless given (on a resume, the saved run's), a warning at 0 without
+    ``exact_starts``."""
     if "progress" in run_options:
         run_options["progress_bar"] = _progress_bar(
-            run_options.get("progress_bar", True), run_options.pop("progress"), stacklevel=3
+            run_options.get("progress_bar", True), run_options.pop("progress"), stacklevel=4
         )
-    unknown = sorted(set(run_options) - {f.name for f in dataclasses.fields(RunOptions)})
+    unknown = sorted(set(run_options) - _OPTIONS - {"progress_bar"})
     if unknown or "num_warmup" in run_options:
         raise TypeError(
             f"sample() got unknown keywords {unknown}; its keywords are those of sample_chains "
@@ -301,25 +294,6 @@ def sample(
             "draws from the target (then pass exact_starts=True), the draws are biased towards "
             "them. Leave num_warmup unset for a warm-up as long as the run.",
             UserWarning,
-            stacklevel=2,
+            stacklevel=3,
         )
-    options = dataclasses.replace(options, num_warmup=num_warmup)
-    spec = TreeSpec(var_name, event_dims, coords, attrs)
-    result = run_chains(algorithm, rng_key, initial_positions, num_draws, options, spec)
-    spec = spec.named_for(as_sampler(algorithm), arguments.as_positions(initial_positions)[0],
-                          options.keep_positions)  # fmt: skip
-    attrs = run_attrs(
-        result.settings,
-        on_nonfinite=options.on_nonfinite,
-        wall_time=result.wall_time,
-        num_steps=result.num_steps,
-    )
-    return spec.build(
-        result.positions,
-        result.info,
-        result.observables,
-        result.settings,
-        thinning=options.thinning,
-        attrs=attrs,
-        log_likelihood=result.log_likelihood,
-    )
+    return dataclasses.replace(options, num_warmup=num_warmup)
