@@ -67,8 +67,8 @@ def file_bytes(path):
         ({"sigma": 0.5}, "sigma"),
         ({"integrator": "splitting"}, "integrator"),
         ({"noise_block_size": 16}, "noise_block_size"),
-        # a system parameter: it changes the step's stability number and its jaxpr
-        ({"inertia": (1.0, 2.0, 4.5)}, "stability_number"),
+        # a system parameter: the settings do not name it, the step's computation does
+        ({"inertia": (1.0, 2.0, 4.5)}, "step_jaxpr_sha256"),
         ({"sampler": "adjusted"}, "sampler"),
     ],
 )

@@ -318,7 +318,8 @@ class _Run:
             self.store.check(self.fingerprint)
 
     def start(self):
-        """Check every start, choose or tune the step (the warm-up), and open the file."""
+        """Open the file, check every start, choose or tune the step (the warm-up)."""
+        self._open()
         o, sampler = self.options, self.sampler
         adapting = arguments.wants_adaptation(
             sampler, o.adapt, o.num_warmup, type(self.algorithm).__name__
@@ -329,7 +330,6 @@ class _Run:
         arguments.check_starts(
             sampler, self.positions, self.num_chains, step_size_checks=not (adapting or choosing)
         )
-        self._open()
         if choosing:
             sampler = choose_from_starts(sampler, self.positions)
             arguments.check_starts(sampler, self.positions, self.num_chains)
@@ -377,8 +377,9 @@ class _Run:
         if self.store is None:
             return 0, None
         first = jax.tree.map(lambda leaf: leaf[0], (self.states, self.chain_keys))
-        self.fingerprint.update(adapted_fingerprint(self.sampler, first[0], first[1]))
-        self.store.check(self.fingerprint)
+        adapted = adapted_fingerprint(self.sampler, first[0], first[1])
+        self.fingerprint.update(adapted)
+        self.store.check(self.fingerprint, required=adapted)
         if not self.store.exists:
             return 0, None
         _, positions, observables, log_likelihood = self.example

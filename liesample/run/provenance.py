@@ -129,15 +129,32 @@ def adapted_fingerprint(sampler, state, rng_key) -> dict:
     return fields
 
 
-def differences(saved: dict, now: dict) -> list[str]:
+def differences(saved: dict, now: dict, required=()) -> list[str]:
     """``"different <field> (saved <value>, now <value>)"`` for each field of ``now`` that
-    ``saved`` records otherwise (or lacks)."""
+    ``saved`` records otherwise, or lacks when the field is ``required``. (A sampler may add
+    derived values to its settings when its starts are checked, so the fields read before
+    that are compared where both record them; the settings after the warm-up, ``adapted.*``,
+    are required.)"""
     missing = object()
     found = []
     for name, value in now.items():
         before = saved.get(name, missing)
+        if before is missing and name not in required:
+            continue
         if before is missing:
             found.append(f"different {name} (not recorded in the file, now {value!r})")
-        elif before != value:
-            found.append(f"different {name} (saved {before!r}, now {value!r})")
+        elif json.dumps(before) != json.dumps(value):
+            found.append(
+                f"different {name} (saved {before!r}, now {value!r}){_MEANING.get(name, '')}"
+            )
     return found
+
+
+_MEANING = {
+    "step_jaxpr_sha256": (
+        ": the step computes something else (the system's parameters, the log-density, or a "
+        "setting the sampler does not record)"
+    ),
+    "observables_jaxpr_sha256": ": the observables compute something else",
+    "log_likelihood_jaxpr_sha256": ": the log-likelihoods compute something else",
+}

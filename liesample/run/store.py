@@ -286,14 +286,15 @@ class RunFile:
             event_dims=spec.event_dims if spec.event_dims is not None else event_dims,
         )
 
-    def check(self, fingerprint: dict):
-        """Refuse to resume unless the file's fingerprint records every field as ``fingerprint``
-        does (each differing field is named with both values)."""
+    def check(self, fingerprint: dict, required=()):
+        """Refuse to resume unless the file's fingerprint records the fields of ``fingerprint``
+        as it does (each differing field is named with both values); a field the file lacks is
+        refused if it is ``required`` (:func:`liesample.run.provenance.differences`)."""
         if not self.exists:
             return
         with _open(self.path) as f:
             saved = _json_attr(_run_group(f, self.path), "fingerprint", self.path)
-        found = differences(saved, json.loads(json.dumps(fingerprint)))
+        found = differences(saved, json.loads(json.dumps(fingerprint)), required)
         if found:
             raise RunFileError(
                 f"cannot resume from {self.path!r}: it was saved by another run: "
