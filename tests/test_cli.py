@@ -1,8 +1,10 @@
 """`liesample demo` writes its report, plots and draws, and refuses bad parameters cleanly."""
 
+import numpy as np
 import pytest
 import xarray as xr
 
+from liesample import load_chains
 from liesample.cli import main
 
 
@@ -17,6 +19,18 @@ def test_demo_writes_report_plots_and_netcdf(tmp_path, capsys):
     tree = xr.open_datatree(out / "draws.nc")
     assert tree["posterior"]["mu"].shape[:2] == (2, 200)
     assert not tree["sample_stats"]["diverging"].values.any()
+    saved = load_chains(out / "draws.nc")  # the run file, verified
+    assert list(saved.posterior["mu"].coords["component"].values) == ["μ₁", "μ₂", "μ₃"]
+    np.testing.assert_array_equal(saved.posterior["mu"], tree["posterior"]["mu"])
+
+
+def test_demo_refuses_an_output_that_is_a_file(tmp_path, capsys):
+    existing = tmp_path / "file.txt"
+    existing.write_text("mine")
+    assert main(["demo", "--output", str(existing), "--no-progress"]) == 2
+    error = capsys.readouterr().err
+    assert "is a file" in error and str(existing) in error and "Traceback" not in error
+    assert existing.read_text() == "mine"
 
 
 def test_demo_rejects_bad_parameters_without_traceback(tmp_path, capsys):

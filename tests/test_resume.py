@@ -1,8 +1,8 @@
 """Long runs lose nothing: ``output=`` saves every chunk, ``resume=True`` continues after a kill.
 
 The interrupted run is a subprocess that kills itself with SIGKILL right after chunk ``k`` has
-been saved (the runner's test hook ``_after_chunk_hook``), which is deterministic and as abrupt
-as a crash or a pre-empted job: no ``finally`` runs, nothing is flushed. Resuming from the file
+been saved (``sample_chains``' ``callback``), which is deterministic and as abrupt as a crash or
+a pre-empted job: no ``finally`` runs, nothing is flushed. Resuming from the file
 must then give the draws of one uninterrupted run *exactly*, because draw ``d`` of chain ``c``
 uses the key ``fold_in(key_c, step)`` and the saved state is the exact state after the last
 saved chunk.
@@ -20,7 +20,7 @@ import pytest
 import xarray as xr
 
 import liesample
-from liesample.run import runner
+from liesample.run import loop
 from liesample.run.runner import load_chains, sample_chains
 
 SYSTEM = liesample.systems.rigid_body((1.0, 2.0, 4.0))
@@ -38,30 +38,50 @@ SCRIPT = textwrap.dedent(
     jax.config.update("jax_enable_x64", True)
     import numpy as np
     import liesample
-    from liesample.run import runner
 
     def kill(draws_done):
         if draws_done >= {KILL_AFTER} * {RUN["chunk_draws"]}:
             os.kill(os.getpid(), signal.SIGKILL)
 
-    runner._after_chunk_hook = kill
     algorithm = liesample.lie_poisson_langevin(
         liesample.systems.rigid_body((1.0, 2.0, 4.0)), beta=3.0, step_size=0.05,
         integrator="lie_euler",
     )
     liesample.sample_chains(
         algorithm, jax.random.key({KEY_SEED}), np.array({STARTS.tolist()}), {NUM_DRAWS},
-        output=sys.argv[1], progress=False, **{RUN!r},
+        output=sys.argv[1], progress_bar=False, callback=kill, **{RUN!r},
     )
     print("NOT KILLED")
     """
 )
 
+# The same run killed in the middle of writing chunk KILL_AFTER + 1: its draws and the state
+# after it are written, the commit is not (the checksum of that chunk's stored draws is the
+# store's last step before the commit).
+MIDWRITE = SCRIPT.replace(
+    "def kill(draws_done):",
+    textwrap.dedent(
+        f"""
+        from liesample.run import store
+        digest, calls = store._chunk_digest, []
+
+        def dying_digest(arrays):
+            calls.append(1)
+            if len(calls) == 2 * {KILL_AFTER} + 1:  # two digests per saved chunk
+                os.kill(os.getpid(), signal.SIGKILL)
+            return digest(arrays)
+
+        store._chunk_digest = dying_digest
+
+        def kill(draws_done):"""
+    ),
+).replace("if draws_done >=", "if False and draws_done >=")
+
 ALGORITHM = liesample.lie_poisson_langevin(SYSTEM, beta=3.0, step_size=0.05, integrator="lie_euler")
 
 
 def run(num_draws=NUM_DRAWS, **kwargs):
-    kwargs = {**RUN, "progress": False, **kwargs}
+    kwargs = {**RUN, "progress_bar": False, **kwargs}
     return sample_chains(ALGORITHM, jax.random.key(KEY_SEED), STARTS, num_draws, **kwargs)
 
 
@@ -70,10 +90,11 @@ def uninterrupted():
     return run()
 
 
-def test_killed_run_resumes_to_the_same_draws(tmp_path, uninterrupted):
+@pytest.mark.parametrize("script", [SCRIPT, MIDWRITE], ids=["between chunks", "while writing"])
+def test_killed_run_resumes_to_the_same_draws(tmp_path, uninterrupted, script):
     path = tmp_path / "run.nc"
     completed = subprocess.run(
-        [sys.executable, "-c", SCRIPT, str(path)],
+        [sys.executable, "-c", script, str(path)],
         check=False,
         capture_output=True,
         text=True,
@@ -84,19 +105,22 @@ def test_killed_run_resumes_to_the_same_draws(tmp_path, uninterrupted):
     # What survived the kill: exactly the first KILL_AFTER chunks, readable as they are.
     saved = load_chains(path)
     saved_draws = KILL_AFTER * RUN["chunk_draws"]
-    assert saved.positions.shape == (3, saved_draws, 3)
-    np.testing.assert_array_equal(saved.positions, uninterrupted.positions[:, :saved_draws])
-    assert saved.num_steps == RUN["num_warmup"] + saved_draws * RUN["thinning"]
-    with xr.open_dataset(path, engine="h5netcdf") as dataset:
-        assert dataset.sizes["draw"] == saved_draws
+    assert saved.posterior["mu"].shape == (3, saved_draws, 3)
+    np.testing.assert_array_equal(saved.posterior["mu"], uninterrupted.positions[:, :saved_draws])
+    assert saved.attrs["num_steps"] == RUN["num_warmup"] + saved_draws * RUN["thinning"]
+    if script is SCRIPT:  # killed between chunks: the file as the last chunk closed it
+        with xr.open_datatree(path, engine="h5netcdf") as tree:
+            assert tree["posterior"].sizes["draw"] == saved_draws
+    assert os.path.exists(f"{path}.lock")  # the killed run's lock file is left: it blocks nothing
 
     resumed = run(output=path, resume=True)
     np.testing.assert_array_equal(resumed.positions, uninterrupted.positions)
     np.testing.assert_array_equal(resumed.info["is_divergent"], uninterrupted.info["is_divergent"])
     np.testing.assert_allclose(resumed.info["energy"], uninterrupted.info["energy"], rtol=4e-16)
     assert resumed.num_steps == uninterrupted.num_steps
-    # …and the file now holds the whole run.
-    np.testing.assert_array_equal(load_chains(path).positions, uninterrupted.positions)
+    # …and the file now holds the whole run; the lock is gone.
+    np.testing.assert_array_equal(load_chains(path).posterior["mu"], uninterrupted.positions)
+    assert not os.path.exists(f"{path}.lock")
 
 
 def test_saved_run_equals_returned_run_and_can_be_extended(tmp_path, uninterrupted, monkeypatch):
@@ -104,27 +128,36 @@ def test_saved_run_equals_returned_run_and_can_be_extended(tmp_path, uninterrupt
     first = run(num_draws=12, output=path)
     np.testing.assert_array_equal(first.positions, uninterrupted.positions[:, :12])
     saved = load_chains(path)
-    np.testing.assert_array_equal(saved.positions, first.positions)
-    np.testing.assert_array_equal(saved.info["is_divergent"], first.info["is_divergent"])
-    assert saved.info["is_divergent"].dtype == bool
+    np.testing.assert_array_equal(saved.posterior["mu"], first.positions)
+    np.testing.assert_array_equal(saved.sample_stats["diverging"], first.info["is_divergent"])
+    assert saved.sample_stats["diverging"].dtype == bool
     # Extend the same run to more draws; the progress bar starts at the saved draws.
     bars = []
 
     class RecordingBar:
-        def __init__(self, *args, total, initial=0, **kwargs):
-            self.total, self.n, self.start = total, initial, initial
+        """What the bar shows: each phase, then the draws (the saved ones first)."""
+
+        def __init__(self, *args, total, **kwargs):
+            self.total, self.shown = total, []
             bars.append(self)
 
+        def set_description(self, text, refresh=True):
+            self.shown.append(text)
+
         def update(self, count):
-            self.n += count
+            self.shown.append(count)
 
         def close(self):
             pass
 
-    monkeypatch.setattr(runner, "tqdm", RecordingBar)
-    extended = run(output=path, resume=True, progress=True)
+    monkeypatch.setattr(loop, "tqdm", RecordingBar)
+    extended = run(output=path, resume=True, progress_bar=True)
     np.testing.assert_array_equal(extended.positions, uninterrupted.positions)
-    assert (bars[0].start, bars[0].n, bars[0].total) == (12, NUM_DRAWS, NUM_DRAWS)
+    (bar,) = bars
+    assert bar.total == NUM_DRAWS
+    assert bar.shown == [
+        "3 chains: checking the starts", "3 chains: compiling", "3 chains: sampling", 12, 4, 4
+    ]  # fmt: skip
     again = run(output=path, resume=True)  # nothing left to do: the saved run comes back
     np.testing.assert_array_equal(again.positions, uninterrupted.positions)
 
@@ -165,7 +198,7 @@ def test_sample_writes_and_resumes(tmp_path, uninterrupted):
     exist yet starts afresh."""
     path = tmp_path / "tree.nc"
     assert not os.path.exists(path)
-    kwargs = {"output": path, "resume": True, "progress": False, **RUN}
+    kwargs = {"output": path, "resume": True, "progress_bar": False, **RUN}
     liesample.sample(ALGORITHM, jax.random.key(KEY_SEED), STARTS, 8, **kwargs)
     tree = liesample.sample(ALGORITHM, jax.random.key(KEY_SEED), STARTS, NUM_DRAWS, **kwargs)
     np.testing.assert_array_equal(np.asarray(tree.posterior["mu"]), uninterrupted.positions)
@@ -175,7 +208,7 @@ def test_an_adapted_run_resumes_to_the_same_draws(tmp_path):
     """Warm-up adaptation is deterministic given the key: a resumed run re-derives the same step
     size (dual averaging of the adjusted sampler) and continues to the uninterrupted draws."""
     algorithm = liesample.adjusted_lie_poisson(SYSTEM, beta=3.0)
-    kwargs = {"num_warmup": 30, "thinning": 2, "chunk_draws": 4, "progress": False}
+    kwargs = {"num_warmup": 30, "thinning": 2, "chunk_draws": 4, "progress_bar": False}
     key = jax.random.key(KEY_SEED)
     whole = sample_chains(algorithm, key, STARTS, 12, **kwargs)
     assert whole.settings["step_size_source"].startswith("warm-up dual averaging")

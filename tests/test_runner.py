@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import liesample
-from liesample.run import runner
+from liesample.run import loop
 from liesample.run.runner import sample_chains
 
 SYSTEM = liesample.systems.rigid_body((1.0, 2.0, 4.0))
@@ -23,7 +23,7 @@ NUM_DRAWS = 12
 
 
 def run(num_draws=NUM_DRAWS, **kwargs):
-    kwargs.setdefault("progress", False)
+    kwargs.setdefault("progress_bar", False)
     return sample_chains(ALGORITHM, KEY, POSITIONS, num_draws, **kwargs)
 
 
@@ -52,7 +52,7 @@ def test_shapes(plain):
 
 def test_chains_are_independent_streams(plain):
     """Chains started at the same point with the runner's per-chain keys still differ."""
-    same_start = sample_chains(ALGORITHM, KEY, np.stack([POSITIONS[0]] * 2), 5, progress=False)
+    same_start = sample_chains(ALGORITHM, KEY, np.stack([POSITIONS[0]] * 2), 5, progress_bar=False)
     assert not np.allclose(same_start.positions[0], same_start.positions[1])
 
 
@@ -137,7 +137,7 @@ def test_bad_arguments(kwargs, match):
     arguments.update(kwargs)
     num_draws = arguments.pop("num_draws")
     with pytest.raises(ValueError, match=match):
-        sample_chains(ALGORITHM, KEY, POSITIONS, num_draws, progress=False, **arguments)
+        sample_chains(ALGORITHM, KEY, POSITIONS, num_draws, progress_bar=False, **arguments)
 
 
 @pytest.mark.parametrize(
@@ -152,7 +152,7 @@ def test_bad_arguments(kwargs, match):
 )
 def test_bad_initial_positions(positions, match):
     with pytest.raises(ValueError, match=match):
-        sample_chains(ALGORITHM, KEY, positions, 4, progress=False)
+        sample_chains(ALGORITHM, KEY, positions, 4, progress_bar=False)
 
 
 class _Runaway(RuntimeError):
@@ -170,22 +170,25 @@ class _GuardBar:
         if count <= 0 or self.calls > 100:
             raise _Runaway(f"draw loop advanced by {count} (call {self.calls})")
 
+    def set_description(self, text, refresh=True):
+        pass
+
     def close(self):
         pass
 
 
 @pytest.mark.parametrize("chunk_draws", [-1, 0, 2.5, True])
 def test_bad_chunk_draws(monkeypatch, chunk_draws):
-    monkeypatch.setattr(runner, "tqdm", _GuardBar)
+    monkeypatch.setattr(loop, "tqdm", _GuardBar)
     with pytest.raises(ValueError, match="chunk_draws"):
-        sample_chains(ALGORITHM, KEY, POSITIONS, 6, progress=False, chunk_draws=chunk_draws)
+        sample_chains(ALGORITHM, KEY, POSITIONS, 6, progress_bar=False, chunk_draws=chunk_draws)
 
 
 def test_every_distinct_start_is_checked_concretely():
     """A degenerate start in any chain (not just the first) is refused, naming the chain."""
     starts = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
     with pytest.raises(ValueError, match=r"initial_positions\[1\].*degenerate"):
-        sample_chains(ALGORITHM, KEY, starts, 4, progress=False)
+        sample_chains(ALGORITHM, KEY, starts, 4, progress_bar=False)
 
 
 def test_a_plain_blackjax_algorithm_runs_as_a_sampler_with_the_defaults(plain):
@@ -196,13 +199,13 @@ def test_a_plain_blackjax_algorithm_runs_as_a_sampler_with_the_defaults(plain):
     )
     assert bare.settings == {} and bare.check_positions is None
     assert bare.tuning is None and bare.noise_blocks is None
-    result = sample_chains(bare, KEY, POSITIONS, 4, progress=False)
+    result = sample_chains(bare, KEY, POSITIONS, 4, progress_bar=False)
     assert result.positions.shape == (3, 4, 3) and result.settings == {
         "num_warmup": 0,
         "adapted": False,
     }
     with pytest.raises(ValueError, match="has no warm-up adaptation"):
-        sample_chains(bare, KEY, POSITIONS, 2, num_warmup=2, adapt=True, progress=False)
+        sample_chains(bare, KEY, POSITIONS, 2, num_warmup=2, adapt=True, progress_bar=False)
 
 
 @pytest.mark.parametrize("name", ["adjusted_lie_poisson", "lie_poisson_langevin"])
@@ -213,7 +216,7 @@ def test_the_warm_up_tunes_a_new_sampler_and_leaves_the_given_one(name):
     sampler = getattr(liesample, name)(SYSTEM, beta=3.0)
     assert sampler.tuning is not None and not sampler.tuning.given
     before = dict(sampler.settings)
-    result = sample_chains(sampler, KEY, POSITIONS, 4, num_warmup=20, progress=False)
+    result = sample_chains(sampler, KEY, POSITIONS, 4, num_warmup=20, progress_bar=False)
     assert result.settings["adapted"] and result.settings["step_size"] > 0
     assert result.settings["step_size_source"].startswith("warm-up ")
     assert sampler.settings == before

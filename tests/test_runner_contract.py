@@ -75,7 +75,7 @@ def test_both_key_styles_give_the_same_draws():
     raw, _ = sampler.step(jax.random.PRNGKey(5), state)
     np.testing.assert_array_equal(typed.position, raw.position)
     runs = [
-        liesample.sample_chains(sampler, key, STARTS, 5, progress=False).positions
+        liesample.sample_chains(sampler, key, STARTS, 5, progress_bar=False).positions
         for key in (jax.random.key(9), jax.random.PRNGKey(9))
     ]
     np.testing.assert_array_equal(*runs)
@@ -117,9 +117,9 @@ def test_magnetic_divergences_reach_sample_stats_and_are_reduced_with_any():
     starts = np.zeros((2, 2))
     key = jax.random.key(3)
     with pytest.warns(RuntimeWarning, match=r"chains 0, 1\).*divergent"):
-        steps = liesample.sample_chains(sampler, key, starts, 100, progress=False)
+        steps = liesample.sample_chains(sampler, key, starts, 100, progress_bar=False)
     with pytest.warns(RuntimeWarning, match="divergent"):
-        tree = liesample.sample(sampler, key, starts, 20, thinning=5, progress=False,
+        tree = liesample.sample(sampler, key, starts, 20, thinning=5, progress_bar=False,
                                 num_warmup=0, event_dims=("coordinate",))  # fmt: skip
     diverging = tree.sample_stats["diverging"].values
     assert diverging.dtype == bool and diverging.any()
@@ -136,7 +136,7 @@ def test_stuck_chains_are_named():
     sampler = liesample.adjusted_lie_poisson(VMF, beta=1.0, step_size=1.0)
     starts = np.tile(MU_HAT, (3, 1))
     with pytest.warns(RuntimeWarning, match=r"3 chain\(s\) are stuck.*chains 0, 1, 2.*smaller"):
-        liesample.sample_chains(sampler, jax.random.key(0), starts, 20, progress=False)
+        liesample.sample_chains(sampler, jax.random.key(0), starts, 20, progress_bar=False)
 
 
 # --------------------------------------------------------------------------- starts
@@ -157,10 +157,10 @@ def test_many_starts_are_checked_in_one_call_naming_the_first_bad_chain(monkeypa
     bad[1234] = 0.0
     bad[2000] = np.nan
     with pytest.raises(ValueError, match=r"initial_positions\[2000\].*finite"):
-        liesample.sample_chains(sampler, jax.random.key(0), bad, 2, progress=False)
+        liesample.sample_chains(sampler, jax.random.key(0), bad, 2, progress_bar=False)
     bad[2000] = 1.0
     with pytest.raises(ValueError, match=r"initial_positions\[1234\].*degenerate"):
-        liesample.sample_chains(sampler, jax.random.key(0), bad, 2, progress=False)
+        liesample.sample_chains(sampler, jax.random.key(0), bad, 2, progress_bar=False)
 
 
 def test_a_start_with_nan_energy_is_refused():
@@ -172,7 +172,7 @@ def test_a_start_with_nan_energy_is_refused():
         sampler.init(jnp.array([0.0, 0.0, -1.0]))
     starts = np.array([[0.0, 0.0, 1.0], [0.0, 0.6, 0.8], [0.0, 0.0, -1.0]])
     with pytest.raises(ValueError, match=r"initial_positions\[2\].*energy h = nan"):
-        liesample.sample_chains(sampler, jax.random.key(0), starts, 2, progress=False)
+        liesample.sample_chains(sampler, jax.random.key(0), starts, 2, progress_bar=False)
 
 
 # --------------------------------------------------------------------------- settings, precision
@@ -181,7 +181,7 @@ def test_a_start_with_nan_energy_is_refused():
 def test_settings_and_explicit_stability_modes_are_recorded():
     sampler = liesample.lie_poisson_langevin(RIGID, beta=1.0, step_size=10.0, stability="warn")
     with pytest.warns(UserWarning, match=r"step_size must be <= "):
-        tree = liesample.sample(sampler, jax.random.key(0), STARTS, 4, progress=False)
+        tree = liesample.sample(sampler, jax.random.key(0), STARTS, 4, progress_bar=False)
     attrs = tree.attrs
     assert attrs["stability"] == "warn" and attrs["step_size"] == 10.0
     assert attrs["step_size_source"] == "given" and attrs["stability_number"] > 2.0
@@ -211,7 +211,7 @@ def test_float32_warning_rule():
 def test_vmf_as_written_raises_naming_the_bound():
     sampler = liesample.lie_poisson_langevin(VMF, beta=1.0, sigma=1.0, step_size=0.05)
     with pytest.raises(ValueError, match=r"κ = .* > 2 .*step_size must be <= 0\.00"):
-        liesample.sample(sampler, jax.random.key(0), np.tile(MU_HAT, (2, 1)), 10, progress=False)
+        liesample.sample(sampler, jax.random.key(0), np.tile(MU_HAT, (2, 1)), 10, progress_bar=False)
 
 
 def _check_vmf(tree, bias_tolerance=0.0):
@@ -236,7 +236,7 @@ STARTS_S2 = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [-0.6, 
 def test_vmf_unadjusted_without_step_size_matches_the_exact_law():
     sampler = liesample.lie_poisson_langevin(VMF, beta=1.0)
     tree = liesample.sample(
-        sampler, jax.random.key(1), STARTS_S2, 1000, num_warmup=200, thinning=2, progress=False
+        sampler, jax.random.key(1), STARTS_S2, 1000, num_warmup=200, thinning=2, progress_bar=False
     )
     assert tree.attrs["adapted"] == 1 and tree.attrs["stability_number"] <= 1.0
     assert tree.attrs["step_size_source"].startswith("warm-up bias model")
@@ -247,7 +247,7 @@ def test_vmf_unadjusted_without_step_size_matches_the_exact_law():
 def test_vmf_adjusted_with_dual_averaging_matches_the_exact_law():
     sampler = liesample.adjusted_lie_poisson(VMF, beta=1.0)
     tree = liesample.sample(
-        sampler, jax.random.key(2), STARTS_S2, 1000, num_warmup=400, thinning=2, progress=False
+        sampler, jax.random.key(2), STARTS_S2, 1000, num_warmup=400, thinning=2, progress_bar=False
     )
     assert tree.attrs["step_size_source"].startswith("warm-up dual averaging")
     rate = float(tree.sample_stats["acceptance_rate"].values.mean())
@@ -262,12 +262,12 @@ def test_chains_that_disagree_are_reported_as_not_converged():
     starts = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.6, 0.8, 0.0]])
     frozen = liesample.adjusted_lie_poisson(system, beta=3.0, step_size=1e-4)
     with pytest.warns(RuntimeWarning, match="split R-hat of their energy"):
-        liesample.sample_chains(frozen, jax.random.key(0), starts, 200, progress=False)
+        liesample.sample_chains(frozen, jax.random.key(0), starts, 200, progress_bar=False)
     mixing = liesample.adjusted_lie_poisson(system, beta=3.0, step_size=0.5)
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
         liesample.sample_chains(mixing, jax.random.key(0), starts, 2000, num_warmup=500,
-                                progress=False)  # fmt: skip
+                                progress_bar=False)  # fmt: skip
 
 
 def test_an_energy_constant_on_the_orbit_raises_no_convergence_warning():
@@ -278,7 +278,7 @@ def test_an_energy_constant_on_the_orbit_raises_no_convergence_warning():
     sampler = liesample.lie_poisson_langevin(system, beta=3.0, step_size=0.05)
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
-        run = liesample.sample_chains(sampler, jax.random.key(0), starts, 200, progress=False)
+        run = liesample.sample_chains(sampler, jax.random.key(0), starts, 200, progress_bar=False)
     assert 0 < np.ptp(run.info["energy"]) < 1e-12  # round-off only
 
 

@@ -10,7 +10,6 @@ import xarray as xr
 import liesample
 from liesample.analysis.diagnostics import to_datatree
 from liesample.geometry.spaces import SU, Euclidean, Sphere
-from liesample.run import runner
 from liesample.run.runner import load_chains, sample_chains
 
 jax.config.update("jax_enable_x64", True)
@@ -41,11 +40,11 @@ def test_one_leaf_dict_gives_the_draws_of_the_plain_array():
     starts = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0]])
     plain = sample_chains(
         liesample.geometric_hmc(vmf_logdensity, Sphere(2), 0.4, 3),
-        KEY, starts, 12, thinning=2, chunk_draws=6, progress=False,
+        KEY, starts, 12, thinning=2, chunk_draws=6, progress_bar=False,
     )  # fmt: skip
     tree = sample_chains(
         liesample.geometric_hmc(lambda p: vmf_logdensity(p["mu"]), {"mu": Sphere(2)}, 0.4, 3),
-        KEY, {"mu": starts}, 12, thinning=2, chunk_draws=6, progress=False,
+        KEY, {"mu": starts}, 12, thinning=2, chunk_draws=6, progress_bar=False,
     )  # fmt: skip
     assert set(tree.positions) == {"mu"}
     np.testing.assert_array_equal(tree.positions["mu"], plain.positions)
@@ -56,7 +55,7 @@ def test_one_leaf_dict_gives_the_draws_of_the_plain_array():
 
 @pytest.fixture(scope="module")
 def product_run():
-    return sample_chains(PRODUCT, KEY, product_starts(), 10, thinning=2, progress=False)
+    return sample_chains(PRODUCT, KEY, product_starts(), 10, thinning=2, progress_bar=False)
 
 
 def test_pytree_draws_have_the_structure_of_the_starts(product_run):
@@ -69,7 +68,7 @@ def test_pytree_draws_have_the_structure_of_the_starts(product_run):
 
 def test_pytree_draws_do_not_depend_on_chunking_or_sharding(product_run):
     # One chunk shape each (10 = 2 × 5 and 10 × 1 draws): one compilation per run.
-    other = sample_chains(PRODUCT, KEY, product_starts(), 10, thinning=2, progress=False,
+    other = sample_chains(PRODUCT, KEY, product_starts(), 10, thinning=2, progress_bar=False,
                           chunk_draws=5, devices=1)  # fmt: skip
     for name in ("mu", "log_kappa"):
         np.testing.assert_array_equal(other.positions[name], product_run.positions[name])
@@ -80,7 +79,7 @@ def test_starts_are_checked_without_the_hook_and_named():
     starts = product_starts()
     starts["mu"][2] = [0.0, 0.0, 2.0]  # off the sphere
     with pytest.raises(ValueError, match=r"initial_positions\[2\]"):
-        sample_chains(bare, KEY, starts, 2, progress=False)
+        sample_chains(bare, KEY, starts, 2, progress_bar=False)
 
 
 @pytest.mark.parametrize(
@@ -100,7 +99,7 @@ def test_starts_are_checked_without_the_hook_and_named():
 )  # fmt: skip
 def test_bad_pytree_positions(positions, error, match):
     with pytest.raises(error, match=match):
-        sample_chains(PRODUCT, KEY, positions, 2, progress=False)
+        sample_chains(PRODUCT, KEY, positions, 2, progress_bar=False)
 
 
 class _Interrupt(Exception):
@@ -115,27 +114,25 @@ def _interrupt_after(draws):
     return hook
 
 
-def test_output_and_resume_with_pytree_positions(tmp_path, monkeypatch, product_run):
+def test_output_and_resume_with_pytree_positions(tmp_path, product_run):
     path = tmp_path / "run.nc"
-    monkeypatch.setattr(runner, "_after_chunk_hook", _interrupt_after(4))
     with pytest.raises(_Interrupt):  # stopped after 2 of 5 chunks were saved
         sample_chains(PRODUCT, KEY, product_starts(), 10, thinning=2, chunk_draws=2,
-                      progress=False, output=path)  # fmt: skip
+                      progress_bar=False, output=path, callback=_interrupt_after(4))  # fmt: skip
     saved = load_chains(path)
-    assert set(saved.positions) == {"mu", "log_kappa"}
-    assert saved.positions["mu"].shape == (3, 4, 3)
-    monkeypatch.setattr(runner, "_after_chunk_hook", None)
+    assert set(saved.posterior.data_vars) == {"mu", "log_kappa"}
+    assert saved.posterior["mu"].shape == (3, 4, 3)
     resumed = sample_chains(PRODUCT, KEY, product_starts(), 10, thinning=2, chunk_draws=2,
-                            progress=False, output=path, resume=True)  # fmt: skip
+                            progress_bar=False, output=path, resume=True)  # fmt: skip
     for name in ("mu", "log_kappa"):  # bitwise the uninterrupted run
         np.testing.assert_array_equal(resumed.positions[name], product_run.positions[name])
-        np.testing.assert_array_equal(load_chains(path).positions[name], resumed.positions[name])
+        np.testing.assert_array_equal(load_chains(path).posterior[name], resumed.positions[name])
     for name in product_run.info:
         np.testing.assert_array_equal(resumed.info[name], product_run.info[name])
     other = product_starts()
     other["log_kappa"] = other["log_kappa"] + 0.1
     with pytest.raises(ValueError, match="initial_positions_sha256"):
-        sample_chains(PRODUCT, KEY, other, 12, progress=False, output=path, resume=True)
+        sample_chains(PRODUCT, KEY, other, 12, progress_bar=False, output=path, resume=True)
 
 
 def test_output_keeps_tuples_and_complex_leaves(tmp_path):
@@ -144,20 +141,23 @@ def test_output_keeps_tuples_and_complex_leaves(tmp_path):
 
     sampler = liesample.geometric_hmc(logdensity, (SU(2), {"x": Euclidean(())}), 0.3, 3)
     starts = (np.tile(np.eye(2, dtype=complex), (2, 1, 1)), {"x": np.zeros(2)})
-    run = sample_chains(sampler, KEY, starts, 4, progress=False, output=tmp_path / "su2.nc")
-    saved = load_chains(tmp_path / "su2.nc")
-    assert isinstance(saved.positions, tuple) and set(saved.positions[1]) == {"x"}
-    assert saved.positions[0].dtype == np.complex128
-    np.testing.assert_array_equal(saved.positions[0], run.positions[0])
-    np.testing.assert_array_equal(saved.positions[1]["x"], run.positions[1]["x"])
+    path = tmp_path / "su2.nc"
+    run = sample_chains(sampler, KEY, starts, 4, progress_bar=False, output=path, chunk_draws=2)
+    saved = load_chains(path).posterior
+    assert set(saved.data_vars) == {"x0.real", "x0.imag", "x1.x"}
+    np.testing.assert_array_equal(saved["x0.real"] + 1j * saved["x0.imag"], run.positions[0])
+    np.testing.assert_array_equal(saved["x1.x"], run.positions[1]["x"])
+    resumed = sample_chains(sampler, KEY, starts, 6, progress_bar=False, output=path, resume=True,
+                            chunk_draws=2)  # fmt: skip
+    assert resumed.positions[0].dtype == np.complex128
+    np.testing.assert_array_equal(resumed.positions[0][:, :4], run.positions[0])
 
 
-def test_output_refuses_unsaveable_pytrees(tmp_path):
+def test_output_saves_any_pytree_with_named_leaves(tmp_path):
+    """The file holds the tree's variables (named from key paths), so any pytree is saved."""
     sampler = liesample.geometric_hmc(lambda p: -0.5 * p[1] ** 2, {1: Euclidean(())}, 0.3, 2)
-    with pytest.raises(TypeError, match="string keys"):
-        sample_chains(sampler, KEY, {1: np.zeros(2)}, 2, progress=False,
-                      output=tmp_path / "run.nc")  # fmt: skip
-    assert not (tmp_path / "run.nc").exists()
+    sample_chains(sampler, KEY, {1: np.zeros(2)}, 2, progress_bar=False, output=tmp_path / "run.nc")
+    assert set(load_chains(tmp_path / "run.nc").posterior.data_vars) == {"1"}
 
 
 def test_variable_names_dims_and_complex_split():
@@ -214,7 +214,7 @@ def test_sample_splits_complex_su2_leaves():
 
     sampler = liesample.geometric_hmc(logdensity, (SU(2), Euclidean(())), 0.3, 3)
     starts = (np.tile(np.eye(2, dtype=complex), (2, 1, 1)), np.zeros(2))
-    tree = liesample.sample(sampler, KEY, starts, 6, progress=False)
+    tree = liesample.sample(sampler, KEY, starts, 6, progress_bar=False)
     posterior = tree.posterior
     assert set(posterior.data_vars) == {"x0.real", "x0.imag", "x1"}
     assert posterior["x0.real"].shape == (2, 6, 2, 2)

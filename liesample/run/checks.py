@@ -1,0 +1,161 @@
+"""The checks run on a finished run: divergences, stuck chains, chains that disagree, and the
+per-variable checks of the draws.
+
+Each check warns (or raises, for divergences with ``on_nonfinite="raise"``) with a message that
+names the chains and a fix; none changes the draws. :func:`check_run` runs them all on a
+:class:`liesample.run.runner.ChainsResult`; :func:`check_variables` is the one place that
+receives every recorded variable (positions and observables, named as in the ``DataTree``) and
+runs the convergence checks of :mod:`liesample.analysis.convergence` on them.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+
+from liesample.analysis.convergence import convergence_warnings
+from liesample.foundation.validation import raise_or_warn
+
+DEFAULT_MIN_ACCEPTANCE_RATE = 0.05
+"""A chain whose mean acceptance rate over the run is below this is reported as stuck."""
+MAX_ENERGY_RHAT = 1.05
+"""Chains whose energies have a split R-hat above this are reported as not converged."""
+
+
+class NonFiniteStateError(FloatingPointError):
+    """A chain diverged: a step produced a non-finite state or energy (the sampler kept the
+    previous state and flagged ``info.is_divergent``)."""
+
+
+def check_run(info, variables, groups, *, on_nonfinite, min_acceptance_rate, stacklevel=2):
+    """Every post-run check: :func:`report_divergences`, :func:`report_stuck_chains`,
+    :func:`report_unconverged` (on ``info``, per-draw arrays ``(chains, draws)``) and
+    :func:`check_variables` (on ``variables``, name -> ``(chains, draws, ...)``).
+
+    ``groups``: the sampler's law groups (a label per chain, chains with one label sample one
+    law), or ``None`` (one law). ``stacklevel`` as for ``warnings.warn`` called here."""
+    level = stacklevel + 1
+    report_divergences(info, on_nonfinite, level)
+    report_stuck_chains(info, min_acceptance_rate, level)
+    report_unconverged(info, groups, level)
+    check_variables(variables, groups, stacklevel=level)
+
+
+def check_variables(variables: dict[str, np.ndarray], groups, *, stacklevel=2) -> list[str]:
+    """Check each recorded variable, ``name -> array (chains, draws, ...)`` (the positions and
+    observables under their ``DataTree`` names), given the law ``groups`` (``None``: one law).
+
+    Warns (``RuntimeWarning``) for each variable with non-finite draws, naming it and its
+    chains; then one ``UserWarning`` with the messages of
+    :func:`liesample.analysis.convergence.convergence_warnings` (rank-normalised split R-hat
+    above 1.01, bulk or tail ESS below 100 per chain, on every element within each law group,
+    or why the checks were impossible). Returns every message."""
+    messages = []
+    for name, values in variables.items():
+        values = np.asarray(values)
+        finite = np.isfinite(values).reshape(values.shape[0], -1).all(axis=1)
+        if not finite.all():
+            chains = np.flatnonzero(~finite)
+            messages.append(
+                f"variable {name!r} has non-finite draws in {len(chains)} chain(s) (chains "
+                f"{chain_list(chains)}): those chains left the target's domain; check the "
+                "starts and the step size"
+            )
+    for message in messages:
+        warnings.warn(message, RuntimeWarning, stacklevel=stacklevel)
+    convergence = convergence_warnings(variables, groups)
+    if convergence:
+        warnings.warn(
+            "convergence checks: " + "; ".join(convergence) + ".", UserWarning, stacklevel=stacklevel
+        )
+    return messages + convergence
+
+
+def chain_list(chains, limit=10) -> str:
+    """``"0, 3, 5"``, cut after ``limit`` chains."""
+    shown = ", ".join(str(int(c)) for c in chains[:limit])
+    return shown + (f", … ({len(chains)} in all)" if len(chains) > limit else "")
+
+
+def report_divergences(info, on_nonfinite: str, stacklevel=2):
+    """A ``RuntimeWarning`` (or :class:`NonFiniteStateError` for ``on_nonfinite="raise"``)
+    naming the chains whose ``info["is_divergent"]`` flags a step."""
+    flags = info.get("is_divergent")
+    if flags is None or not np.any(flags):
+        return
+    chains = np.flatnonzero(np.any(flags, axis=1))
+    message = (
+        f"{int(np.sum(flags))} draws in {len(chains)} chain(s) (chains {chain_list(chains)}) "
+        "contain a divergent step (a non-finite state or energy, or for the Metropolis-adjusted "
+        "samplers an energy error above the divergence threshold); those steps were rejected "
+        "and flagged in info['is_divergent'] (sample_stats 'diverging'). Reduce step_size or "
+        "sigma, or let the warm-up adapt it."
+    )
+    raise_or_warn(message, on_nonfinite == "raise", NonFiniteStateError, RuntimeWarning, stacklevel)
+
+
+def report_stuck_chains(info, threshold: float, stacklevel=2):
+    """A ``RuntimeWarning`` naming the chains whose mean acceptance rate is below
+    ``threshold`` (0 disables it)."""
+    rates = info.get("acceptance_rate")
+    if rates is None or threshold == 0.0:
+        return
+    per_chain = np.mean(rates, axis=1)
+    chains = np.flatnonzero(per_chain < threshold)
+    if chains.size == 0:
+        return
+    worst = ", ".join(f"chain {int(c)}: {per_chain[c]:.3f}" for c in chains[:5])
+    warnings.warn(
+        f"{len(chains)} chain(s) are stuck: their mean acceptance rate is below "
+        f"{threshold:g} (chains {chain_list(chains)}; {worst}). Use a smaller step_size, or "
+        "let the warm-up adapt it (leave step_size unset and pass num_warmup > 0).",
+        RuntimeWarning,
+        stacklevel=stacklevel,
+    )
+
+
+def split_rhat(values) -> float:
+    """Split R-hat (Gelman et al.) of ``values (chains, draws)``: NaN where it is undefined (one
+    chain, few draws, or no spread within chains)."""
+    values = np.asarray(values, dtype=float)
+    if values.ndim != 2 or values.shape[0] < 2 or values.shape[1] < 8:
+        return math.nan
+    half = values.shape[1] // 2
+    halves = np.concatenate([values[:, :half], values[:, -half:]])
+    within = np.mean(np.var(halves, axis=1, ddof=1))
+    between = half * np.var(np.mean(halves, axis=1), ddof=1)
+    if not (np.isfinite(within) and within > 0):
+        return math.nan
+    return float(np.sqrt(((half - 1) / half * within + between / half) / within))
+
+
+def _varies(values) -> bool:
+    """Whether ``values`` vary by more than ``1e-9`` of their size (more than round-off)."""
+    values = np.asarray(values, dtype=float)
+    finite = values[np.isfinite(values)]
+    return finite.size > 0 and np.ptp(finite) > 1e-9 * max(np.max(np.abs(finite)), 1e-300)
+
+
+def report_unconverged(info, groups, stacklevel=2):
+    """A ``RuntimeWarning`` when the split R-hat of the chains' energies, within each law
+    group, is above :data:`MAX_ENERGY_RHAT`."""
+    energy = info.get("energy")
+    if energy is None or np.ndim(energy) != 2:
+        return
+    groups = np.zeros(len(energy), int) if groups is None else np.asarray(groups)
+    # An energy constant to round-off (a Casimir, as for the isotropic rigid body) says nothing
+    # about mixing: its R-hat would compare round-off.
+    chains = [energy[groups == label] for label in np.unique(groups)]
+    rhats = [split_rhat(group) for group in chains if _varies(group)]
+    rhat = max((r for r in rhats if np.isfinite(r)), default=math.nan)
+    if rhat > MAX_ENERGY_RHAT:
+        warnings.warn(
+            f"the chains disagree: the split R-hat of their energy is {rhat:.3g} > "
+            f"{MAX_ENERGY_RHAT:g}, so they have not forgotten their starts or do not sample one "
+            "law. Run longer (num_warmup, num_draws), start the chains from more spread-out "
+            "points, or for an unadjusted sampler reduce step_size.",
+            RuntimeWarning,
+            stacklevel=stacklevel,
+        )

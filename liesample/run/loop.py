@@ -1,0 +1,541 @@
+"""The chunked loop of a run: the sampler's starts checked, its step chosen or tuned, the
+warm-up and the chunks compiled once (``jax.jit``'s own cache, keyed by the sampler, the chunk
+length and the chains' shapes), then run chunk by chunk with a progress bar, each chunk saved to
+the run file (:mod:`liesample.run.store`) as soon as it is done.
+
+:func:`run_chains` is :func:`liesample.run.runner.sample_chains` with its keywords gathered as a
+:class:`RunOptions` and the names of the draws in their ``DataTree`` as a :class:`TreeSpec`.
+"""
+
+from __future__ import annotations
+
+import collections
+import dataclasses
+import functools
+import math
+import time
+import warnings
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+
+import jax
+import numpy as np
+from tqdm.auto import tqdm
+
+from liesample.foundation.compile import jit
+from liesample.foundation.validation import finite_float, is_single_array, prng_key
+from liesample.integrators.chain_loop import run_draws, run_steps
+from liesample.run import arguments
+from liesample.run.checks import DEFAULT_MIN_ACCEPTANCE_RATE, check_run
+from liesample.run.provenance import adapted_fingerprint, run_fingerprint
+from liesample.run.sharding import chain_sharding, shard_chains, to_host
+from liesample.run.store import Layout, RunFile
+from liesample.samplers.contract import (
+    HOOKS,
+    SAMPLE_STATS_NAMES,
+    Sampler,
+    as_sampler,
+    reduce_over_thinning,
+)
+from liesample.tuning.warmup import choose_from_starts, warm_up
+
+
+@dataclass(frozen=True)
+class ChainsResult:
+    """Draws of ``positions`` with shape ``(chains, draws, *event_shape)`` (a pytree of such
+    arrays for pytree positions; ``None`` for a run with ``keep_positions=False``), per-draw
+    ``info`` arrays with shape ``(chains, draws)``, the sampling wall time in seconds
+    (compilation excluded; on a resumed run, the time of this session only), the sampler's
+    ``settings`` after warm-up (step size and how it was chosen, stability mode, …), and the
+    ``observables`` recorded at each draw (the pytree the ``observables`` option returns, each
+    leaf ``(chains, draws, *shape)``; ``None`` without that option), and the pointwise
+    ``log_likelihood`` (name -> ``(chains, draws, *shape)``; ``None`` without that option)."""
+
+    positions: np.ndarray
+    info: dict
+    wall_time: float
+    num_steps: int
+    settings: dict = None
+    observables: object = None
+    log_likelihood: dict = None
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """The keywords of :func:`sample_chains` after ``num_draws`` (documented there)."""
+
+    num_warmup: int = 0
+    thinning: int = 1
+    progress_bar: bool = True
+    chunk_draws: int | None = None
+    on_nonfinite: str = "warn"
+    devices: object = None
+    output: object = None
+    resume: bool = False
+    adapt: bool | None = None
+    min_acceptance_rate: float = DEFAULT_MIN_ACCEPTANCE_RATE
+    observables: object = None
+    keep_positions: bool = True
+    callback: Callable | None = None
+    log_likelihood: Mapping | None = None
+
+
+@dataclass(frozen=True)
+class TreeSpec:
+    """How a run's draws are named and labelled in its ``DataTree`` (the ``var_name``,
+    ``event_dims``, ``coords`` and ``attrs`` of :func:`sample`; the defaults for
+    :func:`sample_chains`' file)."""
+
+    var_name: str | None = None
+    event_dims: object = None
+    coords: Mapping | None = None
+    attrs: Mapping | None = None
+
+    def named_for(self, sampler: Sampler, positions, keep_positions) -> TreeSpec:
+        """The sampler's declared name and dims for single-array positions, unless given."""
+        names = sampler.draw_names
+        if (
+            keep_positions
+            and self.var_name is None
+            and self.event_dims is None
+            and names is not None
+            and is_single_array(positions)
+            and np.ndim(positions) - 1 == len(names.event_dims)
+        ):
+            return dataclasses.replace(self, var_name=names.var_name, event_dims=names.event_dims)
+        return self
+
+    def build(
+        self, positions, info, observables, settings, *, thinning, attrs, log_likelihood=None
+    ):
+        """The ``DataTree`` of these draws: ``attrs`` (the run's) then the spec's own; a
+        ``log_likelihood`` group (ArviZ's, for ``loo`` and ``compare``) when it is given."""
+        from liesample.analysis.diagnostics import to_datatree
+
+        tree = to_datatree(
+            positions,
+            info,
+            var_name=self.var_name,
+            event_dims=self.event_dims,
+            coords=self.coords,
+            observables=observables,
+            thinning=thinning,
+            step_size=settings.get("step_size"),
+            attrs={**attrs, **(self.attrs or {})},
+        )
+        if log_likelihood is not None:
+            from arviz_base import from_dict
+
+            dims = {name: [f"{name}_dim_{k}" for k in range(np.ndim(v) - 2)]
+                    for name, v in log_likelihood.items()}  # fmt: skip
+            group = from_dict({"log_likelihood": log_likelihood}, dims=dims)["log_likelihood"]
+            group.attrs.update(tree["posterior"].attrs)
+            tree["log_likelihood"] = group
+        return tree
+
+    def example(self, positions, observable_shapes, log_likelihood_shapes=None):
+        """A tree of one draw per chain: the names, dims and coords checked on the starts."""
+        if positions is not None:
+            positions = jax.tree.map(lambda leaf: np.asarray(leaf)[:, None], positions)
+        observable_shapes, log_likelihood_shapes = jax.tree.map(
+            lambda leaf: np.zeros((leaf.shape[0], 1, *leaf.shape[1:]), leaf.dtype),
+            (observable_shapes, log_likelihood_shapes),
+        )
+        with warnings.catch_warnings():  # ArviZ remarks on a tree of one draw
+            warnings.simplefilter("ignore", UserWarning)
+            tree = self.build(positions, None, observable_shapes, {}, thinning=1, attrs={},
+                              log_likelihood=log_likelihood_shapes)  # fmt: skip
+        return tree, positions, observable_shapes, log_likelihood_shapes
+
+
+def _library_version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("liesample")
+    except PackageNotFoundError:  # run from a source tree that is not installed
+        return "unknown"
+
+
+def run_attrs(settings, *, on_nonfinite, wall_time, num_steps) -> dict:
+    """The attributes of a run's tree: ArviZ's ``sampling_time`` (seconds, compilation
+    excluded) and ``inference_library`` (and its version), the steps, the warm-up, the sampler's
+    settings. (NetCDF has no boolean attribute: ``adapted`` is stored as 0 or 1.)"""
+    return {
+        "sampling_time": wall_time,
+        "inference_library": "liesample",
+        "inference_library_version": _library_version(),
+        "num_steps": num_steps,
+        "num_warmup": settings.get("num_warmup"),
+        "on_nonfinite": on_nonfinite,
+        **{k: v for k, v in settings.items() if k not in ("num_warmup", "step_size")},
+    }
+
+
+def _observe(observables):
+    """The function ``position -> pytree`` recorded for ``observables`` (a callable, or a tuple
+    of ``(name, function)`` pairs: hashable, so that it can be a static argument)."""
+    if observables is None or callable(observables):
+        return observables
+    functions = dict(observables)
+    return lambda position: {name: f(position) for name, f in functions.items()}
+
+
+def scalar_info(sampler: Sampler, position) -> Sampler:
+    """``sampler`` whose ``info`` keeps only the fields that are one number per step (a scalar
+    array), in a named tuple: a plain BlackJAX algorithm's info may hold nested states and
+    per-coordinate arrays (NUTS: the trajectory's end states, the momentum), which are dropped
+    by this rule. A sampler whose info is already all scalars, or that steps through noise
+    blocks, is returned as it is."""
+    if sampler.noise_blocks is not None:
+        return sampler
+    state = jax.eval_shape(sampler.init, position)
+    _, info = jax.eval_shape(sampler.step, jax.random.key(0), state)
+    fields = info._asdict() if hasattr(info, "_asdict") else dict(vars(info))
+    kept = [name for name, v in fields.items() if getattr(v, "shape", None) == ()]
+    if hasattr(info, "_asdict") and len(kept) == len(fields):
+        return sampler
+    Info = collections.namedtuple(f"Scalar{type(info).__name__}", kept)
+
+    def step(rng_key, state):
+        state, info = sampler.step(rng_key, state)
+        return state, Info(*(getattr(info, name) for name in kept))
+
+    hooks = {name: getattr(sampler, name) for name in HOOKS}
+    return Sampler(sampler.init, step, **hooks)
+
+
+@functools.partial(jit, static_argnames=("sampler", "num_steps"))
+def _run_warmup(states, keys, first_step, *, sampler, num_steps):
+    """``num_steps`` steps of every chain from ``first_step``, discarded (the warm-up)."""
+    return jax.vmap(lambda s, k: run_steps(sampler, k, s, first_step, num_steps)[0])(states, keys)
+
+
+DRAWS = ("positions", "observables", "log_likelihood")
+"""What a chunk records besides ``info``."""
+
+
+def _recorder(observables, log_likelihood, keep_positions):
+    """What is recorded at each draw: ``None`` for the positions alone (the default loop), else
+    a function of the position giving a dict with ``"positions"`` (if kept),
+    ``"observables"`` and ``"log_likelihood"`` (if asked for)."""
+    observe, pointwise = _observe(observables), _observe(log_likelihood)
+    if observe is None and pointwise is None:
+        return None
+
+    def record(position):
+        recorded = {"positions": position} if keep_positions else {}
+        if observe is not None:
+            recorded["observables"] = observe(position)
+        if pointwise is not None:
+            recorded["log_likelihood"] = pointwise(position)
+        return recorded
+
+    return record
+
+
+@functools.partial(
+    jit,
+    static_argnames=(
+        "sampler", "count", "thinning", "observables", "log_likelihood", "keep_positions"
+    ),
+)  # fmt: skip
+def _run_chunk(
+    states, keys, first_step, *, sampler, count, thinning, observables, log_likelihood,
+    keep_positions,
+):  # fmt: skip
+    """``count`` draws of every chain, ``thinning`` steps apart, from ``first_step``: what
+    :func:`_recorder` records, and the per-draw info."""
+    record = _recorder(observables, log_likelihood, keep_positions)
+    return jax.vmap(
+        lambda s, k: run_draws(
+            sampler, k, s, first_step, count, thinning, reduce_over_thinning, record
+        )
+    )(states, keys)
+
+
+class _Run:
+    """One call of :func:`sample_chains`: its checked arguments, sampler, states and file."""
+
+    def __init__(self, algorithm, rng_key, initial_positions, num_draws, options, spec):
+        o = options
+        self.positions, self.num_chains = arguments.as_positions(initial_positions)
+        self.observe, self.observables_key = arguments.as_observables(
+            o.observables, o.keep_positions
+        )
+        self.observable_shapes = (
+            None
+            if self.observe is None
+            else arguments.observable_shapes(self.observe, self.positions)
+        )
+        self.log_likelihood_key = arguments.as_log_likelihood(o.log_likelihood)
+        self.log_likelihood_shapes = (
+            None
+            if self.log_likelihood_key is None
+            else arguments.observable_shapes(_observe(self.log_likelihood_key), self.positions)
+        )
+        arguments.check_run_arguments(
+            num_draws, o.num_warmup, o.thinning, o.on_nonfinite, o.chunk_draws, o.adapt
+        )
+        self.rng_key = prng_key(rng_key)
+        finite_float("min_acceptance_rate", o.min_acceptance_rate, nonnegative=True)
+        if not isinstance(o.resume, bool):
+            raise TypeError(f"resume must be a bool, got {o.resume!r}")
+        if o.resume and o.output is None:
+            raise ValueError("resume=True needs output= (the file the run was saved to)")
+        if o.callback is not None and not callable(o.callback):
+            raise TypeError(f"callback must be a function of draws_done, got {o.callback!r}")
+        arguments.check_finite_starts(self.positions, self.num_chains)
+        self.sharding = chain_sharding(o.devices, self.num_chains)
+        self.algorithm, self.num_draws, self.options = algorithm, int(num_draws), o
+        self.sampler = scalar_info(as_sampler(algorithm), arguments.take_chain(self.positions, 0))
+        self.spec, self.store = spec, None
+        # shown from the start: the phases before the first draw take most of a short run
+        self.bar = tqdm(
+            total=self.num_draws, disable=not o.progress_bar, unit="draw", dynamic_ncols=True
+        )
+        self.phase("checking the starts")
+
+    def phase(self, name):
+        """Name what the run is doing now on the progress bar."""
+        self.bar.set_description(f"{self.num_chains} chains: {name}", refresh=True)
+
+    def _open(self):
+        """Open the run file (refused here, before any compilation, if it cannot be ours), and
+        name the draws: as given, else as the saved run named them, else by default."""
+        o = self.options
+        if o.output is not None:
+            self.store = RunFile.open(o.output, o.resume)
+            self.spec = self.store.names(self.spec)
+        self.spec = self.spec.named_for(self.sampler, self.positions, o.keep_positions)
+        self.example = self.spec.example(
+            self.positions if o.keep_positions else None,
+            self.observable_shapes,
+            self.log_likelihood_shapes,
+        )
+        if self.store is not None:
+            self.fingerprint = self._fingerprint()
+            self.store.check(self.fingerprint)
+
+    def start(self):
+        """Open the file, check every start, choose or tune the step (the warm-up)."""
+        self._open()
+        o, sampler = self.options, self.sampler
+        adapting = arguments.wants_adaptation(
+            sampler, o.adapt, o.num_warmup, type(self.algorithm).__name__
+        )
+        # The step size left unset and not adapted: the sampler's own choice for these starts.
+        choosing = not adapting and sampler.tuning is not None and not sampler.tuning.given
+        # Concrete checks (shape, orbit, constraints, energy, step size) of every start.
+        arguments.check_starts(
+            sampler, self.positions, self.num_chains, step_size_checks=not (adapting or choosing)
+        )
+        if choosing:
+            sampler = choose_from_starts(sampler, self.positions)
+            arguments.check_starts(sampler, self.positions, self.num_chains)
+        states = jax.vmap(sampler.init)(self.positions)
+        chain_keys = jax.random.split(self.rng_key, self.num_chains)
+        states, self.chain_keys = shard_chains((states, chain_keys), self.sharding)
+        self.run_warmup = o.num_warmup > 0
+        if adapting:
+            self.phase("warm-up (adapting)")
+            # From the initial states and deterministic given rng_key: a resumed run re-derives
+            # the same parameters.
+            sampler, adapted = warm_up(
+                sampler, self.rng_key, self.chain_keys, states, self.positions, o.num_warmup
+            )
+            arguments.check_starts(sampler, self.positions, self.num_chains)
+            if adapted is not None:
+                self.run_warmup = False
+                states = adapted
+        self.sampler, self.states = sampler, states
+        self.settings = dict(sampler.settings, num_warmup=o.num_warmup, adapted=adapting)
+
+    def _fingerprint(self):
+        tree = self.example[0]
+        variables = {
+            f"{group}/{name}": list(tree[group][name].dims)
+            for group in tree.children
+            for name in tree[group].data_vars
+        }
+        return run_fingerprint(
+            self.algorithm,
+            dict(self.sampler.settings),
+            rng_key=self.rng_key,
+            initial_positions=self.positions,
+            num_warmup=self.options.num_warmup,
+            thinning=self.options.thinning,
+            keep_positions=self.options.keep_positions,
+            observe=self.observe,
+            log_likelihood=_observe(self.log_likelihood_key),
+            variables=variables,
+            names=[self.spec.var_name, self.spec.event_dims],
+        )
+
+    def resume(self):
+        """``(draws_done, saved draws)``: the saved run's, after checking what made it."""
+        if self.store is None:
+            return 0, None
+        first = jax.tree.map(lambda leaf: leaf[0], (self.states, self.chain_keys))
+        adapted = adapted_fingerprint(self.sampler, first[0], first[1])
+        self.fingerprint.update(adapted)
+        self.store.check(self.fingerprint, required=adapted)
+        if not self.store.exists:
+            return 0, None
+        _, positions, observables, log_likelihood = self.example
+        layout = Layout(positions, observables, log_likelihood, self.spec.var_name or "mu")
+        done, states, previous = self.store.resume(self.states, layout, self.num_draws)
+        if done:
+            self.states = shard_chains(states, self.sharding)
+            self.run_warmup = False
+        return done, previous
+
+    def compile(self, done):
+        """The executables of this run (the warm-up, one chunk length and the last partial
+        one), compiled before the timed loop; ``jax.jit``'s cache keeps them for a next run."""
+        o = self.options
+        self.phase("compiling")
+        self.chunk = o.chunk_draws or max(1, math.ceil(self.num_draws / 20))
+        args = (self.states, self.chain_keys, 0)
+        if self.run_warmup:
+            self.warmup = _run_warmup.lower(
+                *args, sampler=self.sampler, num_steps=o.num_warmup
+            ).compile()
+        remaining = self.num_draws - done
+        self.executables = {}
+        if remaining:
+            for count in {min(self.chunk, remaining), remaining % self.chunk or self.chunk}:
+                self.executables[count] = _run_chunk.lower(
+                    *args,
+                    sampler=self.sampler,
+                    count=count,
+                    thinning=o.thinning,
+                    observables=self.observables_key,
+                    log_likelihood=self.log_likelihood_key,
+                    keep_positions=o.keep_positions,
+                ).compile()
+
+    def _split(self, recorded, info):
+        """One chunk's draws: ``positions``, ``info``, ``observables``, ``log_likelihood``."""
+        if self.observables_key is None and self.log_likelihood_key is None:
+            recorded = {"positions": recorded}  # the default loop records the positions alone
+        return {name: recorded.get(name) for name in DRAWS} | {"info": info}
+
+    def loop(self, done, previous):
+        """Run the chunks from draw ``done``, saving each; the list of chunks (the saved run's
+        first: dicts as :meth:`_split` makes them) and the wall time."""
+        o = self.options
+        chunks = [] if previous is None else [previous]
+        start = time.perf_counter()
+        states, bar = self.states, self.bar
+        if self.run_warmup:
+            self.phase("warm-up")
+            states = jax.block_until_ready(self.warmup(states, self.chain_keys, 0))
+        self.phase("sampling")
+        if done:
+            bar.update(done)  # the draws already saved
+        wall_time = None  # until the last chunk: the file's attributes record the same
+        while done < self.num_draws:
+            count = min(self.chunk, self.num_draws - done)
+            first_step = o.num_warmup + done * o.thinning
+            states, recorded = self.executables[count](states, self.chain_keys, first_step)
+            chunks.append(self._split(*to_host(recorded)))
+            wall_time = time.perf_counter() - start
+            done += count
+            if self.store is not None:
+                self._save(done - count, done, chunks[-1], states, wall_time)
+            bar.update(count)
+            if o.callback is not None:
+                o.callback(done)
+        if wall_time is None:  # nothing ran (a finished run resumed): the warm-up's time
+            wall_time = time.perf_counter() - start
+        return chunks, wall_time
+
+    def _save(self, first, end, draws, states, wall_time):
+        """Write the draws ``first … end`` to the run file, with the tree's attributes then."""
+        o = self.options
+        attrs = run_attrs(
+            self.settings,
+            on_nonfinite=o.on_nonfinite,
+            wall_time=wall_time,
+            num_steps=o.num_warmup + end * o.thinning,
+        )
+        with warnings.catch_warnings():  # ArviZ remarks on a chunk with few draws
+            warnings.filterwarnings("ignore", "Found chain dimension", UserWarning)
+            tree = self.spec.build(
+                draws["positions"],
+                draws["info"],
+                draws["observables"],
+                self.settings,
+                thinning=o.thinning,
+                attrs=attrs,
+                log_likelihood=draws["log_likelihood"],
+            )
+        names = {
+            SAMPLE_STATS_NAMES.get(k, k): [k, np.asarray(v).dtype.str]
+            for k, v in draws["info"].items()
+        }
+        self.store.append(first, tree, names, to_host(states), self.fingerprint)
+
+    def finish(self, chunks, wall_time) -> ChainsResult:
+        """The result of the whole run, after the post-run checks."""
+        o = self.options
+
+        def joined(name):
+            pieces = [chunk[name] for chunk in chunks]
+            if pieces[0] is None:
+                return None
+            return jax.tree.map(lambda *parts: np.concatenate(parts, axis=1), *pieces)
+
+        result = ChainsResult(
+            joined("positions"),
+            joined("info"),
+            wall_time,
+            o.num_warmup + self.num_draws * o.thinning,
+            self.settings,
+            joined("observables"),
+            joined("log_likelihood"),
+        )
+        groups = self.sampler.law_groups
+        groups = None if groups is None else groups(self.positions)
+        check_run(
+            result.info,
+            _variables(result, self.spec.var_name or "mu"),
+            groups,
+            on_nonfinite=o.on_nonfinite,
+            min_acceptance_rate=o.min_acceptance_rate,
+            stacklevel=5,
+        )
+        return result
+
+
+def _variables(result: ChainsResult, var_name: str) -> dict[str, np.ndarray]:
+    """The recorded variables of ``result`` by their ``DataTree`` names (positions, then
+    observables; complex leaves as their real and imaginary parts)."""
+    from liesample.analysis.diagnostics import pytree_variables
+
+    variables = {}
+    for tree, single in ((result.positions, var_name), (result.observables, "observable")):
+        if tree is None:
+            continue
+        tree = {single: tree} if is_single_array(tree) else tree
+        variables.update({name: value for name, (value, _) in pytree_variables(tree).items()})
+    return variables
+
+
+def run_chains(algorithm, rng_key, initial_positions, num_draws, options, spec):
+    """:func:`liesample.run.runner.sample_chains` with its keywords as ``options``
+    (:class:`RunOptions`) and the names of the draws as ``spec`` (:class:`TreeSpec`);
+    ``(result, spec)``, the spec as the run named the draws (completed by the sampler's
+    declared names, or on a resume the saved run's)."""
+    run = _Run(algorithm, rng_key, initial_positions, num_draws, options, spec)
+    try:
+        run.start()
+        done, previous = run.resume()
+        run.compile(done)
+        chunks, wall_time = run.loop(done, previous)
+    finally:
+        run.bar.close()
+        if run.store is not None:
+            run.store.close()
+    return run.finish(chunks, wall_time), run.spec

@@ -1,0 +1,467 @@
+"""A run saved in one NetCDF-4 file that is an ArviZ ``DataTree``, grown chunk by chunk.
+
+The file holds the groups of the tree that :func:`liesample.sample` returns (``posterior``,
+``sample_stats``; same variables, dims, coords and attributes), with an unlimited ``draw``
+dimension, so ``xarray.open_datatree(path)`` or :func:`load_chains` reads it as ArviZ data. One
+more group, ``liesample_run``, holds what a resume needs and what proves the file whole:
+
+- ``fingerprint``: what made the run (:mod:`liesample.run.provenance`), checked on resume;
+- ``state_<slot>_<i>``: leaf ``i`` of the chains' states after the last saved chunk, in two
+  slots written in turn, so the state a resume needs is never the one being overwritten;
+- ``chunk_end``, ``chunk_sha256``: where each saved chunk ends and a SHA-256 of its stored
+  draws (every variable's slice and the ``draw`` coordinate);
+- ``info_names``: each ``sample_stats`` variable's ``info`` key and dtype;
+- ``commit``: ``draws_done``, the number of chunks, the state's slot and its SHA-256, written
+  last, in one attribute: a chunk interrupted while being written is not part of the run (its
+  draws past ``draws_done`` are ignored and overwritten by the resume).
+
+Each chunk opens and closes the file, so a run killed between chunks leaves a whole file, and
+one killed while writing leaves the last committed chunk and state intact. Resuming and
+:func:`load_chains` verify every checksum; an edited, truncated, empty or foreign file is
+refused with its path and what is wrong (:class:`RunFileError`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from liesample.run.lock import OutputLock
+from liesample.run.provenance import FORMAT, differences
+
+RUN_GROUP = "liesample_run"
+"""The group of a run file that holds its fingerprint, states and checksums."""
+
+
+class RunFileError(ValueError):
+    """A run file that cannot be read, resumed or trusted (the message names the path)."""
+
+
+def check_output_path(output, resume: bool) -> str:
+    """``output`` as a path, refused at once if its directory is missing, it is a directory, or
+    it exists and ``resume`` is False."""
+    path = os.fspath(output)
+    directory = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(directory):
+        raise FileNotFoundError(
+            f"output {path!r}: its directory {directory!r} does not exist; create it first"
+        )
+    if os.path.isdir(path):
+        raise IsADirectoryError(
+            f"output {path!r} is a directory; give a file in it, such as "
+            f"{os.path.join(path, 'run.nc')!r}"
+        )
+    if os.path.exists(path) and not resume:
+        raise FileExistsError(
+            f"output {path!r} exists; pass resume=True to continue the run saved there, or "
+            "choose another path"
+        )
+    return path
+
+
+@contextlib.contextmanager
+def _open(path, mode="r"):
+    """The file at ``path`` opened with h5netcdf; any error reading or writing it is raised
+    naming the path (:class:`RunFileError`, or ``OSError`` for a write)."""
+    import h5netcdf
+
+    try:
+        f = h5netcdf.File(path, mode)
+    except (OSError, ValueError) as error:
+        if mode != "r":
+            raise OSError(f"cannot write the run file {path!r}: {error}") from None
+        raise RunFileError(
+            f"{path!r} is not a readable NetCDF-4 (HDF5) file: it is empty, truncated or of "
+            f"another kind ({error})"
+        ) from None
+    try:
+        with f:
+            yield f
+    except RunFileError:
+        raise
+    except (OSError, KeyError, IndexError, TypeError, ValueError) as error:
+        if mode != "r":
+            raise OSError(f"cannot write the run file {path!r}: {error!r}") from None
+        raise RunFileError(f"{path!r} is incomplete or corrupt: {error!r}") from None
+
+
+def _run_group(f, path):
+    if RUN_GROUP not in f.groups:
+        if f.attrs.get("format") == "liesample-chains-1":
+            raise RunFileError(
+                f"{path!r} was written by an older liesample (format 'liesample-chains-1'): it "
+                "cannot be resumed or verified; read it with xarray.open_dataset"
+            )
+        raise RunFileError(
+            f"{path!r} was not written by liesample's sample_chains or sample (it has no "
+            f"{RUN_GROUP!r} group): read it with xarray.open_datatree"
+        )
+    group = f.groups[RUN_GROUP]
+    if group.attrs.get("format") != FORMAT:
+        raise RunFileError(
+            f"{path!r} has run format {group.attrs.get('format')!r}; this liesample reads "
+            f"{FORMAT!r}"
+        )
+    return group
+
+
+def _json_attr(group, name, path):
+    try:
+        return json.loads(group.attrs[name])
+    except (KeyError, TypeError, ValueError):
+        raise RunFileError(f"{path!r}: its {name!r} record is missing or unreadable") from None
+
+
+def _chunk_digest(arrays) -> bytes:
+    """SHA-256 of ``(name, array)`` pairs in the given order (name, dtype, shape and bytes)."""
+    digest = hashlib.sha256()
+    for name, array in arrays:
+        array = np.ascontiguousarray(array)
+        digest.update(f"{name}|{array.dtype.str}|{array.shape}|".encode())
+        digest.update(array.tobytes())
+    return digest.digest()
+
+
+def _tree_groups(f):
+    return sorted(name for name in f.groups if name != RUN_GROUP)
+
+
+def _stored_slices(f, first, end):
+    """Every draw variable's ``[:, first:end]`` slice and each group's ``draw`` coordinate, as
+    stored, in a fixed order."""
+    for group_name in _tree_groups(f):
+        group = f.groups[group_name]
+        yield f"{group_name}/draw", np.asarray(group.variables["draw"][first:end])
+        for name in sorted(group.variables):
+            variable = group.variables[name]
+            if variable.dimensions[:2] == ("chain", "draw"):
+                yield f"{group_name}/{name}", np.asarray(variable[:, first:end])
+
+
+def _state_arrays(group, slot):
+    names = sorted(
+        (n for n in group.variables if n.startswith(f"state_{slot}_")),
+        key=lambda n: int(n.rsplit("_", 1)[1]),
+    )
+    return [(name, np.asarray(group.variables[name][...])) for name in names]
+
+
+def verify(f, path) -> dict:
+    """The commit record of the run in ``f``, after checking the chunk table, every chunk's
+    checksum and the saved state's (:class:`RunFileError` naming what is wrong)."""
+    group = _run_group(f, path)
+    commit = _json_attr(group, "commit", path)
+    done, chunks = commit.get("draws_done"), commit.get("chunks")
+    if not all(isinstance(v, int) and v >= 0 for v in (done, chunks)):
+        raise RunFileError(f"{path!r}: draws_done {done!r} and chunks {chunks!r} are invalid")
+    ends = np.asarray(group.variables["chunk_end"][:chunks]).tolist()
+    sums = np.asarray(group.variables["chunk_sha256"][:chunks])
+    sizes = {f.groups[g].dimensions["draw"].size for g in _tree_groups(f)}
+    if len(ends) != chunks or any(b <= a for a, b in zip([0, *ends], ends, strict=False)):
+        raise RunFileError(f"{path!r}: its chunk table {ends} is not increasing")
+    if (ends[-1] if ends else 0) != done:
+        raise RunFileError(
+            f"{path!r}: draws_done = {done} disagrees with its saved chunks, which end at "
+            f"draw {ends[-1] if ends else 0}: the file was edited or is corrupt"
+        )
+    if min(sizes, default=0) < done:
+        raise RunFileError(f"{path!r}: it holds {min(sizes)} draws, draws_done = {done}")
+    for k, (first, end) in enumerate(zip([0, *ends], ends, strict=False)):
+        if _chunk_digest(_stored_slices(f, first, end)) != bytes(sums[k]):
+            raise RunFileError(
+                f"{path!r}: chunk {k} (draws {first} to {end - 1}) does not match its "
+                "checksum: the file was edited or is corrupt"
+            )
+    if done and _chunk_digest(_state_arrays(group, commit["state_slot"])).hex() != commit.get(
+        "state_sha256"
+    ):
+        raise RunFileError(
+            f"{path!r}: the saved chain states do not match their checksum: the file was "
+            "edited or is corrupt, and the run cannot be resumed"
+        )
+    return commit
+
+
+def load_chains(path):
+    """The run saved by ``sample_chains(..., output=path)`` or ``sample(..., output=path)``
+    (complete or interrupted) as an ArviZ ``DataTree``: the groups, variables and attributes of
+    the tree :func:`liesample.sample` returns, up to the last saved draw.
+
+    Every chunk's checksum and the saved state's are verified first: an edited, truncated,
+    empty or foreign file is refused with its path (:class:`RunFileError`)."""
+    import xarray as xr
+
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"no run file at {path!r}")
+    with _open(path) as f:
+        done = verify(f, path)["draws_done"]
+    with xr.open_datatree(path, engine="h5netcdf") as tree:
+        children = {
+            name: child.to_dataset().isel(draw=slice(0, done)).load()
+            for name, child in tree.children.items()
+            if name != RUN_GROUP
+        }
+        root = dict(tree.attrs)
+    loaded = xr.DataTree.from_dict(children)
+    loaded.attrs = root
+    return loaded
+
+
+def saved_num_warmup(path) -> int | None:
+    """The ``num_warmup`` recorded in the run file at ``path`` (``None`` if there is none)."""
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        return None
+    with _open(path) as f:
+        return int(_json_attr(_run_group(f, path), "fingerprint", path)["num_warmup"])
+
+
+def _to_stored(leaf):
+    leaf = np.asarray(leaf)
+    if leaf.dtype == bool:
+        return leaf.astype(np.int8)
+    return leaf
+
+
+def _state_leaves(states):
+    return [
+        np.asarray(jax.random.key_data(leaf))
+        if jnp.issubdtype(leaf.dtype, jax.dtypes.prng_key)
+        else np.asarray(leaf)
+        for leaf in jax.tree.leaves(states)
+    ]
+
+
+class RunFile:
+    """The run file of one ``sample_chains`` call: locked for its whole run (:meth:`open`),
+    checked against the run's fingerprint, read to resume, and grown chunk by chunk."""
+
+    def __init__(self, path: str, lock: OutputLock):
+        self.path = path
+        self.lock = lock
+        self.exists = os.path.exists(path)
+        self.chunks = 0
+        self.state_slot = 1  # the slot the next state goes to is the other one
+
+    @classmethod
+    def open(cls, output, resume: bool) -> RunFile:
+        """Check ``output`` (:func:`check_output_path`) and take its lock, before any work."""
+        path = check_output_path(output, resume=True)
+        lock = OutputLock(path).acquire()  # a writer at work is named before anything else
+        try:
+            check_output_path(path, resume)
+        except Exception:
+            lock.release()
+            raise
+        return cls(path, lock)
+
+    def close(self):
+        self.lock.release()
+
+    def names(self, spec):
+        """``spec`` (a :class:`liesample.run.runner.TreeSpec`) with the saved run's
+        ``var_name`` and ``event_dims`` where ``spec`` leaves them unset, so that a resume writes
+        the variables the file has (a given name that differs is refused by :meth:`check`)."""
+        import dataclasses
+
+        if not self.exists:
+            return spec
+        with _open(self.path) as f:
+            saved = _json_attr(_run_group(f, self.path), "fingerprint", self.path)
+        var_name, event_dims = json.loads(saved.get("names", "[null, null]"))
+        if isinstance(event_dims, list):
+            event_dims = tuple(event_dims)
+        elif isinstance(event_dims, dict):
+            event_dims = {leaf: tuple(dims) for leaf, dims in event_dims.items()}
+        return dataclasses.replace(
+            spec,
+            var_name=spec.var_name if spec.var_name is not None else var_name,
+            event_dims=spec.event_dims if spec.event_dims is not None else event_dims,
+        )
+
+    def check(self, fingerprint: dict, required=()):
+        """Refuse to resume unless the file's fingerprint records the fields of ``fingerprint``
+        as it does (each differing field is named with both values); a field the file lacks is
+        refused if it is ``required`` (:func:`liesample.run.provenance.differences`)."""
+        if not self.exists:
+            return
+        with _open(self.path) as f:
+            saved = _json_attr(_run_group(f, self.path), "fingerprint", self.path)
+        found = differences(saved, json.loads(json.dumps(fingerprint)), required)
+        if found:
+            raise RunFileError(
+                f"cannot resume from {self.path!r}: it was saved by another run: "
+                + "; ".join(found)
+                + ". Resume with the sampler, settings and arguments of the saved run, or write "
+                "to another output."
+            )
+
+    def resume(self, states, layout, num_draws):
+        """``(draws_done, states, draws)`` of the saved run, verified; ``draws`` is a dict with
+        ``positions``, ``info``, ``observables``, ``log_likelihood`` (``None`` for the last two
+        items when nothing is saved). ``states`` gives the state's
+        structure and dtypes; ``layout`` is the :class:`Layout` of the run's variables."""
+        with _open(self.path) as f:
+            commit = verify(f, self.path)
+            done = commit["draws_done"]
+            if done > num_draws:
+                raise RunFileError(
+                    f"cannot resume from {self.path!r} with num_draws={num_draws}: it already "
+                    f"holds {done} draws"
+                )
+            self.chunks, self.state_slot = commit["chunks"], commit["state_slot"]
+            if done == 0:
+                return 0, None, None
+            group = f.groups[RUN_GROUP]
+            names = _json_attr(group, "info_names", self.path)
+            stats = f.groups["sample_stats"].variables
+            info = {
+                key: np.asarray(stats[name][:, :done]).astype(dtype)
+                for name, (key, dtype) in names.items()
+            }
+            draws = layout.read(f, done) | {"info": info}
+            saved = _state_arrays(group, self.state_slot)
+        leaves, treedef = jax.tree.flatten(states)
+        restored = []
+        for leaf, (name, value) in zip(leaves, saved, strict=True):
+            if jnp.issubdtype(leaf.dtype, jax.dtypes.prng_key):
+                restored.append(jax.random.wrap_key_data(value, impl=jax.random.key_impl(leaf)))
+            else:
+                restored.append(jnp.asarray(value.astype(leaf.dtype)))
+            if restored[-1].shape != leaf.shape:
+                raise RunFileError(
+                    f"cannot resume from {self.path!r}: saved state {name} has shape "
+                    f"{restored[-1].shape}, the sampler's has {leaf.shape}"
+                )
+        return done, jax.tree.unflatten(treedef, restored), draws
+
+    def append(self, first, tree, info_names, states, fingerprint):
+        """Write the draws ``first …`` of ``tree`` (a ``DataTree`` of this chunk: the groups
+        and attributes of the run's tree), the ``states`` after them, their checksums, and then
+        the commit. The first call creates the file with the run's ``fingerprint``."""
+        states = _state_leaves(states)
+        if not self.exists:
+            self._create(tree, info_names, states, fingerprint)
+        count = tree["posterior"].sizes["draw"]
+        end = first + count
+        slot = 1 - self.state_slot
+        with _open(self.path, "a") as f:
+            for name, child in tree.children.items():
+                group = f.groups[name]
+                group.resize_dimension("draw", end)
+                group.variables["draw"][first:end] = np.arange(first, end)
+                for var, value in child.data_vars.items():
+                    group.variables[var][:, first:end] = _to_stored(value.values)
+                group.attrs.update(child.attrs)
+            f.attrs.update(tree.attrs)
+            run = f.groups[RUN_GROUP]
+            for i, leaf in enumerate(states):
+                run.variables[f"state_{slot}_{i}"][...] = leaf
+            run.resize_dimension("chunk", self.chunks + 1)
+            run.variables["chunk_end"][self.chunks] = end
+            run.variables["chunk_sha256"][self.chunks] = np.frombuffer(
+                _chunk_digest(_stored_slices(f, first, end)), np.uint8
+            )
+            state_sha = _chunk_digest(_state_arrays(run, slot)).hex()
+            commit = {"draws_done": end, "chunks": self.chunks + 1, "state_slot": slot}
+            run.attrs["commit"] = json.dumps({**commit, "state_sha256": state_sha})
+        self.chunks, self.state_slot = self.chunks + 1, slot
+
+    def _create(self, tree, info_names, states, fingerprint):
+        import h5py
+
+        with _open(self.path, "w") as f:
+            f.attrs.update(tree.attrs)
+            for name, child in tree.children.items():
+                group = f.create_group(name)
+                group.dimensions = {
+                    dim: None if dim == "draw" else size for dim, size in child.sizes.items()
+                }
+                group.create_variable("draw", ("draw",), np.int64)
+                for coord, value in child.coords.items():
+                    if coord == "draw":
+                        continue
+                    value = np.asarray(value.values)
+                    if value.dtype.kind in "UO":
+                        value = value.astype(object)
+                        dtype = h5py.string_dtype()
+                    else:
+                        dtype = value.dtype
+                    group.create_variable(coord, (coord,), dtype, data=value)
+                for var, value in child.data_vars.items():
+                    stored = _to_stored(value.values)
+                    variable = group.create_variable(var, value.dims, stored.dtype)
+                    if value.dtype == bool:
+                        variable.attrs["dtype"] = "bool"  # xarray reads it back as booleans
+            self._create_run_group(f, info_names, states, fingerprint)
+        self.exists = True
+
+    def _create_run_group(self, f, info_names, states, fingerprint):
+        run = f.create_group(RUN_GROUP)
+        run.dimensions = {"chunk": None, "sha256": 32}
+        run.create_variable("chunk_end", ("chunk",), np.int64)
+        run.create_variable("chunk_sha256", ("chunk", "sha256"), np.uint8)
+        for slot in (0, 1):
+            for i, leaf in enumerate(states):
+                dims = tuple(f"state_{i}_dim_{j}" for j in range(leaf.ndim))
+                for dim, size in zip(dims, leaf.shape, strict=True):
+                    if dim not in run.dimensions:
+                        run.dimensions[dim] = size
+                run.create_variable(f"state_{slot}_{i}", dims, leaf.dtype)
+        run.attrs["format"] = FORMAT
+        run.attrs["fingerprint"] = json.dumps(fingerprint)
+        run.attrs["info_names"] = json.dumps(info_names)
+        run.attrs["commit"] = json.dumps({"draws_done": 0, "chunks": 0, "state_slot": 1})
+
+
+class Layout:
+    """Where a run's recorded draws sit in the file: for each leaf of the positions and of the
+    observables (in ``jax.tree.leaves`` order) its ``posterior`` variable, or its ``.real`` and
+    ``.imag`` variables; each pointwise log-likelihood under its name in ``log_likelihood``."""
+
+    def __init__(self, positions, observables, log_likelihood, var_name):
+        from liesample.analysis.diagnostics import pytree_variables
+        from liesample.foundation.validation import is_single_array
+
+        def leaves_of(tree, single):
+            if tree is None:
+                return None
+            if is_single_array(tree):
+                return jax.tree.structure(tree), [[single]], [np.asarray(tree).dtype]
+            grouped = {}
+            for var, (_, leaf) in pytree_variables(tree).items():
+                grouped.setdefault(leaf, []).append(var)
+            dtypes = [np.asarray(leaf).dtype for leaf in jax.tree.leaves(tree)]
+            return jax.tree.structure(tree), list(grouped.values()), dtypes
+
+        self.trees = {
+            "positions": ("posterior", leaves_of(positions, var_name)),
+            "observables": ("posterior", leaves_of(observables, "observable")),
+            "log_likelihood": (
+                "log_likelihood",
+                None if log_likelihood is None else leaves_of(dict(log_likelihood), None),
+            ),
+        }
+
+    def read(self, f, done) -> dict:
+        """The first ``done`` draws of each recorded tree (``None`` where none is recorded)."""
+        read = {}
+        for name, (group, layout) in self.trees.items():
+            if layout is None:
+                read[name] = None
+                continue
+            variables, (treedef, names, dtypes) = f.groups[group].variables, layout
+            leaves = []
+            for parts, dtype in zip(names, dtypes, strict=True):
+                values = [np.asarray(variables[part][:, :done]) for part in parts]
+                leaf = values[0] if len(values) == 1 else values[0] + 1j * values[1]
+                leaves.append(leaf.astype(dtype))
+            read[name] = jax.tree.unflatten(treedef, leaves)
+        return read
