@@ -78,7 +78,7 @@ def zeitlin_rows(sizes, chains_list, num_steps: int):
                     2,
                     thinning=num_steps // 2,
                     chunk_draws=1,
-                    progress=False,
+                    progress_bar=False,
                 )
                 elapsed = time.perf_counter() - start
                 if repeat:

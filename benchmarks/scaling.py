@@ -69,7 +69,7 @@ def measure(chains_list, devices=None, repeats=2):
                 2,
                 thinning=steps // 2,
                 chunk_draws=1,
-                progress=False,
+                progress_bar=False,
                 devices=devices,
             )
             best = min(best, result.wall_time)

@@ -325,7 +325,7 @@ def exact_sampler(quick, log):
             np.asarray(starts),
             num_sweeps,
             num_warmup=500,
-            progress=False,
+            progress_bar=False,
         )
         sample_seconds = time.perf_counter() - start
         tuned = run.settings["step_size"]

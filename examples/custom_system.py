@@ -68,7 +68,7 @@ def run(num_chains=64, num_draws=400, thinning=10, step_size=0.05, seed=0, progr
         num_draws,
         num_warmup=200,
         thinning=thinning,
-        progress=progress,
+        progress_bar=progress,
     )
     mu = result.positions
     features = np.stack([mu[..., 0] ** 2, mu[..., 1] / RADIUS], axis=-1)  # m², cos φ

@@ -84,7 +84,7 @@ def main(
         "log_kappa": jnp.full((num_chains,), PRIOR_MEAN),
     }
     tree = liesample.sample(
-        sampler, sample_key, starts, num_draws, num_warmup=num_warmup, progress=progress
+        sampler, sample_key, starts, num_draws, num_warmup=num_warmup, progress_bar=progress
     )
 
     exact = posterior.expectations()

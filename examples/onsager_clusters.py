@@ -60,7 +60,7 @@ def sample_at(system, beta, num_chains, num_draws, seed):
         starts,
         num_draws,
         num_warmup=max(num_draws // 2, 100),
-        progress=False,
+        progress_bar=False,
     )
     return np.asarray(run.positions), run.settings["step_size"]
 

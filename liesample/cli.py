@@ -150,7 +150,7 @@ def demo(args) -> int:
         num_draws,
         num_warmup=num_warmup,
         thinning=thinning,
-        progress=not args.no_progress,
+        progress_bar=not args.no_progress,
         output=netcdf,  # written chunk by chunk; liesample.load_chains reads it
         coords={"component": list(system.component_names)},
         attrs={
@@ -197,7 +197,7 @@ def demo(args) -> int:
         iso_draws,
         num_warmup=0,
         exact_starts=True,  # uniform on the sphere: the isotropic body's exact law
-        progress=False,
+        progress_bar=False,
     )
     iso_mu = iso.posterior["mu"].values
     max_lag = min(iso_draws - 1, round(3.0 / (args.sigma**2 * args.step_size)))

@@ -300,7 +300,7 @@ def reference_draws(label, build, starts):
     """The stored arrays of one reference run: each position leaf (its pytree path appended to
     ``label``), and the ``energy`` the sampler reported, all as NumPy arrays."""
     run = liesample.sample_chains(
-        build(), jax.random.key(REFERENCE_SEED), starts(), REFERENCE_DRAWS, progress=False
+        build(), jax.random.key(REFERENCE_SEED), starts(), REFERENCE_DRAWS, progress_bar=False
     )
     leaves, _ = jax.tree_util.tree_flatten_with_path(run.positions)
     arrays = {

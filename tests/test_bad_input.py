@@ -387,7 +387,7 @@ ROWS = [
         "sample adapt unsupported",
         lambda: liesample.sample_chains(
             liesample.magnetic_langevin(_logdensity, 0.1, np.ones(2), 1.0, _FIELD),
-            KEY, np.zeros((2, 2)), 2, num_warmup=2, adapt=True, progress=False,
+            KEY, np.zeros((2, 2)), 2, num_warmup=2, adapt=True, progress_bar=False,
         ),
         ValueError,
         "no warm-up adaptation.*window_adaptation",
@@ -404,7 +404,7 @@ ROWS = [
         "sample start nan energy names the chain",
         lambda: liesample.sample_chains(
             liesample.lie_poisson_langevin(_LOG_SYSTEM, beta=1.0, step_size=0.01),
-            KEY, np.array([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]]), 2, progress=False,
+            KEY, np.array([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]]), 2, progress_bar=False,
         ),
         ValueError,
         r"initial_positions\[1\].*energy h = nan",
@@ -413,7 +413,7 @@ ROWS = [
         "sample magnetic start names the chain",
         lambda: liesample.sample_chains(
             liesample.magnetic_hmc(_log_logdensity, 0.1, np.ones(2), 3, _FIELD),
-            KEY, np.array([[1.0, 1.0], [-1.0, 1.0]]), 2, progress=False,
+            KEY, np.array([[1.0, 1.0], [-1.0, 1.0]]), 2, progress_bar=False,
         ),
         ValueError,
         r"initial_positions\[1\].*logdensity_fn",
@@ -421,7 +421,7 @@ ROWS = [
     (
         "sample beyond bound names the chain",
         lambda: liesample.sample_chains(
-            _langevin(beta=1e3, step_size=0.1), KEY, STARTS, 2, progress=False
+            _langevin(beta=1e3, step_size=0.1), KEY, STARTS, 2, progress_bar=False
         ),
         ValueError,
         r"initial_positions\[0\].*step_size must be <=",
@@ -466,7 +466,7 @@ ROWS = [
     ),
     (
         "sample() num_draws",
-        lambda: liesample.sample(ALGORITHM, KEY, STARTS, 0, progress=False),
+        lambda: liesample.sample(ALGORITHM, KEY, STARTS, 0, progress_bar=False),
         ValueError,
         "num_draws",
     ),

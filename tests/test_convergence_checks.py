@@ -30,7 +30,7 @@ def _sample(sampler, starts, num_draws, **options):
     with warnings.catch_warnings(record=True) as record:
         warnings.simplefilter("always")
         tree = liesample.sample(
-            sampler, jax.random.key(3), starts, num_draws, progress=False, **options
+            sampler, jax.random.key(3), starts, num_draws, progress_bar=False, **options
         )
     return tree, _convergence_messages(record)
 
@@ -134,6 +134,6 @@ def test_well_mixed_run_is_quiet():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         tree = liesample.sample(
-            sampler, jax.random.key(3), starts, 500, num_warmup=100, progress=False
+            sampler, jax.random.key(3), starts, 500, num_warmup=100, progress_bar=False
         )
     assert tree.posterior["mu"].shape == (4, 500, 2)

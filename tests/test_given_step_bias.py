@@ -60,7 +60,7 @@ def test_a_given_step_with_a_large_bias_warns_and_is_recorded():
     starts = np.stack([START, START[[2, 1, 0]], -START])
     with warnings.catch_warnings(record=True) as record:
         warnings.simplefilter("always")
-        tree = liesample.sample(sampler, jax.random.key(0), starts, 8, progress=False)
+        tree = liesample.sample(sampler, jax.random.key(0), starts, 8, progress_bar=False)
     assert any("linear_sd_bias" in str(w.message) for w in record)
     assert tree.attrs["step_size_source"] == "given"
     assert tree.attrs["linear_sd_bias"] == pytest.approx(linear_sd_bias("splitting", kappa))
@@ -94,7 +94,7 @@ def test_the_warned_step_is_measurably_biased_and_the_silent_one_is_not():
             warnings.simplefilter("ignore")
             result = liesample.sample_chains(
                 sampler, jax.random.key(1), starts, 2000, num_warmup=int(20 / dt),
-                thinning=max(1, int(0.5 / dt)), progress=False,
+                thinning=max(1, int(0.5 / dt)), progress_bar=False,
             )  # fmt: skip
         per_chain = (result.positions**2).mean(1) / exact  # (chains, 3), independent chains
         error = per_chain.mean(0) - 1.0

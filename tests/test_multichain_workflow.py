@@ -52,7 +52,7 @@ def test_window_adaptation_adapts_a_batch_of_starts_and_hands_them_on():
     sampler = liesample.geometric_hmc(logdensity, SPACE, **parameters)
     tree = liesample.sample(
         sampler, jax.random.key(2), state.position, 1000, num_warmup=0, exact_starts=True,
-        progress=False,
+        progress_bar=False,
     )  # fmt: skip
     check_exact(tree)
 
@@ -74,7 +74,7 @@ def test_adapt_on_one_chain_then_sample_fresh_chains_by_default():
     (_, parameters), _ = warmup.run(jax.random.key(1), one, 400)
     sampler = liesample.geometric_hmc(logdensity, SPACE, **parameters)
     tree = liesample.sample(sampler, jax.random.key(3), starts(4, seed=7), 1000,
-                            progress=False)  # fmt: skip
+                            progress_bar=False)  # fmt: skip
     assert tree.attrs["num_warmup"] == 1000
     check_exact(tree)
 
@@ -83,7 +83,7 @@ def test_no_warm_up_from_arbitrary_starts_warns():
     """``num_warmup=0`` keeps the starts in the draws: it warns unless the starts are exact."""
     sampler = liesample.geometric_hmc(logdensity, SPACE, 0.01, 3)
     with pytest.warns(UserWarning, match="num_warmup=0"):
-        liesample.sample(sampler, jax.random.key(3), starts(2), 5, num_warmup=0, progress=False)
+        liesample.sample(sampler, jax.random.key(3), starts(2), 5, num_warmup=0, progress_bar=False)
 
 
 def test_draw_names_come_from_the_space_and_are_checked_before_sampling():
@@ -92,7 +92,7 @@ def test_draw_names_come_from_the_space_and_are_checked_before_sampling():
     space = liesample.spaces.SO(3)
     sampler = liesample.geometric_hmc(lambda r: 3.0 * jnp.trace(r), space, 0.2, 3)
     rotations = jnp.stack([jnp.eye(3)] * 2)
-    tree = liesample.sample(sampler, jax.random.key(0), rotations, 4, progress=False)
+    tree = liesample.sample(sampler, jax.random.key(0), rotations, 4, progress_bar=False)
     assert tree.posterior["R"].dims == ("chain", "draw", "row", "col")
     calls = []
     counting = liesample.samplers.contract.Sampler(
@@ -100,5 +100,5 @@ def test_draw_names_come_from_the_space_and_are_checked_before_sampling():
     )
     with pytest.raises(ValueError, match="event_dims must name each event axis"):
         liesample.sample(counting, jax.random.key(0), rotations, 4, event_dims=("c",),
-                         progress=False)  # fmt: skip
+                         progress_bar=False)  # fmt: skip
     assert not calls

@@ -34,7 +34,7 @@ def test_adjusted_rigid_body_at_negative_beta_by_the_default_path(beta):
     system = systems.rigid_body(INERTIA)
     sampler = liesample.adjusted_lie_poisson(system, beta=beta)
     starts = target.sample(jax.random.key(1), 16)
-    tree = liesample.sample(sampler, jax.random.key(2), starts, 1000, progress=False)
+    tree = liesample.sample(sampler, jax.random.key(2), starts, 1000, progress_bar=False)
     step = tree.attrs["step_size"]
     assert np.isfinite(step) and step > 0
     z = _z(tree, tree.posterior["mu"].values ** 2, exact)
@@ -53,7 +53,7 @@ def test_unadjusted_rigid_body_at_negative_beta_by_the_default_path():
     second = np.asarray(target.second_moments())
     sampler = liesample.lie_poisson_langevin(systems.rigid_body(INERTIA), beta=beta)
     starts = target.sample(jax.random.key(3), 16)
-    tree = liesample.sample(sampler, jax.random.key(4), starts, 1000, progress=False)
+    tree = liesample.sample(sampler, jax.random.key(4), starts, 1000, progress_bar=False)
     assert tree.attrs["step_size_source"].startswith("warm-up bias model")
     mu = tree.posterior["mu"].values
     posterior = az.from_dict({"posterior": {"mu": mu}})
@@ -73,7 +73,7 @@ def test_heat_bath_spin_chain_at_negative_beta():
     starts = np.tile(system.default_position, (8, 1, 1))
     tree = liesample.sample(
         sampler, jax.random.key(5), starts, 400, event_dims=("site", "component"),
-        progress=False,
+        progress_bar=False,
     )  # fmt: skip
     energy = tree.sample_stats["energy"].values[..., None]
     z = _z(tree, energy, reference.energy_mean())
@@ -89,7 +89,7 @@ def test_zeitlin_n3_at_negative_beta_by_the_default_path():
     law = system.reference(beta, system.default_position)
     starts = law.orbit_samples(np.random.default_rng(0), 16)
     sampler = liesample.adjusted_lie_poisson(system, beta=beta)
-    tree = liesample.sample(sampler, jax.random.key(6), starts, 1500, progress=False)
+    tree = liesample.sample(sampler, jax.random.key(6), starts, 1500, progress_bar=False)
     assert np.isfinite(tree.attrs["step_size"])
     energy = tree.sample_stats["energy"].values
     exact, exact_error, _ = law.expectations(
@@ -124,7 +124,7 @@ def test_adjusted_zeitlin_at_beta_zero_keeps_a_bounded_step_and_the_uniform_law(
     law = system.reference(0.0, system.default_position)
     sampler = liesample.adjusted_lie_poisson(system, beta=0.0)
     starts = law.orbit_samples(np.random.default_rng(1), 8)
-    tree = liesample.sample(sampler, jax.random.key(7), starts, 300, progress=False)
+    tree = liesample.sample(sampler, jax.random.key(7), starts, 300, progress_bar=False)
     assert tree.attrs["step_size"] <= MAX_STEP_FACTOR * sampler.settings["step_size"] * (1 + 1e-12)
     energy = tree.sample_stats["energy"].values
     assert np.all(np.isfinite(energy))

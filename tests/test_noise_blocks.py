@@ -206,7 +206,7 @@ def test_the_runner_draws_the_blocked_chain_whatever_the_chunks():
     starts = jnp.stack([START, -START])
     key = jax.random.key(9)
     runs = [
-        sample_chains(algorithm, key, starts, 10, thinning=3, chunk_draws=c, progress=False)
+        sample_chains(algorithm, key, starts, 10, thinning=3, chunk_draws=c, progress_bar=False)
         for c in (None, 4)
     ]
     np.testing.assert_array_equal(runs[0].positions, runs[1].positions)

@@ -628,7 +628,7 @@ def test_vortex_metropolis_tunes_its_proposal_and_follows_the_contract():
         starts,
         50,
         num_warmup=200,
-        progress=False,
+        progress_bar=False,
     )
     settings = run.settings
     assert settings["step_size_source"].startswith("warm-up dual averaging")

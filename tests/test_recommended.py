@@ -38,7 +38,7 @@ def test_recommended_sampler_runs_by_the_default_path():
     target = system.reference(2.0, system.default_position)
     sampler = liesample.recommended_sampler(system, beta=2.0)
     tree = liesample.sample(sampler, jax.random.key(0), target.sample(jax.random.key(1), 4), 50,
-                            progress=False)  # fmt: skip
+                            progress_bar=False)  # fmt: skip
     assert np.isfinite(tree.attrs["step_size"])
     assert tree.attrs["step_size_source"].startswith("warm-up dual averaging")
 

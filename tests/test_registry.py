@@ -45,7 +45,7 @@ def sampler(case):
 @pytest.fixture(scope="module")
 def uninterrupted(case, sampler):
     return liesample.sample_chains(
-        sampler, KEY, case.starts(), NUM_DRAWS, chunk_draws=CHUNK_DRAWS, progress=False
+        sampler, KEY, case.starts(), NUM_DRAWS, chunk_draws=CHUNK_DRAWS, progress_bar=False
     )
 
 

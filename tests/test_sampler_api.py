@@ -238,7 +238,7 @@ def test_nonfinite_step_is_flagged_and_rejected():
 def test_runner_warns_on_nonfinite():
     positions = np.stack([MU0, 2.0 * MU0])
     with pytest.warns(RuntimeWarning, match="non-finite"):
-        result = sample_chains(unstable(), KEY, positions, 10, progress=False, on_nonfinite="warn")
+        result = sample_chains(unstable(), KEY, positions, 10, progress_bar=False, on_nonfinite="warn")
     assert result.info["is_divergent"].any()
     assert np.all(np.isfinite(result.positions))
 
@@ -246,7 +246,7 @@ def test_runner_warns_on_nonfinite():
 def test_runner_raises_on_nonfinite():
     positions = np.stack([MU0, 2.0 * MU0])
     with pytest.raises(NonFiniteStateError, match="non-finite"):
-        sample_chains(unstable(), KEY, positions, 10, progress=False, on_nonfinite="raise")
+        sample_chains(unstable(), KEY, positions, 10, progress_bar=False, on_nonfinite="raise")
 
 
 def test_runner_is_silent_on_a_stable_run():
@@ -254,6 +254,6 @@ def test_runner_is_silent_on_a_stable_run():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         result = sample_chains(
-            algorithm(), KEY, positions, 10, progress=False, on_nonfinite="raise"
+            algorithm(), KEY, positions, 10, progress_bar=False, on_nonfinite="raise"
         )
     assert not result.info["is_divergent"].any()

@@ -71,7 +71,7 @@ def test_second_moments_match_exact_law(beta):
         num_draws=3000,
         num_warmup=200,
         thinning=10,
-        progress=False,
+        progress_bar=False,
     )
     mu = result.positions
     exact = rigid_body(INERTIA).reference(beta, [RADIUS, 0, 0]).second_moments()

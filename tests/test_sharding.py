@@ -48,7 +48,7 @@ SCRIPT = textwrap.dedent(
     }
     if not FULL:  # the default suite: the rigid body over both devices, in device order
         del cases["heavy top"]
-    run = dict(num_warmup=3, thinning=2, chunk_draws=4, progress=False)
+    run = dict(num_warmup=3, thinning=2, chunk_draws=4, progress_bar=False)
     for label, (system, starts) in cases.items():
         algorithm = liesample.lie_poisson_langevin(system, beta=2.0, sigma=1.0, step_size=0.05)
         plain = liesample.sample_chains(algorithm, key, starts, 12, **run)
@@ -70,8 +70,8 @@ SCRIPT = textwrap.dedent(
     algorithm = liesample.lie_poisson_langevin(
         system, beta=2.0, step_size=0.05, integrator="lie_euler"
     )
-    tree = liesample.sample(algorithm, key, starts, 6, num_warmup=0, progress=False, devices=2)
-    short = liesample.sample_chains(algorithm, key, starts, 6, progress=False)
+    tree = liesample.sample(algorithm, key, starts, 6, num_warmup=0, progress_bar=False, devices=2)
+    short = liesample.sample_chains(algorithm, key, starts, 6, progress_bar=False)
     np.testing.assert_allclose(np.asarray(tree.posterior["mu"]), short.positions, atol=1e-13)
     # The chunk really is split: each device holds half of the chains' states.
     sharding = liesample.run.sharding.chain_sharding(2, 4)
@@ -140,6 +140,6 @@ def test_chains_must_divide_over_devices():
 
 def test_one_device_sharding_is_the_plain_run():
     key = jax.random.key(5)
-    plain = liesample.sample_chains(ALGORITHM, key, STARTS, 5, progress=False)
-    sharded = liesample.sample_chains(ALGORITHM, key, STARTS, 5, progress=False, devices=1)
+    plain = liesample.sample_chains(ALGORITHM, key, STARTS, 5, progress_bar=False)
+    sharded = liesample.sample_chains(ALGORITHM, key, STARTS, 5, progress_bar=False, devices=1)
     np.testing.assert_array_equal(sharded.positions, plain.positions)

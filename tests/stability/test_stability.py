@@ -151,7 +151,7 @@ def test_sampler_refuses_or_warns_beyond_the_bound():
     assert 0.999 * exact_bound <= named <= 1.03 * exact_bound
     # The runner passes the refusal on, naming the chain.
     with pytest.raises(ValueError, match=r"initial_positions\[0\].*stable bound"):
-        liesample.sample_chains(refusing, jax.random.key(0), position[None], 2, progress=False)
+        liesample.sample_chains(refusing, jax.random.key(0), position[None], 2, progress_bar=False)
     # Refusing is the default; warning is an explicit choice.
     with pytest.raises(ValueError, match="stable bound"):
         liesample.lie_poisson_langevin(system, beta=beta, step_size=0.01).init(position)
