@@ -29,7 +29,9 @@ class NonFiniteStateError(FloatingPointError):
     previous state and flagged ``info.is_divergent``)."""
 
 
-def check_run(info, variables, groups, *, on_nonfinite, min_acceptance_rate, stacklevel=2):
+def check_run(
+    info, variables, groups, *, on_nonfinite, min_acceptance_rate, convergence=True, stacklevel=2
+):
     """Every post-run check: :func:`report_divergences`, :func:`report_stuck_chains`,
     :func:`report_unconverged` (on ``info``, per-draw arrays ``(chains, draws)``) and
     :func:`check_variables` (on ``variables``, name -> ``(chains, draws, ...)``).
@@ -40,15 +42,17 @@ def check_run(info, variables, groups, *, on_nonfinite, min_acceptance_rate, sta
     report_divergences(info, on_nonfinite, level)
     report_stuck_chains(info, min_acceptance_rate, level)
     report_unconverged(info, groups, level)
-    check_variables(variables, groups, stacklevel=level)
+    check_variables(variables, groups, convergence=convergence, stacklevel=level)
 
 
-def check_variables(variables: dict[str, np.ndarray], groups, *, stacklevel=2) -> list[str]:
+def check_variables(
+    variables: dict[str, np.ndarray], groups, *, convergence=True, stacklevel=2
+) -> list[str]:
     """Check each recorded variable, ``name -> array (chains, draws, ...)`` (the positions and
     observables under their ``DataTree`` names), given the law ``groups`` (``None``: one law).
 
     Warns (``RuntimeWarning``) for each variable with non-finite draws, naming it and its
-    chains; then one ``UserWarning`` with the messages of
+    chains; then (``convergence=True``) one ``UserWarning`` with the messages of
     :func:`liesample.analysis.convergence.convergence_warnings` (rank-normalised split R-hat
     above 1.01, bulk or tail ESS below 100 per chain, on every element within each law group,
     or why the checks were impossible). Returns every message."""
@@ -65,6 +69,8 @@ def check_variables(variables: dict[str, np.ndarray], groups, *, stacklevel=2) -
             )
     for message in messages:
         warnings.warn(message, RuntimeWarning, stacklevel=stacklevel)
+    if not convergence:
+        return messages
     convergence = convergence_warnings(variables, groups)
     if convergence:
         warnings.warn(

@@ -477,8 +477,9 @@ class _Run:
         }
         self.store.append(first, tree, names, to_host(states), self.fingerprint)
 
-    def finish(self, chunks, wall_time) -> ChainsResult:
-        """The result of the whole run, after the post-run checks."""
+    def finish(self, chunks, wall_time, convergence) -> ChainsResult:
+        """The result of the whole run, after the post-run checks (with the convergence checks
+        of every variable if ``convergence``)."""
         o = self.options
 
         def joined(name):
@@ -504,6 +505,7 @@ class _Run:
             groups,
             on_nonfinite=o.on_nonfinite,
             min_acceptance_rate=o.min_acceptance_rate,
+            convergence=convergence,
             stacklevel=5,
         )
         return result
@@ -523,11 +525,13 @@ def _variables(result: ChainsResult, var_name: str) -> dict[str, np.ndarray]:
     return variables
 
 
-def run_chains(algorithm, rng_key, initial_positions, num_draws, options, spec):
+def run_chains(algorithm, rng_key, initial_positions, num_draws, options, spec, convergence):
     """:func:`liesample.run.runner.sample_chains` with its keywords as ``options``
     (:class:`RunOptions`) and the names of the draws as ``spec`` (:class:`TreeSpec`);
     ``(result, spec)``, the spec as the run named the draws (completed by the sampler's
-    declared names, or on a resume the saved run's)."""
+    declared names, or on a resume the saved run's). ``convergence``: run the convergence
+    checks of every variable after the run (:func:`liesample.sample` does; the low-level
+    :func:`liesample.sample_chains` leaves them to its caller)."""
     run = _Run(algorithm, rng_key, initial_positions, num_draws, options, spec)
     try:
         run.start()
@@ -538,4 +542,4 @@ def run_chains(algorithm, rng_key, initial_positions, num_draws, options, spec):
         run.bar.close()
         if run.store is not None:
             run.store.close()
-    return run.finish(chunks, wall_time), run.spec
+    return run.finish(chunks, wall_time, convergence), run.spec

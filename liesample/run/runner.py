@@ -138,7 +138,9 @@ def sample_chains(
         a ``RuntimeWarning`` naming the chains, or :class:`NonFiniteStateError`.
     min_acceptance_rate : float
         Chains whose mean ``acceptance_rate`` is below this are reported as stuck; 0 disables
-        the check. The other post-run checks: :mod:`liesample.run.checks`.
+        the check. The other post-run checks: :mod:`liesample.run.checks`; the convergence
+        checks of every variable run in :func:`sample` only (call
+        :func:`liesample.analysis.convergence.convergence_warnings` on this loop's draws).
     devices : None, "all", int, sequence of jax devices, or NamedSharding
         Split the chains over these devices (:func:`liesample.run.sharding.chain_sharding`); the
         number of chains must be a multiple of the number of devices. ``None``: one device.
@@ -180,7 +182,8 @@ def sample_chains(
     """
     options = {name: v for name, v in locals().items() if name in _OPTIONS}  # the keywords
     options = RunOptions(**options, progress_bar=_progress_bar(progress_bar, progress))
-    return run_chains(algorithm, rng_key, initial_positions, num_draws, options, TreeSpec())[0]
+    spec = TreeSpec()
+    return run_chains(algorithm, rng_key, initial_positions, num_draws, options, spec, False)[0]
 
 
 def sample(
@@ -247,7 +250,9 @@ def sample(
     """
     options = _sample_options(run_options, num_draws, num_warmup, exact_starts)
     spec = TreeSpec(var_name, event_dims, coords, attrs)
-    result, spec = run_chains(algorithm, rng_key, initial_positions, num_draws, options, spec)
+    result, spec = run_chains(
+        algorithm, rng_key, initial_positions, num_draws, options, spec, convergence=True
+    )
     attrs = run_attrs(
         result.settings,
         on_nonfinite=options.on_nonfinite,
