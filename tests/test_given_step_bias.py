@@ -49,6 +49,19 @@ def test_linear_model_of_each_scheme():
         assert abs(linear_sd_bias(name, kappa)) == pytest.approx(DEFAULT_RELATIVE_TOLERANCE)
 
 
+def test_a_flat_direction_has_no_bias():
+    """κ = 0 (the isotropic body, whose energy is a Casimir) or round-off small: no error, and
+    no division by 1 − R² = 0; the isotropic body with a given step samples silently."""
+    for name in ("splitting", "lie_euler"):
+        assert linear_sd_bias(name, 0.0) == 0.0
+        assert linear_sd_bias(name, 1e-12) == 0.0
+    isotropic = liesample.systems.rigid_body(inertia=(1.0, 1.0, 1.0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sampler = liesample.lie_poisson_langevin(isotropic, beta=3.0, sigma=1.0, step_size=0.05)
+        sampler.check_positions(np.array([START, -START]))
+
+
 def test_a_given_step_with_a_large_bias_warns_and_is_recorded():
     """κ = 1.86 by the exact stiffness (the sampler's estimate, from points of the orbit, may be
     a little lower): the linear model's sd error is over 50 %."""

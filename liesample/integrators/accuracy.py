@@ -829,14 +829,16 @@ def linear_sd_bias(integrator, stability_number) -> float | None:
 
     Returns ``sqrt(ratio) − 1`` (e.g. ``-0.1``: 10 % too small), ``None`` for an integrator
     without a declared linear step (``euler_heun``, user schemes) or ``κ`` outside
-    ``(0, stability limit)``.
+    ``[0, stability limit)``; ``0`` for ``κ < 1e-6`` (a flat direction: the isotropic body).
     """
     integrator = get_integrator(integrator)
     linear = _LINEAR_STEPS.get(integrator.name)
     limit = integrator.stability_limit
     kappa = float(stability_number)
-    if linear is None or limit is None or not 0.0 < kappa < limit:
+    if linear is None or limit is None or not 0.0 <= kappa < limit:
         return None
+    if kappa < 1e-6:  # |error| < κ/4 is below any tolerance, and 1 − R² would round to 0
+        return 0.0
     r, b = linear(kappa)
     return math.sqrt(2.0 * kappa * b * b / (1.0 - r * r)) - 1.0
 
