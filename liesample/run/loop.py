@@ -192,17 +192,25 @@ def scalar_info(sampler: Sampler, position) -> Sampler:
     state = jax.eval_shape(sampler.init, position)
     _, info = jax.eval_shape(sampler.step, jax.random.key(0), state)
     fields = info._asdict() if hasattr(info, "_asdict") else dict(vars(info))
-    kept = [name for name, v in fields.items() if getattr(v, "shape", None) == ()]
+    kept = tuple(name for name, v in fields.items() if getattr(v, "shape", None) == ())
     if hasattr(info, "_asdict") and len(kept) == len(fields):
         return sampler
-    Info = collections.namedtuple(f"Scalar{type(info).__name__}", kept)
-
-    def step(rng_key, state):
-        state, info = sampler.step(rng_key, state)
-        return state, Info(*(getattr(info, name) for name in kept))
-
     hooks = {name: getattr(sampler, name) for name in HOOKS}
-    return Sampler(sampler.init, step, **hooks)
+    return Sampler(sampler.init, _ScalarInfoStep(sampler.step, kept), **hooks)
+
+
+@dataclass(frozen=True)
+class _ScalarInfoStep:
+    """``step`` whose info keeps the fields ``kept`` (equal for equal steps and fields, so
+    that ``jax.jit``'s cache serves a second run of the same algorithm)."""
+
+    step: Callable
+    kept: tuple
+
+    def __call__(self, rng_key, state):
+        state, info = self.step(rng_key, state)
+        values = [getattr(info, name) for name in self.kept]
+        return state, collections.namedtuple("ScalarInfo", self.kept)(*values)
 
 
 @functools.partial(jit, static_argnames=("sampler", "num_steps"))

@@ -132,16 +132,25 @@ def _tree_groups(f):
     return sorted(name for name in f.groups if name != RUN_GROUP)
 
 
-def _stored_slices(f, first, end):
-    """Every draw variable's ``[:, first:end]`` slice and each group's ``draw`` coordinate, as
-    stored, in a fixed order."""
+def _stored_draws(f, done):
+    """Every group's ``draw`` coordinate and draw variables (dims ``(chain, draw, …)``) up to
+    draw ``done``, as stored, in the order the checksums take them (read once each)."""
+    stored = {}
     for group_name in _tree_groups(f):
         group = f.groups[group_name]
-        yield f"{group_name}/draw", np.asarray(group.variables["draw"][first:end])
+        stored[f"{group_name}/draw"] = np.asarray(group.variables["draw"][:done])
         for name in sorted(group.variables):
             variable = group.variables[name]
             if variable.dimensions[:2] == ("chain", "draw"):
-                yield f"{group_name}/{name}", np.asarray(variable[:, first:end])
+                stored[f"{group_name}/{name}"] = np.asarray(variable[:, :done])
+    return stored
+
+
+def _slices(stored, first, end):
+    """The chunk ``first … end`` of the arrays of :func:`_stored_draws` (or of one chunk's,
+    ``first=0``): what its checksum covers."""
+    for name, array in stored.items():
+        yield name, array[first:end] if name.endswith("/draw") else array[:, first:end]
 
 
 def _state_arrays(group, slot):
@@ -172,8 +181,9 @@ def verify(f, path) -> dict:
         )
     if min(sizes, default=0) < done:
         raise RunFileError(f"{path!r}: it holds {min(sizes)} draws, draws_done = {done}")
+    stored = _stored_draws(f, done)
     for k, (first, end) in enumerate(zip([0, *ends], ends, strict=False)):
-        if _chunk_digest(_stored_slices(f, first, end)) != bytes(sums[k]):
+        if _chunk_digest(_slices(stored, first, end)) != bytes(sums[k]):
             raise RunFileError(
                 f"{path!r}: chunk {k} (draws {first} to {end - 1}) does not match its "
                 "checksum: the file was edited or is corrupt"
@@ -237,6 +247,16 @@ def _state_leaves(states):
         else np.asarray(leaf)
         for leaf in jax.tree.leaves(states)
     ]
+
+
+CHUNK_ATTRS = ("sampling_time", "num_steps")
+"""The tree's attributes that change from chunk to chunk (the others are written once)."""
+
+
+def _update_attrs(stored, attrs):
+    for name in CHUNK_ATTRS:
+        if name in attrs:
+            stored[name] = attrs[name]
 
 
 class RunFile:
@@ -352,24 +372,31 @@ class RunFile:
         count = tree["posterior"].sizes["draw"]
         end = first + count
         slot = 1 - self.state_slot
+        chunk = {}  # what is written, as stored, in the order the checksum takes it
+        for name in sorted(tree.children):
+            chunk[f"{name}/draw"] = np.arange(first, end, dtype=np.int64)
+            for var in sorted(tree[name].data_vars):
+                chunk[f"{name}/{var}"] = np.ascontiguousarray(_to_stored(tree[name][var].values))
         with _open(self.path, "a") as f:
             for name, child in tree.children.items():
                 group = f.groups[name]
                 group.resize_dimension("draw", end)
-                group.variables["draw"][first:end] = np.arange(first, end)
-                for var, value in child.data_vars.items():
-                    group.variables[var][:, first:end] = _to_stored(value.values)
-                group.attrs.update(child.attrs)
-            f.attrs.update(tree.attrs)
+                group.variables["draw"][first:end] = chunk[f"{name}/draw"]
+                for var in child.data_vars:
+                    group.variables[var][:, first:end] = chunk[f"{name}/{var}"]
+                _update_attrs(group.attrs, child.attrs)
+            _update_attrs(f.attrs, tree.attrs)
             run = f.groups[RUN_GROUP]
             for i, leaf in enumerate(states):
                 run.variables[f"state_{slot}_{i}"][...] = leaf
             run.resize_dimension("chunk", self.chunks + 1)
             run.variables["chunk_end"][self.chunks] = end
             run.variables["chunk_sha256"][self.chunks] = np.frombuffer(
-                _chunk_digest(_stored_slices(f, first, end)), np.uint8
+                _chunk_digest(_slices(chunk, 0, count)), np.uint8
             )
-            state_sha = _chunk_digest(_state_arrays(run, slot)).hex()
+            state_sha = _chunk_digest(
+                [(f"state_{slot}_{i}", leaf) for i, leaf in enumerate(states)]
+            ).hex()
             commit = {"draws_done": end, "chunks": self.chunks + 1, "state_slot": slot}
             run.attrs["commit"] = json.dumps({**commit, "state_sha256": state_sha})
         self.chunks, self.state_slot = self.chunks + 1, slot
@@ -381,6 +408,7 @@ class RunFile:
             f.attrs.update(tree.attrs)
             for name, child in tree.children.items():
                 group = f.create_group(name)
+                group.attrs.update(child.attrs)
                 group.dimensions = {
                     dim: None if dim == "draw" else size for dim, size in child.sizes.items()
                 }
