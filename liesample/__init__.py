@@ -9,6 +9,8 @@ The layers, bottom up, are the sub-packages ``foundation``, ``geometry`` and ``t
 """
 
 import sys
+from importlib.metadata import PackageNotFoundError
+from importlib.metadata import version as _distribution_version
 
 from liesample import analysis, dynamics, geometry, integrators, systems, targets
 from liesample.analysis import diagnostics
@@ -48,7 +50,13 @@ for _name, _module in {
     sys.modules[f"{__name__}.{_name}"] = _module
 del _name, _module
 
+try:
+    __version__ = _distribution_version("liesample")
+except PackageNotFoundError:  # imported from a source tree that was never installed
+    __version__ = "0+unknown"
+
 __all__ = [
+    "__version__",
     "PoissonLangevin",
     "Scene",
     "accuracy",
