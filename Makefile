@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 JOBS ?= 2
 
-.PHONY: demo test test-slow test-oldest bench clean check-python
+.PHONY: demo test test-slow test-oldest bench docs clean check-python
 
 check-python:
 	@test -n "$(PYTHON)" || { echo "error: Python >= 3.12 not found (tried: $(PY_CANDIDATES))"; exit 1; }
@@ -57,5 +57,15 @@ $(BIN)/.installed-bench: $(BIN)/.installed
 bench: $(BIN)/.installed-bench
 	$(BIN)/python benchmarks/run.py
 
+# The guides in docs/ and the API reference from the docstrings, rendered into site/ by MkDocs
+# with mkdocstrings; --strict: a warning (a broken link, a docstring the parser cannot read)
+# fails the build.
+$(BIN)/.installed-docs: $(BIN)/.installed
+	$(INSTALL) -e '.[docs]'
+	touch $@
+
+docs: $(BIN)/.installed-docs
+	$(BIN)/python -m mkdocs build --strict
+
 clean:
-	rm -rf $(VENV) $(VENV_OLDEST) liesample-demo-output .pytest_cache
+	rm -rf $(VENV) $(VENV_OLDEST) liesample-demo-output .pytest_cache site

@@ -918,6 +918,8 @@ def specific_heat(energy, beta, num_sites, *, block_size=None) -> JackknifeResul
     block_size : int, optional
         As for :func:`jackknife`.
 
+    Notes
+    -----
     The energy is shifted by its overall mean first (the variance is unchanged, the
     cancellation in ``⟨E²⟩ − ⟨E⟩²`` is avoided).
     """
