@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 JOBS ?= 2
 
-.PHONY: demo test test-slow test-oldest bench clean check-python
+.PHONY: demo test test-slow test-oldest bench docs clean check-python
 
 check-python:
 	@test -n "$(PYTHON)" || { echo "error: Python >= 3.12 not found (tried: $(PY_CANDIDATES))"; exit 1; }
@@ -36,15 +36,18 @@ test: $(BIN)/.installed-test
 test-slow: $(BIN)/.installed-test
 	$(BIN)/python -m pytest -n $(JOBS) --dist worksteal -q -m slow
 
-# The oldest supported jax, in its own venv: `make test-oldest` runs the default suite on it.
-OLDEST_JAX := 0.11.2
+# Every declared floor at once, in its own venv: uv resolves each direct dependency of
+# pyproject.toml (jax, jaxlib, numpy, scipy, blackjax, arviz, xarray, h5netcdf, matplotlib,
+# tqdm, and the test extras with NumPyro) to the lowest version it allows, and
+# `make test-oldest` runs the default suite on that set.
 VENV_OLDEST := .venv-oldest
 
 $(VENV_OLDEST)/bin/.installed-test: pyproject.toml | check-python
+	rm -rf $(VENV_OLDEST)  # afresh: a kept newer version would hide a floor
 	$(PYTHON) -m venv $(VENV_OLDEST)
 	$(VENV_OLDEST)/bin/pip install -q --disable-pip-version-check uv
-	$(VENV_OLDEST)/bin/uv pip install -q --python $(VENV_OLDEST)/bin/python -e '.[test]' \
-		'jax==$(OLDEST_JAX)' 'jaxlib==$(OLDEST_JAX)'
+	$(VENV_OLDEST)/bin/uv pip install -q --python $(VENV_OLDEST)/bin/python \
+		--resolution lowest-direct -e '.[test]'
 	touch $@
 
 test-oldest: $(VENV_OLDEST)/bin/.installed-test
@@ -57,5 +60,15 @@ $(BIN)/.installed-bench: $(BIN)/.installed
 bench: $(BIN)/.installed-bench
 	$(BIN)/python benchmarks/run.py
 
+# The guides in docs/ and the API reference from the docstrings, rendered into site/ by MkDocs
+# with mkdocstrings; --strict: a warning (a broken link, a docstring the parser cannot read)
+# fails the build.
+$(BIN)/.installed-docs: $(BIN)/.installed
+	$(INSTALL) -e '.[docs]'
+	touch $@
+
+docs: $(BIN)/.installed-docs
+	$(BIN)/python -m mkdocs build --strict
+
 clean:
-	rm -rf $(VENV) $(VENV_OLDEST) liesample-demo-output .pytest_cache
+	rm -rf $(VENV) $(VENV_OLDEST) liesample-demo-output .pytest_cache site

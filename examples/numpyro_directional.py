@@ -82,7 +82,8 @@ def main(
     mcmc.print_summary()
 
     tree = arviz.from_numpyro(mcmc, log_likelihood=True)
-    print(arviz_stats.summary(tree, var_names=["mu", "kappa", "log_kappa"]))
+    # every column, whatever the terminal's width (pandas elides columns of a wide table)
+    print(arviz_stats.summary(tree, var_names=["mu", "kappa", "log_kappa"]).to_string())
 
     exact = VonMisesFisherPosterior(data, prior_mean=PRIOR_MEAN, prior_sd=PRIOR_SD).expectations()
     samples = mcmc.get_samples()

@@ -155,3 +155,69 @@ def test_concrete_parameters_are_still_checked():
         Bingham(np.array([0.0, np.inf, 1.0]))
     with pytest.raises(ValueError, match="orientation must be a rotation matrix"):
         Bingham(LAM, 2.0 * np.eye(3))
+
+
+# --- validate_args and infer_shapes (NumPyro's conventions) ---------------------------------------
+
+LAWS = {
+    "vmf": lambda **kw: VonMisesFisher(jnp.array([0.0, 0.0, 1.0]), 2.0, **kw),
+    "vmf_s4": lambda **kw: VonMisesFisher(jnp.eye(5)[0], 1.5, **kw),
+    "bingham": lambda **kw: Bingham(LAM, ORIENTATION, **kw),
+    "matrix_fisher": lambda **kw: MatrixFisher(jnp.diag(jnp.array([2.0, 1.0, -0.5])), **kw),
+}
+OFF_SUPPORT = {
+    "vmf": jnp.ones(3),
+    "vmf_s4": jnp.ones(5),
+    "bingham": jnp.ones(3),
+    "matrix_fisher": 2.0 * jnp.eye(3),
+}
+
+
+@pytest.mark.parametrize("name", LAWS)
+def test_validate_args_warns_off_the_support_as_projected_normal_does(name, recwarn):
+    value = OFF_SUPPORT[name]
+    formula = LAWS[name](validate_args=False).log_prob(value)
+    assert not [w for w in recwarn if "Out-of-support" in str(w.message)]
+    with pytest.warns(UserWarning, match="Out-of-support values"):
+        checked = LAWS[name](validate_args=True).log_prob(value)
+    assert checked == formula  # a warning, not a changed density (round-off must not be -inf)
+    with pytest.warns(UserWarning, match="Out-of-support values"):  # NumPyro's own, the same
+        dist.ProjectedNormal(jnp.ones(3), validate_args=True).log_prob(jnp.ones(3))
+
+
+@pytest.mark.parametrize("name", LAWS)
+def test_validate_args_accepts_the_laws_own_draws(name, recwarn):
+    law = LAWS[name](validate_args=True)
+    draws = law.sample(jax.random.key(3), (5,))
+    assert np.all(np.isfinite(law.log_prob(draws)))
+    assert not [w for w in recwarn if "Out-of-support" in str(w.message)]
+
+
+@pytest.mark.parametrize("name", LAWS)
+def test_validate_args_refuses_a_value_of_the_wrong_event_shape(name):
+    law = LAWS[name](validate_args=True)
+    with pytest.raises(ValueError, match=r"value must have the event shape"):
+        law.log_prob(jnp.ones(4))
+
+
+@pytest.mark.parametrize(
+    "cls, shapes",
+    [
+        (VonMisesFisher, {"mean_direction": (4,), "concentration": ()}),
+        (VonMisesFisher, {"mean_direction": (2, 1, 3), "concentration": (5,)}),
+        (Bingham, {"concentration": (3,)}),
+        (Bingham, {"concentration": (2, 3), "orientation": (4, 1, 3, 3)}),
+        (MatrixFisher, {"F": (3, 3)}),
+        (MatrixFisher, {"F": (6, 2, 3, 3)}),
+    ],
+)
+def test_infer_shapes_agrees_with_the_constructed_law(cls, shapes):
+    arguments = {
+        "mean_direction": lambda shape: jnp.broadcast_to(jnp.eye(shape[-1])[0], shape),
+        "concentration": lambda shape: jnp.ones(shape),
+        "orientation": lambda shape: jnp.broadcast_to(jnp.eye(3), shape),
+        "F": lambda shape: jnp.ones(shape),
+    }
+    law = cls(**{name: arguments[name](shape) for name, shape in shapes.items()})
+    assert cls.infer_shapes(**shapes) == (law.batch_shape, law.event_shape)
+    assert cls.infer_shapes(*shapes.values()) == (law.batch_shape, law.event_shape)

@@ -14,18 +14,18 @@ import dataclasses
 import math
 import warnings
 from collections.abc import Mapping, Sequence
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
-import arviz_stats as azs
 import jax
 import numpy as np
-import pandas as pd
 import scipy.fft
-import xarray as xr
-from arviz_base import from_dict
 
 from liesample.foundation.validation import is_single_array
 from liesample.samplers.contract import SAMPLE_STATS_NAMES
+
+if TYPE_CHECKING:  # ArviZ, xarray and pandas load when a function needs them (import liesample
+    import pandas as pd  # stays as cheap as importing jax and blackjax)
+    import xarray as xr
 
 __all__ = [
     "BlockingResult",
@@ -365,6 +365,8 @@ def to_datatree(
     if sample_stats:
         data["sample_stats"] = sample_stats
         group_attrs["sample_stats"] = run_attrs
+    from arviz_base import from_dict
+
     return from_dict(
         data,
         dims=dims,
@@ -415,6 +417,9 @@ def expectation_table(
         if not (math.isfinite(seconds) and seconds > 0):
             raise ValueError(f"wall_time must be a finite number of seconds > 0, got {wall_time!r}")
         wall_time = seconds
+
+    import arviz_stats as azs
+    import pandas as pd
 
     rows = {}
     for name, values in draws.items():
@@ -478,6 +483,8 @@ def format_table(df: pd.DataFrame) -> str:
     str
         The table, one line per row, with a header and an underline.
     """
+    import pandas as pd
+
     if not isinstance(df, pd.DataFrame):
         raise TypeError(f"df must be a pandas DataFrame, got {type(df).__name__}")
     index_name = str(df.index.name or "")
@@ -911,6 +918,8 @@ def specific_heat(energy, beta, num_sites, *, block_size=None) -> JackknifeResul
     block_size : int, optional
         As for :func:`jackknife`.
 
+    Notes
+    -----
     The energy is shifted by its overall mean first (the variance is unchanged, the
     cancellation in ``⟨E²⟩ − ⟨E⟩²`` is avoided).
     """

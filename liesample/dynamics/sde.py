@@ -35,6 +35,8 @@ class PoissonLangevinSDE:
         Which effects exist (any object with boolean ``hamiltonian``, ``dissipation`` and
         ``noise``); a disabled one is never traced.
 
+    Notes
+    -----
     The Lie–Poisson case ``structure = LiePoissonStructure(algebra)`` reproduces
     :class:`liesample.dynamics.PoissonLangevin`: :meth:`covector` is its ``generator``.
     """

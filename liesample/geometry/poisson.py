@@ -150,6 +150,8 @@ class CanonicalStructure(PoissonStructure):
         for every ``q``, closed as a 2-form: use :func:`magnetic_structure`), or ``None`` for
         the canonical structure.
 
+    Notes
+    -----
     ``X_f = (∇_p f, −∇_q f + G(q) ∇_p f)``; for ``h = |p|²/2m + V(q)`` this is
     ``q̇ = p/m``, ``ṗ = −∇V + G p/m``.
     """

@@ -11,6 +11,11 @@ Every parameter may be traced: a latent concentration, a parameter computed insi
 a ``jit`` or ``vmap`` over the parameters. Normalisers are pure JAX (no host callback) and
 differentiable in the parameters. Values are checked (with an error that names the parameter)
 only when they are concrete; traced values are not checked, as with NumPyro's ``validate_args``.
+With ``validate_args=True`` (or NumPyro's validation enabled), ``log_prob`` checks its value as
+NumPyro's ``ProjectedNormal`` does: the wrong event shape raises ``ValueError``; a concrete value
+off the support (not a unit vector, not a rotation) warns "Out-of-support values", and the
+density is still the formula's (a sampler's state carries round-off off the manifold).
+``infer_shapes`` gives ``(batch_shape, event_shape)`` from the parameters' shapes.
 
 - ``VonMisesFisher(mean_direction, concentration)`` on ``S^{d−1}`` (``κ = 0``: uniform): density
   ``C_d(κ) exp(κ μ·x)`` with respect to the surface measure, ``C_d(κ) = κ^{d/2−1} /
@@ -83,6 +88,21 @@ def _check_finite(name, value):
     if concrete is not None and not np.all(np.isfinite(concrete)):
         raise ValueError(f"{name} must be finite, got {concrete}")
     return concrete
+
+
+def _check_value(distribution, value):
+    """Under ``validate_args``, NumPyro's checks of a ``log_prob`` value as ``ProjectedNormal``
+    makes them: ``ValueError`` when ``value`` does not end in the event shape, a warning when a
+    concrete value is off the support. The density itself is left as the formula: a sampler's
+    state carries round-off off the sphere or the group, which must not turn into ``−inf``."""
+    if distribution._validate_args:
+        event_shape = tuple(jnp.shape(value)[jnp.ndim(value) - len(distribution.event_shape):])
+        if event_shape != distribution.event_shape:
+            raise ValueError(
+                f"value must have the event shape {distribution.event_shape} of "
+                f"{type(distribution).__name__}, got shape {jnp.shape(value)}"
+            )
+        distribution._validate_sample(value)
 
 
 # --------------------------------------------------------------------------- vMF
@@ -188,7 +208,13 @@ class VonMisesFisher(Distribution):
         """``log C_d(κ)`` (surface measure); at ``κ = 0`` the uniform law's ``−log |S^{d−1}|``."""
         return _log_vmf_normalizer(self.concentration, self.d)
 
+    @classmethod
+    def infer_shapes(cls, mean_direction=(), concentration=()):
+        batch_shape = jax.lax.broadcast_shapes(tuple(mean_direction)[:-1], tuple(concentration))
+        return batch_shape, tuple(mean_direction)[-1:]
+
     def log_prob(self, value):
+        _check_value(self, value)
         return self.log_normalizer() + self.concentration * jnp.sum(self.mean_direction * value, -1)
 
     @property
@@ -275,7 +301,13 @@ class Bingham(Distribution):
         """``log Z(λ)``, ``Z = ∫_{S²} exp(−Σ λ_i x_i²) dA`` (exact quadrature)."""
         return jnp.vectorize(orbits.bingham_log_normalizer, signature="(3)->()")(self.concentration)
 
+    @classmethod
+    def infer_shapes(cls, concentration=(3,), orientation=None):
+        frame = () if orientation is None else tuple(orientation)[:-2]
+        return jax.lax.broadcast_shapes(tuple(concentration)[:-1], frame), (3,)
+
     def log_prob(self, value):
+        _check_value(self, value)
         y = jnp.einsum("...j,...ji->...i", value, self.orientation)  # y_i = v_i·x
         return -jnp.sum(self.concentration * y * y, -1) - self.log_normalizer()
 
@@ -413,7 +445,12 @@ class MatrixFisher(Distribution):
         """``log c(F) = log ∫_{SO(3)} exp(tr(FᵀR)) dR`` (Haar probability; 0 at ``F = 0``)."""
         return jnp.vectorize(_matrix_fisher_log_normalizer, signature="(3,3)->()")(self.F)
 
+    @classmethod
+    def infer_shapes(cls, F=(3, 3)):
+        return tuple(F)[:-2], (3, 3)
+
     def log_prob(self, value):
+        _check_value(self, value)
         return jnp.sum(self.F * value, axis=(-2, -1)) - self.log_normalizer()
 
     @property

@@ -40,6 +40,8 @@ def lie_poisson_system(
         Any other :class:`LiePoissonSystem` field (``reference``, ``component_names``,
         ``noise_groups``, ``positive_casimirs``, …).
 
+    Notes
+    -----
     Everything else (the dissipation, Casimir checks, every integrator and sampler) comes from
     the engine; a planar pendulum on ``se(2)*`` is built this way from ``se2``.
     """
