@@ -171,7 +171,9 @@ def sample_chains(
         ``False`` stores only the observables (and info), not the positions (``positions`` is
         then ``None``): a run's memory is then that of the observables.
 
-    Example: the magnetisation and energy of a spin lattice at every draw, no states kept::
+    Examples
+    --------
+    The magnetisation and energy of a spin lattice at every draw, no states kept::
 
         result = sample_chains(
             liesample.heisenberg_heat_bath(system, beta=1.0), key, starts, 1000,
@@ -240,12 +242,16 @@ def sample(
         ``log_likelihood`` (the tree's ``log_likelihood`` group, for ``az.loo``). With
         ``output=``, the file holds this tree as it grows (:func:`load_chains`).
 
+    Notes
+    -----
     ``observables=`` adds its values to ``posterior`` (a dict's keys name them, a single
     array is ``observable``; dims ``<name>_dim_k``), so that ``az.summary``, ESS and R-hat act
     on them; with ``keep_positions=False`` the posterior holds only the observables. ESS and
     R-hat are those of the ambient coordinates (vector components, matrix entries).
 
-    Example: ``sample(liesample.adjusted_lie_poisson(system, beta=1.0), key, starts, 1000)``
+    Examples
+    --------
+    ``sample(liesample.adjusted_lie_poisson(system, beta=1.0), key, starts, 1000)``
     tunes the step size by dual averaging in a warm-up of 1000 steps, then samples.
     """
     options = _sample_options(run_options, num_draws, num_warmup, exact_starts)
