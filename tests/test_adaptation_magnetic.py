@@ -16,12 +16,8 @@ import liesample
 from liesample.samplers.cotangent._euclidean import default_magnetic_field
 from liesample.samplers.cotangent.magnetic_hmc import jittered_magnetic_hmc
 from liesample.targets import correlated_gaussian
-from liesample.tuning.adaptation import (
-    MagneticAdaptationInfo,
-    _chees_gradient,
-    _van_der_corput,
-    magnetic_window_adaptation,
-)
+from liesample.tuning.adaptation import MagneticAdaptationInfo, magnetic_window_adaptation
+from liesample.tuning.trajectory import _chees_gradient, _van_der_corput
 
 CHAINS = 4
 MEAN = np.array([1.0, -2.0, 0.5])

@@ -60,6 +60,16 @@ from liesample.samplers.contract import first_bad_chain
 from liesample.samplers.cotangent._core import check_starts
 from liesample.samplers.cotangent._euclidean import default_magnetic_field
 from liesample.samplers.cotangent.magnetic_hmc import magnetic_hmc
+from liesample.tuning.trajectory import (
+    CHEES_LEARNING_RATE,
+    DEFAULT_INTEGRATION_TIME,
+    MAX_NUM_INTEGRATION_STEPS,
+    ChainMove,
+    averaged_steps,
+    halton,
+    jittered_steps,
+    trajectory_adaptation,
+)
 
 __all__ = [
     "DEFAULT_ANGLE",
@@ -70,8 +80,6 @@ __all__ = [
     "window_schedule",
 ]
 
-DEFAULT_INTEGRATION_TIME = 0.5 * math.pi
-MAX_NUM_INTEGRATION_STEPS = 1024
 
 
 class GeometricAdaptation(NamedTuple):
@@ -417,17 +425,6 @@ DEFAULT_ANGLE = 0.0
 A field helps on some targets (strongly correlated or curved ones) and slows the slowest
 directions of others, so it is opt-in; ``angle > 0`` turns it on, adapted jointly."""
 CHEES_TARGET_ACCEPTANCE_RATE = magnetic_hmc.adaptation["target_acceptance_rate"]
-CHEES_LEARNING_RATE = 0.01
-CHEES_AVERAGING = 0.95  # running means of the ChEES estimates
-CHEES_MAX_TIME_PER_SD = math.pi
-"""Upper bound of the learnt ``T`` in units of ``√(tr Σ̃)``, ``Σ̃`` the target's covariance
-whitened by the current mass (estimated from the chains' spread): half a period of a Gaussian's
-slowest direction is at most ``π √(tr Σ̃)``, beyond which it turns back."""
-CHEES_MAX_PULL = 0.1
-"""The most (in ``log T``) the bound of :func:`_bound_log_time` lowers ``T`` per transition:
-a bound that dips for a few transitions (dual averaging trying a tiny ``ε``, chains that
-started together) cannot drag ``T`` far down, from where the gradient raises it by
-``2 · learning_rate`` at most."""
 
 
 class MagneticAdaptationInfo(NamedTuple):
@@ -442,18 +439,6 @@ class MagneticAdaptationInfo(NamedTuple):
     strength: jax.Array
 
 
-def _van_der_corput(num: int) -> np.ndarray:
-    """The base-2 Halton sequence ``1/2, 1/4, 3/4, 1/8, …`` (``num`` points in ``(0, 1)``)."""
-    index = np.arange(1, num + 1)
-    out = np.zeros(num)
-    scale = 0.5
-    while np.any(index):
-        out += scale * (index & 1)
-        index >>= 1
-        scale *= 0.5
-    return out
-
-
 def _rotation(dimension: int) -> np.ndarray:
     """``J̃`` of :func:`default_magnetic_field`: its field for unit mass and unit strength."""
     return np.asarray(default_magnetic_field(np.ones(dimension), 1.0))
@@ -464,76 +449,6 @@ def _field(rotation, inverse_mass, strength):
     ``G = strength · M^{1/2} J̃ M^{1/2}``, i.e. ``G_ij = strength · J̃_ij / √(m⁻¹_i m⁻¹_j)``."""
     scale = jax.lax.rsqrt(inverse_mass)
     return strength * rotation * scale[:, None] * scale[None, :]
-
-
-def _chees_terms(before, after, momentum, accepted, acceptance, inverse_mass, time):
-    """Estimates of ``ChEES`` and of ``∂ ChEES / ∂ log T`` from a batch of chains.
-
-    ``ChEES = ¼ E[(‖x' − E x‖² − ‖x − E x‖²)²]`` (Hoffman, Radul & Sountsov 2021) in the
-    coordinates whitened by the mass (``x = M^{1/2} q``), the centre estimated by the mean
-    over chains. Its derivative along a trajectory of length ``t = u T`` is
-    ``Δ · (x' − x̄')·ẋ' · t`` with ``Δ`` the change of squared distance, and
-    ``(x' − x̄')·ẋ' = (q' − q̄')·p'`` (the mass cancels, and the field does not enter:
-    ``q̇ = M⁻¹p`` with or without it). The paper weights each chain's proposal by its
-    acceptance probability; here the chain's accepted move stands in for it (a rejected move
-    contributes 0, the same in expectation), normalised by the summed probabilities.
-    Returns ``(chees, gradient, spread)``, ``spread`` the chains' mean of ``‖x' − x̄'‖²`` and
-    of its square.
-    """
-    centred_before = before - jnp.mean(before, 0)
-    centred_after = after - jnp.mean(after, 0)
-    change = jnp.sum(centred_after**2 / inverse_mass, -1) - jnp.sum(
-        centred_before**2 / inverse_mass, -1
-    )
-    rate = jnp.sum(centred_after * momentum, -1)
-    total = jnp.sum(acceptance)
-    norm = jnp.where(total > 0, 1.0 / jnp.maximum(total, 1e-30), 0.0)
-    chees = norm * jnp.sum(jnp.where(accepted, 0.25 * change**2, 0.0))
-    gradient = norm * jnp.sum(jnp.where(accepted, time * change * rate, 0.0))
-    distance = jnp.sum(centred_after**2 / inverse_mass, -1)
-    spread = jnp.stack([jnp.mean(distance), jnp.mean(distance**2)])
-    return chees, gradient, spread
-
-
-def _chees_gradient(*args):
-    """``∂ ChEES / ∂ log T`` of :func:`_chees_terms`."""
-    return _chees_terms(*args)[1]
-
-
-def _log_efficiency_gradient(means, cost_slope):
-    """``∂/∂ log T`` of ``log[(1 − ρ)/((1 + ρ) E L)]`` from running means ``(Ĉ, ĝ, E s, E s²)``.
-
-    ``ρ`` is the one-transition autocorrelation of the squared distance ``s = ‖x − x̄‖²``, so
-    ``(1 − ρ)/(1 + ρ)`` is its effective sample size per transition and dividing by the mean
-    number of leapfrog steps, ``E L ≈ T/(2ε) + ½``, makes it per gradient evaluation
-    (``cost_slope = ∂ log E L / ∂ log T = T/(T + ε)``). ChEES is ``(1 − ρ)`` times its value for
-    independent draws, ``½ Var s``, so with ``r = Ĉ / (½ Var s)``, ``1 − ρ = r/2`` and the
-    gradient is ``(ĝ/Ĉ) · 4/(4 − r) − cost_slope``.
-    For one Gaussian direction of frequency ``ω`` its maximum is at ``T ≈ 1.8/ω`` (ChEES
-    alone first peaks at ``2.25/ω``, ChEES per unit length at ``π/(2ω)``).
-    """
-    chees, gradient, mean, square = means[0], means[1], means[2], means[3]
-    independent = 0.5 * (square - mean**2)
-    r = jnp.clip(chees / jnp.maximum(independent, 1e-300), 0.0, 3.0)
-    ratio = gradient / jnp.maximum(chees, 1e-300)
-    return jnp.where((chees > 0) & (independent > 0), ratio * 4.0 / (4.0 - r) - cost_slope, 0.0)
-
-
-def _bound_log_time(log_time, step_size, max_steps, means, index, num_chains):
-    """``log T`` pulled down towards ``log min(L_max ε, π √(tr Σ̃))`` when above it, by
-    :data:`CHEES_MAX_PULL` at most per transition.
-
-    ``tr Σ̃`` is the running mean of the chains' squared distance to their centre (``means[2]``
-    of :func:`_log_efficiency_gradient`), corrected for the running mean's start at 0 and for
-    the centre's estimate (``C/(C − 1)``): above ``π √(tr Σ̃)`` the slowest direction of a
-    Gaussian turns back (:data:`CHEES_MAX_TIME_PER_SD`).
-    """
-    weight = 1.0 - CHEES_AVERAGING ** (index + 1.0)
-    trace = means[2] / weight * num_chains / (num_chains - 1.0)
-    upper = jnp.log(max_steps * step_size)
-    spread = jnp.log(CHEES_MAX_TIME_PER_SD * jnp.sqrt(trace))
-    upper = jnp.where(jnp.isfinite(spread) & (trace > 0), jnp.minimum(upper, spread), upper)
-    return log_time - jnp.clip(log_time - upper, 0.0, CHEES_MAX_PULL)
 
 
 def _harmonic_mean(rates):
@@ -679,7 +594,12 @@ def magnetic_window_adaptation(
         raise ValueError(f"max_num_integration_steps must be an integer >= 1, got {max_steps!r}")
     max_steps = int(max_steps)
     divergence_threshold = finite_float("divergence_threshold", divergence_threshold, positive=True)
-    learn = integration_time is None
+    lengths = trajectory_adaptation(
+        initial_time if integration_time is None else integration_time,
+        learning_rate,
+        max_steps,
+        learn=integration_time is None,
+    )
     da_init, da_update, da_final = dual_averaging_adaptation(target)
 
     def run(rng_key, initial_positions, num_steps: int = 1000):
@@ -694,26 +614,19 @@ def magnetic_window_adaptation(
         rotation = jnp.asarray(_rotation(dimension), dtype)
         zero_field = np.zeros((dimension, dimension))
         stages, ends = window_schedule(num_steps)
-        slow = np.flatnonzero(stages == 1)
-        last_window = np.flatnonzero(ends[: slow[-1]])  # ends before the last slow window's
-        average_from = int(last_window[-1]) + 1 if slow.size and last_window.size else 0
-        if not slow.size:
-            average_from = num_steps // 2
-        jitter = _van_der_corput(num_steps)
-        time0 = integration_time if integration_time is not None else initial_time
         # The field is off until the first mass update (the end of the first slow window):
         # see :func:`_field_from`.
         field_on = np.arange(num_steps) > _field_from(ends)
 
         def one_step(carry, xs):
-            states, da_state, log_time, means, inverse_mass, welford = carry
-            key, u, stage, window_end, index, on = xs
+            states, da_state, length, inverse_mass, welford = carry
+            key, index, stage, window_end, average, on = xs
             step_size = jnp.exp(da_state.log_step_size)
             strength = jnp.where(on, angle / step_size, 0.0)
             # angle 0: a concrete zero field, so the sampler takes the free drift (no expm)
             field = zero_field if angle == 0.0 else _field(rotation, inverse_mass, strength)
-            trajectory = jnp.exp(log_time)
-            steps = jnp.clip(jnp.ceil(u * trajectory / step_size), 1, max_steps).astype(int)
+            trajectory = jnp.exp(length.log_time)
+            steps = jittered_steps(halton(index), trajectory, step_size, max_steps)
 
             # The top-level API: the flows e^{±εGM⁻¹} are computed once per step for all chains.
             sampler = algorithm(
@@ -729,31 +642,15 @@ def magnetic_window_adaptation(
             da_state = da_update(da_state, _harmonic_mean(info.acceptance_rate))
             before = jax.vmap(_ravel)(states.position)
             after = jax.vmap(_ravel)(new_states.position)
-            if learn:
-                chees, gradient, spread = _chees_terms(
-                    before,
-                    after,
-                    new_states.momentum,
-                    info.is_accepted,
-                    info.acceptance_rate,
-                    inverse_mass,
-                    steps * step_size,  # the time integrated (not u T: L >= 1 and ceil)
-                )
-                # Running means of the estimates, then their ratios (not the mean of ratios:
-                # one batch's ChEES can be near 0).
-                terms = jnp.concatenate([jnp.stack([chees, gradient]), spread])
-                ok = jnp.all(jnp.isfinite(terms))
-                means = jnp.where(
-                    ok, CHEES_AVERAGING * means + (1.0 - CHEES_AVERAGING) * terms, means
-                )
-                gradient = _log_efficiency_gradient(means, trajectory / (trajectory + step_size))
-                # The gradient is dimensionless (≈ +1 for too short, ≥ −1 for too long a
-                # trajectory), so plain stochastic ascent on log T with a fixed step.
-                update = learning_rate * jnp.clip(gradient, -2.0, 2.0)
-                # At T <= ε a transition is one step whatever T is: no lower T to move to.
-                update = jnp.where(trajectory <= step_size, jnp.maximum(update, 0.0), update)
-                log_time = jnp.where(jnp.isfinite(update), log_time + update, log_time)
-                log_time = _bound_log_time(log_time, step_size, max_steps, means, index, num_chains)
+            move = ChainMove(
+                before,
+                after,
+                new_states.momentum,
+                info.is_accepted,
+                info.acceptance_rate,
+                inverse_mass,
+            )
+            length = lengths.update(length, move, step_size, steps, average)
             in_slow = (stage == 1) & adapt_mass
             welford = jax.tree.map(
                 lambda a, b: jnp.where(in_slow, a, b), _welford_batch(welford, after), welford
@@ -771,23 +668,22 @@ def magnetic_window_adaptation(
             record = MagneticAdaptationInfo(
                 new_states, info, step_size, steps, trajectory, strength
             )
-            return (new_states, da_state, log_time, means, inverse_mass, welford), record
+            return (new_states, da_state, length, inverse_mass, welford), record
 
         welford = (jnp.zeros(dimension, dtype), jnp.zeros(dimension, dtype), jnp.asarray(0))
         carry = (
             states,
             da_init(jnp.asarray(initial_step_size, dtype)),
-            jnp.log(jnp.asarray(time0, dtype)),
-            jnp.zeros(4, dtype),
+            lengths.init(dimension, dtype),
             jnp.ones(dimension, dtype),
             welford,
         )
         xs = (
             jax.random.split(rng_key, num_steps),
-            jnp.asarray(jitter, dtype),
+            jnp.arange(num_steps),
             jnp.asarray(stages),
             jnp.asarray(ends),
-            jnp.arange(num_steps),
+            jnp.asarray(averaged_steps(stages, ends)),
             jnp.asarray(field_on),
         )
 
@@ -795,10 +691,9 @@ def magnetic_window_adaptation(
         def warmup(carry, xs):
             return jax.lax.scan(one_step, carry, xs)
 
-        (states, da_state, _, _, inverse_mass, _), info = warmup(carry, xs)
+        (states, da_state, length, inverse_mass, _), info = warmup(carry, xs)
         step_size = float(da_final(da_state))
-        times = np.asarray(info.trajectory_length)
-        trajectory = float(np.exp(np.mean(np.log(times[average_from:]))))
+        trajectory = float(lengths.final(length))
         inverse_mass = np.asarray(inverse_mass)
         if not (np.isfinite(step_size) and np.all(np.isfinite(inverse_mass))):
             raise FloatingPointError(
