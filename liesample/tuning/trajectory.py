@@ -18,7 +18,8 @@ draws (:func:`_log_efficiency_gradient`, from running means of the estimates of
 :func:`_chees_terms`). ChEES needs the target's centre: the mean over chains when several
 chains move together, else a running mean of the one chain's positions. The derivative is
 taken at the time integrated, ``L ε``, not at ``u T``; at ``T <= ε`` ``T`` is not lowered (a
-transition is one step whatever ``T`` is). After each update ``T`` is pulled down towards
+transition is one step whatever ``T`` is). When the mass changes, ``T`` is rescaled to the new
+whitened units (:func:`_rescale`). After each update ``T`` is pulled down towards
 ``min(L_max ε, π √(tr Σ̃))`` when above it (:func:`_bound_log_time`). The tuned ``T`` is
 ``exp`` of the mean of ``log T`` over the transitions updated with ``average=True`` (the last
 slow window and the final fast window of Stan's schedule).
@@ -34,6 +35,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from liesample.geometry import spaces
+
 __all__ = [
     "CHEES_LEARNING_RATE",
     "DEFAULT_INTEGRATION_TIME",
@@ -41,6 +44,8 @@ __all__ = [
     "TrajectoryAdaptation",
     "TrajectoryState",
     "averaged_steps",
+    "chain_move",
+    "euclidean_size",
     "halton",
     "jittered_steps",
     "trajectory_adaptation",
@@ -156,6 +161,22 @@ def _log_efficiency_gradient(means, cost_slope):
     return jnp.where((chees > 0) & (independent > 0), ratio * 4.0 / (4.0 - r) - cost_slope, 0.0)
 
 
+def _rescale(state: TrajectoryState, inverse_mass) -> TrajectoryState:
+    """``T`` carried across a change of the mass: a Gaussian direction's frequency goes as
+    ``√(M⁻¹)``, so ``T`` (and the averaged ``log T``) is divided by the geometric mean of
+    ``√(M⁻¹_new / M⁻¹_old)``, and the running means, in the old whitened units, restart."""
+    previous = state.inverse_mass
+    ratio = jnp.where(previous > 0, inverse_mass / jnp.where(previous > 0, previous, 1.0), 1.0)
+    changed = jnp.any(ratio != 1.0)
+    shift = jnp.where(changed, -0.5 * jnp.mean(jnp.log(ratio)), 0.0)
+    return state._replace(
+        log_time=state.log_time + shift,
+        log_sum=state.log_sum + shift * state.num_averaged,
+        means=jnp.where(changed, 0.0, state.means),
+        since=jnp.where(changed, 0, state.since),
+    )
+
+
 def _bound_log_time(log_time, step_size, max_steps, means, index, correction):
     """``log T`` pulled down towards ``log min(L_max ε, π √(tr Σ̃))`` when above it, by
     :data:`CHEES_MAX_PULL` at most per transition.
@@ -175,25 +196,29 @@ def _bound_log_time(log_time, step_size, max_steps, means, index, correction):
 
 
 class TrajectoryState(NamedTuple):
-    """The rule's carry: ``log T``, running means of the ChEES estimates, a single chain's
-    running centre (unused with several chains), the updates made, and the sum and count of
-    ``log T`` over the averaged updates."""
+    """The rule's carry: ``log T``; running means of the ChEES estimates and the updates since
+    they restarted; a single chain's running centre (unused with several chains) and the
+    updates made; the sum and count of ``log T`` over the averaged transitions; the diagonal
+    inverse mass of the last update (0 before the first)."""
 
     log_time: jax.Array
     means: jax.Array
+    since: jax.Array
     centre: jax.Array
     count: jax.Array
     log_sum: jax.Array
     num_averaged: jax.Array
+    inverse_mass: jax.Array
 
 
 class TrajectoryAdaptation(NamedTuple):
     """``init(dimension, dtype)``, ``update(state, move, step_size, steps, average)``,
-    ``final(state) -> T`` (:func:`trajectory_adaptation`)."""
+    ``final(state) -> T`` (:func:`trajectory_adaptation`); ``learn``: whether ``T`` moves."""
 
     init: Callable
     update: Callable
     final: Callable
+    learn: bool
 
 
 class ChainMove(NamedTuple):
@@ -210,6 +235,64 @@ class ChainMove(NamedTuple):
     inverse_mass: jax.Array
 
 
+def euclidean_size(space) -> int:
+    """The coordinates the rule reads on ``space``: those of its ``Euclidean`` blocks (spheres
+    and groups are compact, and a circle's angle has no centre)."""
+    return sum(math.prod(s.shape) for s in spaces._spaces(space) if _is_euclidean(s))
+
+
+def _is_euclidean(s) -> bool:
+    return isinstance(s, spaces.Euclidean)
+
+
+def chain_move(space, before, after, info, inverse_mass, batched: bool) -> ChainMove:
+    """One transition of geometric HMC on ``space`` as the rule reads it: the ``Euclidean``
+    blocks' positions (states ``before`` and ``after``, a leading chain axis when ``batched``,
+    else a batch of one), in the norm of the diagonal ``D`` of ``M⁻¹``, with ``D⁻¹ M⁻¹ p`` as the
+    momentum (so ``(q − c)·D⁻¹q̇`` is the rate of the squared distance; ``p`` itself for a
+    diagonal mass)."""
+    flat = lambda x: x.reshape((x.shape[0], -1)) if batched else x.reshape((1, -1))
+    parts = {"before": [], "after": [], "momentum": [], "scale": []}
+    blocks = zip(
+        spaces._spaces(space),
+        jax.tree.leaves(before.position),
+        jax.tree.leaves(after.position),
+        jax.tree.leaves(after.momentum),
+        _mass_leaves(space, inverse_mass),
+        strict=True,
+    )
+    for s, q0, q1, p, m in blocks:
+        if not _is_euclidean(s):
+            continue
+        p = flat(p)
+        if jnp.ndim(m) == 2:
+            diagonal = jnp.diagonal(m)
+            p = (p @ m.T) / diagonal
+        else:
+            diagonal = jnp.broadcast_to(jnp.ravel(m), p.shape[-1:])
+        parts["before"].append(flat(q0))
+        parts["after"].append(flat(q1))
+        parts["momentum"].append(p)
+        parts["scale"].append(diagonal)
+    size = euclidean_size(space)
+    width = jax.tree.leaves(before.position)[0].shape[0] if batched else 1
+    empty = {"scale": jnp.zeros(0)}
+    out = {
+        n: jnp.concatenate(v, -1) if v else empty.get(n, jnp.zeros((width, size)))
+        for n, v in parts.items()
+    }
+    accepted, rate = info.is_accepted, info.acceptance_rate
+    if not batched:
+        accepted, rate = jnp.asarray(accepted)[None], jnp.asarray(rate)[None]
+    return ChainMove(out["before"], out["after"], out["momentum"], accepted, rate, out["scale"])
+
+
+def _mass_leaves(space, inverse_mass):
+    """``inverse_mass``'s block per space leaf (a dense block is one leaf, an array)."""
+    structure = jax.tree.structure(space, is_leaf=spaces.is_space)
+    return structure.flatten_up_to(inverse_mass)
+
+
 def trajectory_adaptation(
     initial_time: float = DEFAULT_INTEGRATION_TIME,
     learning_rate: float = CHEES_LEARNING_RATE,
@@ -224,25 +307,28 @@ def trajectory_adaptation(
         return TrajectoryState(
             jnp.log(jnp.asarray(initial_time, dtype)),
             jnp.zeros(4, dtype),
+            jnp.asarray(0),
             jnp.zeros(dimension, dtype),
             jnp.asarray(0),
             zero,
             zero,
+            jnp.zeros(dimension, dtype),
         )
 
     def update(state: TrajectoryState, move: ChainMove, step_size, steps, average):
-        log_time, means, centre, count = state.log_time, state.means, state.centre, state.count
         if learn and move.before.shape[-1] > 0:
-            log_time, means, centre = _learn(state, move, step_size, steps)
-        log_sum = state.log_sum + jnp.where(average, state.log_time, 0.0)
-        num_averaged = state.num_averaged + jnp.where(average, 1.0, 0.0)
-        return TrajectoryState(log_time, means, centre, count + 1, log_sum, num_averaged)
+            state = _learn(_rescale(state, move.inverse_mass), move, step_size, steps)
+        return state._replace(
+            count=state.count + 1,
+            log_sum=state.log_sum + jnp.where(average, state.log_time, 0.0),
+            num_averaged=state.num_averaged + jnp.where(average, 1.0, 0.0),
+        )
 
     def _learn(state, move, step_size, steps):
-        log_time, means, index = state.log_time, state.means, state.count
+        log_time, means, index = state.log_time, state.means, state.since
         num_chains = move.before.shape[0]
         single = num_chains == 1
-        weight = 1.0 - CHEES_AVERAGING ** (index + 1.0)
+        weight = 1.0 - CHEES_AVERAGING ** (state.count + 1.0)
         centre = CHEES_AVERAGING * state.centre + (1.0 - CHEES_AVERAGING) * move.before[0]
         trajectory = jnp.exp(log_time)
         chees, gradient, spread = _chees_terms(
@@ -265,10 +351,16 @@ def trajectory_adaptation(
         log_time = jnp.where(jnp.isfinite(change), log_time + change, log_time)
         correction = 1.0 if single else num_chains / (num_chains - 1.0)
         log_time = _bound_log_time(log_time, step_size, max_steps, means, index, correction)
-        return log_time, means, centre if single else state.centre
+        return state._replace(
+            log_time=log_time,
+            means=means,
+            since=index + 1,
+            centre=centre if single else state.centre,
+            inverse_mass=move.inverse_mass,
+        )
 
     def final(state: TrajectoryState):
         averaged = state.log_sum / jnp.maximum(state.num_averaged, 1.0)
         return jnp.exp(jnp.where(state.num_averaged > 0, averaged, state.log_time))
 
-    return TrajectoryAdaptation(init, update, final)
+    return TrajectoryAdaptation(init, update, final, learn)
