@@ -66,6 +66,8 @@ from liesample.tuning.trajectory import (
     MAX_NUM_INTEGRATION_STEPS,
     ChainMove,
     averaged_steps,
+    chain_move,
+    euclidean_size,
     halton,
     jittered_steps,
     trajectory_adaptation,
@@ -324,6 +326,7 @@ def window_adaptation(
     if is_hmc:
         if fixed_steps is not None and integration_time is not None:
             raise ValueError("give integration_time or num_integration_steps, not both")
+        learn_time = integration_time is None
         if fixed_steps is None:
             time = DEFAULT_INTEGRATION_TIME if integration_time is None else integration_time
             integration_time = finite_float("integration_time", time, positive=True)
@@ -331,6 +334,8 @@ def window_adaptation(
             raise ValueError(f"num_integration_steps must be an integer >= 1, got {fixed_steps!r}")
     elif fixed_steps is not None or integration_time is not None:
         raise ValueError("num_integration_steps and integration_time are HMC parameters")
+    else:
+        learn_time = False
     for key, value in declared["defaults"].items():
         parameters.setdefault(key, value)
     if target_acceptance_rate is None:
@@ -345,13 +350,17 @@ def window_adaptation(
             f"{sorted(declared['parameters'])} and the options {sorted(declared['options'])}"
         )
     initial_mass = parameters.pop("inverse_mass_matrix", None)
+    jittered = is_hmc and fixed_steps is None
+    lengths = trajectory_adaptation(
+        integration_time or DEFAULT_INTEGRATION_TIME, learn=jittered and learn_time
+    )
 
-    def num_steps_for(step_size):
+    def num_steps_for(step_size, length, index):
         if not is_hmc:
             return jnp.asarray(1)
         if fixed_steps is not None:
             return jnp.asarray(int(fixed_steps))
-        return integration_steps(step_size, integration_time)
+        return jittered_steps(halton(index), jnp.exp(length.log_time), step_size)
 
     def transition(key, state, warm, steps):
         extra = {"num_integration_steps": steps} if is_hmc else {}
@@ -388,30 +397,39 @@ def window_adaptation(
         dtype = jnp.asarray(state.logdensity).dtype
         inverse_mass = spaces.check_inverse_mass(space, initial_mass, dtype)
         stages, ends = window_schedule(num_steps)
-        carry = (state, pieces.init(state, initial_step_size, inverse_mass))
+        length = lengths.init(euclidean_size(space), dtype)
+        carry = (state, pieces.init(state, initial_step_size, inverse_mass), length)
         keys = jax.random.split(rng_key, int(num_steps))
+        schedule = (stages, ends, averaged_steps(stages, ends), np.arange(num_steps))
 
         def one_step(carry, xs):
-            state, warm = carry
-            key, (stage, window_end) = xs
-            steps = num_steps_for(warm.step_size)
+            before, warm, length = carry
+            key, (stage, window_end, average, index) = xs
+            steps = num_steps_for(warm.step_size, length, index)
             if batched:
                 key = jax.random.split(key, num_chains)
-            state, info = move(key, state, warm, steps)
+            state, info = move(key, before, warm, steps)
+            if jittered:
+                chains = chain_move(space, before, state, info, warm.inverse_mass, batched)
+                length = lengths.update(length, chains, warm.step_size, steps, average)
             warm = pieces.update(warm, state, info, stage, window_end)
-            return (state, warm), AdaptationInfo(state, info, warm.step_size, steps)
+            return (state, warm, length), AdaptationInfo(state, info, warm.step_size, steps)
 
         @jit
-        def warmup(carry, keys, stages, ends):
-            return jax.lax.scan(one_step, carry, (keys, (stages, ends)))
+        def warmup(carry, keys, schedule):
+            return jax.lax.scan(one_step, carry, (keys, schedule))
 
-        (state, warm), info = warmup(carry, keys, stages, ends)
+        (state, warm, length), info = warmup(carry, keys, schedule)
         step_size = float(pieces.final_step_size(warm))
         tuned = dict(parameters)
         tuned["step_size"] = step_size
         tuned["inverse_mass_matrix"] = warm.inverse_mass
-        if is_hmc:
-            tuned["num_integration_steps"] = int(num_steps_for(step_size))
+        if fixed_steps is not None:
+            tuned["num_integration_steps"] = int(fixed_steps)
+        elif is_hmc:
+            time = float(lengths.final(length))
+            tuned["num_integration_steps"] = int(integration_steps(step_size, time))
+            tuned["jitter"] = True
         tuned.update(build_options)
         return (state, tuned), info
 

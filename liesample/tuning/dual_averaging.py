@@ -1,16 +1,17 @@
-"""Dual averaging of one step size shared by all chains, to a target mean acceptance rate.
+"""Dual averaging of one step size shared by all chains, to a target acceptance rate.
 
 The warm-up of a sampler that declares ``tuning.method == "dual_averaging"``
 (:class:`liesample.samplers.contract.StepSizeTuning`; :func:`liesample.adjusted_lie_poisson`):
-every warm-up step moves each chain with the current step size ``exp(x_t)``, and the mean
-acceptance rate over the chains updates ``x_t`` by the dual-averaging scheme of Hoffman &
+every warm-up step moves each chain with the current step size ``exp(x_t)``, and the harmonic
+mean of the chains' acceptance rates (0 when one chain's is 0: a stuck chain lowers the step
+until it moves, e.g. one started at the rigid body's maximum-energy axis) updates ``x_t`` by the dual-averaging scheme of Hoffman &
 Gelman (2014), as ``blackjax.window_adaptation`` does
 (``blackjax.adaptation.step_size.dual_averaging_adaptation``). The tuned step is the scheme's
 average ``exp(x̄)``.
 
 The steps are those of :func:`liesample.integrators.chain_loop.run_steps` (chain ``c`` with key
 ``key_c``, the sampler's noise blocks), vmapped over the chains; the mean over the chains is a
-``pmean`` over the vmapped axis, so every chain carries the same dual-averaging state.
+collective over the vmapped axis, so every chain carries the same dual-averaging state.
 """
 
 from __future__ import annotations
@@ -36,7 +37,8 @@ class DualAveragingResult(NamedTuple):
 
     states : the chains' states after the warm-up.
     step_size : the tuned step (the dual-averaging average).
-    mean_acceptance : the mean acceptance rate over the chains and the second half of the steps.
+    mean_acceptance : the chains' harmonic mean acceptance rate, averaged over the second half of
+        the steps.
     """
 
     states: object
@@ -49,6 +51,15 @@ class _WarmupState(NamedTuple):
     adaptation: object  # blackjax's DualAveragingAdaptationState, the same in every chain
 
 
+def _harmonic_mean(rate):
+    """The harmonic mean over the chains (0 when any chain's is 0): one stuck chain lowers the
+    step until it moves, as in the other warm-ups (:mod:`liesample.tuning.adaptation`)."""
+    rate = jnp.where(jnp.isfinite(rate), rate, 0.0)
+    stuck = jax.lax.pmin(rate, _CHAINS) <= 0
+    mean = 1.0 / jax.lax.pmean(1.0 / jnp.maximum(rate, 1e-30), _CHAINS)
+    return jnp.where(stuck, 0.0, mean)
+
+
 def _adaptive(sampler_at, update, max_step_size):
     """The warm-up as a sampler on ``_WarmupState``: one step of the sampler at the current
     step size (at most ``max_step_size``), then the dual-averaging update with the mean
@@ -57,7 +68,7 @@ def _adaptive(sampler_at, update, max_step_size):
     def move(advance, state):
         sampler = sampler_at(jnp.minimum(jnp.exp(state.adaptation.log_step_size), max_step_size))
         chain, info = advance(sampler, state.chain)
-        rate = jax.lax.pmean(info.acceptance_rate, _CHAINS)
+        rate = _harmonic_mean(info.acceptance_rate)
         return _WarmupState(chain, update(state.adaptation, rate)), rate
 
     reference = sampler_at(jnp.ones(()))
@@ -102,7 +113,7 @@ def dual_averaging(
     num_steps : int
         Warm-up steps (static).
     target_acceptance_rate : float
-        The mean acceptance rate aimed at.
+        The (harmonic mean) acceptance rate aimed at.
     parameters : dict, optional
         The sampler's other parameters (``StepSizeTuning.parameters``), passed to
         ``sampler_at`` as arrays of the positions' dtype.
