@@ -319,23 +319,58 @@ def window_adaptation(
     del progress_bar  # accepted for BlackJAX compatibility; the warm-up runs in one compiled loop
     spaces._spaces(space)
     finite_float("initial_step_size", initial_step_size, positive=True)
+    plan = _window_plan(algorithm, declared, target_acceptance_rate, integration_time, parameters)
+    warm_up = functools.partial(
+        _window_run, plan, algorithm, logdensity_fn, space, initial_step_size, adapt_mass
+    )
+
+    def run(rng_key, initial_position, num_steps: int = 1000):
+        """Warm up for ``num_steps`` transitions: ``((state, parameters), info)``.
+
+        ``initial_position`` is one point, or a batch of starts with a leading chain axis (one
+        per chain, as for :func:`liesample.sample`): the chains then adapt together (shared
+        step size and mass) and ``state`` holds every chain's final state, the starts of the
+        run that follows. One point gives one chain's state (BlackJAX's shape); to sample it
+        with :func:`liesample.sample`, give it a chain axis of one
+        (``jax.tree.map(lambda x: x[None], state.position)``)."""
+        return warm_up(rng_key, initial_position, num_steps)
+
+    return GeometricAdaptation(run)
+
+
+class _WindowPlan(NamedTuple):
+    """What :func:`window_adaptation` checked: the kernel and its options, the sampler's other
+    parameters, the target rate, the starting mass, a fixed ``L`` (or ``None``) and the rule
+    for ``T`` (HMC with ``L`` unset: jittered)."""
+
+    kernel: Callable
+    build_options: dict
+    parameters: dict
+    target: float
+    initial_mass: object
+    is_hmc: bool
+    fixed_steps: int | None
+    lengths: object
+
+
+def _window_plan(algorithm, declared, target_acceptance_rate, integration_time, parameters):
+    """Validate ``window_adaptation``'s arguments against the sampler's declaration."""
+    name = type(algorithm).__name__
     build_options = {k: parameters.pop(k) for k in declared["options"] if k in parameters}
     kernel = algorithm.build_kernel(**build_options)
     is_hmc = "num_integration_steps" in declared["adapted"]
     fixed_steps = parameters.pop("num_integration_steps", None)
-    if is_hmc:
-        if fixed_steps is not None and integration_time is not None:
-            raise ValueError("give integration_time or num_integration_steps, not both")
-        learn_time = integration_time is None
-        if fixed_steps is None:
-            time = DEFAULT_INTEGRATION_TIME if integration_time is None else integration_time
-            integration_time = finite_float("integration_time", time, positive=True)
-        elif isinstance(fixed_steps, bool) or int(fixed_steps) != fixed_steps or fixed_steps < 1:
-            raise ValueError(f"num_integration_steps must be an integer >= 1, got {fixed_steps!r}")
-    elif fixed_steps is not None or integration_time is not None:
+    if not is_hmc and (fixed_steps is not None or integration_time is not None):
         raise ValueError("num_integration_steps and integration_time are HMC parameters")
-    else:
-        learn_time = False
+    if fixed_steps is not None and integration_time is not None:
+        raise ValueError("give integration_time or num_integration_steps, not both")
+    if fixed_steps is not None and (
+        isinstance(fixed_steps, bool) or int(fixed_steps) != fixed_steps or fixed_steps < 1
+    ):
+        raise ValueError(f"num_integration_steps must be an integer >= 1, got {fixed_steps!r}")
+    time = DEFAULT_INTEGRATION_TIME if integration_time is None else integration_time
+    time = finite_float("integration_time", time, positive=True)
+    learn = is_hmc and fixed_steps is None and integration_time is None
     for key, value in declared["defaults"].items():
         parameters.setdefault(key, value)
     if target_acceptance_rate is None:
@@ -350,21 +385,62 @@ def window_adaptation(
             f"{sorted(declared['parameters'])} and the options {sorted(declared['options'])}"
         )
     initial_mass = parameters.pop("inverse_mass_matrix", None)
-    jittered = is_hmc and fixed_steps is None
-    lengths = trajectory_adaptation(
-        integration_time or DEFAULT_INTEGRATION_TIME, learn=jittered and learn_time
+    fixed = None if fixed_steps is None else int(fixed_steps)
+    lengths = trajectory_adaptation(time, learn=learn)
+    return _WindowPlan(
+        kernel, build_options, parameters, target, initial_mass, is_hmc, fixed, lengths
     )
 
-    def num_steps_for(step_size, length, index):
-        if not is_hmc:
-            return jnp.asarray(1)
-        if fixed_steps is not None:
-            return jnp.asarray(int(fixed_steps))
-        return jittered_steps(halton(index), jnp.exp(length.log_time), step_size)
+
+def _window_run(plan, algorithm, logdensity_fn, space, initial_step_size, adapt_mass,
+                rng_key, initial_position, num_steps):  # fmt: skip
+    """``run`` of :func:`window_adaptation`: the chains' states, the warm-up's compiled
+    ``scan`` and the tuned parameters."""
+    if isinstance(num_steps, bool) or int(num_steps) != num_steps or num_steps < 20:
+        raise ValueError(f"num_steps must be an integer >= 20, got {num_steps!r}")
+    num_chains = _num_chains(space, initial_position)
+    batched = num_chains is not None
+    init = lambda x: algorithm.init(x, logdensity_fn, space)
+    if batched:
+        check_starts(space)(initial_position)
+    state = jax.vmap(init)(initial_position) if batched else init(initial_position)
+    pieces = warmup_pieces(space, plan.target, adapt_mass, batched)
+    dtype = jnp.asarray(state.logdensity).dtype
+    inverse_mass = spaces.check_inverse_mass(space, plan.initial_mass, dtype)
+    stages, ends = window_schedule(num_steps)
+    length = plan.lengths.init(euclidean_size(space), dtype)
+    carry = (state, pieces.init(state, initial_step_size, inverse_mass), length)
+    keys = jax.random.split(rng_key, int(num_steps))
+    schedule = (stages, ends, averaged_steps(stages, ends), np.arange(num_steps))
+    one_step = _window_step(plan, pieces, logdensity_fn, space, num_chains)
+
+    @jit
+    def warmup(carry, keys, schedule):
+        return jax.lax.scan(one_step, carry, (keys, schedule))
+
+    (state, warm, length), info = warmup(carry, keys, schedule)
+    step_size = float(pieces.final_step_size(warm))
+    tuned = {**plan.parameters, "step_size": step_size, "inverse_mass_matrix": warm.inverse_mass}
+    if plan.fixed_steps is not None:
+        tuned["num_integration_steps"] = plan.fixed_steps
+    elif plan.is_hmc:
+        time = float(plan.lengths.final(length))
+        tuned["num_integration_steps"] = int(integration_steps(step_size, time))
+        tuned["jitter"] = True
+    tuned.update(plan.build_options)
+    return (state, tuned), info
+
+
+def _window_step(plan, pieces, logdensity_fn, space, num_chains):
+    """One warm-up transition of :func:`window_adaptation` (a ``scan`` body): the kernel at
+    the current parameters (``L`` fixed, or ``ceil(u T / ε)``), then the updates of the step
+    size and mass and of ``T``."""
+    batched = num_chains is not None
+    jittered = plan.is_hmc and plan.fixed_steps is None
 
     def transition(key, state, warm, steps):
-        extra = {"num_integration_steps": steps} if is_hmc else {}
-        return kernel(
+        extra = {"num_integration_steps": steps} if plan.is_hmc else {}
+        return plan.kernel(
             key,
             state,
             logdensity_fn,
@@ -372,68 +448,28 @@ def window_adaptation(
             step_size=warm.step_size,
             inverse_mass_matrix=warm.inverse_mass,
             **extra,
-            **parameters,
+            **plan.parameters,
         )
 
-    def run(rng_key, initial_position, num_steps: int = 1000):
-        """Warm up for ``num_steps`` transitions: ``((state, parameters), info)``.
+    move = jax.vmap(transition, in_axes=(0, 0, None, None)) if batched else transition
 
-        ``initial_position`` is one point, or a batch of starts with a leading chain axis (one
-        per chain, as for :func:`liesample.sample`): the chains then adapt together (shared
-        step size and mass) and ``state`` holds every chain's final state, the starts of the
-        run that follows."""
-        if isinstance(num_steps, bool) or int(num_steps) != num_steps or num_steps < 20:
-            raise ValueError(f"num_steps must be an integer >= 20, got {num_steps!r}")
-        num_chains = _num_chains(space, initial_position)
-        batched = num_chains is not None
-        if batched:
-            check_starts(space)(initial_position)
-            state = jax.vmap(lambda x: algorithm.init(x, logdensity_fn, space))(initial_position)
-            move = jax.vmap(transition, in_axes=(0, 0, None, None))
+    def one_step(carry, xs):
+        before, warm, length = carry
+        key, (stage, window_end, average, index) = xs
+        if jittered:
+            steps = jittered_steps(halton(index), jnp.exp(length.log_time), warm.step_size)
         else:
-            state = algorithm.init(initial_position, logdensity_fn, space)
-            move = transition
-        pieces = warmup_pieces(space, target, adapt_mass, batched)
-        dtype = jnp.asarray(state.logdensity).dtype
-        inverse_mass = spaces.check_inverse_mass(space, initial_mass, dtype)
-        stages, ends = window_schedule(num_steps)
-        length = lengths.init(euclidean_size(space), dtype)
-        carry = (state, pieces.init(state, initial_step_size, inverse_mass), length)
-        keys = jax.random.split(rng_key, int(num_steps))
-        schedule = (stages, ends, averaged_steps(stages, ends), np.arange(num_steps))
+            steps = jnp.asarray(plan.fixed_steps or 1)
+        if batched:
+            key = jax.random.split(key, num_chains)
+        state, info = move(key, before, warm, steps)
+        if jittered:
+            chains = chain_move(space, before, state, info, warm.inverse_mass, batched)
+            length = plan.lengths.update(length, chains, warm.step_size, steps, average)
+        warm = pieces.update(warm, state, info, stage, window_end)
+        return (state, warm, length), AdaptationInfo(state, info, warm.step_size, steps)
 
-        def one_step(carry, xs):
-            before, warm, length = carry
-            key, (stage, window_end, average, index) = xs
-            steps = num_steps_for(warm.step_size, length, index)
-            if batched:
-                key = jax.random.split(key, num_chains)
-            state, info = move(key, before, warm, steps)
-            if jittered:
-                chains = chain_move(space, before, state, info, warm.inverse_mass, batched)
-                length = lengths.update(length, chains, warm.step_size, steps, average)
-            warm = pieces.update(warm, state, info, stage, window_end)
-            return (state, warm, length), AdaptationInfo(state, info, warm.step_size, steps)
-
-        @jit
-        def warmup(carry, keys, schedule):
-            return jax.lax.scan(one_step, carry, (keys, schedule))
-
-        (state, warm, length), info = warmup(carry, keys, schedule)
-        step_size = float(pieces.final_step_size(warm))
-        tuned = dict(parameters)
-        tuned["step_size"] = step_size
-        tuned["inverse_mass_matrix"] = warm.inverse_mass
-        if fixed_steps is not None:
-            tuned["num_integration_steps"] = int(fixed_steps)
-        elif is_hmc:
-            time = float(lengths.final(length))
-            tuned["num_integration_steps"] = int(integration_steps(step_size, time))
-            tuned["jitter"] = True
-        tuned.update(build_options)
-        return (state, tuned), info
-
-    return GeometricAdaptation(run)
+    return one_step
 
 
 # --------------------------------------------------------------------------- magnetic HMC
@@ -618,117 +654,141 @@ def magnetic_window_adaptation(
         max_steps,
         learn=integration_time is None,
     )
-    da_init, da_update, da_final = dual_averaging_adaptation(target)
+    options = {"divergence_threshold": divergence_threshold, **scheme}
+    plan = _MagneticPlan(
+        algorithm, logdensity_fn, angle, target, initial_step_size, adapt_mass, max_steps,
+        options, lengths,
+    )  # fmt: skip
 
     def run(rng_key, initial_positions, num_steps: int = 1000):
         """Warm up ``C`` chains for ``num_steps`` transitions; ``((states, parameters), info)``."""
-        if isinstance(num_steps, bool) or int(num_steps) != num_steps or num_steps < 20:
-            raise ValueError(f"num_steps must be an integer >= 20, got {num_steps!r}")
-        num_steps = int(num_steps)
-        flat = _flat_starts(initial_positions, logdensity_fn)
-        num_chains, dimension = flat.shape
-        dtype = flat.dtype
-        states = jax.vmap(lambda x: algorithm.init(x, logdensity_fn))(initial_positions)
-        rotation = jnp.asarray(_rotation(dimension), dtype)
-        zero_field = np.zeros((dimension, dimension))
-        stages, ends = window_schedule(num_steps)
-        # The field is off until the first mass update (the end of the first slow window):
-        # see :func:`_field_from`.
-        field_on = np.arange(num_steps) > _field_from(ends)
-
-        def one_step(carry, xs):
-            states, da_state, length, inverse_mass, welford = carry
-            key, index, stage, window_end, average, on = xs
-            step_size = jnp.exp(da_state.log_step_size)
-            strength = jnp.where(on, angle / step_size, 0.0)
-            # angle 0: a concrete zero field, so the sampler takes the free drift (no expm)
-            field = zero_field if angle == 0.0 else _field(rotation, inverse_mass, strength)
-            trajectory = jnp.exp(length.log_time)
-            steps = jittered_steps(halton(index), trajectory, step_size, max_steps)
-
-            # The top-level API: the flows e^{±εGM⁻¹} are computed once per step for all chains.
-            sampler = algorithm(
-                logdensity_fn,
-                step_size,
-                inverse_mass,
-                steps,
-                field,
-                divergence_threshold=divergence_threshold,
-                **scheme,
-            )
-            new_states, info = jax.vmap(sampler.step)(jax.random.split(key, num_chains), states)
-            da_state = da_update(da_state, _harmonic_mean(info.acceptance_rate))
-            before = jax.vmap(_ravel)(states.position)
-            after = jax.vmap(_ravel)(new_states.position)
-            move = ChainMove(
-                before,
-                after,
-                new_states.momentum,
-                info.is_accepted,
-                info.acceptance_rate,
-                inverse_mass,
-            )
-            length = lengths.update(length, move, step_size, steps, average)
-            in_slow = (stage == 1) & adapt_mass
-            welford = jax.tree.map(
-                lambda a, b: jnp.where(in_slow, a, b), _welford_batch(welford, after), welford
-            )
-
-            da_state, inverse_mass, welford = _close_window(
-                window_end & adapt_mass,
-                lambda mean, m2, count: _regularised_variance(
-                    m2 / jnp.maximum(count - 1, 1), count.astype(dtype)
-                ),
-                da_init,
-                da_final,
-                (da_state, inverse_mass, welford),
-            )
-            record = MagneticAdaptationInfo(
-                new_states, info, step_size, steps, trajectory, strength
-            )
-            return (new_states, da_state, length, inverse_mass, welford), record
-
-        welford = (jnp.zeros(dimension, dtype), jnp.zeros(dimension, dtype), jnp.asarray(0))
-        carry = (
-            states,
-            da_init(jnp.asarray(initial_step_size, dtype)),
-            lengths.init(dimension, dtype),
-            jnp.ones(dimension, dtype),
-            welford,
-        )
-        xs = (
-            jax.random.split(rng_key, num_steps),
-            jnp.arange(num_steps),
-            jnp.asarray(stages),
-            jnp.asarray(ends),
-            jnp.asarray(averaged_steps(stages, ends)),
-            jnp.asarray(field_on),
-        )
-
-        @jit
-        def warmup(carry, xs):
-            return jax.lax.scan(one_step, carry, xs)
-
-        (states, da_state, length, inverse_mass, _), info = warmup(carry, xs)
-        step_size = float(da_final(da_state))
-        trajectory = float(lengths.final(length))
-        inverse_mass = np.asarray(inverse_mass)
-        if not (np.isfinite(step_size) and np.all(np.isfinite(inverse_mass))):
-            raise FloatingPointError(
-                "magnetic_window_adaptation ended with a non-finite step size or mass: the "
-                "chains diverged (check logdensity_fn and the starts)"
-            )
-        parameters = {
-            "step_size": step_size,
-            "inverse_mass_matrix": inverse_mass,
-            "num_integration_steps": int(np.clip(math.ceil(trajectory / step_size), 1, max_steps)),
-            "magnetic_field": default_magnetic_field(inverse_mass, angle / step_size),
-            **scheme,
-        }
-        info = info._replace(trajectory_length=info.trajectory_length.at[-1].set(trajectory))
-        return (states, parameters), info
+        return _magnetic_run(plan, rng_key, initial_positions, num_steps)
 
     return GeometricAdaptation(run)
+
+
+class _MagneticPlan(NamedTuple):
+    """What :func:`magnetic_window_adaptation` checked."""
+
+    algorithm: object
+    logdensity_fn: Callable
+    angle: float
+    target: float
+    initial_step_size: float
+    adapt_mass: bool
+    max_steps: int
+    options: dict  # the sampler's keywords: divergence_threshold and the scheme
+    lengths: object
+
+
+def _magnetic_run(plan: _MagneticPlan, rng_key, initial_positions, num_steps):
+    """``run`` of :func:`magnetic_window_adaptation`."""
+    if isinstance(num_steps, bool) or int(num_steps) != num_steps or num_steps < 20:
+        raise ValueError(f"num_steps must be an integer >= 20, got {num_steps!r}")
+    num_steps = int(num_steps)
+    flat = _flat_starts(initial_positions, plan.logdensity_fn)
+    num_chains, dimension = flat.shape
+    dtype = flat.dtype
+    states = jax.vmap(lambda x: plan.algorithm.init(x, plan.logdensity_fn))(initial_positions)
+    stages, ends = window_schedule(num_steps)
+    da_init, _, da_final = dual_averaging_adaptation(plan.target)
+    welford = (jnp.zeros(dimension, dtype), jnp.zeros(dimension, dtype), jnp.asarray(0))
+    carry = (
+        states,
+        da_init(jnp.asarray(plan.initial_step_size, dtype)),
+        plan.lengths.init(dimension, dtype),
+        jnp.ones(dimension, dtype),
+        welford,
+    )
+    xs = (
+        jax.random.split(rng_key, num_steps),
+        jnp.arange(num_steps),
+        jnp.asarray(stages),
+        jnp.asarray(ends),
+        jnp.asarray(averaged_steps(stages, ends)),
+        # The field is off until the first mass update (the end of the first slow window):
+        # see :func:`_field_from`.
+        jnp.asarray(np.arange(num_steps) > _field_from(ends)),
+    )
+    one_step = _magnetic_step(plan, num_chains, dimension, dtype)
+
+    @jit
+    def warmup(carry, xs):
+        return jax.lax.scan(one_step, carry, xs)
+
+    (states, da_state, length, inverse_mass, _), info = warmup(carry, xs)
+    step_size = float(da_final(da_state))
+    trajectory = float(plan.lengths.final(length))
+    inverse_mass = np.asarray(inverse_mass)
+    if not (np.isfinite(step_size) and np.all(np.isfinite(inverse_mass))):
+        raise FloatingPointError(
+            "magnetic_window_adaptation ended with a non-finite step size or mass: the "
+            "chains diverged (check logdensity_fn and the starts)"
+        )
+    steps = int(np.clip(math.ceil(trajectory / step_size), 1, plan.max_steps))
+    parameters = {
+        "step_size": step_size,
+        "inverse_mass_matrix": inverse_mass,
+        "num_integration_steps": steps,
+        "magnetic_field": default_magnetic_field(inverse_mass, plan.angle / step_size),
+        **{k: v for k, v in plan.options.items() if k == "integrator"},
+    }
+    info = info._replace(trajectory_length=info.trajectory_length.at[-1].set(trajectory))
+    return (states, parameters), info
+
+
+def _magnetic_step(plan: _MagneticPlan, num_chains, dimension, dtype):
+    """One warm-up transition of :func:`magnetic_window_adaptation` (a ``scan`` body): every
+    chain moved by ``magnetic_hmc`` at the shared parameters, then the updates of the step
+    size (harmonic mean), ``T``, and in slow windows the mass."""
+    da_init, da_update, da_final = dual_averaging_adaptation(plan.target)
+    rotation = jnp.asarray(_rotation(dimension), dtype)
+    zero_field = np.zeros((dimension, dimension))
+    angle = plan.angle
+
+    def variance(mean, m2, count):
+        return _regularised_variance(m2 / jnp.maximum(count - 1, 1), count.astype(dtype))
+
+    def one_step(carry, xs):
+        states, da_state, length, inverse_mass, welford = carry
+        key, index, stage, window_end, average, on = xs
+        step_size = jnp.exp(da_state.log_step_size)
+        strength = jnp.where(on, angle / step_size, 0.0)
+        # angle 0: a concrete zero field, so the sampler takes the free drift (no expm)
+        field = zero_field if angle == 0.0 else _field(rotation, inverse_mass, strength)
+        trajectory = jnp.exp(length.log_time)
+        steps = jittered_steps(halton(index), trajectory, step_size, plan.max_steps)
+        # The top-level API: the flows e^{±εGM⁻¹} are computed once per step for all chains.
+        sampler = plan.algorithm(
+            plan.logdensity_fn, step_size, inverse_mass, steps, field, **plan.options
+        )
+        new_states, info = jax.vmap(sampler.step)(jax.random.split(key, num_chains), states)
+        da_state = da_update(da_state, _harmonic_mean(info.acceptance_rate))
+        after = jax.vmap(_ravel)(new_states.position)
+        move = ChainMove(
+            jax.vmap(_ravel)(states.position),
+            after,
+            new_states.momentum,
+            info.is_accepted,
+            info.acceptance_rate,
+            inverse_mass,
+        )
+        length = plan.lengths.update(length, move, step_size, steps, average)
+        in_slow = (stage == 1) & plan.adapt_mass
+        welford = jax.tree.map(
+            lambda a, b: jnp.where(in_slow, a, b), _welford_batch(welford, after), welford
+        )
+        da_state, inverse_mass, welford = _close_window(
+            window_end & plan.adapt_mass,
+            variance,
+            da_init,
+            da_final,
+            (da_state, inverse_mass, welford),
+        )
+        record = MagneticAdaptationInfo(new_states, info, step_size, steps, trajectory, strength)
+        return (new_states, da_state, length, inverse_mass, welford), record
+
+    return one_step
 
 
 def _ravel(tree):
