@@ -254,8 +254,9 @@ def test_a_chain_started_at_the_maximum_energy_axis_is_not_left_stuck():
     """Regression (issue 28): at β = 1e4 a chain started on the maximum-energy axis (e₁, the
     smallest inertia) sat at acceptance 0 for the whole run; the warm-up averaged the chains'
     acceptance, so the three others set a step at which its proposals from that unstable
-    point were all rejected. The warm-up now follows the chains' harmonic mean: the step is
-    lowered until that chain moves, then tuned for all."""
+    point were all rejected. The warm-up's pooled rate is now weighted down while one chain's
+    running acceptance is far below the others': the step is lowered until that chain moves,
+    then tuned for all."""
     import warnings
 
     sampler = adjusted_lie_poisson(rigid_body(INERTIA), beta=1e4)

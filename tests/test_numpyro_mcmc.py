@@ -172,17 +172,38 @@ def test_bad_settings_and_starts_are_refused():
 def test_vectorized_chains_equal_chains_run_alone():
     """NumPyro compiles the vmapped chains with plain jax.jit (liesample.foundation.compile): each chain
     must still give the draws of the same chain run alone, to round-off. Short runs: HMC
-    amplifies round-off (1e-16 after 10 transitions, ~1e-5 after 90, measured)."""
+    amplifies round-off (1e-16 after 10 transitions, ~1e-5 after 90, measured). Nothing is
+    adapted: vectorized chains adapt together (pooled), so with adaptation they differ from
+    chains run alone by design."""
     kwargs = dict(num_warmup=10, num_samples=10, progress_bar=False)
-    mcmc = MCMC(GeometricHMC(rotation_and_axis_model), num_chains=3, chain_method="vectorized",
-                **kwargs)  # fmt: skip
+    fixed = dict(adapt_step_size=False, adapt_mass_matrix=False, integration_time=1.0)
+    mcmc = MCMC(GeometricHMC(rotation_and_axis_model, **fixed), num_chains=3,
+                chain_method="vectorized", **kwargs)  # fmt: skip
     mcmc.run(jax.random.key(2))
     together = mcmc.get_samples(group_by_chain=True)
     for chain, key in enumerate(jax.random.split(jax.random.key(2), 3)):
-        alone = MCMC(GeometricHMC(rotation_and_axis_model), **kwargs)
+        alone = MCMC(GeometricHMC(rotation_and_axis_model, **fixed), **kwargs)
         alone.run(key)
         for site, draws in alone.get_samples().items():
             assert np.allclose(together[site][chain], draws, rtol=0, atol=1e-10), (chain, site)
+
+
+def test_vectorized_chains_adapt_together():
+    """Chains that run together adapt together: one step size, one mass (pooled moments) and
+    one T, the same in every chain after the warm-up (each chain alone could end far from
+    the others: a step 200 times smaller in one chain was seen)."""
+
+    def model():
+        numpyro.sample("x", dist.Normal(0.0, 0.003))
+        numpyro.sample("y", dist.Normal(0.0, 1.0).expand([2]))
+
+    mcmc = MCMC(GeometricHMC(model, dense_mass=[("y",)]), num_warmup=30, num_samples=5,
+                num_chains=3, chain_method="vectorized", progress_bar=False)  # fmt: skip
+    mcmc.run(jax.random.key(2), extra_fields=("adapt_state",))
+    adapted = mcmc.get_extra_fields(group_by_chain=True)["adapt_state"]
+    for leaf in jax.tree.leaves(adapted):
+        leaf = np.asarray(leaf)
+        assert np.all(leaf == leaf[:1]), leaf
 
 
 def test_a_parameter_with_a_small_sd_is_not_frozen_by_a_resonance():

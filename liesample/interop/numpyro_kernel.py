@@ -563,7 +563,9 @@ class GeometricHMC(MCMCKernel):
             )
             for key, group in self._blocks.items()
         }
-        self._pieces = warmup_pieces(self._inner_space, self._target, self._adapt_mass)
+        self._pieces = warmup_pieces(
+            self._inner_space, self._target, self._adapt_mass, batched=True
+        )
         self._da_init = dual_averaging_adaptation(self._target)[0]
 
     def _dense_groups(self):
@@ -783,25 +785,33 @@ class GeometricHMC(MCMCKernel):
         masses = {self._blocks[key]: m for key, m in mass.items()}
         return AdaptState(step_size, masses, jnp.exp(length.log_time))
 
-    def _update_dense(self, dense, position, stage, window_end):
-        """Welford covariance of each dense block in slow windows; at a window's end the
-        block's ``M⁻¹`` becomes it, shrunk towards ``1e-3 I`` (Stan's regularisation)."""
+    def _update_dense(self, dense, positions, stage, window_end):
+        """Welford covariance of each dense block in slow windows, pooled over the chains
+        (``positions`` with a leading chain axis); at a window's end the block's ``M⁻¹``
+        becomes it, shrunk towards ``1e-3 I`` (Stan's regularisation)."""
         if not self._dense_keys or not self._adapt_mass:
             return dense
         slow = stage == 1
-        count = jnp.where(slow, dense.count + 1, dense.count)
-        n = count.astype(position[self._dense_keys[0]].dtype)
+        first = positions[self._dense_keys[0]]
+        batch = first.shape[0]
+        old = dense.count.astype(first.dtype)
+        count = jnp.where(slow, dense.count + batch, dense.count)
+        n = count.astype(first.dtype)
         matrices, means, m2s = {}, {}, {}
         for key in self._dense_keys:
-            x = position[key]
-            delta = x - dense.mean[key]
-            mean = dense.mean[key] + delta / jnp.maximum(n, 1.0)
-            m2 = dense.m2[key] + jnp.outer(delta, x - mean)
+            x = positions[key]
+            batch_mean = jnp.mean(x, 0)
+            centred = x - batch_mean
+            delta = batch_mean - dense.mean[key]
+            total = old + batch
+            mean = dense.mean[key] + delta * (batch / total)
+            spread = jnp.outer(delta, delta) * (old * batch / total)
+            m2 = dense.m2[key] + centred.T @ centred + spread
             mean = jnp.where(slow, mean, dense.mean[key])
             m2 = jnp.where(slow, m2, dense.m2[key])
             covariance = m2 / jnp.maximum(n - 1.0, 1.0)
             covariance = 0.5 * (covariance + covariance.T)
-            eye = jnp.eye(x.shape[0], dtype=x.dtype)
+            eye = jnp.eye(x.shape[-1], dtype=x.dtype)
             shrunk = (n / (n + 5.0)) * covariance + 1e-3 * (5.0 / (n + 5.0)) * eye
             matrices[key] = jnp.where(window_end, shrunk, dense.matrices[key])
             means[key] = jnp.where(window_end, jnp.zeros_like(mean), mean)
@@ -889,7 +899,8 @@ class GeometricHMC(MCMCKernel):
                 step_size = self._heuristic_step_size(
                     key_step, inner, inner_logdensity, mass, step_size
                 )
-            warm = self._pieces.init(inner, step_size, pieces_mass)
+            one = jax.tree.map(lambda x: jnp.asarray(x)[None], inner)  # a batch of one
+            warm = self._pieces.init(one, step_size, pieces_mass)
             mass = self._kernel_mass(warm.inverse_mass, dense)
             length = self._lengths.init(euclidean_size(self._inner_space), dtype)
             zero = jnp.asarray(0.0, dtype)
@@ -914,12 +925,7 @@ class GeometricHMC(MCMCKernel):
 
         if batched:
             state = jit(jax.vmap(init_one))(rng_key, init_params)
-            self._sample_fn = jax.vmap(self._sample_one, in_axes=(0, None, None))
-            if self._find_heuristic:
-                # The chains share the iteration count: passed unbatched, the window-end search
-                # stays a branch under vmap instead of running at every iteration.
-                shared = jax.vmap(self._sample_one, in_axes=(0, None, None, None))
-                self._sample_fn = lambda state, a, kw: shared(state, a, kw, state.i[0])
+            self._sample_fn = self._sample_batch
         else:
             state = jit(init_one)(rng_key, init_params)
             self._sample_fn = self._sample_one
@@ -963,71 +969,82 @@ class GeometricHMC(MCMCKernel):
                 stacklevel=4,
             )
 
-    def _sample_one(self, state, model_args, model_kwargs, i=None):
-        i = state.i if i is None else i
+    def _sample_one(self, state, model_args, model_kwargs):
+        """One chain's transition: :meth:`_sample_batch` on a batch of one."""
+        batch = jax.tree.map(lambda x: jnp.asarray(x)[None], state)
+        return jax.tree.map(lambda x: x[0], self._sample_batch(batch, model_args, model_kwargs))
+
+    def _sample_batch(self, state, model_args, model_kwargs):
+        """One transition of every chain (a leading chain axis). The chains share the warm-up:
+        one step size (dual averaging of the harmonic mean of their rates), one mass (their
+        pooled moments) and one ``T`` (ChEES centred on their mean); each chain carries a copy."""
+        i = state.i[0]
         logdensity = self._inner_logdensity(model_args, model_kwargs or {})
-        rng_key, key = jax.random.split(state.rng_key)
-        key_step = None
-        if self._find_heuristic:
-            key, key_step = jax.random.split(key)
-        warm, dense, length = state.warmup, state.dense, state.length
-        step_size = warm.step_size
-        steps = self._steps_for(step_size, length, i)
+        keys = jax.vmap(jax.random.split)(state.rng_key)
+        rng_key, key = keys[:, 0], keys[:, 1]
+        key_step = jax.random.fold_in(key[0], 1) if self._find_heuristic else None
+        first = lambda tree: jax.tree.map(lambda x: x[0], tree)
+        warm, dense, length = first(state.warmup), first(state.dense), first(state.length)
+        steps = self._steps_for(warm.step_size, length, i)
         mass = self._kernel_mass(warm.inverse_mass, dense)
-        inner, info = self._kernel(
-            key,
-            state.inner,
-            logdensity,
-            self._inner_space,
-            step_size=step_size,
-            num_integration_steps=steps,
-            inverse_mass_matrix=mass,
-        )
+        options = dict(step_size=warm.step_size, num_integration_steps=steps)
+
+        def transition(key, inner):
+            space = self._inner_space
+            return self._kernel(key, inner, logdensity, space, **options, inverse_mass_matrix=mass)
+
+        inner, info = jax.vmap(transition)(key, state.inner)
         dtype = inner.logdensity.dtype
         kinetic = cotangent_bundle(self._inner_space, mass, None, dtype).kinetic_energy
-        energy = -inner.logdensity + kinetic(inner.momentum)
+        energy = -inner.logdensity + jax.vmap(kinetic)(inner.momentum)
+        new = (warm, dense, length)
         if self._num_warmup > 0:
-            step = (inner, info, mass, steps, logdensity, key_step)
-            warm, dense, length = self._adapt(state, i, *step)
+            new = self._adapt(state, i, inner, info, mass, steps, logdensity, key_step)
         # NumPyro's running mean, restarted when sampling begins.
         count = jnp.where(i < self._num_warmup, i + 1, i + 1 - self._num_warmup)
         mean_accept = state.mean_accept_prob + (
             info.acceptance_rate - state.mean_accept_prob
         ) / count.astype(dtype)
+        num_chains = state.i.shape[0]
+        share = lambda tree: jax.tree.map(
+            lambda x: jnp.broadcast_to(x, (num_chains, *jnp.shape(x))), tree
+        )
+        new_mass = self._kernel_mass(new[0].inverse_mass, new[1])
+        adapted = self._adapt_state(new[0].step_size, new_mass, new[2])
         return GeometricHMCState(
             state.i + 1,
-            self._to_user(self._unpack(inner.position)),
+            jax.vmap(lambda p: self._to_user(self._unpack(p)))(inner.position),
             -inner.logdensity,
             energy,
             info.is_divergent,
             info.acceptance_rate,
             mean_accept,
             jnp.asarray(info.num_gradient_evaluations),
-            step_size,
-            step_size * steps,
-            self._adapt_state(warm.step_size, self._kernel_mass(warm.inverse_mass, dense), length),
+            share(warm.step_size),
+            share(warm.step_size * steps),
+            share(adapted),
             inner,
-            warm,
-            dense,
-            length,
+            *share(new),
             rng_key,
         )
 
     def _adapt(self, state, i, inner, info, mass, steps, logdensity, key_step):
-        """The warm-up's update after transition ``i`` (Stan's schedule): the step size, the
-        masses and ``T``. At the last warm-up iteration the step size becomes dual averaging's
-        average and ``T`` the rule's tuned one; after the warm-up nothing changes."""
-        warm, dense, length = state.warmup, state.dense, state.length
+        """The shared warm-up's update after transition ``i`` of every chain (Stan's schedule):
+        the step size, the masses and ``T``. At the last warm-up iteration the step size
+        becomes dual averaging's average and ``T`` the rule's tuned one; after the warm-up
+        nothing changes."""
+        first = lambda tree: jax.tree.map(lambda x: x[0], tree)
+        warm, dense, length = first(state.warmup), first(state.dense), first(state.length)
         index = jnp.minimum(i, self._num_warmup - 1)
         stage, window_end, average = (jnp.asarray(column)[index] for column in self._schedule)
         updated = self._pieces.update(warm, inner, info, stage, window_end)
         new_dense = self._update_dense(dense, inner.position, stage, window_end)
         if self._find_heuristic and self._adapt_mass:
 
-            def restart(warm):
+            def restart(warm):  # NumPyro's search, from the first chain
                 new_mass = self._kernel_mass(warm.inverse_mass, new_dense)
                 step = self._heuristic_step_size(
-                    key_step, inner, logdensity, new_mass, warm.step_size
+                    key_step, first(inner), logdensity, new_mass, warm.step_size
                 )
                 da_state = self._da_init(step)
                 return warm._replace(da_state=da_state, step_size=jnp.exp(da_state.log_step_size))
@@ -1038,7 +1055,7 @@ class GeometricHMC(MCMCKernel):
         if not self._adapt_step_size:
             final = jnp.asarray(self._step_size, final.dtype)
         updated = updated._replace(step_size=final)
-        move = chain_move(self._inner_space, state.inner, inner, info, mass, batched=False)
+        move = chain_move(self._inner_space, state.inner, inner, info, mass, batched=True)
         new_length = self._lengths.update(length, move, warm.step_size, steps, average)
         tuned = jnp.log(self._lengths.final(new_length))
         new_length = new_length._replace(

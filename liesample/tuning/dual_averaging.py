@@ -2,10 +2,10 @@
 
 The warm-up of a sampler that declares ``tuning.method == "dual_averaging"``
 (:class:`liesample.samplers.contract.StepSizeTuning`; :func:`liesample.adjusted_lie_poisson`):
-every warm-up step moves each chain with the current step size ``exp(x_t)``, and the harmonic
-mean of the chains' acceptance rates (0 when one chain's is 0: a stuck chain lowers the step
-until it moves, e.g. one started at the rigid body's maximum-energy axis) updates ``x_t`` by the dual-averaging scheme of Hoffman &
-Gelman (2014), as ``blackjax.window_adaptation`` does
+every warm-up step moves each chain with the current step size ``exp(x_t)``, and the chains'
+mean acceptance rate, weighted down when one chain's running acceptance falls far below the
+others' (:func:`_pooled_rate`: a stuck chain lowers the step until it moves, e.g. one started
+at the rigid body's maximum-energy axis), updates ``x_t`` by the dual-averaging scheme of Hoffman & Gelman (2014), as ``blackjax.window_adaptation`` does
 (``blackjax.adaptation.step_size.dual_averaging_adaptation``). The tuned step is the scheme's
 average ``exp(x̄)``.
 
@@ -37,8 +37,8 @@ class DualAveragingResult(NamedTuple):
 
     states : the chains' states after the warm-up.
     step_size : the tuned step (the dual-averaging average).
-    mean_acceptance : the chains' harmonic mean acceptance rate, averaged over the second half of
-        the steps.
+    mean_acceptance : the chains' pooled acceptance rate (:func:`_pooled_rate`), averaged over
+        the second half of the steps.
     """
 
     states: object
@@ -49,27 +49,37 @@ class DualAveragingResult(NamedTuple):
 class _WarmupState(NamedTuple):
     chain: object  # the sampler's state
     adaptation: object  # blackjax's DualAveragingAdaptationState, the same in every chain
+    smoothed: jax.Array  # this chain's running mean acceptance (SMOOTHING per step)
 
 
-def _harmonic_mean(rate):
-    """The harmonic mean over the chains (0 when any chain's is 0): one stuck chain lowers the
-    step until it moves, as in the other warm-ups (:mod:`liesample.tuning.adaptation`)."""
+SMOOTHING = 0.9
+"""Weight of the past in each chain's running mean acceptance (about ten steps)."""
+
+
+def _pooled_rate(rate, smoothed):
+    """The rate dual averaging reads: the chains' mean acceptance of this step, times the ratio
+    of the harmonic to the arithmetic mean of their running means. Chains that accept alike
+    give a ratio near 1; a chain that stays stuck (its running mean near 0) takes it, and the
+    step, down until it moves."""
     rate = jnp.where(jnp.isfinite(rate), rate, 0.0)
-    stuck = jax.lax.pmin(rate, _CHAINS) <= 0
-    mean = 1.0 / jax.lax.pmean(1.0 / jnp.maximum(rate, 1e-30), _CHAINS)
-    return jnp.where(stuck, 0.0, mean)
+    harmonic = 1.0 / jax.lax.pmean(1.0 / jnp.maximum(smoothed, 1e-30), _CHAINS)
+    arithmetic = jax.lax.pmean(smoothed, _CHAINS)
+    ratio = jnp.where(arithmetic > 0, harmonic / jnp.maximum(arithmetic, 1e-30), 1.0)
+    return jax.lax.pmean(rate, _CHAINS) * ratio
 
 
 def _adaptive(sampler_at, update, max_step_size):
     """The warm-up as a sampler on ``_WarmupState``: one step of the sampler at the current
-    step size (at most ``max_step_size``), then the dual-averaging update with the mean
-    acceptance over the chains (the step's info is that mean)."""
+    step size (at most ``max_step_size``), then the dual-averaging update with the chains'
+    pooled acceptance (:func:`_pooled_rate`; the step's info is that rate)."""
 
     def move(advance, state):
         sampler = sampler_at(jnp.minimum(jnp.exp(state.adaptation.log_step_size), max_step_size))
         chain, info = advance(sampler, state.chain)
-        rate = _harmonic_mean(info.acceptance_rate)
-        return _WarmupState(chain, update(state.adaptation, rate)), rate
+        own = jnp.where(jnp.isfinite(info.acceptance_rate), info.acceptance_rate, 0.0)
+        smoothed = SMOOTHING * state.smoothed + (1.0 - SMOOTHING) * own
+        rate = _pooled_rate(info.acceptance_rate, smoothed)
+        return _WarmupState(chain, update(state.adaptation, rate), smoothed), rate
 
     reference = sampler_at(jnp.ones(()))
     blocks = declared_noise_blocks(reference)
@@ -113,7 +123,7 @@ def dual_averaging(
     num_steps : int
         Warm-up steps (static).
     target_acceptance_rate : float
-        The (harmonic mean) acceptance rate aimed at.
+        The (pooled) acceptance rate aimed at.
     parameters : dict, optional
         The sampler's other parameters (``StepSizeTuning.parameters``), passed to
         ``sampler_at`` as arrays of the positions' dtype.
@@ -130,8 +140,8 @@ def dual_averaging(
 
     def chain(key, state, adaptation, parameters):
         warmup = _adaptive(lambda step_size: sampler_at(step_size, **parameters), update, cap)
-        start = _WarmupState(state, adaptation)
         zero = jnp.zeros((), adaptation.log_step_size.dtype)
+        start = _WarmupState(state, adaptation, zero + target_acceptance_rate)
         end, total = run_steps(warmup, key, start, 0, num_steps, accumulate, zero)
         return end.chain, jnp.minimum(final(end.adaptation), cap), total / (num_steps - first_kept)
 

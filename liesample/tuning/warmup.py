@@ -81,8 +81,8 @@ def warm_up(sampler: Sampler, rng_key, chain_keys, states, initial_positions, nu
     )
     target = tuning.target_acceptance_rate
     source = (
-        f"warm-up dual averaging to acceptance {target:g} (harmonic mean over chains), from "
-        f"{initial:.4g}; harmonic mean acceptance in the second half of the warm-up "
+        f"warm-up dual averaging to mean acceptance {target:g} over chains, from "
+        f"{initial:.4g}; mean acceptance in the second half of the warm-up "
         f"{float(result.mean_acceptance):.3f}"
     )
     return tuning.rebuild(float(result.step_size), source), result.states
