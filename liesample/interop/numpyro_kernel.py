@@ -33,16 +33,20 @@ the nearest point of the manifold), ``dense_mass``, ``inverse_mass_matrix``, ``s
 on ``Euclidean`` sites only: the exact drift on a sphere or a group needs one inverse mass per
 copy (:mod:`liesample.samplers.cotangent.geometric_hmc`).
 
-**Warm-up.** During NumPyro's ``num_warmup`` iterations the kernel adapts exactly as
-:func:`liesample.window_adaptation` does, sharing its code
-(:func:`liesample.tuning.adaptation.warmup_pieces` and
-:func:`liesample.tuning.adaptation.window_schedule`) and reading what to adapt from
-``liesample.geometric_hmc.adaptation``: Stan's windows, dual averaging of the step size towards
+**Warm-up.** During NumPyro's ``num_warmup`` iterations the kernel adapts as
+:func:`liesample.window_adaptation` does, sharing its pieces
+(:func:`liesample.tuning.adaptation.warmup_pieces`,
+:func:`liesample.tuning.adaptation.window_schedule` and :mod:`liesample.tuning.trajectory`)
+and reading what to adapt from ``liesample.geometric_hmc.adaptation``: Stan's windows, dual averaging of the step size towards
 ``target_accept_prob``, the inverse mass from Welford moments in algebra coordinates (for a
 ``dense_mass`` block the Welford covariance, shrunk towards ``1e-3 I`` as Stan does), and a
-fixed integration time ``T = π/2`` (``L = ceil(T/ε)`` steps of the ``integrator`` scheme)
-unless ``num_integration_steps`` is given. At the last warm-up iteration the step size becomes
-dual averaging's average; after that nothing changes.
+jittered integration time ``u T`` (``L = ceil(u T/ε)`` steps of the ``integrator`` scheme,
+``u`` from the base-2 Halton sequence) with ``T`` learnt by the ChEES-type rule, unless
+``num_integration_steps`` or ``integration_time`` is given. Vectorized chains
+(``chain_method="vectorized"``) adapt together: one step size (the harmonic mean of their
+rates), one mass (pooled moments) and one ``T``; sequential chains adapt alone. At the last
+warm-up iteration the step size becomes dual averaging's average and ``T`` the rule's; after
+that nothing changes. ``num_warmup=0`` with anything left to adapt warns.
 
 **State and diagnostics.** The sample field is ``z``: the manifold sites' points and the other
 sites' unconstrained values (``init_params`` takes the same form); ``postprocess_fn`` maps it to
@@ -50,9 +54,10 @@ the constrained values and adds deterministic sites, so ``mcmc.get_samples()`` h
 model sees. ``extra_fields`` offers NumPyro's HMC names: ``diverging`` (collected by default:
 ``print_summary`` counts divergences), ``energy`` (``H`` of the state after the transition,
 for ``arviz.plot_energy``), ``potential_energy``, ``accept_prob``, ``mean_accept_prob``,
-``num_steps``, ``step_size``, ``trajectory_length`` and ``adapt_state`` (its ``step_size`` and
-``inverse_mass_matrix``, keyed by tuples of site names). ``arviz.from_numpyro`` names some of
-them ``lp``, ``acceptance_rate`` and ``n_steps``.
+``num_steps`` (gradient evaluations: two per ``minimal_norm`` step), ``step_size``,
+``trajectory_length`` (``ε L``) and ``adapt_state`` (its ``step_size``, ``inverse_mass_matrix``,
+keyed by tuples of site names, and ``trajectory_length``, the adapted ``T``).
+``arviz.from_numpyro`` names some of them ``lp``, ``acceptance_rate`` and ``n_steps``.
 
 **Chains.** ``chain_method="vectorized"`` vmaps init and transition over chains;
 ``"sequential"`` works as well. NumPyro compiles its loop with plain ``jax.jit``, not
