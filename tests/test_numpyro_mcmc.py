@@ -188,30 +188,13 @@ def test_vectorized_chains_equal_chains_run_alone():
             assert np.allclose(together[site][chain], draws, rtol=0, atol=1e-10), (chain, site)
 
 
-def test_vectorized_chains_adapt_together():
-    """Chains that run together adapt together: one step size, one mass (pooled moments) and
-    one T, the same in every chain after the warm-up (each chain alone could end far from
-    the others: a step 200 times smaller in one chain was seen)."""
-
-    def model():
-        numpyro.sample("x", dist.Normal(0.0, 0.003))
-        numpyro.sample("y", dist.Normal(0.0, 1.0).expand([2]))
-
-    mcmc = MCMC(GeometricHMC(model, dense_mass=[("y",)]), num_warmup=30, num_samples=5,
-                num_chains=3, chain_method="vectorized", progress_bar=False)  # fmt: skip
-    mcmc.run(jax.random.key(2), extra_fields=("adapt_state",))
-    adapted = mcmc.get_extra_fields(group_by_chain=True)["adapt_state"]
-    for leaf in jax.tree.leaves(adapted):
-        leaf = np.asarray(leaf)
-        assert np.all(leaf == leaf[:1]), leaf
-
-
 def test_a_parameter_with_a_small_sd_is_not_frozen_by_a_resonance():
     """Regression (issue 28): ``x ~ Normal(0, 0.003)`` with the defaults. A fixed T = π/2 and
     Stan's mass shrinkage put x's whitened frequency near 2, so ωT ≈ π: each draw was nearly
     minus the previous one (lag-1 autocorrelation −0.9) and the chains' amplitudes froze where
     the warm-up left them (sd 13 % low, one chain 59 % low, R-hat 1.09). Jittered lengths and
-    the ChEES-learnt T: every chain's sd within 5 of its MCSE, the pooled one within 10 %."""
+    the ChEES-learnt T: every chain's sd within 5 of its MCSE, the pooled one within 10 %.
+    The vectorized chains share their adapted parameters."""
 
     def model():
         numpyro.sample("x", dist.Normal(0.0, 0.003))
@@ -232,5 +215,10 @@ def test_a_parameter_with_a_small_sd_is_not_frozen_by_a_resonance():
     assert float(arviz_stats.rhat(draws)) < 1.01
     lag1 = [np.corrcoef(chain[:-1], chain[1:])[0, 1] for chain in draws]
     assert min(lag1) > -0.5, lag1  # no draw is nearly minus the previous one
+    # Chains that run together adapt together: one step size, one mass (pooled moments) and
+    # one T in every chain (alone, one chain's step once ended 200 times below the others').
     adapted = mcmc.get_extra_fields(group_by_chain=True)["adapt_state"]
     assert np.all(np.isfinite(np.asarray(adapted.trajectory_length)))
+    for leaf in jax.tree.leaves(adapted):
+        leaf = np.asarray(leaf)
+        assert np.all(leaf == leaf[:1]), leaf
