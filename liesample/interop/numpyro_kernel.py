@@ -36,17 +36,18 @@ copy (:mod:`liesample.samplers.cotangent.geometric_hmc`).
 **Warm-up.** During NumPyro's ``num_warmup`` iterations the kernel adapts as
 :func:`liesample.window_adaptation` does, sharing its pieces
 (:func:`liesample.tuning.adaptation.warmup_pieces`,
-:func:`liesample.tuning.adaptation.window_schedule` and :mod:`liesample.tuning.trajectory`)
-and reading what to adapt from ``liesample.geometric_hmc.adaptation``: Stan's windows, dual averaging of the step size towards
-``target_accept_prob``, the inverse mass from Welford moments in algebra coordinates (for a
-``dense_mass`` block the Welford covariance, shrunk towards ``1e-3 I`` as Stan does), and a
-jittered integration time ``u T`` (``L = ceil(u T/ε)`` steps of the ``integrator`` scheme,
-``u`` from the base-2 Halton sequence) with ``T`` learnt by the ChEES-type rule, unless
+:func:`liesample.tuning.adaptation.window_schedule` and :mod:`liesample.tuning.trajectory`) and
+reading what to adapt from ``liesample.geometric_hmc.adaptation``: Stan's windows, dual averaging of
+the step size towards ``target_accept_prob``, the inverse mass from Welford moments in algebra
+coordinates (for a ``dense_mass`` block the Welford covariance, shrunk towards ``1e-3 I`` as Stan
+does), and a jittered integration time ``u T`` (``L = ceil(u T/ε)`` steps of the ``integrator``
+scheme, ``u`` from the base-2 Halton sequence) with ``T`` learnt by the ChEES-type rule, unless
 ``num_integration_steps`` or ``integration_time`` is given. Vectorized chains
-(``chain_method="vectorized"``) adapt together: one step size (the harmonic mean of their
-rates), one mass (pooled moments) and one ``T``; sequential chains adapt alone. At the last
-warm-up iteration the step size becomes dual averaging's average and ``T`` the rule's; after
-that nothing changes. ``num_warmup=0`` with anything left to adapt warns.
+(``chain_method="vectorized"``) adapt together: one step size (their pooled rate,
+:func:`liesample.tuning.adaptation.pooled_rate`), one mass (pooled moments) and one ``T``;
+sequential chains adapt alone. At the last warm-up iteration the step size becomes dual averaging's
+average and ``T`` the rule's; after that nothing changes. ``num_warmup=0`` with anything left to
+adapt warns.
 
 **State and diagnostics.** The sample field is ``z``: the manifold sites' points and the other
 sites' unconstrained values (``init_params`` takes the same form); ``postprocess_fn`` maps it to
@@ -981,8 +982,9 @@ class GeometricHMC(MCMCKernel):
 
     def _sample_batch(self, state, model_args, model_kwargs):
         """One transition of every chain (a leading chain axis). The chains share the warm-up:
-        one step size (dual averaging of the harmonic mean of their rates), one mass (their
-        pooled moments) and one ``T`` (ChEES centred on their mean); each chain carries a copy."""
+        one step size (dual averaging of their pooled rate), one mass (their pooled moments)
+        and one ``T`` (ChEES centred on their mean); each chain carries a copy (and its own
+        running rate)."""
         i = state.i[0]
         logdensity = self._inner_logdensity(model_args, model_kwargs or {})
         keys = jax.vmap(jax.random.split)(state.rng_key)
@@ -1016,6 +1018,9 @@ class GeometricHMC(MCMCKernel):
         )
         new_mass = self._kernel_mass(new[0].inverse_mass, new[1])
         adapted = self._adapt_state(new[0].step_size, new_mass, new[2])
+        warmup = share(new[0]._replace(smoothed=jnp.zeros(1, dtype)))
+        smoothed = new[0].smoothed if self._num_warmup > 0 else state.warmup.smoothed[:, 0]
+        warmup = warmup._replace(smoothed=smoothed[:, None])
         return GeometricHMCState(
             state.i + 1,
             jax.vmap(lambda p: self._to_user(self._unpack(p)))(inner.position),
@@ -1029,7 +1034,8 @@ class GeometricHMC(MCMCKernel):
             share(warm.step_size * steps),
             share(adapted),
             inner,
-            *share(new),
+            warmup,
+            *share(new[1:]),
             rng_key,
         )
 
@@ -1040,6 +1046,8 @@ class GeometricHMC(MCMCKernel):
         nothing changes."""
         first = lambda tree: jax.tree.map(lambda x: x[0], tree)
         warm, dense, length = first(state.warmup), first(state.dense), first(state.length)
+        # each chain carries its own running rate: gathered, one per chain
+        warm = warm._replace(smoothed=state.warmup.smoothed[:, 0])
         index = jnp.minimum(i, self._num_warmup - 1)
         stage, window_end, average = (jnp.asarray(column)[index] for column in self._schedule)
         updated = self._pieces.update(warm, inner, info, stage, window_end)

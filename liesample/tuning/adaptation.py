@@ -161,6 +161,26 @@ class WarmupState(NamedTuple):
     step_size: jax.Array
     inverse_mass: object
     welford: tuple
+    smoothed: jax.Array  # each chain's running Metropolis rate (batched; else one value)
+
+
+RATE_SMOOTHING = 0.9
+"""Weight of the past in each chain's running Metropolis rate (about ten transitions)."""
+
+
+def pooled_rate(rates, smoothed):
+    """``(rate, smoothed)``: the rate dual averaging reads from a batch of chains, and their
+    updated running rates. The rate is the chains' mean rate times the ratio of the harmonic
+    to the arithmetic mean of their running rates: near 1 for chains that accept alike (the
+    step then meets the target), near 0 while one chain stays stuck (the step is lowered until
+    it moves). (The harmonic mean of the per-transition rates would also free a stuck chain,
+    but per-transition rates are noisy and it ends well above the target.)"""
+    own = jnp.where(jnp.isfinite(rates), rates, 0.0)
+    smoothed = RATE_SMOOTHING * smoothed + (1.0 - RATE_SMOOTHING) * own
+    harmonic = 1.0 / jnp.mean(1.0 / jnp.maximum(smoothed, 1e-30))
+    arithmetic = jnp.mean(smoothed)
+    ratio = jnp.where(arithmetic > 0, harmonic / jnp.maximum(arithmetic, 1e-30), 1.0)
+    return jnp.mean(own) * ratio, smoothed
 
 
 class WarmupPieces(NamedTuple):
@@ -192,25 +212,28 @@ def warmup_pieces(
     of :func:`_inverse_mass`, one transition at a time, on Stan's schedule: ``stage`` 1 (slow
     window) accumulates the mass statistic, ``window_end`` sets the mass and restarts dual
     averaging from its averaged step size. ``batched``: states carry a leading chain axis; the
-    chains share the step size and mass, dual averaging follows the harmonic mean of their
-    acceptance rates (a stuck chain lowers the step) and the mass pools their moments."""
+    chains share the step size and mass, dual averaging follows :func:`pooled_rate` (a stuck
+    chain lowers the step) and the mass pools their moments."""
     da_init, da_update, da_final = dual_averaging_adaptation(target_acceptance_rate)
     statistic = jax.vmap(functools.partial(_statistic, space)) if batched else None
 
     def init(state, initial_step_size, inverse_mass):
+        num_chains = jnp.shape(state.logdensity)[0] if batched else 1
         if batched:
             state = jax.tree.map(lambda leaf: leaf[0], state)
         dtype = jnp.asarray(state.logdensity).dtype
         size = _statistic(space, state).shape[0]
         welford = (jnp.zeros(size, dtype), jnp.zeros(size, dtype), jnp.asarray(0))
         step_size = jnp.asarray(initial_step_size, dtype)
-        return WarmupState(da_init(step_size), step_size, inverse_mass, welford)
+        smoothed = jnp.full(num_chains, target_acceptance_rate, dtype)
+        return WarmupState(da_init(step_size), step_size, inverse_mass, welford, smoothed)
 
     def update(warm, state, info, stage, window_end):
-        da_state, _, inverse_mass, welford = warm
+        da_state, _, inverse_mass, welford, smoothed = warm
         slow = (stage == 1) & adapt_mass
         if batched:
-            da_state = da_update(da_state, _harmonic_mean(info.metropolis_rate))
+            rate, smoothed = pooled_rate(info.metropolis_rate, smoothed)
+            da_state = da_update(da_state, rate)
             updated = _welford_batch(welford, statistic(state))
         else:
             rate = jnp.where(jnp.isfinite(info.metropolis_rate), info.metropolis_rate, 0.0)
@@ -230,7 +253,8 @@ def warmup_pieces(
             da_final,
             (da_state, inverse_mass, welford),
         )
-        return WarmupState(da_state, jnp.exp(da_state.log_step_size), inverse_mass, welford)
+        step_size = jnp.exp(da_state.log_step_size)
+        return WarmupState(da_state, step_size, inverse_mass, welford, smoothed)
 
     def final_step_size(warm):
         return da_final(warm.da_state)
@@ -505,13 +529,6 @@ def _field(rotation, inverse_mass, strength):
     return strength * rotation * scale[:, None] * scale[None, :]
 
 
-def _harmonic_mean(rates):
-    """Harmonic mean of the chains' acceptance rates (0 if any is 0): one stuck chain is enough
-    to lower the step size, as in ChEES-HMC."""
-    rates = jnp.where(jnp.isfinite(rates), rates, 0.0)
-    return jnp.where(jnp.all(rates > 0), 1.0 / jnp.mean(1.0 / jnp.maximum(rates, 1e-30)), 0.0)
-
-
 def _field_from(ends) -> int:
     """Last warm-up step without the field: the end of the first slow window (``-1``, the field
     on throughout, when the schedule has no slow window).
@@ -573,13 +590,13 @@ def magnetic_window_adaptation(
     mean of the jittered lengths, ``round(T / (2ε))``.
 
     **Schedule.** Stan's windows (as :func:`window_adaptation`), all chains sharing one set of
-    parameters: the step size is dual-averaged towards ``target_acceptance_rate`` of the
-    harmonic mean of the chains' acceptance probabilities *with the field on*; the inverse mass
-    is the regularised variance of every chain's draws in a slow window. The field is off up to
-    the end of the first slow window (:func:`_field_from`: a field scaled to the step slows the
-    chains' convergence and would spoil the first mass); from there on, at every step, it is
-    ``default_magnetic_field(M⁻¹, angle / ε)`` for the current ``M⁻¹`` and ``ε``, so the
-    whitened velocity turns by ``angle`` rad per leapfrog step.
+    parameters: the step size is dual-averaged towards ``target_acceptance_rate`` of the chains'
+    pooled acceptance probability (:func:`pooled_rate`) *with the field on*; the inverse mass is the
+    regularised variance of every chain's draws in a slow window. The field is off up to the end of
+    the first slow window (:func:`_field_from`: a field scaled to the step slows the chains'
+    convergence and would spoil the first mass); from there on, at every step, it is
+    ``default_magnetic_field(M⁻¹, angle / ε)`` for the current ``M⁻¹`` and ``ε``, so the whitened
+    velocity turns by ``angle`` rad per leapfrog step.
 
     **Trajectory length (ChEES).** Each transition integrates for ``t = u T`` with ``u`` from the
     base-2 Halton sequence (the same for every chain), ``L = ceil(t / ε)`` steps; ``log T`` is
@@ -699,6 +716,7 @@ def _magnetic_run(plan: _MagneticPlan, rng_key, initial_positions, num_steps):
         plan.lengths.init(dimension, dtype),
         jnp.ones(dimension, dtype),
         welford,
+        jnp.full(num_chains, plan.target, dtype),
     )
     xs = (
         jax.random.split(rng_key, num_steps),
@@ -716,7 +734,7 @@ def _magnetic_run(plan: _MagneticPlan, rng_key, initial_positions, num_steps):
     def warmup(carry, xs):
         return jax.lax.scan(one_step, carry, xs)
 
-    (states, da_state, length, inverse_mass, _), info = warmup(carry, xs)
+    (states, da_state, length, inverse_mass, _, _), info = warmup(carry, xs)
     step_size = float(da_final(da_state))
     trajectory = float(plan.lengths.final(length))
     inverse_mass = np.asarray(inverse_mass)
@@ -740,7 +758,7 @@ def _magnetic_run(plan: _MagneticPlan, rng_key, initial_positions, num_steps):
 def _magnetic_step(plan: _MagneticPlan, num_chains, dimension, dtype):
     """One warm-up transition of :func:`magnetic_window_adaptation` (a ``scan`` body): every
     chain moved by ``magnetic_hmc`` at the shared parameters, then the updates of the step
-    size (harmonic mean), ``T``, and in slow windows the mass."""
+    size (:func:`pooled_rate`), ``T``, and in slow windows the mass."""
     da_init, da_update, da_final = dual_averaging_adaptation(plan.target)
     rotation = jnp.asarray(_rotation(dimension), dtype)
     zero_field = np.zeros((dimension, dimension))
@@ -750,7 +768,7 @@ def _magnetic_step(plan: _MagneticPlan, num_chains, dimension, dtype):
         return _regularised_variance(m2 / jnp.maximum(count - 1, 1), count.astype(dtype))
 
     def one_step(carry, xs):
-        states, da_state, length, inverse_mass, welford = carry
+        states, da_state, length, inverse_mass, welford, smoothed = carry
         key, index, stage, window_end, average, on = xs
         step_size = jnp.exp(da_state.log_step_size)
         strength = jnp.where(on, angle / step_size, 0.0)
@@ -763,7 +781,8 @@ def _magnetic_step(plan: _MagneticPlan, num_chains, dimension, dtype):
             plan.logdensity_fn, step_size, inverse_mass, steps, field, **plan.options
         )
         new_states, info = jax.vmap(sampler.step)(jax.random.split(key, num_chains), states)
-        da_state = da_update(da_state, _harmonic_mean(info.acceptance_rate))
+        rate, smoothed = pooled_rate(info.acceptance_rate, smoothed)
+        da_state = da_update(da_state, rate)
         after = jax.vmap(_ravel)(new_states.position)
         move = ChainMove(
             jax.vmap(_ravel)(states.position),
@@ -786,7 +805,7 @@ def _magnetic_step(plan: _MagneticPlan, num_chains, dimension, dtype):
             (da_state, inverse_mass, welford),
         )
         record = MagneticAdaptationInfo(new_states, info, step_size, steps, trajectory, strength)
-        return (new_states, da_state, length, inverse_mass, welford), record
+        return (new_states, da_state, length, inverse_mass, welford, smoothed), record
 
     return one_step
 

@@ -1,11 +1,12 @@
 """Dual averaging of one step size shared by all chains, to a target acceptance rate.
 
 The warm-up of a sampler that declares ``tuning.method == "dual_averaging"``
-(:class:`liesample.samplers.contract.StepSizeTuning`; :func:`liesample.adjusted_lie_poisson`):
-every warm-up step moves each chain with the current step size ``exp(x_t)``, and the chains'
-mean acceptance rate, weighted down when one chain's running acceptance falls far below the
-others' (:func:`_pooled_rate`: a stuck chain lowers the step until it moves, e.g. one started
-at the rigid body's maximum-energy axis), updates ``x_t`` by the dual-averaging scheme of Hoffman & Gelman (2014), as ``blackjax.window_adaptation`` does
+(:class:`liesample.samplers.contract.StepSizeTuning`; :func:`liesample.adjusted_lie_poisson`): every
+warm-up step moves each chain with the current step size ``exp(x_t)``, and the chains' mean
+acceptance rate, weighted down when one chain's running acceptance falls far below the others'
+(:func:`liesample.tuning.adaptation.pooled_rate`: a stuck chain lowers the step until it moves, e.g.
+one started at the rigid body's maximum-energy axis), updates ``x_t`` by the dual-averaging scheme
+of Hoffman & Gelman (2014), as ``blackjax.window_adaptation`` does
 (``blackjax.adaptation.step_size.dual_averaging_adaptation``). The tuned step is the scheme's
 average ``exp(x̄)``.
 
@@ -26,6 +27,7 @@ from blackjax.adaptation.step_size import dual_averaging_adaptation
 from liesample.foundation.compile import jit
 from liesample.integrators.chain_loop import NoiseBlocks, declared_noise_blocks, run_steps
 from liesample.samplers.contract import Sampler
+from liesample.tuning.adaptation import pooled_rate
 
 __all__ = ["DualAveragingResult", "dual_averaging"]
 
@@ -37,8 +39,9 @@ class DualAveragingResult(NamedTuple):
 
     states : the chains' states after the warm-up.
     step_size : the tuned step (the dual-averaging average).
-    mean_acceptance : the chains' pooled acceptance rate (:func:`_pooled_rate`), averaged over
-        the second half of the steps.
+    mean_acceptance : the chains' pooled acceptance rate
+        (:func:`liesample.tuning.adaptation.pooled_rate`), averaged over the second half of
+        the steps.
     """
 
     states: object
@@ -49,36 +52,21 @@ class DualAveragingResult(NamedTuple):
 class _WarmupState(NamedTuple):
     chain: object  # the sampler's state
     adaptation: object  # blackjax's DualAveragingAdaptationState, the same in every chain
-    smoothed: jax.Array  # this chain's running mean acceptance (SMOOTHING per step)
-
-
-SMOOTHING = 0.9
-"""Weight of the past in each chain's running mean acceptance (about ten steps)."""
-
-
-def _pooled_rate(rate, smoothed):
-    """The rate dual averaging reads: the chains' mean acceptance of this step, times the ratio
-    of the harmonic to the arithmetic mean of their running means. Chains that accept alike
-    give a ratio near 1; a chain that stays stuck (its running mean near 0) takes it, and the
-    step, down until it moves."""
-    rate = jnp.where(jnp.isfinite(rate), rate, 0.0)
-    harmonic = 1.0 / jax.lax.pmean(1.0 / jnp.maximum(smoothed, 1e-30), _CHAINS)
-    arithmetic = jax.lax.pmean(smoothed, _CHAINS)
-    ratio = jnp.where(arithmetic > 0, harmonic / jnp.maximum(arithmetic, 1e-30), 1.0)
-    return jax.lax.pmean(rate, _CHAINS) * ratio
+    smoothed: jax.Array  # this chain's running acceptance (adaptation.pooled_rate)
 
 
 def _adaptive(sampler_at, update, max_step_size):
     """The warm-up as a sampler on ``_WarmupState``: one step of the sampler at the current
     step size (at most ``max_step_size``), then the dual-averaging update with the chains'
-    pooled acceptance (:func:`_pooled_rate`; the step's info is that rate)."""
+    pooled acceptance (:func:`liesample.tuning.adaptation.pooled_rate`; the step's info is
+    that rate)."""
 
     def move(advance, state):
         sampler = sampler_at(jnp.minimum(jnp.exp(state.adaptation.log_step_size), max_step_size))
         chain, info = advance(sampler, state.chain)
-        own = jnp.where(jnp.isfinite(info.acceptance_rate), info.acceptance_rate, 0.0)
-        smoothed = SMOOTHING * state.smoothed + (1.0 - SMOOTHING) * own
-        rate = _pooled_rate(info.acceptance_rate, smoothed)
+        rates = jax.lax.all_gather(info.acceptance_rate, _CHAINS)
+        rate, smoothed = pooled_rate(rates, jax.lax.all_gather(state.smoothed, _CHAINS))
+        smoothed = smoothed[jax.lax.axis_index(_CHAINS)]
         return _WarmupState(chain, update(state.adaptation, rate), smoothed), rate
 
     reference = sampler_at(jnp.ones(()))
