@@ -263,7 +263,7 @@ def test_a_chain_started_at_the_maximum_energy_axis_is_not_left_stuck():
     starts = jnp.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 0.6, 0.8]])
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        tree = liesample.sample(sampler, jax.random.key(0), starts, 100, progress=False)
+        tree = liesample.sample(sampler, jax.random.key(0), starts, 300, progress=False)
     assert not [w for w in caught if "stuck" in str(w.message)], [str(w.message) for w in caught]
     rates = np.asarray(tree.sample_stats["acceptance_rate"]).mean(axis=1)
     assert np.all(rates > 0.4), rates
