@@ -247,3 +247,23 @@ def test_nonfinite_proposals_are_rejected_and_flagged():
     assert np.all(np.isfinite(np.asarray(positions)))
     assert np.all(np.asarray(positions)[:, 0] > -1.0)
     np.testing.assert_allclose(np.sum(np.asarray(positions) ** 2, -1), np.sum(start**2), rtol=1e-12)
+
+
+@pytest.mark.slow  # compile-bound (~25 s on a shared 2-core CPU): the warm-up and the run
+def test_a_chain_started_at_the_maximum_energy_axis_is_not_left_stuck():
+    """Regression (issue 28): at β = 1e4 a chain started on the maximum-energy axis (e₁, the
+    smallest inertia) sat at acceptance 0 for the whole run; the warm-up averaged the chains'
+    acceptance, so the three others set a step at which its proposals from that unstable
+    point were all rejected. The warm-up's pooled rate is now weighted down while one chain's
+    running acceptance is far below the others': the step is lowered until that chain moves,
+    then tuned for all."""
+    import warnings
+
+    sampler = adjusted_lie_poisson(rigid_body(INERTIA), beta=1e4)
+    starts = jnp.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 0.6, 0.8]])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        tree = liesample.sample(sampler, jax.random.key(0), starts, 300, progress=False)
+    assert not [w for w in caught if "stuck" in str(w.message)], [str(w.message) for w in caught]
+    rates = np.asarray(tree.sample_stats["acceptance_rate"]).mean(axis=1)
+    assert np.all(rates > 0.4), rates

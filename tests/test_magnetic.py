@@ -508,3 +508,30 @@ def test_default_magnetic_field_is_a_unit_rotation_in_the_whitened_frame(dense):
     np.testing.assert_allclose(np.abs(field @ np.eye(d)[0]), np.eye(d)[4], atol=1e-12)
     np.testing.assert_allclose(np.abs(field @ np.eye(d)[1]), np.eye(d)[3], atol=1e-12)
     np.testing.assert_allclose(field @ np.eye(d)[2], 0.0, atol=1e-12)
+
+
+def test_magnetic_langevin_reports_its_metropolis_rate_and_refuses_blackjax_adaptation():
+    """An unadjusted sampler's acceptance rate is 1 whatever its step, so an adaptation by
+    acceptance cannot tune it (``blackjax.window_adaptation`` made the step 2.5e-61 or
+    failed): ``info.metropolis_rate`` is the rate the step would have, and BlackJAX's
+    adaptation is refused with a message saying what to use."""
+    import blackjax
+
+    def logdensity_fn(x):
+        return -0.5 * jnp.sum(x**2)
+
+    field = jnp.zeros((2, 2))
+    rates = []
+    for step_size in (0.05, 1.5):
+        sampler = liesample.magnetic_langevin(logdensity_fn, step_size, jnp.ones(2), 1.0, field)
+        _, (_, info) = run_inference_algorithm(
+            jax.random.key(0), sampler, num_steps=30, initial_position=jnp.array([1.0, -0.5])
+        )
+        assert np.all(np.asarray(info.acceptance_rate) == 1.0)
+        rates.append(float(np.mean(info.metropolis_rate)))
+    assert 0.0 <= rates[1] < 0.95 < rates[0] <= 1.0, rates
+    with pytest.raises(TypeError, match="acceptance_rate is 1 at any step size"):
+        adaptation = blackjax.window_adaptation(
+            liesample.magnetic_langevin, logdensity_fn, friction=1.0, magnetic_field=field
+        )
+        adaptation.run(jax.random.key(1), jnp.ones(2), 50)

@@ -8,6 +8,7 @@ keys; short runs, so that each test takes seconds.
 """
 
 import inspect
+import warnings
 
 import arviz_stats
 import jax
@@ -22,6 +23,7 @@ from numpyro.infer import MCMC, init_to_median, init_to_sample, init_to_value
 from liesample.geometry.spaces import SO
 from liesample.interop.numpyro_distributions import VonMisesFisher, rotation
 from liesample.interop.numpyro_kernel import GeometricHMC
+from liesample.tuning.trajectory import halton
 
 NORTH = np.array([0.0, 0.0, 1.0])
 FISHER = np.diag([2.0, 1.0, -0.5])
@@ -83,6 +85,10 @@ def test_extra_fields_have_nuts_names_and_arviz_plot_energy_works():
     assert set(adapt.inverse_mass_matrix) == {("mu",), ("scale",)}
     assert np.shape(adapt.inverse_mass_matrix[("scale",)]) == (2, 50)
     assert np.all(np.ptp(np.asarray(adapt.inverse_mass_matrix[("scale",)]), axis=1) == 0.0)
+    # the learnt integration time, fixed after warm-up; each transition integrates u T
+    times = np.asarray(adapt.trajectory_length)
+    assert np.all(np.isfinite(times) & (times > 0)) and np.all(np.ptp(times, axis=1) == 0.0)
+    assert np.all(np.asarray(extra["trajectory_length"]) <= times + step)
 
     tree = az.from_numpyro(mcmc)
     stats = tree.sample_stats
@@ -206,7 +212,10 @@ def test_potential_fn_with_dense_mass_recovers_a_correlated_gaussian():
     correlation = mass[:, 0, 1] / np.sqrt(mass[:, 0, 0] * mass[:, 1, 1])
     assert np.all(correlation > 0.6), correlation  # a diagonal mass would have 0
     steps, step = np.asarray(extra["num_steps"]), np.asarray(extra["step_size"])
-    assert np.array_equal(steps, np.ceil(1.5 / step).astype(int))  # L = ceil(T / ε)
+    # T = 1.5 fixed (not learnt), jittered: L = ceil(u T / ε), u in (0, 1)
+    np.testing.assert_allclose(extra["adapt_state"].trajectory_length, 1.5)
+    u = np.asarray(halton(np.arange(300, 900)))  # the Halton points of the draws' transitions
+    assert np.array_equal(steps, np.maximum(np.ceil(u * 1.5 / step), 1).astype(int))
     assert np.all(step > 1e-2)  # the heuristic left 1e-3 behind
     tree = pytest.importorskip("arviz").from_numpyro(mcmc)  # no model: ArviZ still converts
     assert tree.posterior["Param:0"].shape[:2] == (2, 600)
@@ -388,3 +397,29 @@ def test_init_docstring_lists_every_parameter():
     for name in inspect.signature(GeometricHMC.__init__).parameters:
         if name != "self":
             assert name in doc, name
+
+
+def test_num_steps_counts_gradients_and_an_unadapted_run_warns():
+    """``num_steps`` counts gradient evaluations (two per ``minimal_norm`` step), so ESS per
+    gradient from it is right for every scheme; ``num_warmup=0`` with something to adapt warns
+    (it ran unadapted and silently: E[log κ] 0.35 against 2.74, R-hat 7.5), and stays quiet
+    when everything is given."""
+    kernel = GeometricHMC(
+        potential_fn=gaussian_potential, integrator="minimal_norm", num_steps=3, step_size=0.3
+    )
+    mcmc = MCMC(kernel, num_warmup=0, num_samples=5, progress_bar=False)
+    fields = ("num_steps", "trajectory_length", "adapt_state")
+    with pytest.warns(UserWarning, match="num_warmup=0 runs unadapted, with step_size=0.3"):
+        mcmc.run(jax.random.key(0), init_params=np.zeros(2), extra_fields=fields)
+    extra = mcmc.get_extra_fields()
+    assert np.all(np.asarray(extra["num_steps"]) == 6)
+    np.testing.assert_allclose(extra["trajectory_length"], 0.9)
+    given = GeometricHMC(
+        potential_fn=gaussian_potential, num_steps=3, adapt_step_size=False,
+        adapt_mass_matrix=False,
+    )  # fmt: skip
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        MCMC(given, num_warmup=0, num_samples=5, progress_bar=False).run(
+            jax.random.key(0), init_params=np.zeros(2)
+        )

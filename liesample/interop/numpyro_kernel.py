@@ -33,16 +33,21 @@ the nearest point of the manifold), ``dense_mass``, ``inverse_mass_matrix``, ``s
 on ``Euclidean`` sites only: the exact drift on a sphere or a group needs one inverse mass per
 copy (:mod:`liesample.samplers.cotangent.geometric_hmc`).
 
-**Warm-up.** During NumPyro's ``num_warmup`` iterations the kernel adapts exactly as
-:func:`liesample.window_adaptation` does, sharing its code
-(:func:`liesample.tuning.adaptation.warmup_pieces` and
-:func:`liesample.tuning.adaptation.window_schedule`) and reading what to adapt from
-``liesample.geometric_hmc.adaptation``: Stan's windows, dual averaging of the step size towards
-``target_accept_prob``, the inverse mass from Welford moments in algebra coordinates (for a
-``dense_mass`` block the Welford covariance, shrunk towards ``1e-3 I`` as Stan does), and a
-fixed integration time ``T = π/2`` (``L = ceil(T/ε)`` steps of the ``integrator`` scheme)
-unless ``num_integration_steps`` is given. At the last warm-up iteration the step size becomes
-dual averaging's average; after that nothing changes.
+**Warm-up.** During NumPyro's ``num_warmup`` iterations the kernel adapts as
+:func:`liesample.window_adaptation` does, sharing its pieces
+(:func:`liesample.tuning.adaptation.warmup_pieces`,
+:func:`liesample.tuning.adaptation.window_schedule` and :mod:`liesample.tuning.trajectory`) and
+reading what to adapt from ``liesample.geometric_hmc.adaptation``: Stan's windows, dual averaging of
+the step size towards ``target_accept_prob``, the inverse mass from Welford moments in algebra
+coordinates (for a ``dense_mass`` block the Welford covariance, shrunk towards ``1e-3 I`` as Stan
+does), and a jittered integration time ``u T`` (``L = ceil(u T/ε)`` steps of the ``integrator``
+scheme, ``u`` from the base-2 Halton sequence) with ``T`` learnt by the ChEES-type rule, unless
+``num_integration_steps`` or ``integration_time`` is given. Vectorized chains
+(``chain_method="vectorized"``) adapt together: one step size (their pooled rate,
+:func:`liesample.tuning.adaptation.pooled_rate`), one mass (pooled moments) and one ``T``;
+sequential chains adapt alone. At the last warm-up iteration the step size becomes dual averaging's
+average and ``T`` the rule's; after that nothing changes. ``num_warmup=0`` with anything left to
+adapt warns.
 
 **State and diagnostics.** The sample field is ``z``: the manifold sites' points and the other
 sites' unconstrained values (``init_params`` takes the same form); ``postprocess_fn`` maps it to
@@ -50,9 +55,10 @@ the constrained values and adds deterministic sites, so ``mcmc.get_samples()`` h
 model sees. ``extra_fields`` offers NumPyro's HMC names: ``diverging`` (collected by default:
 ``print_summary`` counts divergences), ``energy`` (``H`` of the state after the transition,
 for ``arviz.plot_energy``), ``potential_energy``, ``accept_prob``, ``mean_accept_prob``,
-``num_steps``, ``step_size``, ``trajectory_length`` and ``adapt_state`` (its ``step_size`` and
-``inverse_mass_matrix``, keyed by tuples of site names). ``arviz.from_numpyro`` names some of
-them ``lp``, ``acceptance_rate`` and ``n_steps``.
+``num_steps`` (gradient evaluations: two per ``minimal_norm`` step), ``step_size``,
+``trajectory_length`` (``ε L``) and ``adapt_state`` (its ``step_size``, ``inverse_mass_matrix``,
+keyed by tuples of site names, and ``trajectory_length``, the adapted ``T``).
+``arviz.from_numpyro`` names some of them ``lp``, ``acceptance_rate`` and ``n_steps``.
 
 **Chains.** ``chain_method="vectorized"`` vmaps init and transition over chains;
 ``"sequential"`` works as well. NumPyro compiles its loop with plain ``jax.jit``, not
@@ -64,6 +70,7 @@ to round-off, a slow test), as XLA:CPU's vmapped-loop miscompile
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable
 from typing import NamedTuple
 
@@ -91,12 +98,16 @@ from liesample.geometry import spaces
 from liesample.geometry.cotangent import cotangent_bundle
 from liesample.interop.numpyro_distributions import rotation
 from liesample.samplers.cotangent.geometric_hmc import geometric_hmc
-from liesample.tuning.adaptation import (
+from liesample.tuning.adaptation import WarmupState, warmup_pieces, window_schedule
+from liesample.tuning.trajectory import (
     DEFAULT_INTEGRATION_TIME,
-    WarmupState,
-    integration_steps,
-    warmup_pieces,
-    window_schedule,
+    TrajectoryState,
+    averaged_steps,
+    chain_move,
+    euclidean_size,
+    halton,
+    jittered_steps,
+    trajectory_adaptation,
 )
 
 __all__ = ["AdaptState", "GeometricHMC", "GeometricHMCState"]
@@ -111,12 +122,14 @@ SUPPORTED = (
 
 
 class AdaptState(NamedTuple):
-    """``extra_fields=("adapt_state",)`` (the names of NumPyro's ``HMCAdaptState``): the step
-    size and inverse mass of the next transition; ``inverse_mass_matrix`` is keyed by tuples
-    of site names (one per site, one per ``dense_mass`` group)."""
+    """``extra_fields=("adapt_state",)`` (the names of NumPyro's ``HMCAdaptState``): what the
+    warm-up adapted, as the next transition uses it: the step size, the inverse mass (keyed by
+    tuples of site names: one per site, one per ``dense_mass`` group) and the integration time
+    ``T`` (each transition integrates ``u T`` when jittered, ``u`` in ``(0, 1)``)."""
 
     step_size: jax.Array
     inverse_mass_matrix: dict
+    trajectory_length: jax.Array
 
 
 class DenseMass(NamedTuple):
@@ -142,16 +155,13 @@ class GeometricHMCState(NamedTuple):
     mean_accept_prob: jax.Array
     num_steps: jax.Array
     step_size: jax.Array
+    trajectory_length: jax.Array
     adapt_state: AdaptState
     inner: object  # the liesample.geometric_hmc state
     warmup: WarmupState
     dense: DenseMass
+    length: TrajectoryState
     rng_key: jax.Array
-
-    @property
-    def trajectory_length(self):
-        """``ε L`` of the transition that led here."""
-        return self.step_size * self.num_steps
 
 
 def _base_constraint(constraint):
@@ -357,6 +367,7 @@ class GeometricHMC(MCMCKernel):
         init_strategy: Callable | None = None,
         divergence_threshold: float = 1000.0,
         integrator="leapfrog",
+        jitter: bool = True,
         kinetic_fn=None,
         forward_mode_differentiation: bool = False,
         regularize_mass_matrix: bool = True,
@@ -377,10 +388,12 @@ class GeometricHMC(MCMCKernel):
             Initial step size of the warm-up (the step size when ``adapt_step_size=False``).
         num_integration_steps, num_steps : int, optional
             Fixed steps of the scheme per transition (``num_steps`` is NumPyro's name; give
-            one); by default ``ceil(integration_time / ε)``.
+            one), neither jittered nor learnt; by default ``ceil(u T / ε)`` (``jitter``).
         integration_time, trajectory_length : float, optional
-            ``T`` of a trajectory (``trajectory_length`` is NumPyro's name; default ``π/2`` in
-            the units set by the mass, where NumPyro's HMC takes ``2π``).
+            A fixed integration time ``T`` (``trajectory_length`` is NumPyro's name), in the
+            units set by the mass. By default ``T`` is learnt in the warm-up by the ChEES-type
+            rule of :mod:`liesample.tuning.trajectory` from ``π/2`` (kept at ``π/2`` without
+            a warm-up or without ``Euclidean`` sites, the rule's coordinates).
         inverse_mass_matrix : None, float or dict
             Starting ``M⁻¹`` (unit by default): a positive scalar, or a dict keyed by site name
             or by tuple of site names (NumPyro's keys) → a value shaped as
@@ -412,6 +425,10 @@ class GeometricHMC(MCMCKernel):
         integrator : str or sequence of (effect, fraction) pairs
             The integration scheme, as for :func:`liesample.geometric_hmc` (``"leapfrog"`` by
             default, ``"minimal_norm"``, or a palindromic coefficient list).
+        jitter : bool
+            Integrate ``u T`` with ``u`` from the base-2 Halton sequence (default): a fixed
+            ``T`` can sit at a resonance of the target (a direction whose half period is
+            ``T``, whose chain then barely moves). ``False`` integrates ``T`` itself.
         kinetic_fn, forward_mode_differentiation, regularize_mass_matrix
             NumPyro's, accepted at their defaults only (``None``, ``False``, ``True``): the
             kinetic energy is ``½ pᵀM⁻¹p`` in algebra coordinates, gradients are taken in
@@ -471,7 +488,12 @@ class GeometricHMC(MCMCKernel):
             )
         num_integration_steps = _steps_argument(num_integration_steps)
         time = DEFAULT_INTEGRATION_TIME if integration_time is None else integration_time
-        self._integration_time = finite_float("integration_time", time, positive=True)
+        time = finite_float("integration_time", time, positive=True)
+        learn = integration_time is None and num_integration_steps is None
+        self._lengths = trajectory_adaptation(time, learn=learn)
+        if not isinstance(jitter, bool):
+            raise TypeError(f"jitter must be a bool, got {jitter!r}")
+        self._jitter = jitter
         self._num_integration_steps = num_integration_steps
         self._initial_mass = inverse_mass_matrix
         self._dense_mass = _dense_spec(dense_mass)
@@ -547,7 +569,9 @@ class GeometricHMC(MCMCKernel):
             )
             for key, group in self._blocks.items()
         }
-        self._pieces = warmup_pieces(self._inner_space, self._target, self._adapt_mass)
+        self._pieces = warmup_pieces(
+            self._inner_space, self._target, self._adapt_mass, batched=True
+        )
         self._da_init = dual_averaging_adaptation(self._target)[0]
 
     def _dense_groups(self):
@@ -763,28 +787,37 @@ class GeometricHMC(MCMCKernel):
     def _kernel_mass(self, inverse_mass, dense):
         return {**inverse_mass, **dense.matrices}
 
-    def _adapt_state(self, step_size, mass):
-        return AdaptState(step_size, {self._blocks[key]: m for key, m in mass.items()})
+    def _adapt_state(self, step_size, mass, length):
+        masses = {self._blocks[key]: m for key, m in mass.items()}
+        return AdaptState(step_size, masses, jnp.exp(length.log_time))
 
-    def _update_dense(self, dense, position, stage, window_end):
-        """Welford covariance of each dense block in slow windows; at a window's end the
-        block's ``M⁻¹`` becomes it, shrunk towards ``1e-3 I`` (Stan's regularisation)."""
+    def _update_dense(self, dense, positions, stage, window_end):
+        """Welford covariance of each dense block in slow windows, pooled over the chains
+        (``positions`` with a leading chain axis); at a window's end the block's ``M⁻¹``
+        becomes it, shrunk towards ``1e-3 I`` (Stan's regularisation)."""
         if not self._dense_keys or not self._adapt_mass:
             return dense
         slow = stage == 1
-        count = jnp.where(slow, dense.count + 1, dense.count)
-        n = count.astype(position[self._dense_keys[0]].dtype)
+        first = positions[self._dense_keys[0]]
+        batch = first.shape[0]
+        old = dense.count.astype(first.dtype)
+        count = jnp.where(slow, dense.count + batch, dense.count)
+        n = count.astype(first.dtype)
         matrices, means, m2s = {}, {}, {}
         for key in self._dense_keys:
-            x = position[key]
-            delta = x - dense.mean[key]
-            mean = dense.mean[key] + delta / jnp.maximum(n, 1.0)
-            m2 = dense.m2[key] + jnp.outer(delta, x - mean)
+            x = positions[key]
+            batch_mean = jnp.mean(x, 0)
+            centred = x - batch_mean
+            delta = batch_mean - dense.mean[key]
+            total = old + batch
+            mean = dense.mean[key] + delta * (batch / total)
+            spread = jnp.outer(delta, delta) * (old * batch / total)
+            m2 = dense.m2[key] + centred.T @ centred + spread
             mean = jnp.where(slow, mean, dense.mean[key])
             m2 = jnp.where(slow, m2, dense.m2[key])
             covariance = m2 / jnp.maximum(n - 1.0, 1.0)
             covariance = 0.5 * (covariance + covariance.T)
-            eye = jnp.eye(x.shape[0], dtype=x.dtype)
+            eye = jnp.eye(x.shape[-1], dtype=x.dtype)
             shrunk = (n / (n + 5.0)) * covariance + 1e-3 * (5.0 / (n + 5.0)) * eye
             matrices[key] = jnp.where(window_end, shrunk, dense.matrices[key])
             means[key] = jnp.where(window_end, jnp.zeros_like(mean), mean)
@@ -842,8 +875,12 @@ class GeometricHMC(MCMCKernel):
             if init_params is not None:
                 init_params = self._check_init_params(init_params, batched)
         self._num_warmup = int(num_warmup)
+        if self._num_warmup == 0:
+            self._warn_unadapted()
         if self._num_warmup > 0:
-            self._schedule = window_schedule(self._num_warmup)  # constants (also under jit)
+            # constants (also under jit): stage, window end, in the T average
+            stages, ends = window_schedule(self._num_warmup)
+            self._schedule = (stages, ends, averaged_steps(stages, ends))
         dtype = jnp.zeros(()).dtype
         pieces_mass, dense = self._starting_masses(dtype)
         logdensity = self._logdensity_fn(model_args, model_kwargs)
@@ -868,8 +905,10 @@ class GeometricHMC(MCMCKernel):
                 step_size = self._heuristic_step_size(
                     key_step, inner, inner_logdensity, mass, step_size
                 )
-            warm = self._pieces.init(inner, step_size, pieces_mass)
+            one = jax.tree.map(lambda x: jnp.asarray(x)[None], inner)  # a batch of one
+            warm = self._pieces.init(one, step_size, pieces_mass)
             mass = self._kernel_mass(warm.inverse_mass, dense)
+            length = self._lengths.init(euclidean_size(self._inner_space), dtype)
             zero = jnp.asarray(0.0, dtype)
             return GeometricHMCState(
                 jnp.asarray(0),
@@ -881,21 +920,18 @@ class GeometricHMC(MCMCKernel):
                 zero,
                 jnp.asarray(0),
                 warm.step_size,
-                self._adapt_state(warm.step_size, mass),
+                zero,
+                self._adapt_state(warm.step_size, mass, length),
                 inner,
                 warm,
                 dense,
+                length,
                 key,
             )
 
         if batched:
             state = jit(jax.vmap(init_one))(rng_key, init_params)
-            self._sample_fn = jax.vmap(self._sample_one, in_axes=(0, None, None))
-            if self._find_heuristic:
-                # The chains share the iteration count: passed unbatched, the window-end search
-                # stays a branch under vmap instead of running at every iteration.
-                shared = jax.vmap(self._sample_one, in_axes=(0, None, None, None))
-                self._sample_fn = lambda state, a, kw: shared(state, a, kw, state.i[0])
+            self._sample_fn = self._sample_batch
         else:
             state = jit(init_one)(rng_key, init_params)
             self._sample_fn = self._sample_one
@@ -916,83 +952,138 @@ class GeometricHMC(MCMCKernel):
         jax.eval_shape(self.postprocess_fn(model_args, model_kwargs), first)
         return state
 
-    def _sample_one(self, state, model_args, model_kwargs, i=None):
-        i = state.i if i is None else i
+    def _warn_unadapted(self):
+        """``num_warmup=0`` while something is to be adapted: say what the run keeps."""
+        unadapted = [
+            name
+            for name, adapted in (
+                (f"step_size={self._step_size:g}", self._adapt_step_size),
+                ("the starting inverse_mass_matrix", self._adapt_mass),
+                ("the starting integration_time", self._lengths.learn),
+            )
+            if adapted
+        ]
+        if unadapted:
+            warnings.warn(
+                "GeometricHMC with num_warmup=0 runs unadapted, with "
+                + ", ".join(unadapted)
+                + ", from starts that are not draws from the target: the draws may be biased "
+                "and the chains far from converged. Pass num_warmup > 0 to MCMC (e.g. "
+                "num_warmup=1000), or give step_size, inverse_mass_matrix and "
+                "trajectory_length with adapt_step_size=False, adapt_mass_matrix=False.",
+                UserWarning,
+                stacklevel=4,
+            )
+
+    def _sample_one(self, state, model_args, model_kwargs):
+        """One chain's transition: :meth:`_sample_batch` on a batch of one."""
+        batch = jax.tree.map(lambda x: jnp.asarray(x)[None], state)
+        return jax.tree.map(lambda x: x[0], self._sample_batch(batch, model_args, model_kwargs))
+
+    def _sample_batch(self, state, model_args, model_kwargs):
+        """One transition of every chain (a leading chain axis). The chains share the warm-up:
+        one step size (dual averaging of their pooled rate), one mass (their pooled moments)
+        and one ``T`` (ChEES centred on their mean); each chain carries a copy (and its own
+        running rate)."""
+        i = state.i[0]
         logdensity = self._inner_logdensity(model_args, model_kwargs or {})
-        rng_key, key = jax.random.split(state.rng_key)
-        if self._find_heuristic:
-            key, key_step = jax.random.split(key)
-        warm, dense = state.warmup, state.dense
-        step_size = warm.step_size
-        steps = self._steps_for(step_size)
+        keys = jax.vmap(jax.random.split)(state.rng_key)
+        rng_key, key = keys[:, 0], keys[:, 1]
+        key_step = jax.random.fold_in(key[0], 1) if self._find_heuristic else None
+        first = lambda tree: jax.tree.map(lambda x: x[0], tree)
+        warm, dense, length = first(state.warmup), first(state.dense), first(state.length)
+        steps = self._steps_for(warm.step_size, length, i)
         mass = self._kernel_mass(warm.inverse_mass, dense)
-        inner, info = self._kernel(
-            key,
-            state.inner,
-            logdensity,
-            self._inner_space,
-            step_size=step_size,
-            num_integration_steps=steps,
-            inverse_mass_matrix=mass,
-        )
+        options = dict(step_size=warm.step_size, num_integration_steps=steps)
+
+        def transition(key, inner):
+            space = self._inner_space
+            return self._kernel(key, inner, logdensity, space, **options, inverse_mass_matrix=mass)
+
+        inner, info = jax.vmap(transition)(key, state.inner)
         dtype = inner.logdensity.dtype
         kinetic = cotangent_bundle(self._inner_space, mass, None, dtype).kinetic_energy
-        energy = -inner.logdensity + kinetic(inner.momentum)
+        energy = -inner.logdensity + jax.vmap(kinetic)(inner.momentum)
+        new = (warm, dense, length)
         if self._num_warmup > 0:
-            index = jnp.minimum(i, self._num_warmup - 1)
-            stage, window_end = (jnp.asarray(column)[index] for column in self._schedule)
-            updated = self._pieces.update(warm, inner, info, stage, window_end)
-            new_dense = self._update_dense(dense, inner.position, stage, window_end)
-            if self._find_heuristic and self._adapt_mass:
-
-                def restart(warm):
-                    new_mass = self._kernel_mass(warm.inverse_mass, new_dense)
-                    step = self._heuristic_step_size(
-                        key_step, inner, logdensity, new_mass, warm.step_size
-                    )
-                    da_state = self._da_init(step)
-                    return warm._replace(
-                        da_state=da_state, step_size=jnp.exp(da_state.log_step_size)
-                    )
-
-                updated = jax.lax.cond(window_end, restart, lambda warm: warm, updated)
-            final = jnp.where(
-                i == self._num_warmup - 1,
-                self._pieces.final_step_size(updated),
-                updated.step_size,
-            )
-            if not self._adapt_step_size:
-                final = jnp.asarray(self._step_size, final.dtype)
-            updated = updated._replace(step_size=final)
-            in_warmup = i < self._num_warmup
-            keep = lambda new, old: jax.tree.map(lambda a, b: jnp.where(in_warmup, a, b), new, old)
-            warm, dense = keep(updated, warm), keep(new_dense, dense)
+            new = self._adapt(state, i, inner, info, mass, steps, logdensity, key_step)
         # NumPyro's running mean, restarted when sampling begins.
         count = jnp.where(i < self._num_warmup, i + 1, i + 1 - self._num_warmup)
         mean_accept = state.mean_accept_prob + (
             info.acceptance_rate - state.mean_accept_prob
         ) / count.astype(dtype)
+        num_chains = state.i.shape[0]
+        share = lambda tree: jax.tree.map(
+            lambda x: jnp.broadcast_to(x, (num_chains, *jnp.shape(x))), tree
+        )
+        new_mass = self._kernel_mass(new[0].inverse_mass, new[1])
+        adapted = self._adapt_state(new[0].step_size, new_mass, new[2])
+        warmup = share(new[0]._replace(smoothed=jnp.zeros(1, dtype)))
+        smoothed = new[0].smoothed if self._num_warmup > 0 else state.warmup.smoothed[:, 0]
+        warmup = warmup._replace(smoothed=smoothed[:, None])
         return GeometricHMCState(
             state.i + 1,
-            self._to_user(self._unpack(inner.position)),
+            jax.vmap(lambda p: self._to_user(self._unpack(p)))(inner.position),
             -inner.logdensity,
             energy,
             info.is_divergent,
             info.acceptance_rate,
             mean_accept,
-            jnp.asarray(info.num_integration_steps),
-            step_size,
-            self._adapt_state(warm.step_size, self._kernel_mass(warm.inverse_mass, dense)),
+            jnp.asarray(info.num_gradient_evaluations),
+            share(warm.step_size),
+            share(warm.step_size * steps),
+            share(adapted),
             inner,
-            warm,
-            dense,
+            warmup,
+            *share(new[1:]),
             rng_key,
         )
 
-    def _steps_for(self, step_size):
+    def _adapt(self, state, i, inner, info, mass, steps, logdensity, key_step):
+        """The shared warm-up's update after transition ``i`` of every chain (Stan's schedule):
+        the step size, the masses and ``T``. At the last warm-up iteration the step size
+        becomes dual averaging's average and ``T`` the rule's tuned one; after the warm-up
+        nothing changes."""
+        first = lambda tree: jax.tree.map(lambda x: x[0], tree)
+        warm, dense, length = first(state.warmup), first(state.dense), first(state.length)
+        # each chain carries its own running rate: gathered, one per chain
+        warm = warm._replace(smoothed=state.warmup.smoothed[:, 0])
+        index = jnp.minimum(i, self._num_warmup - 1)
+        stage, window_end, average = (jnp.asarray(column)[index] for column in self._schedule)
+        updated = self._pieces.update(warm, inner, info, stage, window_end)
+        new_dense = self._update_dense(dense, inner.position, stage, window_end)
+        if self._find_heuristic and self._adapt_mass:
+
+            def restart(warm):  # NumPyro's search, from the first chain
+                new_mass = self._kernel_mass(warm.inverse_mass, new_dense)
+                step = self._heuristic_step_size(
+                    key_step, first(inner), logdensity, new_mass, warm.step_size
+                )
+                da_state = self._da_init(step)
+                return warm._replace(da_state=da_state, step_size=jnp.exp(da_state.log_step_size))
+
+            updated = jax.lax.cond(window_end, restart, lambda warm: warm, updated)
+        last = i == self._num_warmup - 1
+        final = jnp.where(last, self._pieces.final_step_size(updated), updated.step_size)
+        if not self._adapt_step_size:
+            final = jnp.asarray(self._step_size, final.dtype)
+        updated = updated._replace(step_size=final)
+        move = chain_move(self._inner_space, state.inner, inner, info, mass, batched=True)
+        new_length = self._lengths.update(length, move, warm.step_size, steps, average)
+        tuned = jnp.log(self._lengths.final(new_length))
+        new_length = new_length._replace(
+            log_time=jnp.where(last, tuned, new_length.log_time).astype(tuned.dtype)
+        )
+        in_warmup = i < self._num_warmup
+        keep = lambda new, old: jax.tree.map(lambda a, b: jnp.where(in_warmup, a, b), new, old)
+        return keep(updated, warm), keep(new_dense, dense), keep(new_length, length)
+
+    def _steps_for(self, step_size, length, i):
+        """Steps of the scheme for transition ``i``: the fixed ``L``, or ``ceil(u T / ε)``."""
         if self._num_integration_steps is not None:
             return jnp.asarray(self._num_integration_steps)
-        return integration_steps(step_size, self._integration_time)
+        u = halton(i) if self._jitter else 1.0
+        return jittered_steps(u, jnp.exp(length.log_time), step_size)
 
     def sample(self, state, model_args, model_kwargs):
         return self._sample_fn(state, model_args, model_kwargs)
@@ -1003,7 +1094,7 @@ class GeometricHMC(MCMCKernel):
 
     def get_diagnostics_str(self, state):
         return (
-            f"{int(state.num_steps)} steps of size {float(state.step_size):.2e}. "
+            f"{int(state.num_steps)} gradients, step size {float(state.step_size):.2e}. "
             f"acc. prob={float(state.mean_accept_prob):.2f}"
         )
 

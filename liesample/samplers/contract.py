@@ -220,6 +220,10 @@ class Sampler(blackjax.base.SamplingAlgorithm, DeclaresNoiseBlocks):
         The name and event dims of a single-array position in the ``DataTree`` of
         :func:`liesample.sample` (e.g. ``R`` with dims ``(row, col)`` on ``SO(3)``); ``None``
         (default): named from the event's rank.
+    stuck_advice : str or None
+        What to do when a chain is stuck (its acceptance rate near 0): a call that works for
+        this sampler, which the runner's stuck-chain warning quotes. ``None`` (default): the
+        runner's generic advice.
     """
 
     settings: Mapping = MappingProxyType({})
@@ -227,6 +231,7 @@ class Sampler(blackjax.base.SamplingAlgorithm, DeclaresNoiseBlocks):
     tuning: StepSizeTuning | None = None
     draw_names: DrawNames | None = None
     law_groups: Callable | None = None
+    stuck_advice: str | None = None
 
     def __new__(cls, init, step, **hooks):
         unknown = sorted(set(hooks) - set(HOOKS))
@@ -246,6 +251,7 @@ HOOKS = {
     "noise_blocks": None,
     "draw_names": None,
     "law_groups": None,
+    "stuck_advice": None,
 }
 """The hooks a :class:`Sampler` declares, each with the factory of its default (``None``:
 the default is ``None``); keyword arguments of ``Sampler(init, step, **hooks)``."""

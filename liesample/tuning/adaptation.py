@@ -60,6 +60,18 @@ from liesample.samplers.contract import first_bad_chain
 from liesample.samplers.cotangent._core import check_starts
 from liesample.samplers.cotangent._euclidean import default_magnetic_field
 from liesample.samplers.cotangent.magnetic_hmc import magnetic_hmc
+from liesample.tuning.trajectory import (
+    CHEES_LEARNING_RATE,
+    DEFAULT_INTEGRATION_TIME,
+    MAX_NUM_INTEGRATION_STEPS,
+    ChainMove,
+    averaged_steps,
+    chain_move,
+    euclidean_size,
+    halton,
+    jittered_steps,
+    trajectory_adaptation,
+)
 
 __all__ = [
     "DEFAULT_ANGLE",
@@ -70,8 +82,6 @@ __all__ = [
     "window_schedule",
 ]
 
-DEFAULT_INTEGRATION_TIME = 0.5 * math.pi
-MAX_NUM_INTEGRATION_STEPS = 1024
 
 
 class GeometricAdaptation(NamedTuple):
@@ -151,6 +161,26 @@ class WarmupState(NamedTuple):
     step_size: jax.Array
     inverse_mass: object
     welford: tuple
+    smoothed: jax.Array  # each chain's running Metropolis rate (batched; else one value)
+
+
+RATE_SMOOTHING = 0.9
+"""Weight of the past in each chain's running Metropolis rate (about ten transitions)."""
+
+
+def pooled_rate(rates, smoothed):
+    """``(rate, smoothed)``: the rate dual averaging reads from a batch of chains, and their
+    updated running rates. The rate is the chains' mean rate times the ratio of the harmonic
+    to the arithmetic mean of their running rates: near 1 for chains that accept alike (the
+    step then meets the target), near 0 while one chain stays stuck (the step is lowered until
+    it moves). (The harmonic mean of the per-transition rates would also free a stuck chain,
+    but per-transition rates are noisy and it ends well above the target.)"""
+    own = jnp.where(jnp.isfinite(rates), rates, 0.0)
+    smoothed = RATE_SMOOTHING * smoothed + (1.0 - RATE_SMOOTHING) * own
+    harmonic = 1.0 / jnp.mean(1.0 / jnp.maximum(smoothed, 1e-30))
+    arithmetic = jnp.mean(smoothed)
+    ratio = jnp.where(arithmetic > 0, harmonic / jnp.maximum(arithmetic, 1e-30), 1.0)
+    return jnp.mean(own) * ratio, smoothed
 
 
 class WarmupPieces(NamedTuple):
@@ -182,25 +212,28 @@ def warmup_pieces(
     of :func:`_inverse_mass`, one transition at a time, on Stan's schedule: ``stage`` 1 (slow
     window) accumulates the mass statistic, ``window_end`` sets the mass and restarts dual
     averaging from its averaged step size. ``batched``: states carry a leading chain axis; the
-    chains share the step size and mass, dual averaging follows the harmonic mean of their
-    acceptance rates (a stuck chain lowers the step) and the mass pools their moments."""
+    chains share the step size and mass, dual averaging follows :func:`pooled_rate` (a stuck
+    chain lowers the step) and the mass pools their moments."""
     da_init, da_update, da_final = dual_averaging_adaptation(target_acceptance_rate)
     statistic = jax.vmap(functools.partial(_statistic, space)) if batched else None
 
     def init(state, initial_step_size, inverse_mass):
+        num_chains = jnp.shape(state.logdensity)[0] if batched else 1
         if batched:
             state = jax.tree.map(lambda leaf: leaf[0], state)
         dtype = jnp.asarray(state.logdensity).dtype
         size = _statistic(space, state).shape[0]
         welford = (jnp.zeros(size, dtype), jnp.zeros(size, dtype), jnp.asarray(0))
         step_size = jnp.asarray(initial_step_size, dtype)
-        return WarmupState(da_init(step_size), step_size, inverse_mass, welford)
+        smoothed = jnp.full(num_chains, target_acceptance_rate, dtype)
+        return WarmupState(da_init(step_size), step_size, inverse_mass, welford, smoothed)
 
     def update(warm, state, info, stage, window_end):
-        da_state, _, inverse_mass, welford = warm
+        da_state, _, inverse_mass, welford, smoothed = warm
         slow = (stage == 1) & adapt_mass
         if batched:
-            da_state = da_update(da_state, _harmonic_mean(info.metropolis_rate))
+            rate, smoothed = pooled_rate(info.metropolis_rate, smoothed)
+            da_state = da_update(da_state, rate)
             updated = _welford_batch(welford, statistic(state))
         else:
             rate = jnp.where(jnp.isfinite(info.metropolis_rate), info.metropolis_rate, 0.0)
@@ -220,7 +253,8 @@ def warmup_pieces(
             da_final,
             (da_state, inverse_mass, welford),
         )
-        return WarmupState(da_state, jnp.exp(da_state.log_step_size), inverse_mass, welford)
+        step_size = jnp.exp(da_state.log_step_size)
+        return WarmupState(da_state, step_size, inverse_mass, welford, smoothed)
 
     def final_step_size(warm):
         return da_final(warm.da_state)
@@ -309,20 +343,58 @@ def window_adaptation(
     del progress_bar  # accepted for BlackJAX compatibility; the warm-up runs in one compiled loop
     spaces._spaces(space)
     finite_float("initial_step_size", initial_step_size, positive=True)
+    plan = _window_plan(algorithm, declared, target_acceptance_rate, integration_time, parameters)
+    warm_up = functools.partial(
+        _window_run, plan, algorithm, logdensity_fn, space, initial_step_size, adapt_mass
+    )
+
+    def run(rng_key, initial_position, num_steps: int = 1000):
+        """Warm up for ``num_steps`` transitions: ``((state, parameters), info)``.
+
+        ``initial_position`` is one point, or a batch of starts with a leading chain axis (one
+        per chain, as for :func:`liesample.sample`): the chains then adapt together (shared
+        step size and mass) and ``state`` holds every chain's final state, the starts of the
+        run that follows. One point gives one chain's state (BlackJAX's shape); to sample it
+        with :func:`liesample.sample`, give it a chain axis of one
+        (``jax.tree.map(lambda x: x[None], state.position)``)."""
+        return warm_up(rng_key, initial_position, num_steps)
+
+    return GeometricAdaptation(run)
+
+
+class _WindowPlan(NamedTuple):
+    """What :func:`window_adaptation` checked: the kernel and its options, the sampler's other
+    parameters, the target rate, the starting mass, a fixed ``L`` (or ``None``) and the rule
+    for ``T`` (HMC with ``L`` unset: jittered)."""
+
+    kernel: Callable
+    build_options: dict
+    parameters: dict
+    target: float
+    initial_mass: object
+    is_hmc: bool
+    fixed_steps: int | None
+    lengths: object
+
+
+def _window_plan(algorithm, declared, target_acceptance_rate, integration_time, parameters):
+    """Validate ``window_adaptation``'s arguments against the sampler's declaration."""
+    name = type(algorithm).__name__
     build_options = {k: parameters.pop(k) for k in declared["options"] if k in parameters}
     kernel = algorithm.build_kernel(**build_options)
     is_hmc = "num_integration_steps" in declared["adapted"]
     fixed_steps = parameters.pop("num_integration_steps", None)
-    if is_hmc:
-        if fixed_steps is not None and integration_time is not None:
-            raise ValueError("give integration_time or num_integration_steps, not both")
-        if fixed_steps is None:
-            time = DEFAULT_INTEGRATION_TIME if integration_time is None else integration_time
-            integration_time = finite_float("integration_time", time, positive=True)
-        elif isinstance(fixed_steps, bool) or int(fixed_steps) != fixed_steps or fixed_steps < 1:
-            raise ValueError(f"num_integration_steps must be an integer >= 1, got {fixed_steps!r}")
-    elif fixed_steps is not None or integration_time is not None:
+    if not is_hmc and (fixed_steps is not None or integration_time is not None):
         raise ValueError("num_integration_steps and integration_time are HMC parameters")
+    if fixed_steps is not None and integration_time is not None:
+        raise ValueError("give integration_time or num_integration_steps, not both")
+    if fixed_steps is not None and (
+        isinstance(fixed_steps, bool) or int(fixed_steps) != fixed_steps or fixed_steps < 1
+    ):
+        raise ValueError(f"num_integration_steps must be an integer >= 1, got {fixed_steps!r}")
+    time = DEFAULT_INTEGRATION_TIME if integration_time is None else integration_time
+    time = finite_float("integration_time", time, positive=True)
+    learn = is_hmc and fixed_steps is None and integration_time is None
     for key, value in declared["defaults"].items():
         parameters.setdefault(key, value)
     if target_acceptance_rate is None:
@@ -337,17 +409,62 @@ def window_adaptation(
             f"{sorted(declared['parameters'])} and the options {sorted(declared['options'])}"
         )
     initial_mass = parameters.pop("inverse_mass_matrix", None)
+    fixed = None if fixed_steps is None else int(fixed_steps)
+    lengths = trajectory_adaptation(time, learn=learn)
+    return _WindowPlan(
+        kernel, build_options, parameters, target, initial_mass, is_hmc, fixed, lengths
+    )
 
-    def num_steps_for(step_size):
-        if not is_hmc:
-            return jnp.asarray(1)
-        if fixed_steps is not None:
-            return jnp.asarray(int(fixed_steps))
-        return integration_steps(step_size, integration_time)
+
+def _window_run(plan, algorithm, logdensity_fn, space, initial_step_size, adapt_mass,
+                rng_key, initial_position, num_steps):  # fmt: skip
+    """``run`` of :func:`window_adaptation`: the chains' states, the warm-up's compiled
+    ``scan`` and the tuned parameters."""
+    if isinstance(num_steps, bool) or int(num_steps) != num_steps or num_steps < 20:
+        raise ValueError(f"num_steps must be an integer >= 20, got {num_steps!r}")
+    num_chains = _num_chains(space, initial_position)
+    batched = num_chains is not None
+    init = lambda x: algorithm.init(x, logdensity_fn, space)
+    if batched:
+        check_starts(space)(initial_position)
+    state = jax.vmap(init)(initial_position) if batched else init(initial_position)
+    pieces = warmup_pieces(space, plan.target, adapt_mass, batched)
+    dtype = jnp.asarray(state.logdensity).dtype
+    inverse_mass = spaces.check_inverse_mass(space, plan.initial_mass, dtype)
+    stages, ends = window_schedule(num_steps)
+    length = plan.lengths.init(euclidean_size(space), dtype)
+    carry = (state, pieces.init(state, initial_step_size, inverse_mass), length)
+    keys = jax.random.split(rng_key, int(num_steps))
+    schedule = (stages, ends, averaged_steps(stages, ends), np.arange(num_steps))
+    one_step = _window_step(plan, pieces, logdensity_fn, space, num_chains)
+
+    @jit
+    def warmup(carry, keys, schedule):
+        return jax.lax.scan(one_step, carry, (keys, schedule))
+
+    (state, warm, length), info = warmup(carry, keys, schedule)
+    step_size = float(pieces.final_step_size(warm))
+    tuned = {**plan.parameters, "step_size": step_size, "inverse_mass_matrix": warm.inverse_mass}
+    if plan.fixed_steps is not None:
+        tuned["num_integration_steps"] = plan.fixed_steps
+    elif plan.is_hmc:
+        time = float(plan.lengths.final(length))
+        tuned["num_integration_steps"] = int(integration_steps(step_size, time))
+        tuned["jitter"] = True
+    tuned.update(plan.build_options)
+    return (state, tuned), info
+
+
+def _window_step(plan, pieces, logdensity_fn, space, num_chains):
+    """One warm-up transition of :func:`window_adaptation` (a ``scan`` body): the kernel at
+    the current parameters (``L`` fixed, or ``ceil(u T / ε)``), then the updates of the step
+    size and mass and of ``T``."""
+    batched = num_chains is not None
+    jittered = plan.is_hmc and plan.fixed_steps is None
 
     def transition(key, state, warm, steps):
-        extra = {"num_integration_steps": steps} if is_hmc else {}
-        return kernel(
+        extra = {"num_integration_steps": steps} if plan.is_hmc else {}
+        return plan.kernel(
             key,
             state,
             logdensity_fn,
@@ -355,59 +472,28 @@ def window_adaptation(
             step_size=warm.step_size,
             inverse_mass_matrix=warm.inverse_mass,
             **extra,
-            **parameters,
+            **plan.parameters,
         )
 
-    def run(rng_key, initial_position, num_steps: int = 1000):
-        """Warm up for ``num_steps`` transitions: ``((state, parameters), info)``.
+    move = jax.vmap(transition, in_axes=(0, 0, None, None)) if batched else transition
 
-        ``initial_position`` is one point, or a batch of starts with a leading chain axis (one
-        per chain, as for :func:`liesample.sample`): the chains then adapt together (shared
-        step size and mass) and ``state`` holds every chain's final state, the starts of the
-        run that follows."""
-        if isinstance(num_steps, bool) or int(num_steps) != num_steps or num_steps < 20:
-            raise ValueError(f"num_steps must be an integer >= 20, got {num_steps!r}")
-        num_chains = _num_chains(space, initial_position)
-        batched = num_chains is not None
-        if batched:
-            check_starts(space)(initial_position)
-            state = jax.vmap(lambda x: algorithm.init(x, logdensity_fn, space))(initial_position)
-            move = jax.vmap(transition, in_axes=(0, 0, None, None))
+    def one_step(carry, xs):
+        before, warm, length = carry
+        key, (stage, window_end, average, index) = xs
+        if jittered:
+            steps = jittered_steps(halton(index), jnp.exp(length.log_time), warm.step_size)
         else:
-            state = algorithm.init(initial_position, logdensity_fn, space)
-            move = transition
-        pieces = warmup_pieces(space, target, adapt_mass, batched)
-        dtype = jnp.asarray(state.logdensity).dtype
-        inverse_mass = spaces.check_inverse_mass(space, initial_mass, dtype)
-        stages, ends = window_schedule(num_steps)
-        carry = (state, pieces.init(state, initial_step_size, inverse_mass))
-        keys = jax.random.split(rng_key, int(num_steps))
+            steps = jnp.asarray(plan.fixed_steps or 1)
+        if batched:
+            key = jax.random.split(key, num_chains)
+        state, info = move(key, before, warm, steps)
+        if jittered:
+            chains = chain_move(space, before, state, info, warm.inverse_mass, batched)
+            length = plan.lengths.update(length, chains, warm.step_size, steps, average)
+        warm = pieces.update(warm, state, info, stage, window_end)
+        return (state, warm, length), AdaptationInfo(state, info, warm.step_size, steps)
 
-        def one_step(carry, xs):
-            state, warm = carry
-            key, (stage, window_end) = xs
-            steps = num_steps_for(warm.step_size)
-            if batched:
-                key = jax.random.split(key, num_chains)
-            state, info = move(key, state, warm, steps)
-            warm = pieces.update(warm, state, info, stage, window_end)
-            return (state, warm), AdaptationInfo(state, info, warm.step_size, steps)
-
-        @jit
-        def warmup(carry, keys, stages, ends):
-            return jax.lax.scan(one_step, carry, (keys, (stages, ends)))
-
-        (state, warm), info = warmup(carry, keys, stages, ends)
-        step_size = float(pieces.final_step_size(warm))
-        tuned = dict(parameters)
-        tuned["step_size"] = step_size
-        tuned["inverse_mass_matrix"] = warm.inverse_mass
-        if is_hmc:
-            tuned["num_integration_steps"] = int(num_steps_for(step_size))
-        tuned.update(build_options)
-        return (state, tuned), info
-
-    return GeometricAdaptation(run)
+    return one_step
 
 
 # --------------------------------------------------------------------------- magnetic HMC
@@ -417,17 +503,6 @@ DEFAULT_ANGLE = 0.0
 A field helps on some targets (strongly correlated or curved ones) and slows the slowest
 directions of others, so it is opt-in; ``angle > 0`` turns it on, adapted jointly."""
 CHEES_TARGET_ACCEPTANCE_RATE = magnetic_hmc.adaptation["target_acceptance_rate"]
-CHEES_LEARNING_RATE = 0.01
-CHEES_AVERAGING = 0.95  # running means of the ChEES estimates
-CHEES_MAX_TIME_PER_SD = math.pi
-"""Upper bound of the learnt ``T`` in units of ``√(tr Σ̃)``, ``Σ̃`` the target's covariance
-whitened by the current mass (estimated from the chains' spread): half a period of a Gaussian's
-slowest direction is at most ``π √(tr Σ̃)``, beyond which it turns back."""
-CHEES_MAX_PULL = 0.1
-"""The most (in ``log T``) the bound of :func:`_bound_log_time` lowers ``T`` per transition:
-a bound that dips for a few transitions (dual averaging trying a tiny ``ε``, chains that
-started together) cannot drag ``T`` far down, from where the gradient raises it by
-``2 · learning_rate`` at most."""
 
 
 class MagneticAdaptationInfo(NamedTuple):
@@ -442,18 +517,6 @@ class MagneticAdaptationInfo(NamedTuple):
     strength: jax.Array
 
 
-def _van_der_corput(num: int) -> np.ndarray:
-    """The base-2 Halton sequence ``1/2, 1/4, 3/4, 1/8, …`` (``num`` points in ``(0, 1)``)."""
-    index = np.arange(1, num + 1)
-    out = np.zeros(num)
-    scale = 0.5
-    while np.any(index):
-        out += scale * (index & 1)
-        index >>= 1
-        scale *= 0.5
-    return out
-
-
 def _rotation(dimension: int) -> np.ndarray:
     """``J̃`` of :func:`default_magnetic_field`: its field for unit mass and unit strength."""
     return np.asarray(default_magnetic_field(np.ones(dimension), 1.0))
@@ -464,83 +527,6 @@ def _field(rotation, inverse_mass, strength):
     ``G = strength · M^{1/2} J̃ M^{1/2}``, i.e. ``G_ij = strength · J̃_ij / √(m⁻¹_i m⁻¹_j)``."""
     scale = jax.lax.rsqrt(inverse_mass)
     return strength * rotation * scale[:, None] * scale[None, :]
-
-
-def _chees_terms(before, after, momentum, accepted, acceptance, inverse_mass, time):
-    """Estimates of ``ChEES`` and of ``∂ ChEES / ∂ log T`` from a batch of chains.
-
-    ``ChEES = ¼ E[(‖x' − E x‖² − ‖x − E x‖²)²]`` (Hoffman, Radul & Sountsov 2021) in the
-    coordinates whitened by the mass (``x = M^{1/2} q``), the centre estimated by the mean
-    over chains. Its derivative along a trajectory of length ``t = u T`` is
-    ``Δ · (x' − x̄')·ẋ' · t`` with ``Δ`` the change of squared distance, and
-    ``(x' − x̄')·ẋ' = (q' − q̄')·p'`` (the mass cancels, and the field does not enter:
-    ``q̇ = M⁻¹p`` with or without it). The paper weights each chain's proposal by its
-    acceptance probability; here the chain's accepted move stands in for it (a rejected move
-    contributes 0, the same in expectation), normalised by the summed probabilities.
-    Returns ``(chees, gradient, spread)``, ``spread`` the chains' mean of ``‖x' − x̄'‖²`` and
-    of its square.
-    """
-    centred_before = before - jnp.mean(before, 0)
-    centred_after = after - jnp.mean(after, 0)
-    change = jnp.sum(centred_after**2 / inverse_mass, -1) - jnp.sum(
-        centred_before**2 / inverse_mass, -1
-    )
-    rate = jnp.sum(centred_after * momentum, -1)
-    total = jnp.sum(acceptance)
-    norm = jnp.where(total > 0, 1.0 / jnp.maximum(total, 1e-30), 0.0)
-    chees = norm * jnp.sum(jnp.where(accepted, 0.25 * change**2, 0.0))
-    gradient = norm * jnp.sum(jnp.where(accepted, time * change * rate, 0.0))
-    distance = jnp.sum(centred_after**2 / inverse_mass, -1)
-    spread = jnp.stack([jnp.mean(distance), jnp.mean(distance**2)])
-    return chees, gradient, spread
-
-
-def _chees_gradient(*args):
-    """``∂ ChEES / ∂ log T`` of :func:`_chees_terms`."""
-    return _chees_terms(*args)[1]
-
-
-def _log_efficiency_gradient(means, cost_slope):
-    """``∂/∂ log T`` of ``log[(1 − ρ)/((1 + ρ) E L)]`` from running means ``(Ĉ, ĝ, E s, E s²)``.
-
-    ``ρ`` is the one-transition autocorrelation of the squared distance ``s = ‖x − x̄‖²``, so
-    ``(1 − ρ)/(1 + ρ)`` is its effective sample size per transition and dividing by the mean
-    number of leapfrog steps, ``E L ≈ T/(2ε) + ½``, makes it per gradient evaluation
-    (``cost_slope = ∂ log E L / ∂ log T = T/(T + ε)``). ChEES is ``(1 − ρ)`` times its value for
-    independent draws, ``½ Var s``, so with ``r = Ĉ / (½ Var s)``, ``1 − ρ = r/2`` and the
-    gradient is ``(ĝ/Ĉ) · 4/(4 − r) − cost_slope``.
-    For one Gaussian direction of frequency ``ω`` its maximum is at ``T ≈ 1.8/ω`` (ChEES
-    alone first peaks at ``2.25/ω``, ChEES per unit length at ``π/(2ω)``).
-    """
-    chees, gradient, mean, square = means[0], means[1], means[2], means[3]
-    independent = 0.5 * (square - mean**2)
-    r = jnp.clip(chees / jnp.maximum(independent, 1e-300), 0.0, 3.0)
-    ratio = gradient / jnp.maximum(chees, 1e-300)
-    return jnp.where((chees > 0) & (independent > 0), ratio * 4.0 / (4.0 - r) - cost_slope, 0.0)
-
-
-def _bound_log_time(log_time, step_size, max_steps, means, index, num_chains):
-    """``log T`` pulled down towards ``log min(L_max ε, π √(tr Σ̃))`` when above it, by
-    :data:`CHEES_MAX_PULL` at most per transition.
-
-    ``tr Σ̃`` is the running mean of the chains' squared distance to their centre (``means[2]``
-    of :func:`_log_efficiency_gradient`), corrected for the running mean's start at 0 and for
-    the centre's estimate (``C/(C − 1)``): above ``π √(tr Σ̃)`` the slowest direction of a
-    Gaussian turns back (:data:`CHEES_MAX_TIME_PER_SD`).
-    """
-    weight = 1.0 - CHEES_AVERAGING ** (index + 1.0)
-    trace = means[2] / weight * num_chains / (num_chains - 1.0)
-    upper = jnp.log(max_steps * step_size)
-    spread = jnp.log(CHEES_MAX_TIME_PER_SD * jnp.sqrt(trace))
-    upper = jnp.where(jnp.isfinite(spread) & (trace > 0), jnp.minimum(upper, spread), upper)
-    return log_time - jnp.clip(log_time - upper, 0.0, CHEES_MAX_PULL)
-
-
-def _harmonic_mean(rates):
-    """Harmonic mean of the chains' acceptance rates (0 if any is 0): one stuck chain is enough
-    to lower the step size, as in ChEES-HMC."""
-    rates = jnp.where(jnp.isfinite(rates), rates, 0.0)
-    return jnp.where(jnp.all(rates > 0), 1.0 / jnp.mean(1.0 / jnp.maximum(rates, 1e-30)), 0.0)
 
 
 def _field_from(ends) -> int:
@@ -604,13 +590,13 @@ def magnetic_window_adaptation(
     mean of the jittered lengths, ``round(T / (2ε))``.
 
     **Schedule.** Stan's windows (as :func:`window_adaptation`), all chains sharing one set of
-    parameters: the step size is dual-averaged towards ``target_acceptance_rate`` of the
-    harmonic mean of the chains' acceptance probabilities *with the field on*; the inverse mass
-    is the regularised variance of every chain's draws in a slow window. The field is off up to
-    the end of the first slow window (:func:`_field_from`: a field scaled to the step slows the
-    chains' convergence and would spoil the first mass); from there on, at every step, it is
-    ``default_magnetic_field(M⁻¹, angle / ε)`` for the current ``M⁻¹`` and ``ε``, so the
-    whitened velocity turns by ``angle`` rad per leapfrog step.
+    parameters: the step size is dual-averaged towards ``target_acceptance_rate`` of the chains'
+    pooled acceptance probability (:func:`pooled_rate`) *with the field on*; the inverse mass is the
+    regularised variance of every chain's draws in a slow window. The field is off up to the end of
+    the first slow window (:func:`_field_from`: a field scaled to the step slows the chains'
+    convergence and would spoil the first mass); from there on, at every step, it is
+    ``default_magnetic_field(M⁻¹, angle / ε)`` for the current ``M⁻¹`` and ``ε``, so the whitened
+    velocity turns by ``angle`` rad per leapfrog step.
 
     **Trajectory length (ChEES).** Each transition integrates for ``t = u T`` with ``u`` from the
     base-2 Halton sequence (the same for every chain), ``L = ceil(t / ε)`` steps; ``log T`` is
@@ -679,143 +665,149 @@ def magnetic_window_adaptation(
         raise ValueError(f"max_num_integration_steps must be an integer >= 1, got {max_steps!r}")
     max_steps = int(max_steps)
     divergence_threshold = finite_float("divergence_threshold", divergence_threshold, positive=True)
-    learn = integration_time is None
-    da_init, da_update, da_final = dual_averaging_adaptation(target)
+    lengths = trajectory_adaptation(
+        initial_time if integration_time is None else integration_time,
+        learning_rate,
+        max_steps,
+        learn=integration_time is None,
+    )
+    options = {"divergence_threshold": divergence_threshold, **scheme}
+    plan = _MagneticPlan(
+        algorithm, logdensity_fn, angle, target, initial_step_size, adapt_mass, max_steps,
+        options, lengths,
+    )  # fmt: skip
 
     def run(rng_key, initial_positions, num_steps: int = 1000):
         """Warm up ``C`` chains for ``num_steps`` transitions; ``((states, parameters), info)``."""
-        if isinstance(num_steps, bool) or int(num_steps) != num_steps or num_steps < 20:
-            raise ValueError(f"num_steps must be an integer >= 20, got {num_steps!r}")
-        num_steps = int(num_steps)
-        flat = _flat_starts(initial_positions, logdensity_fn)
-        num_chains, dimension = flat.shape
-        dtype = flat.dtype
-        states = jax.vmap(lambda x: algorithm.init(x, logdensity_fn))(initial_positions)
-        rotation = jnp.asarray(_rotation(dimension), dtype)
-        zero_field = np.zeros((dimension, dimension))
-        stages, ends = window_schedule(num_steps)
-        slow = np.flatnonzero(stages == 1)
-        last_window = np.flatnonzero(ends[: slow[-1]])  # ends before the last slow window's
-        average_from = int(last_window[-1]) + 1 if slow.size and last_window.size else 0
-        if not slow.size:
-            average_from = num_steps // 2
-        jitter = _van_der_corput(num_steps)
-        time0 = integration_time if integration_time is not None else initial_time
-        # The field is off until the first mass update (the end of the first slow window):
-        # see :func:`_field_from`.
-        field_on = np.arange(num_steps) > _field_from(ends)
-
-        def one_step(carry, xs):
-            states, da_state, log_time, means, inverse_mass, welford = carry
-            key, u, stage, window_end, index, on = xs
-            step_size = jnp.exp(da_state.log_step_size)
-            strength = jnp.where(on, angle / step_size, 0.0)
-            # angle 0: a concrete zero field, so the sampler takes the free drift (no expm)
-            field = zero_field if angle == 0.0 else _field(rotation, inverse_mass, strength)
-            trajectory = jnp.exp(log_time)
-            steps = jnp.clip(jnp.ceil(u * trajectory / step_size), 1, max_steps).astype(int)
-
-            # The top-level API: the flows e^{±εGM⁻¹} are computed once per step for all chains.
-            sampler = algorithm(
-                logdensity_fn,
-                step_size,
-                inverse_mass,
-                steps,
-                field,
-                divergence_threshold=divergence_threshold,
-                **scheme,
-            )
-            new_states, info = jax.vmap(sampler.step)(jax.random.split(key, num_chains), states)
-            da_state = da_update(da_state, _harmonic_mean(info.acceptance_rate))
-            before = jax.vmap(_ravel)(states.position)
-            after = jax.vmap(_ravel)(new_states.position)
-            if learn:
-                chees, gradient, spread = _chees_terms(
-                    before,
-                    after,
-                    new_states.momentum,
-                    info.is_accepted,
-                    info.acceptance_rate,
-                    inverse_mass,
-                    steps * step_size,  # the time integrated (not u T: L >= 1 and ceil)
-                )
-                # Running means of the estimates, then their ratios (not the mean of ratios:
-                # one batch's ChEES can be near 0).
-                terms = jnp.concatenate([jnp.stack([chees, gradient]), spread])
-                ok = jnp.all(jnp.isfinite(terms))
-                means = jnp.where(
-                    ok, CHEES_AVERAGING * means + (1.0 - CHEES_AVERAGING) * terms, means
-                )
-                gradient = _log_efficiency_gradient(means, trajectory / (trajectory + step_size))
-                # The gradient is dimensionless (≈ +1 for too short, ≥ −1 for too long a
-                # trajectory), so plain stochastic ascent on log T with a fixed step.
-                update = learning_rate * jnp.clip(gradient, -2.0, 2.0)
-                # At T <= ε a transition is one step whatever T is: no lower T to move to.
-                update = jnp.where(trajectory <= step_size, jnp.maximum(update, 0.0), update)
-                log_time = jnp.where(jnp.isfinite(update), log_time + update, log_time)
-                log_time = _bound_log_time(log_time, step_size, max_steps, means, index, num_chains)
-            in_slow = (stage == 1) & adapt_mass
-            welford = jax.tree.map(
-                lambda a, b: jnp.where(in_slow, a, b), _welford_batch(welford, after), welford
-            )
-
-            da_state, inverse_mass, welford = _close_window(
-                window_end & adapt_mass,
-                lambda mean, m2, count: _regularised_variance(
-                    m2 / jnp.maximum(count - 1, 1), count.astype(dtype)
-                ),
-                da_init,
-                da_final,
-                (da_state, inverse_mass, welford),
-            )
-            record = MagneticAdaptationInfo(
-                new_states, info, step_size, steps, trajectory, strength
-            )
-            return (new_states, da_state, log_time, means, inverse_mass, welford), record
-
-        welford = (jnp.zeros(dimension, dtype), jnp.zeros(dimension, dtype), jnp.asarray(0))
-        carry = (
-            states,
-            da_init(jnp.asarray(initial_step_size, dtype)),
-            jnp.log(jnp.asarray(time0, dtype)),
-            jnp.zeros(4, dtype),
-            jnp.ones(dimension, dtype),
-            welford,
-        )
-        xs = (
-            jax.random.split(rng_key, num_steps),
-            jnp.asarray(jitter, dtype),
-            jnp.asarray(stages),
-            jnp.asarray(ends),
-            jnp.arange(num_steps),
-            jnp.asarray(field_on),
-        )
-
-        @jit
-        def warmup(carry, xs):
-            return jax.lax.scan(one_step, carry, xs)
-
-        (states, da_state, _, _, inverse_mass, _), info = warmup(carry, xs)
-        step_size = float(da_final(da_state))
-        times = np.asarray(info.trajectory_length)
-        trajectory = float(np.exp(np.mean(np.log(times[average_from:]))))
-        inverse_mass = np.asarray(inverse_mass)
-        if not (np.isfinite(step_size) and np.all(np.isfinite(inverse_mass))):
-            raise FloatingPointError(
-                "magnetic_window_adaptation ended with a non-finite step size or mass: the "
-                "chains diverged (check logdensity_fn and the starts)"
-            )
-        parameters = {
-            "step_size": step_size,
-            "inverse_mass_matrix": inverse_mass,
-            "num_integration_steps": int(np.clip(math.ceil(trajectory / step_size), 1, max_steps)),
-            "magnetic_field": default_magnetic_field(inverse_mass, angle / step_size),
-            **scheme,
-        }
-        info = info._replace(trajectory_length=info.trajectory_length.at[-1].set(trajectory))
-        return (states, parameters), info
+        return _magnetic_run(plan, rng_key, initial_positions, num_steps)
 
     return GeometricAdaptation(run)
+
+
+class _MagneticPlan(NamedTuple):
+    """What :func:`magnetic_window_adaptation` checked."""
+
+    algorithm: object
+    logdensity_fn: Callable
+    angle: float
+    target: float
+    initial_step_size: float
+    adapt_mass: bool
+    max_steps: int
+    options: dict  # the sampler's keywords: divergence_threshold and the scheme
+    lengths: object
+
+
+def _magnetic_run(plan: _MagneticPlan, rng_key, initial_positions, num_steps):
+    """``run`` of :func:`magnetic_window_adaptation`."""
+    if isinstance(num_steps, bool) or int(num_steps) != num_steps or num_steps < 20:
+        raise ValueError(f"num_steps must be an integer >= 20, got {num_steps!r}")
+    num_steps = int(num_steps)
+    flat = _flat_starts(initial_positions, plan.logdensity_fn)
+    num_chains, dimension = flat.shape
+    dtype = flat.dtype
+    states = jax.vmap(lambda x: plan.algorithm.init(x, plan.logdensity_fn))(initial_positions)
+    stages, ends = window_schedule(num_steps)
+    da_init, _, da_final = dual_averaging_adaptation(plan.target)
+    welford = (jnp.zeros(dimension, dtype), jnp.zeros(dimension, dtype), jnp.asarray(0))
+    carry = (
+        states,
+        da_init(jnp.asarray(plan.initial_step_size, dtype)),
+        plan.lengths.init(dimension, dtype),
+        jnp.ones(dimension, dtype),
+        welford,
+        jnp.full(num_chains, plan.target, dtype),
+    )
+    xs = (
+        jax.random.split(rng_key, num_steps),
+        jnp.arange(num_steps),
+        jnp.asarray(stages),
+        jnp.asarray(ends),
+        jnp.asarray(averaged_steps(stages, ends)),
+        # The field is off until the first mass update (the end of the first slow window):
+        # see :func:`_field_from`.
+        jnp.asarray(np.arange(num_steps) > _field_from(ends)),
+    )
+    one_step = _magnetic_step(plan, num_chains, dimension, dtype)
+
+    @jit
+    def warmup(carry, xs):
+        return jax.lax.scan(one_step, carry, xs)
+
+    (states, da_state, length, inverse_mass, _, _), info = warmup(carry, xs)
+    step_size = float(da_final(da_state))
+    trajectory = float(plan.lengths.final(length))
+    inverse_mass = np.asarray(inverse_mass)
+    if not (np.isfinite(step_size) and np.all(np.isfinite(inverse_mass))):
+        raise FloatingPointError(
+            "magnetic_window_adaptation ended with a non-finite step size or mass: the "
+            "chains diverged (check logdensity_fn and the starts)"
+        )
+    steps = int(np.clip(math.ceil(trajectory / step_size), 1, plan.max_steps))
+    parameters = {
+        "step_size": step_size,
+        "inverse_mass_matrix": inverse_mass,
+        "num_integration_steps": steps,
+        "magnetic_field": default_magnetic_field(inverse_mass, plan.angle / step_size),
+        **{k: v for k, v in plan.options.items() if k == "integrator"},
+    }
+    info = info._replace(trajectory_length=info.trajectory_length.at[-1].set(trajectory))
+    return (states, parameters), info
+
+
+def _magnetic_step(plan: _MagneticPlan, num_chains, dimension, dtype):
+    """One warm-up transition of :func:`magnetic_window_adaptation` (a ``scan`` body): every
+    chain moved by ``magnetic_hmc`` at the shared parameters, then the updates of the step
+    size (:func:`pooled_rate`), ``T``, and in slow windows the mass."""
+    da_init, da_update, da_final = dual_averaging_adaptation(plan.target)
+    rotation = jnp.asarray(_rotation(dimension), dtype)
+    zero_field = np.zeros((dimension, dimension))
+    angle = plan.angle
+
+    def variance(mean, m2, count):
+        return _regularised_variance(m2 / jnp.maximum(count - 1, 1), count.astype(dtype))
+
+    def one_step(carry, xs):
+        states, da_state, length, inverse_mass, welford, smoothed = carry
+        key, index, stage, window_end, average, on = xs
+        step_size = jnp.exp(da_state.log_step_size)
+        strength = jnp.where(on, angle / step_size, 0.0)
+        # angle 0: a concrete zero field, so the sampler takes the free drift (no expm)
+        field = zero_field if angle == 0.0 else _field(rotation, inverse_mass, strength)
+        trajectory = jnp.exp(length.log_time)
+        steps = jittered_steps(halton(index), trajectory, step_size, plan.max_steps)
+        # The top-level API: the flows e^{±εGM⁻¹} are computed once per step for all chains.
+        sampler = plan.algorithm(
+            plan.logdensity_fn, step_size, inverse_mass, steps, field, **plan.options
+        )
+        new_states, info = jax.vmap(sampler.step)(jax.random.split(key, num_chains), states)
+        rate, smoothed = pooled_rate(info.acceptance_rate, smoothed)
+        da_state = da_update(da_state, rate)
+        after = jax.vmap(_ravel)(new_states.position)
+        move = ChainMove(
+            jax.vmap(_ravel)(states.position),
+            after,
+            new_states.momentum,
+            info.is_accepted,
+            info.acceptance_rate,
+            inverse_mass,
+        )
+        length = plan.lengths.update(length, move, step_size, steps, average)
+        in_slow = (stage == 1) & plan.adapt_mass
+        welford = jax.tree.map(
+            lambda a, b: jnp.where(in_slow, a, b), _welford_batch(welford, after), welford
+        )
+        da_state, inverse_mass, welford = _close_window(
+            window_end & plan.adapt_mass,
+            variance,
+            da_init,
+            da_final,
+            (da_state, inverse_mass, welford),
+        )
+        record = MagneticAdaptationInfo(new_states, info, step_size, steps, trajectory, strength)
+        return (new_states, da_state, length, inverse_mass, welford, smoothed), record
+
+    return one_step
 
 
 def _ravel(tree):

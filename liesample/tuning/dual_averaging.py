@@ -1,16 +1,18 @@
-"""Dual averaging of one step size shared by all chains, to a target mean acceptance rate.
+"""Dual averaging of one step size shared by all chains, to a target acceptance rate.
 
 The warm-up of a sampler that declares ``tuning.method == "dual_averaging"``
-(:class:`liesample.samplers.contract.StepSizeTuning`; :func:`liesample.adjusted_lie_poisson`):
-every warm-up step moves each chain with the current step size ``exp(x_t)``, and the mean
-acceptance rate over the chains updates ``x_t`` by the dual-averaging scheme of Hoffman &
-Gelman (2014), as ``blackjax.window_adaptation`` does
+(:class:`liesample.samplers.contract.StepSizeTuning`; :func:`liesample.adjusted_lie_poisson`): every
+warm-up step moves each chain with the current step size ``exp(x_t)``, and the chains' mean
+acceptance rate, weighted down when one chain's running acceptance falls far below the others'
+(:func:`liesample.tuning.adaptation.pooled_rate`: a stuck chain lowers the step until it moves, e.g.
+one started at the rigid body's maximum-energy axis), updates ``x_t`` by the dual-averaging scheme
+of Hoffman & Gelman (2014), as ``blackjax.window_adaptation`` does
 (``blackjax.adaptation.step_size.dual_averaging_adaptation``). The tuned step is the scheme's
 average ``exp(x̄)``.
 
 The steps are those of :func:`liesample.integrators.chain_loop.run_steps` (chain ``c`` with key
 ``key_c``, the sampler's noise blocks), vmapped over the chains; the mean over the chains is a
-``pmean`` over the vmapped axis, so every chain carries the same dual-averaging state.
+collective over the vmapped axis, so every chain carries the same dual-averaging state.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from blackjax.adaptation.step_size import dual_averaging_adaptation
 from liesample.foundation.compile import jit
 from liesample.integrators.chain_loop import NoiseBlocks, declared_noise_blocks, run_steps
 from liesample.samplers.contract import Sampler
+from liesample.tuning.adaptation import pooled_rate
 
 __all__ = ["DualAveragingResult", "dual_averaging"]
 
@@ -36,7 +39,9 @@ class DualAveragingResult(NamedTuple):
 
     states : the chains' states after the warm-up.
     step_size : the tuned step (the dual-averaging average).
-    mean_acceptance : the mean acceptance rate over the chains and the second half of the steps.
+    mean_acceptance : the chains' pooled acceptance rate
+        (:func:`liesample.tuning.adaptation.pooled_rate`), averaged over the second half of
+        the steps.
     """
 
     states: object
@@ -47,18 +52,22 @@ class DualAveragingResult(NamedTuple):
 class _WarmupState(NamedTuple):
     chain: object  # the sampler's state
     adaptation: object  # blackjax's DualAveragingAdaptationState, the same in every chain
+    smoothed: jax.Array  # this chain's running acceptance (adaptation.pooled_rate)
 
 
 def _adaptive(sampler_at, update, max_step_size):
     """The warm-up as a sampler on ``_WarmupState``: one step of the sampler at the current
-    step size (at most ``max_step_size``), then the dual-averaging update with the mean
-    acceptance over the chains (the step's info is that mean)."""
+    step size (at most ``max_step_size``), then the dual-averaging update with the chains'
+    pooled acceptance (:func:`liesample.tuning.adaptation.pooled_rate`; the step's info is
+    that rate)."""
 
     def move(advance, state):
         sampler = sampler_at(jnp.minimum(jnp.exp(state.adaptation.log_step_size), max_step_size))
         chain, info = advance(sampler, state.chain)
-        rate = jax.lax.pmean(info.acceptance_rate, _CHAINS)
-        return _WarmupState(chain, update(state.adaptation, rate)), rate
+        rates = jax.lax.all_gather(info.acceptance_rate, _CHAINS)
+        rate, smoothed = pooled_rate(rates, jax.lax.all_gather(state.smoothed, _CHAINS))
+        smoothed = smoothed[jax.lax.axis_index(_CHAINS)]
+        return _WarmupState(chain, update(state.adaptation, rate), smoothed), rate
 
     reference = sampler_at(jnp.ones(()))
     blocks = declared_noise_blocks(reference)
@@ -102,7 +111,7 @@ def dual_averaging(
     num_steps : int
         Warm-up steps (static).
     target_acceptance_rate : float
-        The mean acceptance rate aimed at.
+        The (pooled) acceptance rate aimed at.
     parameters : dict, optional
         The sampler's other parameters (``StepSizeTuning.parameters``), passed to
         ``sampler_at`` as arrays of the positions' dtype.
@@ -119,8 +128,8 @@ def dual_averaging(
 
     def chain(key, state, adaptation, parameters):
         warmup = _adaptive(lambda step_size: sampler_at(step_size, **parameters), update, cap)
-        start = _WarmupState(state, adaptation)
         zero = jnp.zeros((), adaptation.log_step_size.dtype)
+        start = _WarmupState(state, adaptation, zero + target_acceptance_rate)
         end, total = run_steps(warmup, key, start, 0, num_steps, accumulate, zero)
         return end.chain, jnp.minimum(final(end.adaptation), cap), total / (num_steps - first_kept)
 

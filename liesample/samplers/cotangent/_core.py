@@ -326,7 +326,22 @@ def space_sampler(logdensity_fn, space, step_fn: Callable, settings: dict) -> Sa
     if isinstance(space, spaces.Space):
         names = DrawNames(space.draw_name, space.draw_dims())
     return Sampler(
-        init_fn, step_fn, settings=settings, check_positions=check_starts(space), draw_names=names
+        init_fn,
+        step_fn,
+        settings=settings,
+        check_positions=check_starts(space),
+        draw_names=names,
+        stuck_advice=window_advice(settings["sampler"], "logdensity_fn, space"),
+    )
+
+
+def window_advice(sampler: str, arguments: str) -> str:
+    """The stuck-chain advice of a sampler that :func:`liesample.window_adaptation` tunes."""
+    return (
+        f"Give a smaller step_size, or tune it: (state, parameters), _ = "
+        f"liesample.window_adaptation(liesample.{sampler}, {arguments}).run(rng_key, "
+        f"initial_positions, 1000), then liesample.{sampler}({arguments}, **parameters) "
+        "started from state.position with num_warmup=0, exact_starts=True."
     )
 
 

@@ -171,6 +171,7 @@ def as_top_level_api(
     momentum_persistence: float = 0.0,
     persistent: bool = True,
     integrator="leapfrog",
+    jitter: bool = False,
 ) -> Sampler:
     """Geometric HMC on Lie groups, spheres and products with ``Rᵈ`` (Metropolis-adjusted).
 
@@ -212,6 +213,11 @@ def as_top_level_api(
         ``(("B", 0.5), ("A", 1.0), ("B", 0.5))`` (:mod:`liesample.geometry.cotangent`).
         ``info.num_gradient_evaluations`` counts what it costs (a scheme that ends with a
         drift also evaluates the gradient at the end of every step).
+    jitter : bool
+        Draw the steps of each transition afresh, ``L ~ ceil(u · num_integration_steps)`` with
+        ``u ~ Uniform(0, 1)`` (what :func:`liesample.window_adaptation` returns, with the
+        ``T`` its ChEES rule learnt): a fixed length can sit at a resonance of the target (a
+        direction whose half period is ``L ε`` barely moves). ``False`` (default): ``L`` steps.
     """
     check_positive_step_size(step_size)
     check_integer("num_integration_steps", num_integration_steps)
@@ -232,9 +238,18 @@ def as_top_level_api(
         settings["momentum_persistence"] = setting(momentum_persistence)
         settings["persistent"] = persistent
     settings.update(scheme_setting(integrator))
+    if not isinstance(jitter, bool):
+        raise TypeError(f"jitter must be a bool, got {jitter!r}")
+    if jitter:
+        settings["jitter"] = True
 
     def step_fn(rng_key, state):
-        return transition(rng_key, state, move, num_integration_steps, *options)
+        steps = num_integration_steps
+        if jitter:
+            key_length, rng_key = jax.random.split(rng_key)
+            u = jax.random.uniform(key_length, (), state.logdensity.dtype)
+            steps = jnp.clip(jnp.ceil(u * steps), 1, steps).astype(int)
+        return transition(rng_key, state, move, steps, *options)
 
     return space_sampler(logdensity_fn, space, step_fn, settings)
 

@@ -299,8 +299,23 @@ def as_top_level_api(
     if not callable(integrator):
         settings.update(scheme_setting(integrator))
     check_positions = check_starts(logdensity_fn, d)
-    return Sampler(init_fn, step_fn, settings=settings, check_positions=check_positions)
+    return Sampler(
+        init_fn,
+        step_fn,
+        settings=settings,
+        check_positions=check_positions,
+        stuck_advice=STUCK_ADVICE,
+    )
 
+
+STUCK_ADVICE = (
+    "Give a smaller step_size, or tune it: (states, parameters), _ = "
+    "liesample.magnetic_window_adaptation(logdensity_fn).run(rng_key, initial_positions, 1000) "
+    "(initial_positions with a leading axis of >= 2 chains), then "
+    "liesample.jittered_magnetic_hmc(logdensity_fn, **parameters) started from "
+    "states.position with num_warmup=0, exact_starts=True."
+)
+"""The stuck-chain advice of ``magnetic_hmc`` (``Sampler.stuck_advice``)."""
 
 magnetic_hmc = sampling_api(
     as_top_level_api, init, build_kernel, "magnetic_hmc", __name__, adaptation=ADAPTATION
@@ -352,4 +367,10 @@ def jittered_magnetic_hmc(
     settings = dict(base.settings)
     settings["sampler"] = "jittered_magnetic_hmc"
     settings["max_num_integration_steps"] = settings.pop("num_integration_steps")
-    return Sampler(base.init, step_fn, settings=settings, check_positions=base.check_positions)
+    return Sampler(
+        base.init,
+        step_fn,
+        settings=settings,
+        check_positions=base.check_positions,
+        stuck_advice=STUCK_ADVICE,
+    )

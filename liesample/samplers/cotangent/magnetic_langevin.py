@@ -76,12 +76,17 @@ class MagneticLangevinInfo(NamedTuple):
     acceptance_rate : 1.0 for a step taken, 0.0 for a divergent (rejected) one (unadjusted).
     energy : ``H = −log π(q) + ½pᵀM⁻¹p`` at the chain's state after the step.
     num_gradient_evaluations : gradients of ``log π`` the step evaluated.
+    metropolis_rate : ``min(1, e^{−ΔH})`` the step would have as a Metropolis proposal (``ΔH``
+        without the energy the ``O`` step exchanged with the heat bath): what a step-size
+        adaptation targets (an unadjusted sampler's ``acceptance_rate`` is 1 whatever its step
+        and bias; tuned by it, the step would grow without bound).
     """
 
     is_divergent: jax.Array
     acceptance_rate: jax.Array
     energy: jax.Array
     num_gradient_evaluations: jax.Array
+    metropolis_rate: jax.Array
 
 
 def init(position, logdensity_fn: Callable, rng_key=None) -> MagneticLangevinState:
@@ -105,14 +110,33 @@ def _step(rng_key, state, logdensity_fn, move, friction):
         unravel(new.position), new.momentum, new.logdensity, unravel(new.logdensity_grad)
     )
     info = MagneticLangevinInfo(
-        info.is_divergent, info.acceptance_rate, info.energy, info.num_gradient_evaluations
+        info.is_divergent,
+        info.acceptance_rate,
+        info.energy,
+        info.num_gradient_evaluations,
+        info.metropolis_rate,
     )
     return new_state, info
 
 
 def build_kernel(integrator="baoab"):
     """Build ``kernel(rng_key, state, logdensity_fn, step_size, inverse_mass_matrix, friction,
-    magnetic_field) -> (state, info)``; the flow ``e^{εGM⁻¹/2}`` is recomputed per call."""
+    magnetic_field) -> (state, info)``; the flow ``e^{εGM⁻¹/2}`` is recomputed per call.
+
+    A callable ``integrator`` is refused: ``blackjax.window_adaptation`` passes its own
+    integrator function here, and it tunes the step by ``acceptance_rate``, which an
+    unadjusted sampler reports as 1 whatever its bias."""
+    if callable(integrator):
+        raise TypeError(
+            "magnetic_langevin.build_kernel got a function as integrator (as "
+            "blackjax.window_adaptation passes): magnetic_langevin is unadjusted, its "
+            "acceptance_rate is 1 at any step size, so an adaptation by acceptance cannot tune "
+            "it. Tune its step by info.metropolis_rate (the rate the step would have), e.g. "
+            "liesample.window_adaptation(liesample.geometric_langevin, logdensity_fn, "
+            "liesample.spaces.Euclidean((d,))) on a flat position, then pass its step_size, "
+            "inverse_mass_matrix and friction here; integrator takes 'baoab', 'obabo', 'obab' "
+            "or a coefficient list"
+        )
     scheme = langevin_scheme(integrator)
 
     def kernel(
@@ -193,7 +217,16 @@ def as_top_level_api(
         **scheme_setting(integrator, "baoab"),
     }
     check_positions = check_starts(logdensity_fn, d)
-    return Sampler(init_fn, step_fn, settings=settings, check_positions=check_positions)
+    return Sampler(
+        init_fn,
+        step_fn,
+        settings=settings,
+        check_positions=check_positions,
+        stuck_advice=(
+            "Give a smaller step_size: an unadjusted step is rejected only where it diverges "
+            "(info.metropolis_rate is the rate the step would have as a Metropolis proposal)."
+        ),
+    )
 
 
 magnetic_langevin = sampling_api(

@@ -419,6 +419,11 @@ def as_top_level_api(
             tuning=tuning,
             noise_blocks=NoiseBlocks(noise_block_size, draw_block, block_step),
             law_groups=orbit_groups(system),
+            stuck_advice=(
+                "Give a smaller step_size, or leave it unset with num_warmup > 0 "
+                "(liesample.sample's warm-up then tunes it by dual averaging), or pass "
+                "adapt=True with num_warmup > 0 to tune a given one."
+            ),
         )
 
     tuning = StepSizeTuning(

@@ -381,6 +381,8 @@ def as_top_level_api(
         # Without noise nothing is drawn: the per-step loop is already lean.
         noise_blocks=NoiseBlocks(noise_block_size, draw_block, block_step) if scene.noise else None,
         law_groups=_starts.orbit_groups(system),
+        stuck_advice="Give a smaller step_size, or leave it unset: liesample.sample then "
+        "chooses it from the starts by the bias model.",
     )
 
 
