@@ -133,10 +133,25 @@ def test_magnetic_divergences_reach_sample_stats_and_are_reduced_with_any():
 
 
 def test_stuck_chains_are_named():
+    """The chains are named and the advice is the sampler's own (a call that works for it)."""
     sampler = liesample.adjusted_lie_poisson(VMF, beta=1.0, step_size=1.0)
     starts = np.tile(MU_HAT, (3, 1))
-    with pytest.warns(RuntimeWarning, match=r"3 chain\(s\) are stuck.*chains 0, 1, 2.*smaller"):
+    with pytest.warns(RuntimeWarning, match=r"3 chain\(s\) are stuck.*chains 0, 1, 2.*smaller") as caught:
         liesample.sample_chains(sampler, jax.random.key(0), starts, 20, progress_bar=False)
+    assert any(sampler.stuck_advice in str(w.message) for w in caught)
+
+
+def test_a_nan_log_density_is_named_as_such():
+    """A NaN log-density is treated as −∞: the divergence message says NaN was seen and points
+    at the model, not at the step size."""
+
+    def logdensity(x):
+        return jnp.where(x[0] > 0.5, jnp.nan, -0.5 * jnp.sum(x**2))
+
+    sampler = liesample.magnetic_hmc(logdensity, 0.5, jnp.ones(2), 5, jnp.zeros((2, 2)))
+    starts = np.zeros((2, 2))
+    with pytest.warns(RuntimeWarning, match="energy was NaN.*treated as −∞.*domain error"):
+        liesample.sample_chains(sampler, jax.random.key(0), starts, 30, progress_bar=False)
 
 
 # --------------------------------------------------------------------------- starts

@@ -63,6 +63,12 @@ def observable_shapes(observe, initial_positions):
     return example
 
 
+ONE_START = (
+    "One start without a chain axis (such as the state window_adaptation(...).run returns for "
+    "a single start) is one chain as jax.tree.map(lambda x: x[None], position)."
+)
+
+
 def as_positions(initial_positions):
     """``initial_positions`` as a JAX array, or a pytree of JAX arrays, with a leading chain axis
     shared by every leaf (checked); returns ``(positions, num_chains)``."""
@@ -71,7 +77,7 @@ def as_positions(initial_positions):
         if positions.ndim < 1 or positions.shape[0] < 1:
             raise ValueError(
                 "initial_positions must have a leading chain axis with at least one chain, "
-                f"shape (chains, ...); got shape {positions.shape}"
+                f"shape (chains, ...); got shape {positions.shape}. {ONE_START}"
             )
         return positions, positions.shape[0]
     paths, treedef = jax.tree_util.tree_flatten_with_path(initial_positions)
@@ -83,7 +89,7 @@ def as_positions(initial_positions):
         if leaf.ndim < 1 or leaf.shape[0] < 1:
             raise ValueError(
                 f"{name} must have a leading chain axis with at least one chain, shape "
-                f"(chains, ...); got shape {leaf.shape}"
+                f"(chains, ...); got shape {leaf.shape}. {ONE_START}"
             )
         if leaf.shape[0] != leaves[0].shape[0]:
             raise ValueError(

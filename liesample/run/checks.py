@@ -30,7 +30,15 @@ class NonFiniteStateError(FloatingPointError):
 
 
 def check_run(
-    info, variables, groups, *, on_nonfinite, min_acceptance_rate, convergence=True, stacklevel=2
+    info,
+    variables,
+    groups,
+    *,
+    on_nonfinite,
+    min_acceptance_rate,
+    stuck_advice=None,
+    convergence=True,
+    stacklevel=2,
 ):
     """Every post-run check: :func:`report_divergences`, :func:`report_stuck_chains`,
     :func:`report_unconverged` (on ``info``, per-draw arrays ``(chains, draws)``) and
@@ -40,7 +48,7 @@ def check_run(
     law), or ``None`` (one law). ``stacklevel`` as for ``warnings.warn`` called here."""
     level = stacklevel + 1
     report_divergences(info, on_nonfinite, level)
-    report_stuck_chains(info, min_acceptance_rate, level)
+    report_stuck_chains(info, min_acceptance_rate, stuck_advice, level)
     report_unconverged(info, groups, level)
     check_variables(variables, groups, convergence=convergence, stacklevel=level)
 
@@ -87,7 +95,9 @@ def chain_list(chains, limit=10) -> str:
 
 def report_divergences(info, on_nonfinite: str, stacklevel=2):
     """A ``RuntimeWarning`` (or :class:`NonFiniteStateError` for ``on_nonfinite="raise"``)
-    naming the chains whose ``info["is_divergent"]`` flags a step."""
+    naming the chains whose ``info["is_divergent"]`` flags a step; when the energy recorded at
+    such draws is NaN, the message says so (a NaN log-density, treated as −∞, is a fault of the
+    model, not of the step size)."""
     flags = info.get("is_divergent")
     if flags is None or not np.any(flags):
         return
@@ -96,15 +106,27 @@ def report_divergences(info, on_nonfinite: str, stacklevel=2):
         f"{int(np.sum(flags))} draws in {len(chains)} chain(s) (chains {chain_list(chains)}) "
         "contain a divergent step (a non-finite state or energy, or for the Metropolis-adjusted "
         "samplers an energy error above the divergence threshold); those steps were rejected "
-        "and flagged in info['is_divergent'] (sample_stats 'diverging'). Reduce step_size or "
-        "sigma, or let the warm-up adapt it."
+        "and flagged in info['is_divergent'] (sample_stats 'diverging')."
     )
+    energy = info.get("energy")
+    nan = 0 if energy is None else int(np.sum(np.isnan(np.asarray(energy, float)) & flags))
+    if nan:
+        message += (
+            f" At {nan} of them the energy was NaN: the log-density (or Hamiltonian) returned "
+            "NaN there, and a NaN is treated as −∞ (zero probability). That is a domain error "
+            "in the model (a log or sqrt of a negative number, 0/0, an overflow), not a step "
+            "too large: make the log-density return -inf (or a finite value) outside its "
+            "support, or constrain the parameter."
+        )
+    else:
+        message += " Reduce step_size or sigma, or let the warm-up adapt it."
     raise_or_warn(message, on_nonfinite == "raise", NonFiniteStateError, RuntimeWarning, stacklevel)
 
 
-def report_stuck_chains(info, threshold: float, stacklevel=2):
+def report_stuck_chains(info, threshold: float, advice=None, stacklevel=2):
     """A ``RuntimeWarning`` naming the chains whose mean acceptance rate is below
-    ``threshold`` (0 disables it)."""
+    ``threshold`` (0 disables it), with the sampler's own ``advice``
+    (``Sampler.stuck_advice``) or a generic one."""
     rates = info.get("acceptance_rate")
     if rates is None or threshold == 0.0:
         return
@@ -115,8 +137,8 @@ def report_stuck_chains(info, threshold: float, stacklevel=2):
     worst = ", ".join(f"chain {int(c)}: {per_chain[c]:.3f}" for c in chains[:5])
     warnings.warn(
         f"{len(chains)} chain(s) are stuck: their mean acceptance rate is below "
-        f"{threshold:g} (chains {chain_list(chains)}; {worst}). Use a smaller step_size, or "
-        "let the warm-up adapt it (leave step_size unset and pass num_warmup > 0).",
+        f"{threshold:g} (chains {chain_list(chains)}; {worst}). "
+        + (advice or "Use a smaller step_size, or let the warm-up adapt it."),
         RuntimeWarning,
         stacklevel=stacklevel,
     )

@@ -513,6 +513,7 @@ class _Run:
             groups,
             on_nonfinite=o.on_nonfinite,
             min_acceptance_rate=o.min_acceptance_rate,
+            stuck_advice=self.sampler.stuck_advice,
             convergence=convergence,
             stacklevel=5,
         )

@@ -206,7 +206,8 @@ def metropolis(rng_key, bundle, initial: PhasePoint, proposal: PhasePoint, diver
     with ``acceptance_rate = min(1, e^{−(ΔH − heat)})`` (0 when non-finite; ``heat`` is what the
     OU steps put in, so the rate measures the error of the Hamiltonian pieces only). With
     ``accept=False`` (unadjusted chains) every finite proposal is taken. A non-finite proposal
-    (state or energy) is always rejected and flagged divergent.
+    (state or energy) is always rejected and flagged divergent; its energy is reported as
+    ``inf``, or ``NaN`` where the log-density was NaN (treated as −∞), so the runner can say so.
     """
     start = energy(bundle, initial.logdensity, initial.momentum)
     final = energy(bundle, proposal.logdensity, proposal.momentum)
@@ -225,7 +226,7 @@ def metropolis(rng_key, bundle, initial: PhasePoint, proposal: PhasePoint, diver
         is_accepted = u < acceptance_rate
     else:
         is_accepted = finite
-    final = jnp.where(finite, final, jnp.inf)
+    final = jnp.where(finite | jnp.isnan(final), final, jnp.inf)
     return is_accepted, acceptance_rate, is_divergent, start, final
 
 
