@@ -24,6 +24,7 @@ from liesample.samplers.cotangent.geometric_hmc import geometric_hmc
 from liesample.samplers.cotangent.geometric_langevin import geometric_langevin
 from liesample.samplers.cotangent.magnetic_hmc import jittered_magnetic_hmc, magnetic_hmc
 from liesample.samplers.cotangent.magnetic_langevin import magnetic_langevin
+from liesample.samplers.gauge.heat_bath import wilson_heat_bath
 from liesample.samplers.orbit.adjusted_lie_poisson import adjusted_lie_poisson
 from liesample.samplers.orbit.lie_poisson_langevin import lie_poisson_langevin
 from liesample.samplers.orbit.vortex_metropolis import vortex_metropolis
@@ -85,5 +86,6 @@ __all__ = [
     "systems",
     "targets",
     "vortex_metropolis",
+    "wilson_heat_bath",
     "window_adaptation",
 ]
