@@ -1,4 +1,4 @@
-"""Exact laws of two-dimensional lattice gauge theory with the Wilson action (docs/gauge.md).
+"""Exact laws of two-dimensional lattice gauge theory with the Wilson action.
 
 In two dimensions the plaquettes of an open lattice are independent, each with the
 single-plaquette law ``∝ exp((β/N) Re tr U) dHaar(U)``; on the torus the product of all

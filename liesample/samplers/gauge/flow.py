@@ -7,7 +7,7 @@ metric, where left and right trivialisations give one gradient flow, its velocit
 
     ċ = −(N/2) ∇(S/β),      V ← V exp(ĉ),
 
-the ``θ``-dissipation of the ``T*G`` dynamics with the noise switched off (``MATH.md`` §1). It is
+the ``θ``-dissipation of the ``T*G`` dynamics with the noise switched off. It is
 integrated by Lüscher's third-order Runge–Kutta–Munthe-Kaas scheme (his appendix C), mirrored to
 the right action. The energy density ``E = 2 Σ_{μ<ν} Re tr(1 − V_μν) / V`` along the flow defines
 the scale ``t₀`` by ``t₀² E(t₀) = 0.3``.

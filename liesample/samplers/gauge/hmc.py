@@ -14,7 +14,7 @@ angles, ``1/N`` for SU(N)), ``d`` the lattice curl; its largest eigenvalue on a 
 extents is ``4d`` (the staggered mode). The leapfrog is unstable on that mode when
 ``ε ω ≥ 2``, ``ω² = 2 c β · 4d``; such a step is refused. Below the limit the quadratic part
 is stable, but the non-linear couplings still heat a long trajectory from an ordered field at
-``0.8`` of the limit (docs/gauge.md); useful steps are about half the limit or less.
+``0.8`` of the limit; useful steps are about half the limit or less.
 """
 
 from __future__ import annotations
