@@ -45,8 +45,11 @@ PUBLISHED_PLAQUETTE = 0.593683  # SU(3), β = 6.0, large volume (Boyd et al. 199
 RESULTS = Path(__file__).resolve().parent / "results" / "gauge.json"
 
 
-def _chain(step, state, key, num_updates, observable):
-    """Jitted scan of ``num_updates`` steps recording ``observable`` and the acceptance."""
+CHUNK = 10  # updates per compiled call: one compile per sampler, whatever the run length
+
+
+def make_run(step, observable):
+    """A jitted scan of ``CHUNK`` steps recording ``observable`` and the acceptance."""
 
     @jax.jit
     def run(state, keys):
@@ -56,11 +59,21 @@ def _chain(step, state, key, num_updates, observable):
 
         return jax.lax.scan(body, state, keys)
 
-    keys = jax.random.split(key, num_updates)
-    compiled = run.lower(state, keys).compile()  # compile outside the timed region
+    return run
+
+
+def _chain(run, state, key, num_updates):
+    """``num_updates`` (rounded up to chunks) steps; the first chunk compiles and is not timed."""
+    chunks = jax.random.split(key, -(-num_updates // CHUNK) + 1)
+    jax.block_until_ready(run(state, jax.random.split(chunks[0], CHUNK)))  # compile
+    values, rates = [], []
     start = time.perf_counter()
-    state, (values, rate) = jax.block_until_ready(compiled(state, keys))
-    return state, np.asarray(values), float(np.mean(rate)), time.perf_counter() - start
+    for key in chunks[1:]:
+        state, (v, r) = jax.block_until_ready(run(state, jax.random.split(key, CHUNK)))
+        values.append(np.asarray(v))
+        rates.append(np.asarray(r))
+    seconds = time.perf_counter() - start
+    return state, np.concatenate(values), float(np.mean(np.concatenate(rates))), seconds
 
 
 # --------------------------------------------------------------------------- plain HMC (baseline)
@@ -89,10 +102,13 @@ def plain_hmc(system, beta, step_size, num_steps):
     def step(key, state):
         c = jax.random.normal(key, system.space.momentum_array_shape, jnp.float64)
         p0 = system.space.hat(c)  # unit-variance components in the basis iλ_a
-        u, p = state.position, p0 + 0.5 * step_size * force(state.position)
-        for k in range(num_steps):
+        def leapfrog(k, up):
+            u, p = up
             u = u @ jax.scipy.linalg.expm(step_size * p)
-            p = p + (step_size if k < num_steps - 1 else 0.5 * step_size) * force(u)
+            return u, p + jnp.where(k < num_steps - 1, 1.0, 0.5) * step_size * force(u)
+
+        start = (state.position, p0 + 0.5 * step_size * force(state.position))
+        u, p = jax.lax.fori_loop(0, num_steps, leapfrog, start)
         delta = (kinetic(p) + beta * system.action(u)) - (kinetic(p0) + beta * system.action(state.position))
         accept = jax.random.uniform(jax.random.fold_in(key, 1)) < jnp.exp(-delta)  # NaN: reject
         new = jnp.where(accept, u, state.position)
@@ -113,9 +129,9 @@ def su3_rows(size, counts, thermalisation, seed=0):
     system, beta = wilson_gauge("SU3", (size,) * 4), 6.0
     links = system.hot_start(jax.random.key(seed))
     heat_bath = liesample.wilson_heat_bath(system, beta=beta, overrelaxation=4)
-    state = heat_bath.init(links)
-    state, _, _, _ = _chain(heat_bath.step, state, jax.random.key(seed + 1), thermalisation,
-                            system.mean_plaquette)  # fmt: skip
+    runs = {"heat_bath": make_run(heat_bath.step, system.mean_plaquette)}
+    state, _, _, _ = _chain(runs["heat_bath"], heat_bath.init(links), jax.random.key(seed + 1),
+                            thermalisation)  # fmt: skip
     links = state.position
     eps, steps = 0.05, 20
     samplers = {
@@ -133,8 +149,9 @@ def su3_rows(size, counts, thermalisation, seed=0):
     rows = []
     num_links = system.dim * size**4
     for name, (sampler, sweeps, updates) in samplers.items():
-        _, values, rate, seconds = _chain(sampler.step, sampler.init(links), jax.random.key(seed + 2),
-                                          updates, system.mean_plaquette)  # fmt: skip
+        run = runs["heat_bath"] if sampler is heat_bath else make_run(sampler.step, system.mean_plaquette)
+        _, values, rate, seconds = _chain(run, sampler.init(links), jax.random.key(seed + 2),
+                                          updates)  # fmt: skip
         rows.append(_row(name, values, rate, seconds, updates * sweeps * num_links))
         print(rows[-1], flush=True)
     return rows
@@ -161,11 +178,10 @@ def u1_autocorrelation(betas, size, num_updates, seed=0):
     for beta in betas:
         system = wilson_gauge("U1", (size, size))
         sampler = liesample.wilson_heat_bath(system, beta=beta, overrelaxation=1)
+        run = make_run(sampler.step, system.topological_charge)
         state = sampler.init(system.hot_start(jax.random.key(seed)))
-        state, _, _, _ = _chain(sampler.step, state, jax.random.key(seed + 1), num_updates // 5,
-                                system.topological_charge)  # fmt: skip
-        _, q, _, seconds = _chain(sampler.step, state, jax.random.key(seed + 2), num_updates,
-                                  system.topological_charge)  # fmt: skip
+        state, _, _, _ = _chain(run, state, jax.random.key(seed + 1), num_updates // 5)
+        _, q, _, seconds = _chain(run, state, jax.random.key(seed + 2), num_updates)
         ess = float(az.ess(q[None, :]))
         rows.append({"beta": beta, "tau_int_Q": len(q) / (2.0 * ess), "q2": float(np.mean(q**2)),
                      "seconds": seconds})  # fmt: skip
@@ -183,8 +199,9 @@ def main(argv=None) -> int:
     else:
         size, therm, counts = args.size, args.thermalisation, {"heat_bath": 60, "hmc": 30, "smd": 300}
     betas = (1.0, 3.0) if args.quick else (1.0, 2.0, 4.0, 6.0)
+    u1 = u1_autocorrelation(betas, 8 if args.quick else 16, 200 if args.quick else 2000)
+    print(u1, flush=True)
     su3 = su3_rows(size, counts, therm)
-    u1 = u1_autocorrelation(betas, 8 if args.quick else 16, 200 if args.quick else 4000)
     print(f"4-D SU(3) {size}⁴, β = 6.0 (published large-volume plaquette {PUBLISHED_PLAQUETTE})")
     print("| sampler | plaquette ± MCSE | acceptance | ESS | ESS/s | link updates/s |")
     print("|---|---|---|---|---|---|")
