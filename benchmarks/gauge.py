@@ -109,7 +109,8 @@ def plain_hmc(system, beta, step_size, num_steps):
 
         start = (state.position, p0 + 0.5 * step_size * force(state.position))
         u, p = jax.lax.fori_loop(0, num_steps, leapfrog, start)
-        delta = (kinetic(p) + beta * system.action(u)) - (kinetic(p0) + beta * system.action(state.position))
+        energy = lambda u, p: kinetic(p) + beta * system.action(u)
+        delta = energy(u, p) - energy(state.position, p0)
         accept = jax.random.uniform(jax.random.fold_in(key, 1)) < jnp.exp(-delta)  # NaN: reject
         new = jnp.where(accept, u, state.position)
         return state._replace(position=new), PlainInfo(jnp.minimum(1.0, jnp.exp(-delta)))
@@ -129,8 +130,8 @@ def su3_rows(size, counts, thermalisation, seed=0):
     system, beta = wilson_gauge("SU3", (size,) * 4), 6.0
     links = system.hot_start(jax.random.key(seed))
     heat_bath = liesample.wilson_heat_bath(system, beta=beta, overrelaxation=4)
-    runs = {"heat_bath": make_run(heat_bath.step, system.mean_plaquette)}
-    state, _, _, _ = _chain(runs["heat_bath"], heat_bath.init(links), jax.random.key(seed + 1),
+    runs = {"heat bath + OR (1 + 4 sweeps)": make_run(heat_bath.step, system.mean_plaquette)}
+    state, _, _, _ = _chain(runs["heat bath + OR (1 + 4 sweeps)"], heat_bath.init(links), jax.random.key(seed + 1),
                             thermalisation)  # fmt: skip
     links = state.position
     eps, steps = 0.05, 20
@@ -149,7 +150,7 @@ def su3_rows(size, counts, thermalisation, seed=0):
     rows = []
     num_links = system.dim * size**4
     for name, (sampler, sweeps, updates) in samplers.items():
-        run = runs["heat_bath"] if sampler is heat_bath else make_run(sampler.step, system.mean_plaquette)
+        run = runs.get(name) or make_run(sampler.step, system.mean_plaquette)
         _, values, rate, seconds = _chain(run, sampler.init(links), jax.random.key(seed + 2),
                                           updates)  # fmt: skip
         rows.append(_row(name, values, rate, seconds, updates * sweeps * num_links))
@@ -192,12 +193,13 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="4⁴ and few updates (a smoke run)")
     parser.add_argument("--size", type=int, default=8)
-    parser.add_argument("--thermalisation", type=int, default=30, help="heat-bath updates")
+    parser.add_argument("--thermalisation", type=int, default=20, help="heat-bath updates")
     args = parser.parse_args(argv)
     if args.quick:
         size, therm, counts = 4, 5, {"heat_bath": 10, "hmc": 5, "smd": 20}
     else:
-        size, therm, counts = args.size, args.thermalisation, {"heat_bath": 60, "hmc": 30, "smd": 300}
+        counts = {"heat_bath": 40, "hmc": 20, "smd": 200}
+        size, therm = args.size, args.thermalisation
     betas = (1.0, 3.0) if args.quick else (1.0, 2.0, 4.0, 6.0)
     u1 = u1_autocorrelation(betas, 8 if args.quick else 16, 200 if args.quick else 2000)
     print(u1, flush=True)
@@ -207,7 +209,8 @@ def main(argv=None) -> int:
     print("|---|---|---|---|---|---|")
     for r in su3:
         print(f"| {r['sampler']} | {r['plaquette']:.5f} ± {r['mcse']:.5f} | {r['acceptance']:.2f} "
-              f"| {r['ess']:.0f} | {r['ess_per_s']:.3g} | {r['link_updates_per_s']:.3g} |")  # fmt: skip
+              f"| {r['ess']:.0f} | {r['ess_per_s']:.3g} "
+              f"| {r['link_updates_per_s']:.3g} |")  # fmt: skip
     print("\n2-D U(1): integrated autocorrelation time of Q (heat bath + OR)")
     print("| β | τ_int(Q) | ⟨Q²⟩ |")
     print("|---|---|---|")

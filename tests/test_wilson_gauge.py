@@ -98,13 +98,17 @@ def test_float32_links_are_refused_by_the_group_check():
 
 def test_exact_laws_agree_with_direct_integration():
     beta = 2.3
-    haar = lambda f: integrate.quad(lambda a: f(a) * np.sin(a) ** 2 * np.exp(beta * np.cos(a)), 0, np.pi)[0]
+    def haar(f):
+        return integrate.quad(lambda a: f(a) * np.sin(a) ** 2 * np.exp(beta * np.cos(a)), 0, np.pi)[0]
+
     direct = haar(np.cos) / haar(lambda a: 1.0)
     assert exact.single_plaquette_mean(beta, 2) == pytest.approx(direct, rel=1e-12)
-    assert exact.single_plaquette_mean(beta, 2) == pytest.approx(special.iv(2, beta) / special.iv(1, beta))
+    bessel = special.iv(2, beta) / special.iv(1, beta)
+    assert exact.single_plaquette_mean(beta, 2) == pytest.approx(bessel)
     # the torus tends to independent plaquettes as V grows
     assert exact.su2_torus_plaquette_mean(beta, 400) == pytest.approx(direct, rel=1e-10)
-    assert exact.u1_torus_plaquette_mean(1.0, 400) == pytest.approx(exact.single_plaquette_mean(1.0, 1))
+    open_u1 = exact.single_plaquette_mean(1.0, 1)
+    assert exact.u1_torus_plaquette_mean(1.0, 400) == pytest.approx(open_u1)
     # SU(3) at small β: E[Re tr U/3] = β/18 + O(β²) (E|tr U|² = 1 under Haar)
     assert exact.single_plaquette_mean(1e-3, 3) == pytest.approx(1e-3 / 18, rel=1e-3)
     law = exact.u1_torus_charge_law(1.0, 16, 6)

@@ -191,7 +191,8 @@ class WilsonGauge:
         total = 0.0
         for mu, nu in self.planes:
             mask = jnp.asarray(self.plaquette_mask(mu, nu))
-            total = total + jnp.sum(jnp.where(mask, 1.0 - self.retrace(self.plaquette(links, mu, nu)), 0.0))
+            deficit = 1.0 - self.retrace(self.plaquette(links, mu, nu))
+            total = total + jnp.sum(jnp.where(mask, deficit, 0.0))
         return total
 
     def logdensity(self, beta):
@@ -278,7 +279,9 @@ def clover_charge(system: WilsonGauge, links):
         eye = jnp.eye(system.n)
         field[mu, nu] = a - jnp.trace(a, axis1=-2, axis2=-1)[..., None, None] * eye / system.n
     tr = lambda a, b: jnp.real(jnp.trace(a @ b, axis1=-2, axis2=-1))
-    density = tr(field[0, 1], field[2, 3]) - tr(field[0, 2], field[1, 3]) + tr(field[0, 3], field[1, 2])
+    density = (
+        tr(field[0, 1], field[2, 3]) - tr(field[0, 2], field[1, 3]) + tr(field[0, 3], field[1, 2])
+    )
     # F = i a² F_herm for the anti-Hermitian clover F, hence the sign
     return -jnp.sum(density) * 8.0 / (32.0 * jnp.pi**2)
 

@@ -36,7 +36,8 @@ def _weighted_mean(log_weights, values) -> float:
 
 
 def _plaquettes(num_plaquettes) -> int:
-    if isinstance(num_plaquettes, bool) or int(num_plaquettes) != num_plaquettes or num_plaquettes < 1:
+    bad = isinstance(num_plaquettes, bool) or int(num_plaquettes) != num_plaquettes
+    if bad or num_plaquettes < 1:
         raise ValueError(f"num_plaquettes must be an integer >= 1, got {num_plaquettes!r}")
     return int(num_plaquettes)
 

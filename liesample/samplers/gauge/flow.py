@@ -16,7 +16,6 @@ the scale ``t₀`` by ``t₀² E(t₀) = 0.3``.
 from __future__ import annotations
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from liesample.geometry import spaces
