@@ -159,7 +159,8 @@ def su3_rows(size, counts, thermalisation, seed=0):
 
 
 def _row(name, values, rate, seconds, link_updates):
-    ess = float(az.ess(values[None, :]))
+    # a chain that (almost) never moves has no meaningful ESS: report nan, not ArviZ's n
+    ess = float(az.ess(values[None, :])) if rate > 0.05 else math.nan
     se = float(np.std(values, ddof=1) / math.sqrt(max(ess, 1.0)))
     return {
         "sampler": name,
