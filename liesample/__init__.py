@@ -37,6 +37,7 @@ if TYPE_CHECKING:  # what the lazy names below resolve to, for type checkers and
     from liesample.samplers.cotangent.geometric_langevin import geometric_langevin
     from liesample.samplers.cotangent.magnetic_hmc import jittered_magnetic_hmc, magnetic_hmc
     from liesample.samplers.cotangent.magnetic_langevin import magnetic_langevin
+    from liesample.samplers.gauge.heat_bath import wilson_heat_bath
     from liesample.samplers.orbit.adjusted_lie_poisson import adjusted_lie_poisson
     from liesample.samplers.orbit.lie_poisson_langevin import lie_poisson_langevin
     from liesample.samplers.orbit.vortex_metropolis import vortex_metropolis
@@ -83,6 +84,7 @@ _ATTRIBUTES = {
     "sample_chains": "liesample.run.runner",
     "simulate": "liesample.integrators.drivers",
     "vortex_metropolis": "liesample.samplers.orbit.vortex_metropolis",
+    "wilson_heat_bath": "liesample.samplers.gauge.heat_bath",
     "window_adaptation": "liesample.tuning.adaptation",
 }
 
@@ -124,6 +126,7 @@ __all__ = [
     "systems",
     "targets",
     "vortex_metropolis",
+    "wilson_heat_bath",
     "window_adaptation",
 ]
 

@@ -8,10 +8,12 @@ from liesample.systems.heisenberg import heisenberg
 from liesample.systems.point_vortices import point_vortex_integrator, point_vortices
 from liesample.systems.rigid_body import rigid_body
 from liesample.systems.stochastic_pendulum import stochastic_pendulum
+from liesample.systems.wilson_gauge import WilsonGauge, wilson_gauge
 from liesample.systems.zeitlin import isospectral_midpoint, zeitlin_euler
 
 __all__ = [
     "LiePoissonSystem",
+    "WilsonGauge",
     "charged_particle",
     "charged_particle_path",
     "heavy_top",
@@ -22,5 +24,6 @@ __all__ = [
     "point_vortices",
     "rigid_body",
     "stochastic_pendulum",
+    "wilson_gauge",
     "zeitlin_euler",
 ]

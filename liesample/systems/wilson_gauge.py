@@ -1,0 +1,335 @@
+"""Lattice gauge theory with the Wilson action: a system on ``T*G`` (a product of groups).
+
+A :class:`WilsonGauge` is the first *group-product* system kind: its state is a field of group
+elements (the links), not a point of a coadjoint orbit, so it is not a
+:class:`~liesample.dynamics.system.LiePoissonSystem`. It declares
+
+- ``space``: the links as a space of :mod:`liesample.geometry.spaces` (``U1`` angles of shape
+  ``(d, *shape)``, or ``SU(N)`` matrices of shape ``(d, *shape, N, N)``), which is what the
+  ``T*G`` samplers (:func:`liesample.geometric_hmc`) move by exact group exponentials;
+- ``action(links)``: ``S/β = Σ_P (1 − Re tr U_P / N)`` (``1 − cos θ_P`` for U(1)), so the Gibbs
+  law is ``exp(−β S/β)`` with respect to the Haar measure of every link, and
+  ``logdensity(beta)`` is the ``log π`` a ``T*G`` sampler takes;
+- the observables ``mean_plaquette``, ``topological_charge``, ``wilson_loop``,
+  ``polyakov_loop``, ``energy_density``, and the Haar / identity starts ``hot_start`` and
+  ``cold_start``;
+- ``staples(links, mu)``: the sum ``A_μ(x)`` of the staples, so that the action is, link by link,
+  ``−(1/N) Re tr(U_μ(x) A_μ(x))`` plus terms free of ``U_μ(x)`` (what the heat bath uses).
+
+The plaquette is ``U_P = U_μ(x) U_ν(x+μ̂) U_μ(x+ν̂)† U_ν(x)†`` (``θ_μ(x) + θ_ν(x+μ̂) −
+θ_μ(x+ν̂) − θ_ν(x)`` for U(1)), one per site and pair ``μ < ν``. Periodic boundaries close the
+lattice into a torus; ``"open"`` keeps only the plaquettes that do not wrap (the links at the
+far edge that no plaquette holds are then free, Haar-distributed).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from liesample.geometry import spaces
+
+__all__ = ["GROUPS", "WilsonGauge", "wilson_gauge"]
+
+GROUPS = ("U1", "SU2", "SU3")
+"""Names ``wilson_gauge`` takes for ``group`` (and ``"SU<N>"`` for any ``N ≥ 2``)."""
+
+
+def _group_order(group) -> int:
+    """1 for ``"U1"``, ``N`` for ``"SU<N>"``, or a clear error."""
+    if group == "U1":
+        return 1
+    if isinstance(group, str) and group.startswith("SU") and group[2:].isdigit():
+        n = int(group[2:])
+        if n >= 2:
+            return n
+    raise ValueError(
+        f"group must be 'U1', 'SU2', 'SU3' (or 'SU<N>' with N >= 2), got {group!r}"
+    )
+
+
+def _lattice_shape(shape) -> tuple[int, ...]:
+    if isinstance(shape, (int, np.integer)) or not isinstance(shape, (tuple, list)):
+        raise TypeError(
+            f"shape must be a tuple of 2 to 4 lattice extents, e.g. (8, 8), got {shape!r}"
+        )
+    if not 2 <= len(shape) <= 4 or not all(
+        isinstance(s, (int, np.integer)) and not isinstance(s, bool) and s >= 2 for s in shape
+    ):
+        raise ValueError(
+            f"shape must hold 2 to 4 integer extents, each >= 2 (e.g. (8, 8) or (8, 8, 8, 8)), "
+            f"got {shape!r}"
+        )
+    return tuple(int(s) for s in shape)
+
+
+def _dagger(u):
+    return jnp.conj(jnp.swapaxes(u, -1, -2))
+
+
+@dataclasses.dataclass(frozen=True)
+class WilsonGauge:
+    """The Wilson gauge action on a ``d``-dimensional lattice (:func:`wilson_gauge`)."""
+
+    group: str
+    shape: tuple[int, ...]
+    boundary: str = "periodic"
+
+    def __post_init__(self):
+        _group_order(self.group)
+        object.__setattr__(self, "shape", _lattice_shape(self.shape))
+        if self.boundary not in ("periodic", "open"):
+            raise ValueError(
+                f"boundary must be 'periodic' or 'open', got {self.boundary!r}"
+            )
+
+    # ------------------------------------------------------------------ structure
+    @property
+    def n(self) -> int:
+        """``N`` of ``SU(N)``; 1 for U(1)."""
+        return _group_order(self.group)
+
+    @property
+    def dim(self) -> int:
+        return len(self.shape)
+
+    @property
+    def abelian(self) -> bool:
+        return self.n == 1
+
+    @property
+    def space(self):
+        """The links as a space: ``U1((d, *shape))`` or ``SU(N, (d, *shape))``."""
+        links = (self.dim, *self.shape)
+        return spaces.U1(links) if self.abelian else spaces.SU(self.n, links)
+
+    @property
+    def num_plaquettes(self) -> int:
+        """Plaquettes in the action (``V d(d−1)/2`` on the torus)."""
+        return int(sum(np.sum(self.plaquette_mask(mu, nu)) for mu, nu in self.planes))
+
+    @property
+    def planes(self) -> tuple[tuple[int, int], ...]:
+        return tuple((mu, nu) for mu in range(self.dim) for nu in range(mu + 1, self.dim))
+
+    def plaquette_mask(self, mu, nu) -> np.ndarray:
+        """Which sites ``x`` carry a plaquette in the plane ``(μ, ν)`` (all on the torus)."""
+        mask = np.ones(self.shape, bool)
+        if self.boundary == "open":
+            for axis in (mu, nu):
+                index = [slice(None)] * self.dim
+                index[axis] = -1
+                mask[tuple(index)] = False
+        return mask
+
+    # ------------------------------------------------------------------ lattice algebra
+    def shift(self, field, axis, step=1):
+        """``f(x + step·ê_axis)`` of a site field (periodic indexing)."""
+        return jnp.roll(field, -step, axis=axis)
+
+    def multiply(self, *factors):
+        """The product of link fields (sum of angles for U(1))."""
+        out = factors[0]
+        for f in factors[1:]:
+            out = out + f if self.abelian else out @ f
+        return out
+
+    def inverse(self, u):
+        return -u if self.abelian else _dagger(u)
+
+    def retrace(self, u):
+        """``Re tr U / N`` (``cos θ`` for U(1))."""
+        if self.abelian:
+            return jnp.cos(u)
+        return jnp.real(jnp.trace(u, axis1=-2, axis2=-1)) / self.n
+
+    def plaquette(self, links, mu, nu):
+        """``U_μν(x)`` at every site (angles for U(1))."""
+        u_mu, u_nu = links[mu], links[nu]
+        return self.multiply(
+            u_mu,
+            self.shift(u_nu, mu),
+            self.inverse(self.shift(u_mu, nu)),
+            self.inverse(u_nu),
+        )
+
+    def staples(self, links, mu):
+        """``A_μ(x)``: the sum of staples, ``Σ_P∋U_μ(x) Re tr(U_P)/N = Re tr(U_μ(x) A_μ(x))/N``.
+
+        For U(1) a complex number ``Σ e^{iα}`` (the action of the link is ``−Re(e^{iθ} A)``)."""
+        total = 0.0
+        for nu in range(self.dim):
+            if nu == mu:
+                continue
+            lo, hi = sorted((mu, nu))
+            mask = jnp.asarray(self.plaquette_mask(lo, hi))
+            u_mu, u_nu = links[mu], links[nu]
+            up = self.multiply(
+                self.shift(u_nu, mu), self.inverse(self.shift(u_mu, nu)), self.inverse(u_nu)
+            )
+            down = self.multiply(
+                self.inverse(self.shift(self.shift(u_nu, mu), nu, -1)),
+                self.inverse(self.shift(u_mu, nu, -1)),
+                self.shift(u_nu, nu, -1),
+            )
+            up_mask, down_mask = mask, self.shift(mask, nu, -1)
+            total = total + self._as_matrix(up, up_mask) + self._as_matrix(down, down_mask)
+        return total
+
+    def _as_matrix(self, u, mask):
+        if self.abelian:
+            return jnp.where(mask, jnp.exp(1j * u), 0.0)
+        return jnp.where(mask[..., None, None], u, 0.0)
+
+    # ------------------------------------------------------------------ action
+    def action(self, links):
+        """``S/β = Σ_P (1 − Re tr U_P / N)``."""
+        total = 0.0
+        for mu, nu in self.planes:
+            mask = jnp.asarray(self.plaquette_mask(mu, nu))
+            deficit = 1.0 - self.retrace(self.plaquette(links, mu, nu))
+            total = total + jnp.sum(jnp.where(mask, deficit, 0.0))
+        return total
+
+    def logdensity(self, beta):
+        """``links ↦ −β S/β``: the ``log π`` (Haar measure) of a ``T*G`` sampler."""
+        beta = float(beta)
+        return lambda links: -beta * self.action(links)
+
+    # ------------------------------------------------------------------ starts
+    def hot_start(self, rng_key, dtype=None):
+        """Haar-random links (pure JAX: vmaps over keys)."""
+        return self.space.uniform(rng_key, dtype)
+
+    def cold_start(self, dtype=None):
+        """Every link the identity."""
+        dtype = jnp.dtype(dtype or jnp.zeros(()).dtype)
+        if self.abelian:
+            return jnp.zeros((self.dim, *self.shape), dtype)
+        eye = jnp.eye(self.n, dtype=jnp.result_type(dtype, jnp.complex64))
+        return jnp.broadcast_to(eye, (self.dim, *self.shape, self.n, self.n))
+
+    # ------------------------------------------------------------------ observables
+    def mean_plaquette(self, links):
+        """Mean over the action's plaquettes of ``Re tr U_P / N`` (``cos θ_P`` for U(1))."""
+        return 1.0 - self.action(links) / self.num_plaquettes
+
+    def topological_charge(self, links):
+        """2-D U(1): the geometric charge ``Σ_P arg(U_P) / 2π`` (an integer on the torus).
+
+        Other groups and dimensions: the clover charge of :func:`clover_charge` (flow first,
+        :func:`liesample.samplers.gauge.wilson_flow`, for a near-integer value)."""
+        if self.abelian and self.dim == 2:
+            theta = self.plaquette(links, 0, 1)
+            return jnp.sum(jnp.angle(jnp.exp(1j * theta))) / (2.0 * jnp.pi)
+        if self.dim == 4 and not self.abelian:
+            return clover_charge(self, links)
+        raise ValueError(
+            f"topological_charge is defined for 2-D U(1) (geometric) and 4-D SU(N) (clover); "
+            f"got group {self.group!r} in {self.dim} dimensions"
+        )
+
+    def wilson_loop(self, links, r, t, mu=0, nu=None):
+        """Mean of ``Re tr W / N`` over the ``r × t`` rectangles in the plane ``(μ, ν)``
+        (``ν`` the last axis by default: time), over every site (periodic indexing)."""
+        nu = self.dim - 1 if nu is None else nu
+        bottom = self._line(links[mu], mu, r)
+        right = self.shift(self._line(links[nu], nu, t), mu, r)
+        top = self.shift(self._line(links[mu], mu, r), nu, t)
+        left = self._line(links[nu], nu, t)
+        loop = self.multiply(bottom, right, self.inverse(top), self.inverse(left))
+        return jnp.mean(self.retrace(loop))
+
+    def _line(self, link, axis, length):
+        """``U(x) U(x+ê) … U(x+(length−1)ê)`` along ``axis`` at every site."""
+        out = link
+        for k in range(1, length):
+            out = self.multiply(out, self.shift(link, axis, k))
+        return out
+
+    def polyakov_loop(self, links, axis=None):
+        """Mean over the spatial sites of ``tr Π_t U_t(x, t) / N`` (complex), ``axis`` the time
+        direction (the last by default); needs a periodic lattice."""
+        axis = self.dim - 1 if axis is None else axis
+        line = self._line(links[axis], axis, self.shape[axis])
+        value = jnp.exp(1j * line) if self.abelian else jnp.trace(line, axis1=-2, axis2=-1) / self.n
+        return jnp.mean(jnp.take(value, 0, axis=axis))
+
+    def energy_density(self, links):
+        """``E = 2 Σ_{μ<ν} Re tr(1 − U_μν) / V`` per site in Lüscher's normalisation
+        (``t² E`` defines ``t₀``: ``t₀² ⟨E(t₀)⟩ = 0.3``); for SU(N) only."""
+        return 2.0 * self.n * self.action(links) / math.prod(self.shape)
+
+
+def clover_charge(system: WilsonGauge, links):
+    """The clover topological charge ``Q = (1/32π²) Σ_x ε_μνρσ tr(F_μν F_ρσ)`` of a 4-D SU(N)
+    field, ``F_μν`` the anti-Hermitian traceless part of the four-leaf clover over 4 (a plain
+    observable: integer-valued only after smoothing, e.g. the Wilson flow)."""
+    field = {}
+    for mu, nu in system.planes:
+        leaves = 0.0
+        for s_mu, s_nu in ((1, 1), (-1, 1), (-1, -1), (1, -1)):
+            leaves = leaves + _leaf(system, links, mu, nu, s_mu, s_nu)
+        c = leaves / 4.0
+        a = 0.5 * (c - _dagger(c))
+        eye = jnp.eye(system.n)
+        field[mu, nu] = a - jnp.trace(a, axis1=-2, axis2=-1)[..., None, None] * eye / system.n
+    tr = lambda a, b: jnp.real(jnp.trace(a @ b, axis1=-2, axis2=-1))
+    density = (
+        tr(field[0, 1], field[2, 3]) - tr(field[0, 2], field[1, 3]) + tr(field[0, 3], field[1, 2])
+    )
+    # F = i a² F_herm for the anti-Hermitian clover F, hence the sign
+    return -jnp.sum(density) * 8.0 / (32.0 * jnp.pi**2)
+
+
+def _leaf(system, links, mu, nu, s_mu, s_nu):
+    """The plaquette from ``x`` going ``s_μ ê_μ`` then ``s_ν ê_ν`` (and back), oriented as the
+    ``(μ, ν)`` plaquette."""
+
+    def step(axis, sign, at):
+        # the link from `at` to `at + sign ê_axis`, as a field over x (at: offsets dict)
+        field = links[axis]
+        for ax, k in at.items():
+            field = system.shift(field, ax, k)
+        if sign > 0:
+            return field
+        return _dagger(system.shift(field, axis, -1))
+
+    p1 = step(mu, s_mu, {})
+    p2 = step(nu, s_nu, {mu: s_mu})
+    p3 = step(mu, -s_mu, {mu: s_mu, nu: s_nu})
+    p4 = step(nu, -s_nu, {nu: s_nu})
+    loop = p1 @ p2 @ p3 @ p4
+    return loop if s_mu * s_nu > 0 else _dagger(loop)
+
+
+def wilson_gauge(group: str, shape, boundary: str = "periodic") -> WilsonGauge:
+    """The Wilson gauge action ``S = β Σ_P (1 − Re tr U_P / N)`` on a lattice.
+
+    Parameters
+    ----------
+    group : str
+        ``"U1"`` (links are angles, shape ``(d, *shape)``), ``"SU2"``, ``"SU3"`` or
+        ``"SU<N>"`` (complex matrices, shape ``(d, *shape, N, N)``).
+    shape : tuple of int
+        The lattice extents, 2 to 4 of them, each ``>= 2`` (the heat bath's checkerboard needs
+        even extents on the torus).
+    boundary : str
+        ``"periodic"`` (a torus, default) or ``"open"`` (only the plaquettes that do not
+        wrap).
+
+    Returns
+    -------
+    WilsonGauge
+        Sample it with :func:`liesample.recommended_sampler` (heat bath with over-relaxation,
+        :func:`liesample.wilson_heat_bath`) or with :func:`liesample.geometric_hmc` on
+        ``system.space`` with ``system.logdensity(beta)``.
+    """
+    return WilsonGauge(group, shape, boundary)
+
+
+jax.tree_util.register_static(WilsonGauge)
