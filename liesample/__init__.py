@@ -28,6 +28,7 @@ from liesample.samplers.orbit.adjusted_lie_poisson import adjusted_lie_poisson
 from liesample.samplers.orbit.lie_poisson_langevin import lie_poisson_langevin
 from liesample.samplers.orbit.vortex_metropolis import vortex_metropolis
 from liesample.samplers.recommended import recommended_sampler
+from liesample.samplers.spins.heisenberg_cluster import heisenberg_cluster
 from liesample.samplers.spins.heisenberg_heat_bath import heisenberg_heat_bath
 from liesample.samplers.spins.heisenberg_metropolis import heisenberg_metropolis
 from liesample.samplers.spins.heisenberg_wolff import heisenberg_wolff
@@ -62,6 +63,7 @@ __all__ = [
     "geometric_hmc",
     "geometric_langevin",
     "geometry",
+    "heisenberg_cluster",
     "heisenberg_heat_bath",
     "heisenberg_metropolis",
     "heisenberg_wolff",
