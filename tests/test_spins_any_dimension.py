@@ -194,3 +194,19 @@ def test_cluster_moves_refuse_what_reflections_do_not_sample():
         liesample.heisenberg_cluster(heisenberg((4,)), beta=-1.0)
     with pytest.raises(ValueError, match="clusters"):
         liesample.heisenberg_cluster(heisenberg((4,)), beta=1.0, clusters="some")
+
+
+@pytest.mark.parametrize(
+    ("shape", "kwargs", "beta", "name"),
+    [
+        ((16, 16, 16), {}, 0.693, "heisenberg_cluster"),
+        ((16, 16, 16), {}, 0.3, "heisenberg_heat_bath"),
+        ((8, 8, 8), {}, 0.693, "heisenberg_heat_bath"),
+        ((16, 16, 16), {"field": (0.0, 0.0, 0.1)}, 0.693, "heisenberg_heat_bath"),
+        ((16, 16, 16), {"coupling": -1.0}, -0.693, "heisenberg_heat_bath"),
+        ((64, 64), {}, 0.693, "heisenberg_heat_bath"),
+    ],
+)
+def test_recommended_spin_sampler_follows_the_measured_choice(shape, kwargs, beta, name):
+    system = heisenberg(shape, periodic=True, **kwargs)
+    assert liesample.recommended_sampler(system, beta=beta).settings["sampler"] == name
