@@ -3,7 +3,7 @@ Swendsen–Wang cluster algorithm and a plain reference heat bath, side by side 
 
 A suite of ``benchmarks/run.py`` (``benchmarks/suites.py``); alone::
 
-    .venv/bin/python benchmarks/spins.py            # L = 8, 16, 32 (~15 min on 2 shared cores)
+    .venv/bin/python benchmarks/spins.py            # L = 8, 16, 32 (~20 min on 2 shared cores)
     .venv/bin/python benchmarks/spins.py --quick    # L = 8 only (benchmarks/results/quick/)
 
 Writes ``spins.json``. On ``heisenberg((L, L, L), periodic=True)``, J = 1, no field, at
@@ -27,8 +27,8 @@ excluded).
 The user's path, at L = 8: ``liesample.sample(liesample.recommended_sampler(system, beta=β_c),
 …)`` with the default warm-up, timed with its compilation, against the reference heat bath run
 for as many warm-up steps and draws, also timed with its compilation. The choice table runs the
-two library samplers at L = 8 over several β to show where each wins
-(``liesample.recommended_sampler`` follows it).
+two library samplers at L = 8 over several β, and (full mode) at L = 16 on both sides of β_c, to
+show where each wins (``liesample.recommended_sampler`` follows it).
 """
 
 from __future__ import annotations
@@ -57,10 +57,12 @@ BETA_C = 0.693
 SIZES = (8, 16, 32)
 QUICK_SIZES = (8,)
 NUM_CHAINS = 4
-BUDGET_SECONDS = {8: 8.0, 16: 40.0, 32: 120.0}
+BUDGET_SECONDS = {8: 8.0, 16: 40.0, 32: 200.0}
 QUICK_BUDGET_SECONDS = 4.0
 CHOICE_BETAS = (0.3, 0.5, 0.693, 1.0)
-USER_PATH_DRAWS = 2000
+CHOICE_LARGE = {16: (0.6, 0.8)}  # full mode: the edges of the window where clusters may win
+CHOICE_LARGE_BUDGET = 20.0
+USER_PATH_DRAWS = 4000
 QUANTITIES = ("abs_magnetisation", "energy_per_site")
 
 SAMPLERS = {
@@ -307,14 +309,16 @@ def run(out_dir: Path, quick: bool, log=print) -> None:
             rows += measure(label, build(system, BETA_C), starts, budget, 1, log, extra)
         rows += measure("reference heat bath", _Reference(BETA_C), starts, budget, 1, log, extra)
     choice = []
-    system = heisenberg((8, 8, 8), periodic=True)
-    for beta in CHOICE_BETAS:
-        log(f"  choice: 8^3 at beta = {beta}")
+    runs = [(8, beta, QUICK_BUDGET_SECONDS) for beta in CHOICE_BETAS]
+    if not quick:
+        runs += [(s, b, CHOICE_LARGE_BUDGET) for s, betas in CHOICE_LARGE.items() for b in betas]
+    for size, beta, budget in runs:
+        log(f"  choice: {size}^3 at beta = {beta}")
+        system = heisenberg((size,) * 3, periodic=True)
         starts = equilibrated_starts(system, beta, 3)
         for label, build in SAMPLERS.items():
             choice += measure(
-                label, build(system, beta), starts, QUICK_BUDGET_SECONDS, 2, log,
-                {"size": 8, "beta": beta},
+                label, build(system, beta), starts, budget, 2, log, {"size": size, "beta": beta}
             )
     path = common.write_json(
         out_dir / "spins.json",
@@ -419,22 +423,24 @@ def report_section(results) -> str:
             )
     lines += [
         "",
-        "Which library sampler wins at 8³ (ESS/s of |m| and E; `liesample.recommended_sampler` "
-        "follows this table):",
+        "Which library sampler wins (ESS/s of |m| and E; `liesample.recommended_sampler` "
+        "follows this table and the rows above):",
         "",
-        "| β | quantity | heat bath + OR ESS/s | swendsen-wang ESS/s | ratio SW/HB |",
-        "|---|---|---|---|---|",
+        "| L | β | quantity | heat bath + OR ESS/s | swendsen-wang ESS/s | ratio SW/HB |",
+        "|---|---|---|---|---|---|",
     ]
     choice = results["choice"]
-    for beta in sorted({r["beta"] for r in choice}):
+    for size, beta in sorted({(r["size"], r["beta"]) for r in choice}):
         for quantity in QUANTITIES:
             heat, cluster = (
-                next(r for r in choice if r["beta"] == beta and r["sampler"] == s
-                     and r["quantity"] == quantity)
+                next(
+                    r for r in choice if r["size"] == size and r["beta"] == beta
+                    and r["sampler"] == s and r["quantity"] == quantity
+                )
                 for s in SAMPLERS
             )
             lines.append(
-                f"| {beta} | {quantity} | {heat['ess_per_second']:.3g} | "
+                f"| {size} | {beta} | {quantity} | {heat['ess_per_second']:.3g} | "
                 f"{cluster['ess_per_second']:.3g} | "
                 f"{cluster['ess_per_second'] / heat['ess_per_second']:.2f} |"
             )
