@@ -150,7 +150,7 @@ ROWS = [
     # ---- systems.heisenberg
     ("heisenberg shape zero", lambda: systems.heisenberg((0,)), ValueError, "shape"),
     ("heisenberg shape type", lambda: systems.heisenberg(5), TypeError, "shape"),
-    ("heisenberg shape 3d", lambda: systems.heisenberg((2, 2, 2)), ValueError, "shape"),
+    ("heisenberg shape empty", lambda: systems.heisenberg(()), ValueError, "shape"),
     (
         "heisenberg coupling nan",
         lambda: systems.heisenberg((4,), coupling=NAN),
