@@ -199,11 +199,11 @@ def test_cluster_moves_refuse_what_reflections_do_not_sample():
 @pytest.mark.parametrize(
     ("shape", "kwargs", "beta", "name"),
     [
-        ((16, 16, 16), {}, 0.693, "heisenberg_cluster"),
-        ((16, 16, 16), {}, 0.3, "heisenberg_heat_bath"),
-        ((8, 8, 8), {}, 0.693, "heisenberg_heat_bath"),
-        ((16, 16, 16), {"field": (0.0, 0.0, 0.1)}, 0.693, "heisenberg_heat_bath"),
-        ((16, 16, 16), {"coupling": -1.0}, -0.693, "heisenberg_heat_bath"),
+        ((32, 32, 32), {}, 0.693, "heisenberg_cluster"),
+        ((32, 32, 32), {}, 0.3, "heisenberg_heat_bath"),
+        ((16, 16, 16), {}, 0.693, "heisenberg_heat_bath"),
+        ((32, 32, 32), {"field": (0.0, 0.0, 0.1)}, 0.693, "heisenberg_heat_bath"),
+        ((32, 32, 32), {"coupling": -1.0}, -0.693, "heisenberg_heat_bath"),
         ((64, 64), {}, 0.693, "heisenberg_heat_bath"),
     ],
 )

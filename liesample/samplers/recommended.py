@@ -32,7 +32,7 @@ from liesample.systems.point_vortices import PointVortexSystem
 
 __all__ = ["recommended_sampler", "spin_sampler_name"]
 
-CLUSTER_MIN_SITES = 16**3
+CLUSTER_MIN_SITES = 32**3
 """Smallest 3-D lattice on which the cluster moves beat heat bath + over-relaxation at β_c."""
 
 CLUSTER_BETA_WINDOW = (0.6, 0.8)
