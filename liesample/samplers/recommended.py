@@ -35,7 +35,7 @@ __all__ = ["recommended_sampler", "spin_sampler_name"]
 CLUSTER_MIN_SITES = 32**3
 """Smallest 3-D lattice on which the cluster moves beat heat bath + over-relaxation at β_c."""
 
-CLUSTER_BETA_WINDOW = (0.6, 0.8)
+CLUSTER_BETA_WINDOW = (0.65, 0.75)
 """``βJ`` around the 3-D critical point (``β_c J ≈ 0.693``) where they do."""
 
 
