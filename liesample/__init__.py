@@ -42,6 +42,7 @@ if TYPE_CHECKING:  # what the lazy names below resolve to, for type checkers and
     from liesample.samplers.orbit.lie_poisson_langevin import lie_poisson_langevin
     from liesample.samplers.orbit.vortex_metropolis import vortex_metropolis
     from liesample.samplers.recommended import recommended_sampler
+    from liesample.samplers.spins.heisenberg_cluster import heisenberg_cluster
     from liesample.samplers.spins.heisenberg_heat_bath import heisenberg_heat_bath
     from liesample.samplers.spins.heisenberg_metropolis import heisenberg_metropolis
     from liesample.samplers.spins.heisenberg_wolff import heisenberg_wolff
@@ -68,6 +69,7 @@ _ATTRIBUTES = {
     "default_magnetic_field": "liesample.samplers.cotangent._euclidean",
     "geometric_hmc": "liesample.samplers.cotangent.geometric_hmc",
     "geometric_langevin": "liesample.samplers.cotangent.geometric_langevin",
+    "heisenberg_cluster": "liesample.samplers.spins.heisenberg_cluster",
     "heisenberg_heat_bath": "liesample.samplers.spins.heisenberg_heat_bath",
     "heisenberg_metropolis": "liesample.samplers.spins.heisenberg_metropolis",
     "heisenberg_wolff": "liesample.samplers.spins.heisenberg_wolff",
@@ -103,6 +105,7 @@ __all__ = [
     "geometric_hmc",
     "geometric_langevin",
     "geometry",
+    "heisenberg_cluster",
     "heisenberg_heat_bath",
     "heisenberg_metropolis",
     "heisenberg_wolff",

@@ -241,6 +241,11 @@ SAMPLERS = [
         lambda: _VORTEX_STARTS,
     ),
     SamplerCase(
+        "heisenberg_cluster",
+        lambda: liesample.heisenberg_cluster(_heisenberg(), beta=0.5),
+        lambda: _spin_starts((4, 4), seed=4),
+    ),
+    SamplerCase(
         "heisenberg_heat_bath",
         lambda: liesample.heisenberg_heat_bath(_heisenberg(), beta=1.0),
         lambda: _spin_starts((4, 4), seed=1),

@@ -150,7 +150,7 @@ ROWS = [
     # ---- systems.heisenberg
     ("heisenberg shape zero", lambda: systems.heisenberg((0,)), ValueError, "shape"),
     ("heisenberg shape type", lambda: systems.heisenberg(5), TypeError, "shape"),
-    ("heisenberg shape 3d", lambda: systems.heisenberg((2, 2, 2)), ValueError, "shape"),
+    ("heisenberg shape empty", lambda: systems.heisenberg(()), ValueError, "shape"),
     (
         "heisenberg coupling nan",
         lambda: systems.heisenberg((4,), coupling=NAN),
@@ -738,7 +738,7 @@ ROWS = [
         ValueError,
         "step_size.*finite",
     ),
-    # ---- liesample.heisenberg_heat_bath, liesample.heisenberg_wolff
+    # ---- liesample.heisenberg_heat_bath, liesample.heisenberg_wolff, heisenberg_cluster
     (
         "heisenberg_heat_bath anisotropy",
         lambda: liesample.heisenberg_heat_bath(systems.heisenberg((4,), anisotropy=0.3), beta=1.0),
@@ -770,6 +770,18 @@ ROWS = [
         lambda: liesample.heisenberg_wolff(CHAIN, beta=-1.0),
         ValueError,
         "beta must be >= 0",
+    ),
+    (
+        "heisenberg_cluster coupling",
+        lambda: liesample.heisenberg_cluster(systems.heisenberg((4,), coupling=-1.0), beta=1.0),
+        ValueError,
+        "coupling.*heisenberg_heat_bath",
+    ),
+    (
+        "heisenberg_cluster clusters",
+        lambda: liesample.heisenberg_cluster(CHAIN, beta=1.0, clusters="one"),
+        ValueError,
+        "clusters must be one of",
     ),
     # ---- systems.zeitlin_euler
     ("zeitlin_euler size", lambda: systems.zeitlin_euler(1), ValueError, "N must be an int >= 2"),

@@ -72,7 +72,16 @@ def naive_neighbour_sum(s, shape, periodic):
 # The Hamiltonian and the lattice helpers against naive loops
 # ---------------------------------------------------------------------------------------------
 
-GEOMETRIES = [((5,), False), ((5,), True), ((3, 3), False), ((3, 3), True), ((3, 4), True)]
+GEOMETRIES = [
+    ((5,), False),
+    ((5,), True),
+    ((3, 3), False),
+    ((3, 3), True),
+    ((3, 4), True),
+    ((3, 4, 3), True),
+    ((2, 3, 2), False),
+    ((3, 3, 3, 3), True),
+]
 
 
 @pytest.mark.parametrize(("shape", "periodic"), GEOMETRIES)
@@ -338,7 +347,7 @@ def test_pure_dissipation_aligns_the_ferromagnetic_chain(hamiltonian):
     [
         ({"shape": 16}, TypeError, "shape"),
         ({"shape": ()}, ValueError, "shape"),
-        ({"shape": (2, 2, 2)}, ValueError, "shape"),
+        ({"shape": (2, 2, 2), "periodic": True}, ValueError, "periodic"),
         ({"shape": (0,)}, ValueError, "shape"),
         ({"shape": (4, -1)}, ValueError, "shape"),
         ({"shape": (2.5,)}, TypeError, "shape"),

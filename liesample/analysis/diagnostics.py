@@ -974,12 +974,24 @@ def binder_cumulant(magnetisation, *, block_size=None) -> JackknifeResult:
 
     Parameters
     ----------
-    magnetisation : array_like, shape (chains, draws), (chains, draws, components) or (draws,)
-        As for :func:`susceptibility`.
+    magnetisation : array_like
+        The magnetisation per site at each draw: ``(draws, components)`` for one chain or
+        ``(chains, draws, components)`` for several, ``components`` being 2, 3 or 4 (O(2),
+        O(3), O(4) spins); or a scalar one, ``(draws,)`` or ``(chains, draws)`` with more than
+        4 draws per chain. Any other shape is a ``ValueError`` naming these.
     block_size : int, optional
         As for :func:`jackknife`.
     """
-    squared = _magnetisation_norm(magnetisation) ** 2
+    m = np.asarray(magnetisation, dtype=float)
+    if m.ndim == 2 and 2 <= m.shape[1] <= 4:
+        m = m[None]  # one chain of a vector magnetisation
+    if m.ndim not in (1, 2, 3) or (m.ndim == 2 and m.shape[1] < 2):
+        raise ValueError(
+            "magnetisation must have shape (draws, components) for one chain or (chains, draws, "
+            "components) for several (components 2, 3 or 4), or (draws,) / (chains, draws) for "
+            f"a scalar magnetisation; got shape {m.shape}"
+        )
+    squared = _magnetisation_norm(m) ** 2
     return jackknife(
         lambda m2, m4: 1.0 - m4 / (3.0 * m2**2), squared, squared**2, block_size=block_size
     )

@@ -1,8 +1,9 @@
 """Classical Heisenberg spin lattices: the stochastic Landau–Lifshitz–Gilbert equation.
 
 The state is a stack of unit spins ``s`` of shape ``(*shape, 3)`` on the product
-``(so(3)*)^N`` (``so3`` acts copy by copy), ``N = prod(shape)``: ``shape = (N,)`` is a chain and
-``shape = (L₁, L₂)`` a square lattice. The Hamiltonian (classical Heisenberg model) is
+``(so(3)*)^N`` (``so3`` acts copy by copy), ``N = prod(shape)``: ``shape = (N,)`` is a chain,
+``shape = (L₁, L₂)`` a square lattice, ``(L₁, L₂, L₃)`` a simple cubic one, and so on in any
+dimension (the hypercubic lattice ``Z^d``, each site with ``2d`` neighbours). The Hamiltonian (classical Heisenberg model) is
 
     h(s) = −J Σ_⟨jk⟩ s_j·s_k  −  B·Σ_k s_k  −  D Σ_k (s_k·e_z)²
 
@@ -79,14 +80,18 @@ class SpinLatticeSystem(LiePoissonSystem):
 
 
 def lattice_shape(shape) -> tuple[int, ...]:
-    """``shape`` as a tuple of 1 or 2 positive ints, or a ``TypeError``/``ValueError``."""
+    """``shape`` as a non-empty tuple of positive ints (one per lattice axis), or a
+    ``TypeError``/``ValueError``."""
     if not isinstance(shape, (tuple, list)):
         raise TypeError(
-            f"shape must be a tuple of 1 or 2 positive ints, (N,) for a chain or (L1, L2) for a "
-            f"square lattice; got {shape!r}"
+            f"shape must be a tuple of positive ints, one per lattice axis: (N,) for a chain, "
+            f"(L1, L2) for a square lattice, (L1, L2, L3) for a cubic one; got {shape!r}"
         )
-    if not 1 <= len(shape) <= 2:
-        raise ValueError(f"shape must have 1 or 2 entries (chain or square lattice), got {shape!r}")
+    if len(shape) == 0:
+        raise ValueError(
+            f"shape must have at least one entry (one per lattice axis, e.g. (8,) or (8, 8, 8)), "
+            f"got {shape!r}"
+        )
     out = []
     for extent in shape:
         if isinstance(extent, (bool, np.bool_)):
@@ -112,7 +117,7 @@ def _field(field) -> np.ndarray:
 def _bond_sum(s, periodic: bool):
     """``Σ_⟨jk⟩ s_j·s_k`` over nearest-neighbour bonds along every lattice axis (no loops)."""
     total = jnp.zeros((), s.dtype)
-    for axis in range(s.ndim - 1):  # lattice axes only (at most 2)
+    for axis in range(s.ndim - 1):  # lattice axes only
         if periodic:
             total = total + jnp.sum(s * jnp.roll(s, -1, axis=axis))
         else:
@@ -198,12 +203,13 @@ def heisenberg(
     field=(0.0, 0.0, 0.0),
     anisotropy=0.0,
 ) -> SpinLatticeSystem:
-    """The classical Heisenberg model on a chain or a square lattice.
+    """The classical Heisenberg model on a hypercubic lattice of any dimension.
 
     Parameters
     ----------
-    shape : tuple of 1 or 2 positive ints
-        ``(N,)`` for a chain of ``N`` spins, ``(L1, L2)`` for a square lattice.
+    shape : tuple of positive ints
+        One extent per lattice axis: ``(N,)`` for a chain of ``N`` spins, ``(L1, L2)`` for a
+        square lattice, ``(L1, L2, L3)`` for a simple cubic one, and so on.
     coupling : float
         Exchange ``J`` (finite): ``J > 0`` ferromagnetic, ``J < 0`` antiferromagnetic.
     periodic : bool
@@ -256,7 +262,9 @@ def heisenberg(
 
     default_position = np.zeros((*shape, 3))
     default_position[..., 2] = 1.0
-    geometry = "chain" if len(shape) == 1 else "square lattice"
+    geometry = {1: "chain", 2: "square lattice", 3: "cubic lattice"}.get(
+        len(shape), f"{len(shape)}-d lattice"
+    )
     return SpinLatticeSystem(
         name=f"Heisenberg {geometry} {'x'.join(map(str, shape))}",
         algebra=so3,

@@ -1,1 +1,2 @@
-"""Spin-lattice samplers: exact heat bath with over-relaxation, single-spin Metropolis, Wolff."""
+"""Spin-lattice samplers: exact heat bath with over-relaxation, single-spin Metropolis, and
+cluster moves (Swendsen–Wang, Wolff)."""

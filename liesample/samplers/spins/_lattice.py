@@ -2,7 +2,7 @@
 
 The samplers (:mod:`~liesample.samplers.spins.heisenberg_heat_bath`,
 :mod:`~liesample.samplers.spins.heisenberg_metropolis`,
-:mod:`~liesample.samplers.spins.heisenberg_wolff`) act on a :func:`liesample.systems.heisenberg`
+:mod:`~liesample.samplers.spins.heisenberg_cluster`) act on a :func:`liesample.systems.heisenberg`
 system. Spins of one colour class of the lattice's proper colouring
 (:func:`liesample.systems.heisenberg.colouring`) are never neighbours, so given the other classes
 each feels a fixed local field

@@ -1,0 +1,242 @@
+"""Cluster moves for the classical Heisenberg (O(3)) ferromagnet: Swendsen–Wang and Wolff, with
+Wolff's embedding, vectorised in any dimension.
+
+A BlackJAX-shaped module (``init``, ``build_kernel``, ``as_top_level_api``). One step (Wolff
+1989, embedded Ising spins ``σ_k = sign(r·s_k)``):
+
+1. draw a uniform reflection direction ``r ∈ S²``;
+2. open every nearest-neighbour bond ``⟨ij⟩`` independently with probability
+
+   ``p_ij = 1 − exp(min(0, −2βJ (r·s_i)(r·s_j)))``
+
+   (the Fortuin–Kasteleyn bonds of the embedded Ising model, coupling ``βJ|r·s_i||r·s_j|``);
+3. find the connected components of the open bonds (:func:`connected_components`);
+4. reflect clusters, ``s ↦ s − 2(r·s)r``: with ``clusters="all"`` (Swendsen–Wang) each cluster
+   independently with probability 1/2, with ``clusters="seed"`` (Wolff's single cluster) the one
+   holding a uniform seed site.
+
+A reflection keeps every bond inside and outside a cluster, and the bond probabilities make both
+moves satisfy detailed balance for ``exp(−βh)`` with no rejection. That holds for the isotropic
+nearest-neighbour model with ``J > 0``, no field, no anisotropy and ``β ≥ 0``; other systems are
+refused. A Swendsen–Wang step gives every site a new bond configuration and a chance to flip: it
+is one sweep of the lattice, so a warm-up of ``n`` steps is ``n`` sweeps. A Wolff step moves one
+cluster only (at high temperature one site), however large the lattice.
+
+The connected components come from label propagation with pointer jumping (no site-by-site
+loop): every site points to a site of smaller index in its cluster; each round hooks the root
+of every site onto the smallest label across its open bonds (a scatter-min) and halves the
+pointer paths twice; the round repeats until nothing changes, a number of rounds that grows
+like the logarithm of the cluster diameter rather than the diameter itself.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from liesample.samplers.contract import Sampler, sampling_api
+from liesample.samplers.spins._lattice import (
+    SpinState,
+    check_beta,
+    check_spin_system,
+    finish_step,
+    init,
+    spin_sampler,
+)
+from liesample.systems.heisenberg import SpinLatticeSystem, neighbour_table
+from liesample.targets.spins import von_mises_fisher
+
+__all__ = [
+    "CLUSTER_RULES",
+    "ClusterInfo",
+    "SpinState",
+    "as_top_level_api",
+    "bond_table",
+    "build_kernel",
+    "check_cluster_system",
+    "connected_components",
+    "init",
+]
+
+CLUSTER_RULES = ("all", "seed")
+"""``"all"``: Swendsen–Wang (every cluster flips with probability 1/2); ``"seed"``: Wolff's single
+cluster (the cluster of a uniform seed site flips)."""
+
+
+class ClusterInfo(NamedTuple):
+    """What one cluster move did: the shared spin-info fields plus ``cluster_size`` (the number
+    of sites reflected). ``acceptance_rate`` is always 1 (the move is rejection-free)."""
+
+    is_divergent: jax.Array
+    acceptance_rate: jax.Array
+    energy: jax.Array
+    cluster_size: jax.Array
+
+
+def check_cluster_system(system: SpinLatticeSystem, sampler: str) -> None:
+    """Refuse what reflections do not sample: ``J ≤ 0``, a field, an anisotropy."""
+    params = check_spin_system(system)
+    problems = []
+    if params["coupling"] <= 0.0:
+        problems.append(f"coupling J = {params['coupling']:g} (must be > 0, ferromagnetic)")
+    if any(b != 0.0 for b in params["field"]):
+        problems.append(f"field = {params['field']} (must be zero)")
+    if params["anisotropy"] != 0.0:
+        problems.append(f"anisotropy = {params['anisotropy']:g} (must be 0)")
+    if problems:
+        raise ValueError(
+            f"{sampler} is exact only for the isotropic ferromagnet without field "
+            "(reflections must keep h); this system has " + "; ".join(problems) + ". Use "
+            "heisenberg_heat_bath (any coupling sign and field) or heisenberg_metropolis "
+            "(anisotropy too) instead"
+        )
+
+
+def check_cluster_beta(beta, sampler: str) -> float:
+    beta = check_beta(beta)
+    if beta < 0.0:
+        raise ValueError(
+            f"beta must be >= 0 for {sampler} (a negative temperature turns the ferromagnet "
+            f"into an antiferromagnet, which reflections do not sample); got {beta!r}. Use "
+            "heisenberg_heat_bath for beta < 0"
+        )
+    return beta
+
+
+def bond_table(shape, periodic: bool):
+    """``(neighbours (N, 2·dim), bond ids (N, 2·dim), bond ends (B, 2))`` of the lattice.
+
+    ``neighbours`` is :func:`~liesample.systems.heisenberg.neighbour_table` (``N`` where an open
+    edge has none); ``bond ids[i, d]`` numbers the undirected bond from ``i`` to its ``d``-th
+    neighbour (``B`` where there is none), in the order the rows first meet them; ``ends[b]``
+    holds its two sites, smaller first.
+    """
+    table = neighbour_table(shape, periodic)
+    num_sites, degree = table.shape
+    i = np.repeat(np.arange(num_sites), degree)
+    j = table.reshape(-1)
+    valid = j != num_sites
+    key = np.minimum(i, j)[valid] * num_sites + np.maximum(i, j)[valid]
+    unique, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+    order = np.argsort(first)  # number the bonds in the order the rows first meet them
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.size)
+    bonds = np.full(num_sites * degree, unique.size, dtype=np.int64)
+    bonds[valid] = rank[inverse.reshape(-1)]
+    ends = np.stack([unique // num_sites, unique % num_sites], axis=1)[order]
+    return table, bonds.reshape(table.shape), ends.astype(np.int64).reshape(-1, 2)
+
+
+def connected_components(linked):
+    """``root[k]``, the smallest site index in ``k``'s component, for ``linked`` (N, degree)
+    int: the sites each site is joined to (``k`` itself where a bond is closed or missing).
+
+    Label propagation with pointer jumping: ``parent[k] ≤ k`` always; a round hooks the root of
+    every ``k`` onto the smallest parent across its links (scatter-min) and jumps pointers twice.
+    A round that changes nothing leaves every tree a star whose linked sites share the root, so
+    the loop stops exactly at the components.
+    """
+    num_sites = linked.shape[0]
+
+    def round_(carry):
+        parent, _ = carry
+        smallest = jnp.min(parent[linked], axis=1)
+        hooked = parent.at[parent].min(smallest)
+        jumped = hooked[hooked]
+        jumped = jumped[jumped]
+        return jumped, jnp.any(jumped != parent)
+
+    parent, _ = jax.lax.while_loop(
+        lambda carry: carry[1], round_, (jnp.arange(num_sites, dtype=linked.dtype), True)
+    )
+    return parent
+
+
+def build_kernel(system: SpinLatticeSystem, clusters: str = "all"):
+    """``kernel(rng_key, state, beta) -> (state, ClusterInfo)``: one cluster step.
+
+    ``clusters`` (structural) is ``"all"`` (Swendsen–Wang) or ``"seed"`` (Wolff); ``beta`` may
+    be traced.
+    """
+    if clusters not in CLUSTER_RULES:
+        raise ValueError(
+            f"clusters must be one of {CLUSTER_RULES} ('all': Swendsen-Wang, 'seed': Wolff), "
+            f"got {clusters!r}"
+        )
+    check_cluster_system(system, "heisenberg_cluster")
+    params = system.params
+    coupling = params["coupling"]
+    table, bonds, ends = bond_table(params["shape"], params["periodic"])
+    num_sites = table.shape[0]
+    sites = np.arange(num_sites)[:, None]
+    table, bonds, ends = (jnp.asarray(a, jnp.int32) for a in (table, bonds, ends))
+    sites = jnp.asarray(sites, jnp.int32)
+
+    def kernel(rng_key, state: SpinState, beta):
+        s = state.position.reshape(num_sites, 3)
+        key_r, key_seed, key_bonds = jax.random.split(rng_key, 3)
+        r = von_mises_fisher(key_r, jnp.array([0.0, 0.0, 1.0], s.dtype), 0.0)  # uniform on S²
+        projection = s @ r
+        product = projection[ends[:, 0]] * projection[ends[:, 1]]
+        p_bond = -jnp.expm1(jnp.minimum(0.0, -2.0 * beta * coupling * product))
+        bond_open = jax.random.uniform(key_bonds, p_bond.shape, dtype=s.dtype) < p_bond
+        bond_open = jnp.append(bond_open, False)  # the missing bond of an open edge
+        root = connected_components(jnp.where(bond_open[bonds], table, sites))
+        if clusters == "all":
+            coin = jax.random.bernoulli(key_seed, 0.5, (num_sites,))
+            flip = coin[root]
+        else:
+            seed = jax.random.randint(key_seed, (), 0, num_sites, dtype=jnp.int32)
+            flip = root == root[seed]
+        new = jnp.where(flip[:, None], s - 2.0 * projection[:, None] * r, s)
+        return finish_step(
+            system,
+            state.position,
+            new.reshape(state.position.shape),
+            1.0,
+            info_class=ClusterInfo,
+            cluster_size=jnp.sum(flip, dtype=jnp.int32),
+        )
+
+    return kernel
+
+
+def as_top_level_api(system: SpinLatticeSystem, *, beta, clusters: str = "all") -> Sampler:
+    """Cluster sampler of ``exp(−βh)`` for the isotropic ferromagnet without field.
+
+    Parameters
+    ----------
+    system : SpinLatticeSystem
+        From :func:`liesample.systems.heisenberg`, any dimension, open or periodic, with
+        ``coupling > 0``, zero ``field`` and ``anisotropy = 0`` (a ``ValueError`` names what is
+        not allowed and the sampler to use instead).
+    beta : float
+        Inverse temperature, finite and ``≥ 0``.
+    clusters : {"all", "seed"}
+        ``"all"``: Swendsen–Wang, every cluster of the bond configuration reflected with
+        probability 1/2 (one step is one sweep of the lattice); ``"seed"``: Wolff's single
+        cluster, the one holding a uniform seed site (one step moves one cluster).
+
+    Returns
+    -------
+    Sampler
+        ``init(position) -> SpinState`` and ``step(rng_key, state) -> (state, ClusterInfo)``
+        (``info.cluster_size``: sites reflected); jit- and vmap-able.
+    """
+    if clusters not in CLUSTER_RULES:
+        raise ValueError(
+            f"clusters must be one of {CLUSTER_RULES} ('all': Swendsen-Wang, 'seed': Wolff), "
+            f"got {clusters!r}"
+        )
+    check_cluster_system(system, "heisenberg_cluster")
+    beta = check_cluster_beta(beta, "heisenberg_cluster")
+    kernel = build_kernel(system, clusters)
+    return spin_sampler("heisenberg_cluster", kernel, system, beta, clusters=clusters)
+
+
+heisenberg_cluster = sampling_api(
+    as_top_level_api, init, build_kernel, "heisenberg_cluster", __name__
+)
