@@ -258,6 +258,16 @@ SAMPLERS = [
         lambda: _spin_starts((5,), seed=2),
     ),
     SamplerCase(
+        "wilson_heat_bath",
+        lambda: liesample.wilson_heat_bath(liesample.systems.wilson_gauge("SU2", (4, 4)), beta=2.0),
+        lambda: np.stack(
+            [
+                liesample.systems.wilson_gauge("SU2", (4, 4)).hot_start(jax.random.key(seed))
+                for seed in (5, 6)
+            ]
+        ),
+    ),
+    SamplerCase(
         "heisenberg_wolff",
         lambda: liesample.heisenberg_wolff(_heisenberg(), beta=0.5),
         lambda: _spin_starts((4, 4), seed=3),
@@ -271,6 +281,8 @@ NOT_SAMPLED = {
     "stochastic_pendulum": "a symplectic diffusion for liesample.simulate, not sampled",
     "point_vortex_integrator": "an integrator for point_vortices, not a system",
     "isospectral_midpoint": "an integrator for zeitlin_euler, not a system",
+    "wilson_gauge": "a T*G system (not Lie-Poisson): its sampler row is wilson_heat_bath",
+    "WilsonGauge": "the class of wilson_gauge's systems",
 }
 """Names in ``liesample.systems`` that are not system rows, and why."""
 

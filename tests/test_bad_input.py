@@ -783,6 +783,31 @@ ROWS = [
         ValueError,
         "clusters must be one of",
     ),
+    # ---- systems.wilson_gauge, liesample.wilson_heat_bath
+    (
+        "wilson_gauge group",
+        lambda: systems.wilson_gauge("SO3", (4, 4)),
+        ValueError,
+        "group must be 'U1', 'SU2', 'SU3'",
+    ),
+    (
+        "wilson_gauge shape",
+        lambda: systems.wilson_gauge("U1", (4,)),
+        ValueError,
+        "shape must hold 2 to 4 integer extents",
+    ),
+    (
+        "wilson_heat_bath odd torus",
+        lambda: liesample.wilson_heat_bath(systems.wilson_gauge("U1", (3, 4)), beta=1.0),
+        ValueError,
+        "even lattice extents on a torus",
+    ),
+    (
+        "wilson_heat_bath beta",
+        lambda: liesample.wilson_heat_bath(systems.wilson_gauge("U1", (4, 4)), beta=-1.0),
+        ValueError,
+        "beta must be >= 0",
+    ),
     # ---- systems.zeitlin_euler
     ("zeitlin_euler size", lambda: systems.zeitlin_euler(1), ValueError, "N must be an int >= 2"),
     (

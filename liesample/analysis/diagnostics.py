@@ -219,8 +219,9 @@ def to_datatree(
         Other keys are stored under their own names. ``None`` gives a tree without
         ``sample_stats``.
     var_name : str, default "mu"
-        Name of the sampled variable in the ``posterior`` group (single-array positions; a
-        pytree's variables are named from its key paths).
+        Name of the sampled variable in the ``posterior`` group (single-array positions, split
+        into ``<var_name>.real`` and ``<var_name>.imag`` when complex; a pytree's variables are
+        named from its key paths).
     event_dims : sequence of str, optional
         Dimension names for the event axes; one per axis after (chain, draw). Default: by the
         event's rank, ``()``, ``("component",)``, ``("row", "col")``, else ``dim_k``. For pytree
@@ -270,7 +271,11 @@ def to_datatree(
             event_dims = DEFAULT_EVENT_DIMS.get(
                 pos.ndim - 2, tuple(f"dim_{k}" for k in range(pos.ndim - 2))
             )
-        variables = {var_name: (pos, var_name)}
+        if np.iscomplexobj(pos):  # as for a pytree's complex leaf: two real variables
+            variables = {f"{var_name}.real": (pos.real, var_name)}
+            variables[f"{var_name}.imag"] = (pos.imag, var_name)
+        else:
+            variables = {var_name: (pos, var_name)}
         leaf_dims = {var_name: tuple(event_dims)}
     else:
         if var_name is not None:

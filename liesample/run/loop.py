@@ -296,7 +296,7 @@ class _Run:
         arguments.check_finite_starts(self.positions, self.num_chains)
         self.sharding = chain_sharding(o.devices, self.num_chains)
         self.algorithm, self.num_draws, self.options = algorithm, int(num_draws), o
-        self.sampler = scalar_info(as_sampler(algorithm), arguments.take_chain(self.positions, 0))
+        self.sampler = as_sampler(algorithm)  # its info reduced to scalars in _open
         self.spec, self.store = spec, None
         # shown from the start: the phases before the first draw take most of a short run
         self.bar = tqdm(
@@ -321,6 +321,8 @@ class _Run:
             self.observable_shapes,
             self.log_likelihood_shapes,
         )
+        # after the names are checked: tracing the step is the first work on the sampler
+        self.sampler = scalar_info(self.sampler, arguments.take_chain(self.positions, 0))
         if self.store is not None:
             self.fingerprint = self._fingerprint()
             self.store.check(self.fingerprint)

@@ -462,7 +462,9 @@ class Layout:
             if tree is None:
                 return None
             if is_single_array(tree):
-                return jax.tree.structure(tree), [[single]], [np.asarray(tree).dtype]
+                dtype = np.asarray(tree).dtype
+                parts = [f"{single}.real", f"{single}.imag"] if dtype.kind == "c" else [single]
+                return jax.tree.structure(tree), [parts], [dtype]
             grouped = {}
             for var, (_, leaf) in pytree_variables(tree).items():
                 grouped.setdefault(leaf, []).append(var)
