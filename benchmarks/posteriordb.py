@@ -257,7 +257,7 @@ def run_pair(setup, key, num_warmup, num_draws, first, log):
             start = time.perf_counter()
             try:
                 getattr(runs[label], phase)()
-            except Exception as error:  # noqa: BLE001  (a failure is a result: recorded)
+            except Exception as error:
                 failed[label] = error
             log(f"  {label}: {phase} {time.perf_counter() - start:.0f} s (compilation included)")
     return {label: failed.get(label, runs[label].out) for label in PAIR}
@@ -495,7 +495,7 @@ def run(out_dir: Path, quick: bool, log=print, names=None) -> None:
             for j, (label, fn) in enumerate(extra_samplers().items()):
                 try:
                     outs[label] = fn(setup, jax.random.fold_in(pkey, 20 + j), num_warmup, num_draws)
-                except Exception as error:  # noqa: BLE001  (a failure is a result: recorded)
+                except Exception as error:
                     outs[label] = error
         rows = []
         for label, out in outs.items():

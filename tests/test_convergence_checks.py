@@ -12,6 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from arviz_stats.base import array_stats
+from liesample.spaces import Euclidean, Sphere
 
 import liesample
 from liesample.analysis.convergence import (
@@ -19,7 +20,6 @@ from liesample.analysis.convergence import (
     convergence_warnings,
     rank_diagnostics,
 )
-from liesample.spaces import Euclidean, Sphere
 
 
 def _convergence_messages(record):

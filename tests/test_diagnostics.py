@@ -166,7 +166,7 @@ def test_z_scores_have_the_normal_false_alarm_rate():
     n_sets, phi = 200, 0.8
     x = ar1(rng, phi, (n_sets, 4, 1000))
     names = [f"rep{i}" for i in range(n_sets)]
-    df = diag.expectation_table(dict(zip(names, x, strict=True)), {n: 0.0 for n in names})
+    df = diag.expectation_table(dict(zip(names, x, strict=True)), dict.fromkeys(names, 0.0))
     z = df["z"].to_numpy()
     assert np.all(np.isfinite(z))
     frac = np.mean(np.abs(z) > 2)

@@ -11,8 +11,8 @@ from scipy.stats import vonmises_fisher
 
 pytest.importorskip("numpyro")
 
-from liesample.interop.numpyro_distributions import MatrixFisher, VonMisesFisher, log_bessel_iv  # noqa: E402
-from liesample.targets.groups import MatrixFisherLaw, vmf_mean_resultant_length  # noqa: E402
+from liesample.interop.numpyro_distributions import MatrixFisher, VonMisesFisher, log_bessel_iv
+from liesample.targets.groups import MatrixFisherLaw, vmf_mean_resultant_length
 
 
 @pytest.mark.parametrize("d, kappa", [(3, 4.0), (6, 10.0), (3, 500.0)])

@@ -227,7 +227,7 @@ def u1_plaquettes(links):
 def su2_plaquettes(links):
     """½ tr U_h(x) U_v(x + ê₁) U_h(x + ê₂)† U_v(x)†."""
     h, v = links["h"], links["v"]
-    dagger = lambda u: jnp.conj(jnp.swapaxes(u, -1, -2))  # noqa: E731
+    dagger = lambda u: jnp.conj(jnp.swapaxes(u, -1, -2))
     u = h[:, :-1] @ v[1:, :] @ dagger(h[:, 1:]) @ dagger(v[:-1, :])
     return 0.5 * jnp.real(jnp.trace(u, axis1=-2, axis2=-1))
 
@@ -329,7 +329,7 @@ def test_unadjusted_langevin_bias_is_second_order_in_the_step():
     5 MCSE, with an MCSE small enough to see a first-order term carrying half of ``e(0.4)``.
     """
     space = S.Sphere(2)
-    logdensity = lambda x: KAPPA2 * jnp.dot(MU2, x)  # noqa: E731
+    logdensity = lambda x: KAPPA2 * jnp.dot(MU2, x)
     exact = vmf_mean_resultant_length(KAPPA2, 3)
     starts = S.Sphere(2, shape=(64,)).uniform(jax.random.key(10))
     steps = np.array([0.4, 0.2, 0.1])

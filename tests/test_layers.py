@@ -46,7 +46,7 @@ def layer_of(module: str) -> int | None:
     parts = module.split(".")
     if parts[0] != "liesample" or module not in MODULES:
         return None
-    if len(parts) == 2 and MODULES[module].name != "__init__.py" or module == "liesample":
+    if (len(parts) == 2 and MODULES[module].name != "__init__.py") or module == "liesample":
         return len(LAYERS)
     for index, (_, folders) in enumerate(LAYERS):
         if parts[1] in folders:

@@ -17,14 +17,14 @@ import numpy as np
 import pytest
 
 numpyro = pytest.importorskip("numpyro")
-import numpyro.distributions as dist  # noqa: E402
-from numpyro.distributions import constraints  # noqa: E402
-from numpyro.infer import MCMC  # noqa: E402
+import numpyro.distributions as dist
+from numpyro.distributions import constraints
+from numpyro.infer import MCMC
 
-from liesample.geometry.spaces import SO  # noqa: E402
-from liesample.interop.numpyro_distributions import Bingham, MatrixFisher, VonMisesFisher  # noqa: E402
-from liesample.interop.numpyro_kernel import GeometricHMC  # noqa: E402
-from liesample.targets.groups import MatrixFisherLaw  # noqa: E402
+from liesample.geometry.spaces import SO
+from liesample.interop.numpyro_distributions import Bingham, MatrixFisher, VonMisesFisher
+from liesample.interop.numpyro_kernel import GeometricHMC
+from liesample.targets.groups import MatrixFisherLaw
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "numpyro_directional.py"
 

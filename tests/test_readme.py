@@ -17,4 +17,4 @@ def test_readme_has_python_examples():
 
 @pytest.mark.parametrize("index", range(len(BLOCKS)))
 def test_readme_example_runs(index):
-    exec(compile(BLOCKS[index], f"README.md (python block {index})", "exec"), {})  # noqa: S102
+    exec(compile(BLOCKS[index], f"README.md (python block {index})", "exec"), {})

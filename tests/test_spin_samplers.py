@@ -18,7 +18,7 @@ import pytest
 import liesample
 from liesample.samplers.contract import check_info
 from liesample.samplers.spins._lattice import SpinInfo, SpinState, finish_step
-from liesample.samplers.spins.heisenberg_wolff import WolffInfo, bond_table  # noqa: F401
+from liesample.samplers.spins.heisenberg_wolff import WolffInfo, bond_table
 from liesample.systems import heisenberg, rigid_body
 from liesample.systems.heisenberg import neighbour_table
 from liesample.targets.spins import (

@@ -18,6 +18,7 @@ from liesample.samplers.gauge.hmc import gauge_hmc, stability_limit
 from liesample.systems import wilson_gauge
 from liesample.targets import gauge as exact
 
+
 def staple_action(system, links, mu):
     """Σ_x Re tr(U_μ(x) A_μ(x)) / N."""
     a = system.staples(links, mu)

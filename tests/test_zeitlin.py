@@ -244,7 +244,7 @@ def test_su2_is_the_isotropic_rigid_body_pathwise():
     assert abs(float(zeitlin.hamiltonian(su2_from_so3(mu0))) - 0.5 * mu0 @ mu0) < 1e-14
     assert np.allclose(so3_from_su2(su2_from_so3(mu0)), mu0)
     # Hamiltonian drift is a Casimir's: add a non-trivial one to both through the same map.
-    extra = lambda mu: 0.7 * mu[0] * mu[1] + 0.2 * mu[2] ** 2  # noqa: E731
+    extra = lambda mu: 0.7 * mu[0] * mu[1] + 0.2 * mu[2] ** 2
     body = replace(body, hamiltonian=lambda mu, h=body.hamiltonian: h(mu) + extra(mu))
     zeitlin = replace(
         zeitlin, hamiltonian=lambda x, h=zeitlin.hamiltonian: h(x) + extra(so3_from_su2(x))
@@ -349,7 +349,7 @@ def test_isospectral_midpoint_is_modin_viviani():
     step = liesample.jit(lambda x: isospectral_midpoint(dynamics, x, h))
     ours = np.asarray(step(jnp.asarray(EULER_START)))
     assert np.max(np.abs(ours - algebra.from_matrix(w1))) < 1e-12
-    spectrum = lambda w: np.linalg.eigvalsh(1j * w)  # noqa: E731
+    spectrum = lambda w: np.linalg.eigvalsh(1j * w)
     assert np.max(np.abs(spectrum(w1) - spectrum(w0))) < 1e-12
     # and the step is Zeitlin's flow Ẇ = [P, W] to first order
     p0 = p_of(w0)

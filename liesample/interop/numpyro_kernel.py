@@ -761,7 +761,7 @@ class GeometricHMC(MCMCKernel):
             if missing:
                 raise ValueError(f"inverse_mass_matrix misses the sites or groups {missing}")
         else:
-            by_key = None if given is None else {key: given for key in self._blocks}
+            by_key = None if given is None else dict.fromkeys(self._blocks, given)
         matrices = {}
         for key in self._dense_keys:
             n = self._inner_space[key].shape[0]

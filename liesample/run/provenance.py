@@ -38,7 +38,7 @@ def _plain(value):
         return value.item() if hasattr(value, "item") else value
     try:
         array = np.asarray(value)
-    except Exception:  # noqa: BLE001  a setting numpy cannot read: its repr names it
+    except Exception:
         return repr(value)
     if array.dtype.kind in "biufc":
         if array.size <= 8:
