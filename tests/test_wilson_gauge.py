@@ -99,8 +99,10 @@ def test_float32_links_are_refused_by_the_group_check():
 
 def test_exact_laws_agree_with_direct_integration():
     beta = 2.3
+
     def haar(f):
-        return integrate.quad(lambda a: f(a) * np.sin(a) ** 2 * np.exp(beta * np.cos(a)), 0, np.pi)[0]
+        density = lambda a: f(a) * np.sin(a) ** 2 * np.exp(beta * np.cos(a))
+        return integrate.quad(density, 0, np.pi)[0]
 
     direct = haar(np.cos) / haar(lambda a: 1.0)
     assert exact.single_plaquette_mean(beta, 2) == pytest.approx(direct, rel=1e-12)
@@ -114,6 +116,46 @@ def test_exact_laws_agree_with_direct_integration():
     assert exact.single_plaquette_mean(1e-3, 3) == pytest.approx(1e-3 / 18, rel=1e-3)
     law = exact.u1_torus_charge_law(1.0, 16, 6)
     assert law.sum() == pytest.approx(1.0) and np.allclose(law, law[::-1])
+
+
+def weyl_coefficient(beta, lam, points=120):
+    """``c_λ`` and ``∂_β c_λ`` of SU(3) (times ``e^{−β}``) by Weyl's integration formula: the
+    eigenphases ``(a, b, −a−b)`` on a grid, ``χ_λ |Δ|² = det[e^{iθ_i(λ_j+3−j)}] conj(Δ)``."""
+    grid = np.linspace(-np.pi, np.pi, points + 1)[:-1]
+    a, b = np.meshgrid(grid, grid, indexing="ij")
+    theta = np.stack([a, b, -a - b], axis=-1)
+
+    def alternant(powers):
+        return np.linalg.det(np.exp(1j * theta[..., :, None] * np.asarray(powers)))
+
+    vandermonde = alternant([2, 1, 0])
+    haar = np.abs(vandermonde) ** 2
+    retrace = np.cos(theta).sum(-1) / 3.0
+    weight = np.exp(beta * (retrace - 1.0)) * np.conj(alternant([lam[0] + 2, lam[1] + 1, 0]))
+    weight = weight * vandermonde / haar.sum()
+    return np.sum(weight).real, np.sum(weight * retrace).real
+
+
+def test_su3_torus_law_agrees_by_independent_routes():
+    beta = 3.7
+    lam, c, dc, d = exact.sun_character_coefficients(beta, 3, max_row=6, windings=30)
+    for row in ([0, 0, 0], [1, 0, 0], [1, 1, 0], [2, 1, 0], [3, 1, 0], [4, 4, 0]):
+        k = int(np.flatnonzero((lam == row).all(1))[0])
+        np.testing.assert_allclose((c[k], dc[k]), weyl_coefficient(beta, row), rtol=1e-10)
+    assert d[list(map(tuple, lam)).index((2, 1, 0))] == 8  # the adjoint
+    # the same machinery for SU(2) against its Bessel closed form
+    for beta, v in ((0.5, 2), (2.3, 4), (8.0, 16)):
+        general = exact.sun_torus_plaquette_mean(beta, v, 2)
+        assert general == pytest.approx(exact.su2_torus_plaquette_mean(beta, v), rel=1e-10)
+    # many plaquettes: independent ones (Weyl quadrature); small β: E[Re tr U/3] = β/18 + O(β²)
+    assert exact.su3_torus_plaquette_mean(3.0, 400) == pytest.approx(
+        exact.single_plaquette_mean(3.0, 3), rel=1e-10
+    )
+    assert exact.su3_torus_plaquette_mean(1e-3, 4) == pytest.approx(1e-3 / 18, rel=1e-3)
+    # the constraint of a small torus is visible: 2×2 at β = 6 is 0.432, not 0.423
+    assert exact.su3_torus_plaquette_mean(6.0, 4) - exact.single_plaquette_mean(6.0, 3) > 0.009
+    with pytest.raises(ValueError, match="raise windings"):
+        exact.sun_character_coefficients(20.0, 3, max_row=4, windings=2)
 
 
 # --------------------------------------------------------------------------- exact checks (slow)
@@ -155,11 +197,15 @@ def test_small_tori_feel_the_global_constraint():
     for group, beta, law in (
         ("U1", 1.0, exact.u1_torus_plaquette_mean),
         ("SU2", 2.0, exact.su2_torus_plaquette_mean),
+        ("SU3", 6.0, exact.su3_torus_plaquette_mean),
     ):
         system = wilson_gauge(group, (2, 2))
         sampler = liesample.recommended_sampler(system, beta=beta)
         means = chain_means(system, sampler, {"plaquette": system.mean_plaquette}, 800, 16)
         assert_within_mcse(means["plaquette"], law(beta, 4))
+        independent = exact.single_plaquette_mean(beta, system.n)
+        mcse = means["plaquette"].std(ddof=1) / np.sqrt(means["plaquette"].size)
+        assert abs(means["plaquette"].mean() - independent) > 4 * mcse, (group, independent)
 
 
 @pytest.mark.slow

@@ -7,7 +7,11 @@ plaquettes is constrained and the character expansion gives, for ``V`` plaquette
 - U(1): ``Z = Σ_k I_k(β)^V`` (times ``e^{−βV}``), the geometric charge ``Q = Σ_P arg U_P / 2π``
   an integer with ``P(Q = q) ∝ ∫ dν cos(2πνq) f(ν)^V``, ``f(ν) = ∫_{−π}^{π} e^{β cos φ}
   cos(νφ) dφ`` (the density of the sum of ``V`` independent plaquette angles at ``2πq``);
-- SU(2): ``Z = Σ_{n≥1} ((2/β) I_n(β))^V`` (the spin ``j = (n−1)/2`` term).
+- SU(2): ``Z = Σ_{n≥1} ((2/β) I_n(β))^V`` (the spin ``j = (n−1)/2`` term);
+- SU(N): ``Z = Σ_λ (c_λ(β)/d_λ)^V`` over the irreducible representations ``λ``, with the
+  character coefficients ``c_λ = ∫ χ_λ(U)^* e^{(β/N) Re tr U} dU = Σ_{k∈ℤ}
+  det[I_{λ_j+k+i−j}(β/N)]_{i,j=1…N}`` (the Bessel determinant of the unitary group, summed over
+  the windings ``k`` that restrict ``U(N)`` to ``SU(N)``) and ``d_λ`` the dimensions.
 
 The plaquette means are ``(1/V) ∂_β log Z`` of these sums. The single-plaquette laws of SU(N)
 are integrals over the eigenphases (Weyl's integration formula).
@@ -23,6 +27,9 @@ from liesample.foundation.validation import finite_float
 __all__ = [
     "single_plaquette_mean",
     "su2_torus_plaquette_mean",
+    "su3_torus_plaquette_mean",
+    "sun_character_coefficients",
+    "sun_torus_plaquette_mean",
     "u1_torus_charge_law",
     "u1_torus_plaquette_mean",
 ]
@@ -61,6 +68,77 @@ def su2_torus_plaquette_mean(beta, num_plaquettes) -> float:
     i_n = special.ive(n, beta)
     derivative = 0.5 * (special.ive(n - 1, beta) + special.ive(n + 1, beta)) / i_n - 1.0 / beta
     return _weighted_mean(v * np.log(2.0 * i_n / beta), derivative)
+
+
+def _highest_weights(n: int, max_row: int) -> np.ndarray:
+    """Every ``λ_1 ≥ … ≥ λ_{N−1} ≥ λ_N = 0`` with ``λ_1 ≤ max_row`` (the SU(N) irreps), rows."""
+    rows = [(0,)]
+    for _ in range(n - 1):
+        rows = [(v, *r) for r in rows for v in range(r[0], max_row + 1)]
+    return np.array(sorted(rows), dtype=int)
+
+
+def sun_character_coefficients(beta, n: int, max_row: int = 40, windings: int = 40):
+    """The character expansion ``e^{(β/N) Re tr U} = Σ_λ c_λ(β) χ_λ(U)`` on SU(N).
+
+    Returns ``(λ, c, dc, d)``: the highest weights ``λ`` (rows ``λ_1 ≥ … ≥ λ_N = 0``, ``λ_1 ≤
+    max_row``), ``c_λ e^{−β}``, ``∂_β c_λ e^{−β}`` and the dimensions ``d_λ``, from
+    ``c_λ = Σ_{|k| ≤ windings} det[I_{λ_j+k+i−j}(β/N)]`` (the common factor ``e^{−β}`` keeps
+    large ``β`` finite)."""
+    beta = finite_float("beta", beta)
+    if isinstance(n, bool) or int(n) != n or n < 2:
+        raise ValueError(f"n must be an integer >= 2 (SU(n)), got {n!r}")
+    n, x = int(n), beta / n
+    lam = _highest_weights(n, max_row)
+    i, k = np.arange(n), np.arange(-windings, windings + 1)
+    order = lam[:, None, None, :] + k[:, None, None] + i[:, None] - i  # (λ, k, i, j)
+    low = order.min() - 1
+    table = special.ive(np.arange(low, order.max() + 2), x)  # I_m e^{−x}, m = low, low + 1, …
+    entries = table[order - low]
+    slopes = 0.5 * (table[order - 1 - low] + table[order + 1 - low]) / n  # e^{−x} ∂_β I_m(β/N)
+    terms = np.linalg.det(entries)
+    if np.max(np.abs(terms[:, [0, -1]])) > 1e-15 * np.max(np.abs(terms)):
+        raise ValueError(
+            f"beta = {beta:g} needs more than windings = {windings} terms of the sum over k; "
+            "raise windings"
+        )
+    c = terms.sum(1)
+    dc = 0.0
+    for j in range(n):  # d det = Σ_j det(column j differentiated)
+        dc = dc + np.linalg.det(np.concatenate(
+            [entries[..., :j], slopes[..., j : j + 1], entries[..., j + 1 :]], axis=-1
+        )).sum(1)  # fmt: skip
+    shifted = lam + (n - 1 - i)
+    d = np.ones(len(lam))
+    for p in range(n):
+        for q in range(p + 1, n):
+            d = d * (shifted[:, p] - shifted[:, q]) / (q - p)
+    return lam, c, dc, d
+
+
+def sun_torus_plaquette_mean(beta, num_plaquettes, n: int) -> float:
+    """``E[Re tr U_P / N]`` of 2-D SU(N) on a torus of ``V`` plaquettes:
+    ``(1/V) ∂_β log Σ_λ (c_λ/d_λ)^V`` (:func:`sun_character_coefficients`)."""
+    beta = finite_float("beta", beta, positive=True)
+    v = _plaquettes(num_plaquettes)
+    max_row = 30 + int(10.0 * np.sqrt(beta / n))  # I_m(β/N) is negligible beyond (and k too)
+    lam, c, dc, d = sun_character_coefficients(beta, n, max_row, max_row)
+    keep = c > 0.0  # the coefficients are positive; rounding can flip the negligible ones
+    log_w = v * np.log(c[keep] / d[keep])
+    tail = np.max(log_w[lam[keep, 0] == max_row]) - np.max(log_w)
+    if tail > np.log(1e-15):
+        raise ValueError(
+            f"beta = {beta:g} is too large for num_plaquettes = {v} in the character sum "
+            f"(representations with lambda_1 > {max_row} matter); use a smaller beta or more "
+            "plaquettes (the law then tends to single_plaquette_mean)"
+        )
+    return _weighted_mean(log_w, dc[keep] / c[keep])
+
+
+def su3_torus_plaquette_mean(beta, num_plaquettes) -> float:
+    """``E[Re tr U_P / 3]`` of 2-D SU(3) on a torus of ``V`` plaquettes
+    (:func:`sun_torus_plaquette_mean` with ``n = 3``)."""
+    return sun_torus_plaquette_mean(beta, num_plaquettes, 3)
 
 
 def u1_torus_charge_law(beta, num_plaquettes, max_charge: int = 10) -> np.ndarray:
