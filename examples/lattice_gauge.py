@@ -33,7 +33,7 @@ def u1_topology(size, beta, num_draws, num_chains=4, seed=0):
     observables = {"plaquette": system.mean_plaquette, "Q": system.topological_charge}
     tree = liesample.sample(
         liesample.recommended_sampler(system, beta=beta), jax.random.key(seed + 1), starts,
-        num_draws, observables=observables, keep_positions=False, progress=False,
+        num_draws, observables=observables, keep_positions=False, progress_bar=False,
     )  # fmt: skip
     plaquette = np.asarray(tree.posterior["plaquette"].values).mean(1)
     chi = (np.asarray(tree.posterior["Q"].values) ** 2).mean(1) / size**2
@@ -56,7 +56,7 @@ def su3_scale(size, beta, num_draws, flow_time, seed=0):
     sampler = liesample.recommended_sampler(system, beta=beta)
     tree = liesample.sample(
         sampler, jax.random.key(seed + 1), starts, num_draws, num_warmup=num_draws,
-        observables={"plaquette": system.mean_plaquette}, progress=False,
+        observables={"plaquette": system.mean_plaquette}, progress_bar=False,
     )  # fmt: skip
     plaquette = np.asarray(tree.posterior["plaquette"].values)[0]
     links = tree.posterior["U"].values[0, -1]

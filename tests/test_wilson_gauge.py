@@ -158,6 +158,52 @@ def test_su3_torus_law_agrees_by_independent_routes():
         exact.sun_character_coefficients(20.0, 3, max_row=4, windings=2)
 
 
+def flux_links(shape, n01, n23, n=3):
+    """SU(N) links ``diag(e^{iθ}, e^{−iθ}, 1, …)`` of the U(1) field with constant flux
+    ``2π n/(L_μ L_ν)`` through every ``(0, 1)`` and ``(2, 3)`` plaquette (the U(1) bundle of
+    Chern numbers ``n01``, ``n23``; the flux closes through the last slice of links)."""
+    x = np.indices(shape)
+    theta = np.zeros((4, *shape))
+    for (mu, nu), flux in (((0, 1), n01), ((2, 3), n23)):
+        theta[nu] = 2 * np.pi * flux * x[mu] / (shape[mu] * shape[nu])
+        theta[mu] = np.where(x[mu] == shape[mu] - 1, -2 * np.pi * flux * x[nu] / shape[nu], 0.0)
+    phases = np.zeros((*theta.shape, n))
+    phases[..., 0], phases[..., 1] = theta, -theta
+    return jnp.asarray(np.exp(1j * phases)[..., None] * np.eye(n))
+
+
+def test_clover_charge_of_constant_flux_fields_and_its_gauge_invariance():
+    # the bundle L ⊕ L⁻¹ has Q = 2 n01 n23; every clover leaf of the constant field is
+    # e^{iφH}, H = diag(1, −1, 0), so F = i sin(φ) H and Q = V sin φ01 sin φ23 / (2π²) exactly
+    system = wilson_gauge("SU3", (4, 4, 4, 4))
+    observe = jax.jit(lambda u: (system.topological_charge(u), system.mean_plaquette(u)))
+    for n01, n23 in ((1, 1), (1, -1), (2, 1)):
+        links = flux_links(system.shape, n01, n23)
+        assert system.space.constraint_error(np.asarray(links)) < 1e-14
+        phi01, phi23 = 2 * np.pi * n01 / 16, 2 * np.pi * n23 / 16
+        expected = 256 * np.sin(phi01) * np.sin(phi23) / (2 * np.pi**2)
+        charge, plaquette = observe(links)
+        assert float(charge) == pytest.approx(expected, rel=1e-12)
+        assert abs(expected - 2 * n01 * n23) < 0.15 * abs(2 * n01 * n23)
+    # U_μ(x) → g(x) U_μ(x) g(x+μ̂)† leaves the charge and the plaquette as they are
+    z = np.random.default_rng(4).normal(size=(*system.shape, 3, 3, 2)) @ np.array([1, 1j])
+    g, r = np.linalg.qr(z)
+    g = g * (np.diagonal(r, 0, -2, -1) / np.abs(np.diagonal(r, 0, -2, -1)))[..., None, :]
+    g = jnp.asarray(g / np.linalg.det(g)[..., None, None] ** (1 / 3))
+    gauged = jnp.stack([
+        g @ links[mu] @ jnp.conj(jnp.swapaxes(system.shift(g, mu), -1, -2)) for mu in range(4)
+    ])  # fmt: skip
+    assert system.space.constraint_error(np.asarray(gauged)) < 1e-13
+    np.testing.assert_allclose(observe(gauged), (charge, plaquette), rtol=1e-12)
+
+
+def test_flow_scale_interpolates_t_squared_e():
+    times = np.linspace(0.1, 3.0, 30)
+    assert flow_scale(times, 0.2 / times) == pytest.approx(1.5)  # t²E = 0.2 t
+    assert flow_scale(times, np.full(30, 0.05)) == pytest.approx(np.sqrt(6.0), rel=1e-2)
+    assert np.isnan(flow_scale(times, 0.01 / times))  # the flow stops short of 0.3
+
+
 # --------------------------------------------------------------------------- exact checks (slow)
 
 
@@ -165,7 +211,7 @@ def chain_means(system, sampler, observables, num_draws, num_chains=8, seed=0, n
     starts = jax.vmap(system.hot_start)(jax.random.split(jax.random.key(seed), num_chains))
     tree = liesample.sample(
         sampler, jax.random.key(seed + 1), starts, num_draws, num_warmup=num_warmup,
-        observables=observables, keep_positions=False, progress=False,
+        observables=observables, keep_positions=False, progress_bar=False,
     )  # fmt: skip
     return {name: np.asarray(tree.posterior[name].values).mean(1) for name in observables}
 
@@ -247,8 +293,17 @@ def test_links_stay_in_the_group_over_many_heat_bath_updates():
 def test_wilson_flow_lowers_the_energy_and_finds_t0_on_a_smooth_field():
     system = wilson_gauge("SU3", (4, 4, 4, 4))
     links = system.hot_start(jax.random.key(7))
-    flowed, energies = jax.jit(lambda u: wilson_flow(system, u, 2.0, 40))(links)
+    flow = jax.jit(lambda u: wilson_flow(system, u, 2.0, 40))
+    flowed, energies = flow(links)
     assert np.all(np.diff(np.asarray(energies)) < 0)
     assert system.space.constraint_error(np.asarray(flowed)) < 1e-12
     times = np.linspace(0.05, 2.0, 40)
     assert np.isfinite(flow_scale(times, energies)) or np.all(times**2 * energies < 0.3)
+    # a constant-flux field is a classical solution (the staple forces cancel): the flow keeps it
+    flux = flux_links(system.shape, 1, 1)
+    still, energies = flow(flux)
+    np.testing.assert_allclose(still, flux, atol=1e-12)
+    np.testing.assert_allclose(energies, system.energy_density(flux), rtol=1e-12)
+    assert float(system.topological_charge(still)) == pytest.approx(
+        float(system.topological_charge(flux)), rel=1e-12
+    )
