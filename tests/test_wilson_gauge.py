@@ -197,6 +197,25 @@ def test_clover_charge_of_constant_flux_fields_and_its_gauge_invariance():
     np.testing.assert_allclose(observe(gauged), (charge, plaquette), rtol=1e-12)
 
 
+@pytest.mark.parametrize("group", ["U1", "SU3"])
+def test_wilson_flow_damps_a_weak_transverse_mode_at_the_rate_p_hat_squared(group):
+    # Lüscher's flow ∂_t B_μ = D_ν G_νμ, linearised: a transverse mode decays as e^{−p̂² t},
+    # p̂² = 4 sin²(p/2), whatever N (for SU(3) along diag(1, −1, 0)): this fixes the flow time
+    # that t₀ is measured in
+    system, eps, flow_time = wilson_gauge(group, (4, 6)), 1e-3, 0.5
+    theta = np.zeros((2, *system.shape))
+    theta[0] = eps * np.cos(2 * np.pi * np.indices(system.shape)[1] / 6)
+    if system.abelian:
+        links = jnp.asarray(theta)
+    else:
+        phases = np.stack([theta, -theta, np.zeros_like(theta)], axis=-1)
+        links = jnp.asarray(np.exp(1j * phases)[..., None] * np.eye(3))
+    flowed = wilson_flow(system, links, flow_time, 20)[0]
+    angles = flowed if system.abelian else jnp.angle(flowed[..., 0, 0])
+    expected = theta * np.exp(-4 * np.sin(np.pi / 6) ** 2 * flow_time)
+    np.testing.assert_allclose(angles, expected, atol=1e-5 * eps)
+
+
 def test_flow_scale_interpolates_t_squared_e():
     times = np.linspace(0.1, 3.0, 30)
     assert flow_scale(times, 0.2 / times) == pytest.approx(1.5)  # t²E = 0.2 t
