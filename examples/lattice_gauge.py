@@ -4,8 +4,8 @@ plaquette with the Wilson-flow scale ``t₀``.
 1. 2-D U(1) on an ``L × L`` torus at coupling ``β``: the heat bath with over-relaxation
    (``liesample.recommended_sampler``) from hot starts; the plaquette and the topological
    susceptibility ``⟨Q²⟩/V`` against the exact torus laws (``liesample.targets.gauge``).
-2. 4-D SU(3) on ``L⁴`` at ``β``: the mean plaquette, and ``t₀`` from ``t² ⟨E(t)⟩ = 0.3`` along
-   the Wilson flow of the last configurations.
+2. 4-D SU(3) on ``L⁴`` at ``β``: the mean plaquette, ``t₀`` from ``t² E(t) = 0.3`` along the
+   Wilson flow of the last configuration, and that configuration's clover charge after the flow.
 
 Run: ``python examples/lattice_gauge.py [--quick]`` (``--quick``: small lattices, seconds).
 """
@@ -59,14 +59,16 @@ def su3_scale(size, beta, num_draws, flow_time, seed=0):
         observables={"plaquette": system.mean_plaquette}, progress_bar=False,
     )  # fmt: skip
     plaquette = np.asarray(tree.posterior["plaquette"].values)[0]
-    links = tree.posterior["U"].values[0, -1]
-    num_steps = int(round(flow_time / 0.02))
-    _, energies = jax.jit(lambda u: wilson_flow(system, u, flow_time, num_steps))(links)
+    last = {part: tree.posterior[f"U.{part}"].values[0, -1] for part in ("real", "imag")}
+    links = last["real"] + 1j * last["imag"]  # complex links are stored as two real parts
+    num_steps = round(flow_time / 0.02)
+    flowed, energies = jax.jit(lambda u: wilson_flow(system, u, flow_time, num_steps))(links)
     times = flow_time * np.arange(1, num_steps + 1) / num_steps
     return {
         "plaquette": float(plaquette.mean()),
         "t0": flow_scale(times, np.asarray(energies)),
         "t2E_end": float(times[-1] ** 2 * energies[-1]),
+        "Q_flowed": float(system.topological_charge(flowed)),
     }
 
 
@@ -84,7 +86,8 @@ def main(argv=None) -> int:
     print(f"2-D U(1): plaquette {u1['plaquette']:.4f} ± {u1['plaquette_mcse']:.4f} "
           f"(exact {u1['plaquette_exact']:.4f}); chi = <Q²>/V {u1['chi']:.4f} ± "
           f"{u1['chi_mcse']:.4f} (exact {u1['chi_exact']:.4f})")  # fmt: skip
-    print(f"4-D SU(3): plaquette {su3['plaquette']:.4f}, t0/a² {su3['t0']:.3f}")
+    print(f"4-D SU(3): plaquette {su3['plaquette']:.4f}, t0/a² {su3['t0']:.3f}, clover charge "
+          f"after the flow {su3['Q_flowed']:.3f}")  # fmt: skip
     if args.output:
         with open(args.output, "w") as f:
             json.dump({"u1": u1, "su3": su3}, f, indent=1)

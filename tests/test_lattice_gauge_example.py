@@ -31,4 +31,4 @@ def test_quick_run_writes_its_numbers(tmp_path, run_example):
     assert run_example("lattice_gauge", ["--quick", "--output", str(output)]) == 0
     numbers = json.loads(output.read_text())
     assert 0.0 < numbers["su3"]["plaquette"] < 1.0
-    assert np.isfinite(numbers["u1"]["chi"])
+    assert np.isfinite(numbers["u1"]["chi"]) and np.isfinite(numbers["su3"]["Q_flowed"])
