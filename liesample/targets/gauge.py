@@ -122,10 +122,11 @@ def sun_torus_plaquette_mean(beta, num_plaquettes, n: int) -> float:
     beta = finite_float("beta", beta, positive=True)
     v = _plaquettes(num_plaquettes)
     max_row = 30 + int(10.0 * np.sqrt(beta / n))  # I_m(β/N) is negligible beyond (and k too)
-    lam, c, dc, d = sun_character_coefficients(beta, n, max_row, max_row)
-    keep = c > 0.0  # the coefficients are positive; rounding can flip the negligible ones
-    log_w = v * np.log(c[keep] / d[keep])
-    tail = np.max(log_w[lam[keep, 0] == max_row]) - np.max(log_w)
+    with np.errstate(divide="ignore", under="ignore"):  # negligible terms underflow to 0
+        lam, c, dc, d = sun_character_coefficients(beta, n, max_row, max_row)
+        keep = c > 0.0  # the coefficients are positive; rounding can flip the negligible ones
+        log_w = v * np.log(c[keep] / d[keep])
+    tail = np.max(log_w[lam[keep, 0] == max_row], initial=-np.inf) - np.max(log_w)
     if tail > np.log(1e-15):
         raise ValueError(
             f"beta = {beta:g} is too large for num_plaquettes = {v} in the character sum "
