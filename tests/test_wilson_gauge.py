@@ -33,7 +33,7 @@ def staple_action(system, links, mu):
 def test_staples_hold_every_plaquette_of_a_link(group, boundary):
     # in d dimensions each plaquette holds two links of each of its two directions
     system = wilson_gauge(group, (4, 2, 2), boundary)
-    links = system.hot_start(jax.random.key(0))
+    links = jax.jit(system.hot_start)(jax.random.key(0))  # compiled once: cheaper than eager
     system.space.check(links)
     total = sum(staple_action(system, links, mu) for mu in range(system.dim))
     plaquettes = system.num_plaquettes - float(system.action(links))
@@ -46,10 +46,10 @@ def test_cold_start_and_loops(group):
     cold = system.cold_start()
     assert float(system.mean_plaquette(cold)) == pytest.approx(1.0)
     assert complex(system.polyakov_loop(cold)) == pytest.approx(1.0)
-    hot = system.hot_start(jax.random.key(1))
-    np.testing.assert_allclose(system.wilson_loop(hot, 1, 1), system.mean_plaquette(hot))
-    starts = jax.vmap(system.hot_start)(jax.random.split(jax.random.key(2), 3))
+    starts = jax.jit(jax.vmap(system.hot_start))(jax.random.split(jax.random.key(2), 3))
     assert starts.shape == (3, *system.space.position_array_shape)
+    hot = starts[0]
+    np.testing.assert_allclose(system.wilson_loop(hot, 1, 1), system.mean_plaquette(hot))
 
 
 def test_geometric_charge_is_an_integer_on_the_torus():
