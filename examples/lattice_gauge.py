@@ -60,7 +60,7 @@ def su3_scale(size, beta, num_draws, flow_time, seed=0):
     )  # fmt: skip
     plaquette = np.asarray(tree.posterior["plaquette"].values)[0]
     links = tree.posterior["U"].values[0, -1]
-    num_steps = int(round(flow_time / 0.02))
+    num_steps = round(flow_time / 0.02)
     _, energies = jax.jit(lambda u: wilson_flow(system, u, flow_time, num_steps))(links)
     times = flow_time * np.arange(1, num_steps + 1) / num_steps
     return {

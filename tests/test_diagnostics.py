@@ -1,4 +1,5 @@
-"""Tests for liesample.analysis.diagnostics and liesample.analysis.plots on synthetic chains with known answers."""
+"""Tests for liesample.analysis.diagnostics and liesample.analysis.plots on synthetic chains with
+known answers."""
 
 from collections import namedtuple
 

@@ -136,7 +136,9 @@ def test_stuck_chains_are_named():
     """The chains are named and the advice is the sampler's own (a call that works for it)."""
     sampler = liesample.adjusted_lie_poisson(VMF, beta=1.0, step_size=1.0)
     starts = np.tile(MU_HAT, (3, 1))
-    with pytest.warns(RuntimeWarning, match=r"3 chain\(s\) are stuck.*chains 0, 1, 2.*smaller") as caught:
+    with pytest.warns(
+        RuntimeWarning, match=r"3 chain\(s\) are stuck.*chains 0, 1, 2.*smaller"
+    ) as caught:
         liesample.sample_chains(sampler, jax.random.key(0), starts, 20, progress_bar=False)
     assert any(sampler.stuck_advice in str(w.message) for w in caught)
 
@@ -163,9 +165,12 @@ def test_many_starts_are_checked_in_one_call_naming_the_first_bad_chain(monkeypa
     sampler = liesample.adjusted_lie_poisson(RIGID, beta=1.0, step_size=0.1)
     calls = []
     original = type(RIGID).check_position
-    monkeypatch.setattr(
-        type(RIGID), "check_position", lambda self, *a, **k: calls.append(1) or original(self, *a, **k)
-    )  # fmt: skip
+
+    def counted(self, *args, **kwargs):
+        calls.append(1)
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(type(RIGID), "check_position", counted)
     sampler.check_positions(starts)
     assert len(calls) == 0  # no per-start Python loop
     bad = starts.copy()
@@ -226,7 +231,9 @@ def test_float32_warning_rule():
 def test_vmf_as_written_raises_naming_the_bound():
     sampler = liesample.lie_poisson_langevin(VMF, beta=1.0, sigma=1.0, step_size=0.05)
     with pytest.raises(ValueError, match=r"κ = .* > 2 .*step_size must be <= 0\.00"):
-        liesample.sample(sampler, jax.random.key(0), np.tile(MU_HAT, (2, 1)), 10, progress_bar=False)
+        liesample.sample(
+            sampler, jax.random.key(0), np.tile(MU_HAT, (2, 1)), 10, progress_bar=False
+        )
 
 
 def _check_vmf(tree, bias_tolerance=0.0):

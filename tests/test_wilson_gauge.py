@@ -100,7 +100,9 @@ def test_float32_links_are_refused_by_the_group_check():
 def test_exact_laws_agree_with_direct_integration():
     beta = 2.3
     def haar(f):
-        return integrate.quad(lambda a: f(a) * np.sin(a) ** 2 * np.exp(beta * np.cos(a)), 0, np.pi)[0]
+        return integrate.quad(lambda a: f(a) * np.sin(a) ** 2 * np.exp(beta * np.cos(a)), 0, np.pi)[
+            0
+        ]
 
     direct = haar(np.cos) / haar(lambda a: 1.0)
     assert exact.single_plaquette_mean(beta, 2) == pytest.approx(direct, rel=1e-12)

@@ -202,15 +202,15 @@ def to_datatree(
     Parameters
     ----------
     positions : array_like ``(chains, draws, *event_shape)``, a pytree of such arrays, or None
-        Sampled states (``None``: only ``observables`` were kept). A pytree (dict, tuple, named tuple: the positions of the geometric
-        samplers on product spaces) gives one posterior variable per leaf, named from its key
-        path: dict keys and named-tuple fields as given (``mu``, ``log_kappa``), tuple entries
-        ``x0``, ``x1``…, nested keys joined with ``.`` (``{"a": {"b": …}}`` -> ``a.b``). Its
-        event dims are ``<name>_dim_0``, ``<name>_dim_1``…. A complex leaf ``U`` (``SU(n)``
-        matrices) is stored as the two real variables ``U.real`` and ``U.imag``, sharing the
-        dims of ``U``. ESS, R-hat and MCSE computed from the tree are those of these ambient
-        coordinates (vector components, matrix entries), not of intrinsic coordinates on the
-        group or sphere. A list is read as one array.
+        Sampled states (``None``: only ``observables`` were kept). A pytree (dict, tuple, named
+        tuple: the positions of the geometric samplers on product spaces) gives one posterior
+        variable per leaf, named from its key path: dict keys and named-tuple fields as given
+        (``mu``, ``log_kappa``), tuple entries ``x0``, ``x1``…, nested keys joined with ``.``
+        (``{"a": {"b": …}}`` -> ``a.b``). Its event dims are ``<name>_dim_0``, ``<name>_dim_1``…. A
+        complex leaf ``U`` (``SU(n)`` matrices) is stored as the two real variables ``U.real`` and
+        ``U.imag``, sharing the dims of ``U``. ESS, R-hat and MCSE computed from the tree are those
+        of these ambient coordinates (vector components, matrix entries), not of intrinsic
+        coordinates on the group or sphere. A list is read as one array.
     info : mapping, NamedTuple or dataclass, optional
         Per-draw arrays shaped ``(chains, draws)`` (the Info contract of
         :mod:`liesample.samplers.contract`). Recognised keys are renamed to ArviZ's
@@ -669,8 +669,9 @@ def blocking_error(x, *, warn: bool = True) -> BlockingResult:
       Booth and Alavi 2011): ``b^3 > 2 · draws · tau_k^2``, ``draws`` over all chains and
       ``tau_k = (error_k / error_0)^2``.
 
-    Chains are combined at that common level: ``Var(mean) = sum_c s_{c,k}^2 / (n_k - 1) / chains^2`` (the grand mean
-    averages the chains' means; a chain that sits apart from the others is not seen here:
+    Chains are combined at that common level:
+    ``Var(mean) = sum_c s_{c,k}^2 / (n_k - 1) / chains^2`` (the grand mean averages the chains'
+    means; a chain that sits apart from the others is not seen here:
     use R-hat for that).
 
     Parameters

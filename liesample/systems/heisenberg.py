@@ -3,7 +3,8 @@
 The state is a stack of unit spins ``s`` of shape ``(*shape, 3)`` on the product
 ``(so(3)*)^N`` (``so3`` acts copy by copy), ``N = prod(shape)``: ``shape = (N,)`` is a chain,
 ``shape = (L₁, L₂)`` a square lattice, ``(L₁, L₂, L₃)`` a simple cubic one, and so on in any
-dimension (the hypercubic lattice ``Z^d``, each site with ``2d`` neighbours). The Hamiltonian (classical Heisenberg model) is
+dimension (the hypercubic lattice ``Z^d``, each site with ``2d`` neighbours). The Hamiltonian
+(classical Heisenberg model) is
 
     h(s) = −J Σ_⟨jk⟩ s_j·s_k  −  B·Σ_k s_k  −  D Σ_k (s_k·e_z)²
 
