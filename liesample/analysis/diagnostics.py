@@ -252,63 +252,10 @@ def to_datatree(
     if positions is None and observables is None:
         raise ValueError("to_datatree needs positions, observables or both; got neither")
     single = positions is not None and is_single_array(positions)
-    if positions is None:
-        if var_name is not None:
-            raise ValueError("var_name names the positions, and there are none (positions=None)")
-        variables, leaf_dims = {}, {}
-    elif single:
-        var_name = "mu" if var_name is None else var_name
-        if not isinstance(var_name, str) or not var_name:
-            raise ValueError(f"var_name must be a non-empty string, got {var_name!r}")
-        if isinstance(event_dims, Mapping):
-            raise TypeError("event_dims must be a sequence of dim names for array positions")
-        pos = np.asarray(positions)
-        if pos.ndim < 2:
-            raise ValueError(
-                f"positions must have shape (chains, draws, *event_shape), got shape {pos.shape}"
-            )
-        if event_dims is None:
-            event_dims = DEFAULT_EVENT_DIMS.get(
-                pos.ndim - 2, tuple(f"dim_{k}" for k in range(pos.ndim - 2))
-            )
-        if np.iscomplexobj(pos):  # as for a pytree's complex leaf: two real variables
-            variables = {f"{var_name}.real": (pos.real, var_name)}
-            variables[f"{var_name}.imag"] = (pos.imag, var_name)
-        else:
-            variables = {var_name: (pos, var_name)}
-        leaf_dims = {var_name: tuple(event_dims)}
-    else:
-        if var_name is not None:
-            raise ValueError(
-                "var_name names a single array of positions; the variables of pytree positions "
-                "are named from their key paths"
-            )
-        variables = pytree_variables(positions)
-    if observables is not None:
-        observed = {"observable": observables} if is_single_array(observables) else observables
-        try:
-            observed = pytree_variables(observed)
-        except ValueError as error:
-            raise ValueError(str(error).replace("positions", "observables")) from None
-        clash = sorted(set(observed) & set(variables))
-        if clash:
-            raise ValueError(
-                f"observables {clash} have the names of position variables: rename them"
-            )
-    else:
-        observed = {}
+    variables, leaf_dims = _position_variables(positions, var_name, event_dims)
+    observed = _observed_variables(observables, variables)
     if not single:
-        given = {} if event_dims is None else event_dims
-        if not isinstance(given, Mapping):
-            raise TypeError(
-                "event_dims for pytree positions must be a mapping {leaf name: dims}, got "
-                f"{event_dims!r}"
-            )
-        leaf_names = {leaf for _, leaf in [*variables.values(), *observed.values()]}
-        unknown = sorted(set(given) - leaf_names)
-        if unknown:
-            raise ValueError(f"event_dims names no leaf of positions: {unknown}")
-        leaf_dims = {leaf: tuple(dims) for leaf, dims in given.items()}
+        leaf_dims = _pytree_leaf_dims(event_dims, [*variables.values(), *observed.values()])
     for value, leaf in [*variables.values(), *observed.values()]:
         leaf_dims.setdefault(leaf, tuple(f"{leaf}_dim_{k}" for k in range(value.ndim - 2)))
     shapes = {value.shape[:2] for value, _ in [*variables.values(), *observed.values()]}
@@ -320,7 +267,96 @@ def to_datatree(
     variables = {**variables, **observed}
     if isinstance(thinning, bool) or int(thinning) != thinning or thinning < 1:
         raise ValueError(f"thinning must be a positive integer, got {thinning!r}")
+    dims, all_coords = _dims_and_coords(variables, leaf_dims, single, coords)
+    sample_shape = next(iter(variables.values()))[0].shape[:2]
+    sample_stats = _sample_stats(info, sample_shape)
+    run_attrs = _tree_attrs({"thinning": int(thinning), "step_size": step_size, **(attrs or {})})
+    data = {"posterior": {name: value for name, (value, _) in variables.items()}}
+    group_attrs = {"/": run_attrs, "posterior": run_attrs}
+    if sample_stats:
+        data["sample_stats"] = sample_stats
+        group_attrs["sample_stats"] = run_attrs
+    from arviz_base import from_dict
 
+    return from_dict(data, dims=dims, coords=all_coords, attrs=group_attrs)
+
+
+def _tree_attrs(attrs: Mapping) -> dict:
+    """``attrs`` as NetCDF-safe attributes (:func:`_netcdf_attr`), ``None`` values dropped."""
+    converted = {str(k): _netcdf_attr(v) for k, v in attrs.items()}
+    return {k: v for k, v in converted.items() if v is not None}
+
+
+def _position_variables(positions, var_name, event_dims):
+    """``({variable: (array, leaf name)}, {leaf name: event dims})`` of the positions (the
+    second is empty for a pytree, whose dims :func:`_pytree_leaf_dims` reads)."""
+    if positions is None:
+        if var_name is not None:
+            raise ValueError("var_name names the positions, and there are none (positions=None)")
+        return {}, {}
+    if not is_single_array(positions):
+        if var_name is not None:
+            raise ValueError(
+                "var_name names a single array of positions; the variables of pytree positions "
+                "are named from their key paths"
+            )
+        return pytree_variables(positions), {}
+    var_name = "mu" if var_name is None else var_name
+    if not isinstance(var_name, str) or not var_name:
+        raise ValueError(f"var_name must be a non-empty string, got {var_name!r}")
+    if isinstance(event_dims, Mapping):
+        raise TypeError("event_dims must be a sequence of dim names for array positions")
+    pos = np.asarray(positions)
+    if pos.ndim < 2:
+        raise ValueError(
+            f"positions must have shape (chains, draws, *event_shape), got shape {pos.shape}"
+        )
+    if event_dims is None:
+        event_dims = DEFAULT_EVENT_DIMS.get(
+            pos.ndim - 2, tuple(f"dim_{k}" for k in range(pos.ndim - 2))
+        )
+    if np.iscomplexobj(pos):  # as for a pytree's complex leaf: two real variables
+        variables = {f"{var_name}.real": (pos.real, var_name)}
+        variables[f"{var_name}.imag"] = (pos.imag, var_name)
+    else:
+        variables = {var_name: (pos, var_name)}
+    return variables, {var_name: tuple(event_dims)}
+
+
+def _observed_variables(observables, variables) -> dict[str, tuple[np.ndarray, str]]:
+    """The observables' variables (as :func:`pytree_variables`), whose names must differ from
+    the positions' ``variables``."""
+    if observables is None:
+        return {}
+    observed = {"observable": observables} if is_single_array(observables) else observables
+    try:
+        observed = pytree_variables(observed)
+    except ValueError as error:
+        raise ValueError(str(error).replace("positions", "observables")) from None
+    clash = sorted(set(observed) & set(variables))
+    if clash:
+        raise ValueError(f"observables {clash} have the names of position variables: rename them")
+    return observed
+
+
+def _pytree_leaf_dims(event_dims, variables) -> dict[str, tuple[str, ...]]:
+    """The event dims that ``event_dims`` (a mapping, or ``None``) gives the leaves of pytree
+    positions and observables, whose ``(value, leaf name)`` pairs are ``variables``."""
+    given = {} if event_dims is None else event_dims
+    if not isinstance(given, Mapping):
+        raise TypeError(
+            "event_dims for pytree positions must be a mapping {leaf name: dims}, got "
+            f"{event_dims!r}"
+        )
+    unknown = sorted(set(given) - {leaf for _, leaf in variables})
+    if unknown:
+        raise ValueError(f"event_dims names no leaf of positions: {unknown}")
+    return {leaf: tuple(dims) for leaf, dims in given.items()}
+
+
+def _dims_and_coords(variables, leaf_dims, single, coords):
+    """``({variable: its event dims}, {dim: coordinate values})``: ``coords`` where given, else
+    ``x, y, z`` for a single axis of length 3, else ``0, 1, …``; checked against the sizes."""
     all_coords: dict[str, Sequence] = {}
     dims: dict[str, list[str]] = {}
     for name, (value, leaf) in variables.items():
@@ -340,44 +376,31 @@ def to_datatree(
                 all_coords.setdefault(dim, list(range(size)))
     if coords is not None:
         all_coords.update(coords)
-    for name, (value, leaf) in variables.items():
+    for name, (value, _) in variables.items():
         for dim, size in zip(dims[name], value.shape[2:], strict=True):
             if len(all_coords[dim]) != size:
                 raise ValueError(
                     f"coords[{dim!r}] has {len(all_coords[dim])} values but positions "
                     f"{name!r} has {size} along that axis"
                 )
-    n_chains, n_draws = next(iter(variables.values()))[0].shape[:2]
+    return dims, all_coords
 
+
+def _sample_stats(info, sample_shape) -> dict[str, np.ndarray]:
+    """``info``'s arrays under their ``sample_stats`` names (the divergence flag as bool),
+    each checked to have the ``(chains, draws)`` sizes ``sample_shape``."""
     sample_stats: dict[str, np.ndarray] = {}
     for key, value in _info_dict(info).items():
-        if value.shape[:2] != (n_chains, n_draws):
+        if value.shape[:2] != sample_shape:
             raise ValueError(
                 f"info[{key!r}] must have leading shape (chains, draws) = "
-                f"{(n_chains, n_draws)} like positions, got shape {value.shape}"
+                f"{sample_shape} like positions, got shape {value.shape}"
             )
         name = _SAMPLE_STATS_NAMES.get(key, key)
         if name == "diverging":
             value = value.astype(bool)
         sample_stats[name] = value
-
-    run_attrs = {"thinning": int(thinning), "step_size": step_size, **dict(attrs or {})}
-    run_attrs = {str(k): _netcdf_attr(v) for k, v in run_attrs.items()}
-    run_attrs = {k: v for k, v in run_attrs.items() if v is not None}
-
-    data = {"posterior": {name: value for name, (value, _) in variables.items()}}
-    group_attrs = {"/": run_attrs, "posterior": run_attrs}
-    if sample_stats:
-        data["sample_stats"] = sample_stats
-        group_attrs["sample_stats"] = run_attrs
-    from arviz_base import from_dict
-
-    return from_dict(
-        data,
-        dims=dims,
-        coords=all_coords,
-        attrs=group_attrs,
-    )
+    return sample_stats
 
 
 # --------------------------------------------------------------------------- tables
