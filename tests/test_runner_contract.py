@@ -17,6 +17,7 @@ import warnings
 from collections import namedtuple
 
 import arviz_stats as azs
+import blackjax
 import cases
 import jax
 import jax.numpy as jnp
@@ -66,6 +67,22 @@ def test_check_info_names_the_missing_contract_fields():
     with pytest.raises(TypeError, match=r"lacks the Info contract's fields \['is_divergent', 'acc"):
         check_info(namedtuple("OldInfo", ["energy", "nonfinite"]))
     assert CONTRACT_FIELDS == ("is_divergent", "acceptance_rate", "energy")
+
+
+def test_energy_is_named_for_what_it_is():
+    """ArviZ's ``energy`` only for HMC's total energy (a state with a momentum, or a plain
+    BlackJAX algorithm); ``hamiltonian`` for h of a momentum-free state."""
+    from liesample.samplers.contract import as_sampler, energy_name
+
+    position = jnp.asarray(STARTS[0])
+    orbit = liesample.lie_poisson_langevin(RIGID, beta=1.0, step_size=0.05)
+    assert energy_name(orbit, position) == "hamiltonian"
+    spins = liesample.heisenberg_metropolis(systems.heisenberg((4,)), beta=1.0)
+    assert energy_name(spins, jnp.tile(position, (4, 1))) == "hamiltonian"
+    hmc = liesample.magnetic_hmc(lambda q: -0.5 * q @ q, 0.1, jnp.ones(3), 3, jnp.zeros((3, 3)))
+    assert energy_name(hmc, position) == "energy"
+    plain = blackjax.hmc(lambda q: -0.5 * q @ q, 0.1, jnp.ones(3), 3)
+    assert energy_name(as_sampler(plain), position) == "energy"
 
 
 def test_both_key_styles_give_the_same_draws():

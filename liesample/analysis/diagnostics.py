@@ -104,7 +104,12 @@ def _chain_draw_array(x, name: str, *, min_draws: int = 1, ndims: Sequence[int] 
 
 
 def _netcdf_attr(value):
-    """Convert ``value`` to something NetCDF can store as an attribute, or ``None`` to drop it."""
+    """Convert ``value`` to something NetCDF can store as an attribute, or ``None`` to drop it.
+
+    NetCDF has no boolean attribute (xarray refuses to write one): a boolean (``adapted``,
+    say) is stored as the integer ``1`` or ``0``, which keeps its truth value when read back
+    (the strings ``"true"``/``"false"`` would not: ``"false"`` is truthy), as are the entries
+    of a boolean array. Arrays become lists, other objects their ``str``."""
     if value is None:
         return None
     if isinstance(value, (bool, np.bool_)):
@@ -196,6 +201,7 @@ def to_datatree(
     thinning: int = 1,
     attrs: Mapping | None = None,
     observables=None,
+    energy_name: str = "energy",
 ) -> xr.DataTree:
     """Package sampler output as an ArviZ ``DataTree``.
 
@@ -215,9 +221,9 @@ def to_datatree(
         Per-draw arrays shaped ``(chains, draws)`` (the Info contract of
         :mod:`liesample.samplers.contract`). Recognised keys are renamed to ArviZ's
         ``sample_stats`` names: ``is_divergent`` -> ``diverging`` (stored as bool; a legacy
-        ``nonfinite`` too), ``acceptance_rate``, ``energy`` and ``casimir_error`` unchanged.
-        Other keys are stored under their own names. ``None`` gives a tree without
-        ``sample_stats``.
+        ``nonfinite`` too), ``energy`` -> ``energy_name``, ``acceptance_rate`` and
+        ``casimir_error`` unchanged. Other keys are stored under their own names. ``None``
+        gives a tree without ``sample_stats``.
     var_name : str, default "mu"
         Name of the sampled variable in the ``posterior`` group (single-array positions, split
         into ``<var_name>.real`` and ``<var_name>.imag`` when complex; a pytree's variables are
@@ -236,13 +242,19 @@ def to_datatree(
         Thinning factor between stored draws, stored as an attribute.
     attrs : mapping, optional
         Extra run metadata (sampler name, seed, ...). Stored on the root and on both groups;
-        ``None`` values are dropped and other values are converted to NetCDF-safe types.
+        ``None`` values are dropped and the others made NetCDF-safe, so that
+        ``tree.to_netcdf(path)`` writes them: a boolean is stored as ``1`` or ``0``
+        (:func:`_netcdf_attr`).
     observables : array_like ``(chains, draws, *shape)`` or a pytree of such arrays, optional
         Functions of the state recorded at each draw (``observables=`` of
         :func:`liesample.sample`): extra ``posterior`` variables, so that ArviZ's summary, ESS
         and R-hat act on them. A dict's keys (key paths, as for pytree positions) name them, a
         single array is named ``observable``; dims ``<name>_dim_k`` unless ``event_dims`` (a
         mapping) names them. Their names must differ from the positions'.
+    energy_name : str, default "energy"
+        The ``sample_stats`` name of ``info["energy"]``: ``"energy"`` (ArviZ's, which its
+        ``bfmi`` and ``plot_energy`` read as HMC's total energy) or ``"hamiltonian"`` (``h``
+        of a state without a momentum; :func:`liesample.samplers.contract.energy_name`).
 
     Returns
     -------
@@ -252,24 +264,12 @@ def to_datatree(
     if positions is None and observables is None:
         raise ValueError("to_datatree needs positions, observables or both; got neither")
     single = positions is not None and is_single_array(positions)
-    variables, leaf_dims = _position_variables(positions, var_name, event_dims)
-    observed = _observed_variables(observables, variables)
-    if not single:
-        leaf_dims = _pytree_leaf_dims(event_dims, [*variables.values(), *observed.values()])
-    for value, leaf in [*variables.values(), *observed.values()]:
-        leaf_dims.setdefault(leaf, tuple(f"{leaf}_dim_{k}" for k in range(value.ndim - 2)))
-    shapes = {value.shape[:2] for value, _ in [*variables.values(), *observed.values()]}
-    if len(shapes) > 1:
-        raise ValueError(
-            "positions and observables must have the same (chains, draws) sizes, got "
-            f"{sorted(shapes)}"
-        )
-    variables = {**variables, **observed}
+    variables, leaf_dims = _posterior_variables(positions, var_name, event_dims, observables)
     if isinstance(thinning, bool) or int(thinning) != thinning or thinning < 1:
         raise ValueError(f"thinning must be a positive integer, got {thinning!r}")
     dims, all_coords = _dims_and_coords(variables, leaf_dims, single, coords)
     sample_shape = next(iter(variables.values()))[0].shape[:2]
-    sample_stats = _sample_stats(info, sample_shape)
+    sample_stats = _sample_stats(info, sample_shape, energy_name)
     run_attrs = _tree_attrs({"thinning": int(thinning), "step_size": step_size, **(attrs or {})})
     data = {"posterior": {name: value for name, (value, _) in variables.items()}}
     group_attrs = {"/": run_attrs, "posterior": run_attrs}
@@ -285,6 +285,25 @@ def _tree_attrs(attrs: Mapping) -> dict:
     """``attrs`` as NetCDF-safe attributes (:func:`_netcdf_attr`), ``None`` values dropped."""
     converted = {str(k): _netcdf_attr(v) for k, v in attrs.items()}
     return {k: v for k, v in converted.items() if v is not None}
+
+
+def _posterior_variables(positions, var_name, event_dims, observables):
+    """``({variable: (array, leaf name)}, {leaf name: event dims})`` of the positions and the
+    observables, which must have the same ``(chains, draws)`` sizes."""
+    variables, leaf_dims = _position_variables(positions, var_name, event_dims)
+    observed = _observed_variables(observables, variables)
+    if positions is None or not is_single_array(positions):
+        leaf_dims = _pytree_leaf_dims(event_dims, [*variables.values(), *observed.values()])
+    variables = {**variables, **observed}
+    for value, leaf in variables.values():
+        leaf_dims.setdefault(leaf, tuple(f"{leaf}_dim_{k}" for k in range(value.ndim - 2)))
+    shapes = {value.shape[:2] for value, _ in variables.values()}
+    if len(shapes) > 1:
+        raise ValueError(
+            "positions and observables must have the same (chains, draws) sizes, got "
+            f"{sorted(shapes)}"
+        )
+    return variables, leaf_dims
 
 
 def _position_variables(positions, var_name, event_dims):
@@ -386,9 +405,16 @@ def _dims_and_coords(variables, leaf_dims, single, coords):
     return dims, all_coords
 
 
-def _sample_stats(info, sample_shape) -> dict[str, np.ndarray]:
-    """``info``'s arrays under their ``sample_stats`` names (the divergence flag as bool),
-    each checked to have the ``(chains, draws)`` sizes ``sample_shape``."""
+def _sample_stats(info, sample_shape, energy_name: str) -> dict[str, np.ndarray]:
+    """``info``'s arrays under their ``sample_stats`` names (the divergence flag as bool,
+    ``energy`` as ``energy_name``), each checked to have the ``(chains, draws)`` sizes
+    ``sample_shape``."""
+    if not isinstance(energy_name, str) or not energy_name:
+        raise ValueError(
+            f"energy_name must be a non-empty string (\"energy\" or \"hamiltonian\"), got "
+            f"{energy_name!r}"
+        )
+    names = {**_SAMPLE_STATS_NAMES, "energy": energy_name}
     sample_stats: dict[str, np.ndarray] = {}
     for key, value in _info_dict(info).items():
         if value.shape[:2] != sample_shape:
@@ -396,7 +422,7 @@ def _sample_stats(info, sample_shape) -> dict[str, np.ndarray]:
                 f"info[{key!r}] must have leading shape (chains, draws) = "
                 f"{sample_shape} like positions, got shape {value.shape}"
             )
-        name = _SAMPLE_STATS_NAMES.get(key, key)
+        name = names.get(key, key)
         if name == "diverging":
             value = value.astype(bool)
         sample_stats[name] = value
