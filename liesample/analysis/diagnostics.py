@@ -13,13 +13,15 @@ from __future__ import annotations
 import dataclasses
 import math
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, NamedTuple
 
 import jax
 import numpy as np
+import numpy.typing as npt
 import scipy.fft
 
+from liesample.foundation.types import PyTree
 from liesample.foundation.validation import is_single_array
 from liesample.samplers.contract import SAMPLE_STATS_NAMES
 
@@ -147,7 +149,7 @@ def _leaf_name(path) -> str:
     return ".".join(parts)
 
 
-def pytree_variables(positions) -> dict[str, tuple[np.ndarray, str]]:
+def pytree_variables(positions: PyTree) -> dict[str, tuple[np.ndarray, str]]:
     """``{variable name: (real array, leaf name)}`` for the leaves of a pytree of draws.
 
     Each leaf ``(chains, draws, *event)`` is named from its key path (:func:`_leaf_name`); a
@@ -191,8 +193,8 @@ DEFAULT_EVENT_DIMS = {0: (), 1: ("component",), 2: ("row", "col")}
 
 
 def to_datatree(
-    positions,
-    info=None,
+    positions: PyTree | None,
+    info: Mapping | tuple | object | None = None,
     *,
     var_name: str | None = None,
     event_dims: Sequence[str] | Mapping[str, Sequence[str]] | None = None,
@@ -200,7 +202,7 @@ def to_datatree(
     step_size: float | None = None,
     thinning: int = 1,
     attrs: Mapping | None = None,
-    observables=None,
+    observables: PyTree | None = None,
     energy_name: str = "energy",
 ) -> xr.DataTree:
     """Package sampler output as an ArviZ ``DataTree``.
@@ -562,7 +564,7 @@ def format_table(df: pd.DataFrame) -> str:
 # --------------------------------------------------------------------------- time correlations
 
 
-def autocovariance(x, max_lag: int, *, center: bool = True) -> np.ndarray:
+def autocovariance(x: npt.ArrayLike, max_lag: int, *, center: bool = True) -> np.ndarray:
     """Autocovariance over lags ``0..max_lag``, averaged over chains and time, via FFT.
 
     ``c[k] = sum over chains and t of (x_t - m) . (x_{t+k} - m) / (chains * (draws - k))``,
@@ -604,7 +606,7 @@ def autocovariance(x, max_lag: int, *, center: bool = True) -> np.ndarray:
 # --------------------------------------------------------------------------- health checks
 
 
-def casimir_drift(info) -> dict[str, float]:
+def casimir_drift(info: Mapping | tuple | object) -> dict[str, float]:
     """Summarise the relative Casimir error recorded by the sampler.
 
     Parameters
@@ -626,7 +628,7 @@ def casimir_drift(info) -> dict[str, float]:
     return {"max": float(np.max(err)), "final": float(np.max(err[:, -1]))}
 
 
-def count_nonfinite(info) -> int:
+def count_nonfinite(info: Mapping | tuple | object) -> int:
     """Number of draws, over all chains, flagged divergent (non-finite state or energy).
 
     Parameters
@@ -700,7 +702,7 @@ def _blocking_levels(x):
     return levels
 
 
-def blocking_error(x, *, warn: bool = True) -> BlockingResult:
+def blocking_error(x: npt.ArrayLike, *, warn: bool = True) -> BlockingResult:
     """Standard error of the mean of correlated draws by blocking (Flyvbjerg and Petersen 1989),
     with the level chosen automatically (Jonsson 2018).
 
@@ -835,7 +837,9 @@ def _leave_one_out(function, block_means):
     return full, error, (num - 1) * (mean_left_out - full)
 
 
-def jackknife(function, *series, block_size: int | None = None) -> JackknifeResult:
+def jackknife(
+    function: Callable[..., float], *series: npt.ArrayLike, block_size: int | None = None
+) -> JackknifeResult:
     """Jackknife estimate and error of ``function(mean of series[0], mean of series[1], …)``.
 
     For variance-type quantities, which are functions of several means (the specific heat
@@ -957,7 +961,9 @@ def _positive(name, value):
     return value
 
 
-def specific_heat(energy, beta, num_sites, *, block_size=None) -> JackknifeResult:
+def specific_heat(
+    energy: npt.ArrayLike, beta: float, num_sites: int, *, block_size: int | None = None
+) -> JackknifeResult:
     """Specific heat per site ``C = β² (⟨E²⟩ − ⟨E⟩²) / N`` with its jackknife error.
 
     Parameters
@@ -988,7 +994,12 @@ def specific_heat(energy, beta, num_sites, *, block_size=None) -> JackknifeResul
 
 
 def susceptibility(
-    magnetisation, beta, num_sites, *, connected: bool = True, block_size=None
+    magnetisation: npt.ArrayLike,
+    beta: float,
+    num_sites: int,
+    *,
+    connected: bool = True,
+    block_size: int | None = None,
 ) -> JackknifeResult:
     """Magnetic susceptibility per site with its jackknife error.
 
@@ -1020,7 +1031,9 @@ def susceptibility(
     return jackknife(lambda m2: beta * num_sites * m2, norm**2, block_size=block_size)
 
 
-def binder_cumulant(magnetisation, *, block_size=None) -> JackknifeResult:
+def binder_cumulant(
+    magnetisation: npt.ArrayLike, *, block_size: int | None = None
+) -> JackknifeResult:
     """Binder cumulant ``U = 1 − ⟨m⁴⟩ / (3 ⟨m²⟩²)`` with its jackknife error.
 
     ``m² = |m|²`` for a vector magnetisation. With this (Ising) normalisation ``U → 2/3`` in
