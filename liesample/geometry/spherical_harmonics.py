@@ -330,7 +330,10 @@ def _check_grid(values, theta, max_degree):
 
 
 def harmonic_analysis(
-    values: npt.ArrayLike, theta: npt.ArrayLike, max_degree: int, weights: npt.ArrayLike = None
+    values: npt.ArrayLike,
+    theta: npt.ArrayLike,
+    max_degree: int,
+    weights: npt.ArrayLike | None = None,
 ) -> np.ndarray:
     """Coefficients ``c_ℓm`` (order of :func:`degrees_and_orders`) of ``f ≈ Σ c_ℓm Y_ℓ^m`` from
     samples ``values[..., t, p] = f(θ_t, φ_p)``, ``φ_p = 2πp/num_phi`` (``num_phi ≥ 2L + 1``).
