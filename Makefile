@@ -30,7 +30,9 @@ $(BIN)/.installed-test: $(BIN)/.installed
 demo: $(BIN)/.installed
 	$(BIN)/liesample demo
 
+# The lint first (a second or two), with the rule set of pyproject.toml [tool.ruff.lint].
 test: $(BIN)/.installed-test
+	$(BIN)/ruff check .
 	$(BIN)/python -m pytest -n $(JOBS) --dist worksteal -q
 
 test-slow: $(BIN)/.installed-test

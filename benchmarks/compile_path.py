@@ -30,6 +30,32 @@ CHAINS = (1, 8, 64, 1024)
 SYSTEMS = ("rigid body", "heavy top", "spins 8x8")
 
 
+def _runners(algorithm):
+    """``run(states, keys, n) -> positions``: ``n`` steps of every chain, vectorised; and
+    ``single(state, key, n)``, the same for one chain, jitted."""
+    import jax
+
+    def run(states, keys, n):
+        def chain(state, key):
+            return jax.lax.fori_loop(
+                0, n, lambda i, s: algorithm.step(jax.random.fold_in(key, i), s)[0], state
+            )
+
+        return jax.vmap(chain)(states, keys).position
+
+    def single(state, key, n):
+        return run(jax.tree.map(lambda x: x[None], state), key[None], n)[0]
+
+    return run, jax.jit(single)
+
+
+def _chain(states, c):
+    """Chain ``c`` of the batched ``states``."""
+    import jax
+
+    return jax.tree.map(lambda x: x[c], states)
+
+
 def _measure_here(quick: bool) -> dict:
     """Measure every configuration in this interpreter (called in a subprocess)."""
     import jax
@@ -61,18 +87,8 @@ def _measure_here(quick: bool) -> dict:
             system, beta=2.0, step_size=0.05, stability="off"
         )
 
-        def run(states, keys, n):
-            def chain(state, key):
-                return jax.lax.fori_loop(
-                    0, n, lambda i, s: algorithm.step(jax.random.fold_in(key, i), s)[0], state
-                )
-
-            return jax.vmap(chain)(states, keys).position
-
+        run, single = _runners(algorithm)
         start = jnp.asarray(start, dtype=jnp.float64)
-        single = jax.jit(
-            lambda state, key, n: run(jax.tree.map(lambda x: x[None], state), key[None], n)[0]
-        )
         for num_chains in CHAINS:
             keys = jax.random.split(jax.random.key(0), num_chains)
             states = jax.vmap(algorithm.init)(jnp.broadcast_to(start, (num_chains, *start.shape)))
@@ -86,7 +102,7 @@ def _measure_here(quick: bool) -> dict:
                     [
                         np.asarray(
                             liesample.jit(single)(
-                                jax.tree.map(lambda x: x[c], states), keys[c], check_steps
+                                _chain(states, c), keys[c], check_steps
                             )
                         )
                         for c in sorted({0, num_chains - 1})

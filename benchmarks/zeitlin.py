@@ -229,13 +229,34 @@ def cost_against_size(quick, log):
         midpoint = variants["Euler, isospectral midpoint"]
         state = midpoint.init(jnp.asarray(start))
         keys = jax.random.split(jax.random.key(0), repeats)
-        final = liesample.jit(
-            lambda s, keys: jax.lax.scan(lambda s, k: (midpoint.step(k, s)[0], None), s, keys)[0]
-        )(state, keys)
+        final = _final_state(midpoint, state, keys)
         gap = float(np.max(np.abs(np.asarray(system.algebra.to_matrix(final.position)) - w_numpy)))
         rows[-1]["gap_to_jax"] = gap
         log(f"             NumPy vs JAX midpoint after {repeats} steps: max |ΔW| = {gap:.1e}")
     return rows
+
+
+def _final_state(algorithm, state, keys):
+    """The state after one step of ``algorithm`` per key, compiled."""
+
+    def steps(state, keys):
+        return jax.lax.scan(lambda s, k: (algorithm.step(k, s)[0], None), state, keys)[0]
+
+    return liesample.jit(steps)(state, keys)
+
+
+def _energy_chains(algorithm, num_steps):
+    """``(states, keys) -> (states, h at each step)``: ``num_steps`` steps of every chain,
+    vectorised and compiled."""
+
+    def chain(state, key):
+        def body(state, k):
+            state, info = algorithm.step(k, state)
+            return state, info.energy
+
+        return jax.lax.scan(body, state, jax.random.split(key, num_steps))
+
+    return liesample.jit(jax.vmap(chain))
 
 
 def ess_per_second(quick, log):
@@ -247,18 +268,10 @@ def ess_per_second(quick, log):
         start = _start(size)
         algorithm = liesample.lie_poisson_langevin(system, beta=1.0, sigma=1.0, step_size=ESS_STEP)
 
-        def chain(state, key, n):
-            def body(state, k):
-                state, info = algorithm.step(k, state)
-                return state, info.energy
-
-            return jax.lax.scan(body, state, jax.random.split(key, n))
-
         starts = jax.vmap(algorithm.init)(jnp.repeat(jnp.asarray(start)[None], num_chains, 0))
         keys = jax.random.split(jax.random.key(1), num_chains)
-        warm = liesample.jit(jax.vmap(lambda s, k: chain(s, k, warmup)))
-        states, _ = warm(starts, keys)
-        run = liesample.jit(jax.vmap(lambda s, k: chain(s, k, num_steps)))
+        states, _ = _energy_chains(algorithm, warmup)(starts, keys)
+        run = _energy_chains(algorithm, num_steps)
         compiled = run.lower(states, keys).compile()
         timed_keys = jax.random.split(keys[0], num_chains)
         (_, energies), seconds = common.timed(compiled, states, timed_keys)

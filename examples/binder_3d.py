@@ -21,6 +21,7 @@ with its error propagated from the two fits. ``--plot FILE`` saves ``U(β)`` per
 from __future__ import annotations
 
 import argparse
+import itertools
 import math
 import sys
 from pathlib import Path
@@ -150,7 +151,7 @@ def main(argv=None) -> int:
         for beta, value, error in zip(betas, u, e, strict=True):
             print(f"  beta = {beta:.4f}   U = {value:.4f} +- {error:.4f}")
     crossings = []
-    for small, large in zip(sizes, sizes[1:]):
+    for small, large in itertools.pairwise(sizes):
         beta_star, error, u_star = crossing(betas, *results[small], *results[large])
         crossings.append((beta_star, error, u_star))
         print(

@@ -144,8 +144,8 @@ def main(argv=None) -> int:
     parser.add_argument("--draws", type=int, default=400,
                         help="draws per chain, after as many warm-up steps (default 400)")
     parser.add_argument("--b", type=parse_b, default=parse_b(DEFAULT_B),
-                        help=f"values of b = β‖W‖²/(N² − 1), comma-separated, written --b=-4,-1,0,1 "
-                             f"(default {DEFAULT_B})")
+                        help="values of b = β‖W‖²/(N² − 1), comma-separated, written "
+                             f"--b=-4,-1,0,1 (default {DEFAULT_B})")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--output", "--out", type=Path, default=Path("condensation-output"))
     args = parser.parse_args(argv)

@@ -2,8 +2,8 @@
 
 Run with ``.venv/bin/python examples/numpyro_directional.py`` (about 30 s on 2 cores).
 
-The model is written in NumPyro; :class:`liesample.interop.numpyro_kernel.GeometricHMC` samples it with
-geometric HMC, moving the direction ``mu`` on the sphere itself (no unit-vector trick, no
+The model is written in NumPyro; :class:`liesample.interop.numpyro_kernel.GeometricHMC` samples
+it with geometric HMC, moving the direction ``mu`` on the sphere itself (no unit-vector trick, no
 projected parametrisation) and the concentration ``kappa`` in NumPyro's unconstrained
 coordinate ``log κ``::
 

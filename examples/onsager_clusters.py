@@ -104,10 +104,12 @@ def main(argv=None) -> int:
     system = point_vortices(circulations)
     low, high = beta_bounds(circulations)
     print(
-        f"{args.vortices} vortices (Γ = ±1): the Gibbs law is normalisable for {low:.3g} < β < {high:.3g}"
+        f"{args.vortices} vortices (Γ = ±1): the Gibbs law is normalisable for "
+        f"{low:.3g} < β < {high:.3g}"
     )
     print(
-        f"{'β':>6} {'E|D|²':>8} {'± MCSE':>7} {'R-hat':>6} {'like-signed NN angle':>21} {'scale':>7}"
+        f"{'β':>6} {'E|D|²':>8} {'± MCSE':>7} {'R-hat':>6} "
+        f"{'like-signed NN angle':>21} {'scale':>7}"
     )
     rows = []
     for index, beta in enumerate(float(b) for b in args.betas.split(",")):

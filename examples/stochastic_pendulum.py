@@ -2,8 +2,8 @@
 
 ``H_0 = p²/2 − cos q`` with noise in both coordinates, ``H_1 = σ₁ cos q`` (random torque
 ``σ₁ sin q ∘ dW¹``) and ``H_2 = σ₂ p`` (random displacement ``σ₂ ∘ dW²``). Paths are integrated
-by the stochastic implicit midpoint rule (:mod:`liesample.dynamics.symplectic`), whose one-step map is
-symplectic for every path; the figure shows the paths over the deterministic energy contours,
+by the stochastic implicit midpoint rule (:mod:`liesample.dynamics.symplectic`), whose one-step map
+is symplectic for every path; the figure shows the paths over the deterministic energy contours,
 the energy along each path, and the measured symplecticity defect ``max |Dφᵀ Ω Dφ − Ω|``.
 
 Run: ``python examples/stochastic_pendulum.py [output.png]``.

@@ -1,6 +1,7 @@
-"""Scenes of stochastic-dissipative point vortices on the sphere (paper, ``fig:point_vortex_with_dissipation``).
+"""Scenes of stochastic-dissipative point vortices on the sphere.
 
-Writes two figures into ``--out`` (default ``examples/output``):
+The paper's ``fig:point_vortex_with_dissipation``. Writes two figures into ``--out`` (default
+``examples/output``):
 
 - ``vortex_dissipation.png``: pure dissipation (``σ = 0``, ``θ > 0``), six unit vortices from
   uniform random starts: ``h(t)`` decreases monotonically and the vortices converge to the

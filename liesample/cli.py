@@ -6,8 +6,12 @@ import argparse
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    import jax
 
 DEMO_DESCRIPTION = """\
 Sample the stochastic-dissipative rigid body on the sphere |μ| = radius with the
@@ -74,44 +78,54 @@ class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescrip
     """Shows every option's default and keeps the description's line breaks."""
 
 
-def _parse(argv):
+def _parse(argv: list[str]) -> argparse.Namespace:
     return _parser().parse_args(argv)
 
 
-def _random_points_on_sphere(key, num, radius):
+def _random_points_on_sphere(key: jax.Array, num: int, radius: float) -> jax.Array:
     import jax
 
     x = jax.random.normal(key, (num, 3))
     return radius * x / np.linalg.norm(x, axis=-1, keepdims=True)
 
 
-def demo(args) -> int:
+def demo(args: argparse.Namespace) -> int:
+    """Run ``liesample demo`` with the parsed ``args``: sample, report, plot. Returns the exit
+    status (1 if every draw diverged)."""
     import jax
 
     jax.config.update("jax_enable_x64", True)  # Casimirs to round-off need float64
 
-    from liesample import lie_poisson_langevin, systems
-    from liesample.analysis.diagnostics import (
-        autocovariance,
-        casimir_drift,
-        count_nonfinite,
-        expectation_table,
-        format_table,
-    )
-    from liesample.analysis.plots import (
-        plot_autocorrelation,
-        plot_marginals,
-        plot_sphere_density,
-        plot_traces,
-    )
-    from liesample.run.runner import sample, sample_chains
-    from liesample.targets import isotropic_autocorrelation
+    from liesample import systems
 
     if args.chains < 1:
         raise ValueError(f"--chains must be >= 1, got {args.chains}")
     if not args.time > 0:
         raise ValueError(f"--time must be > 0, got {args.time}")
-    out = args.output
+    netcdf = _draws_file(args.output)
+    system = systems.rigid_body(args.inertia)
+    target = system.reference(args.beta, [args.radius, 0.0, 0.0])
+    key_start, key_run, key_iso = jax.random.split(jax.random.key(args.seed), 3)
+    starts = _random_points_on_sphere(key_start, args.chains, args.radius)  # both runs
+    tree = _sample_gibbs_law(args, system, starts, key_run, netcdf)
+    if not _report_averages(args, system, target, tree):
+        print(
+            f"liesample demo: error: every draw of the {args.integrator!r} run diverged "
+            "(non-finite states); reduce --step-size or choose another --integrator",
+            file=sys.stderr,
+        )
+        return 1
+    autocorrelation = _isotropic_autocorrelation(args, starts, key_iso)
+    paths = _plots(args, system, target, tree.posterior["mu"].values, autocorrelation)
+    print(f"\nWrote {netcdf} and plots:")
+    for path in paths:
+        print(f"  {path}")
+    return 0
+
+
+def _draws_file(out: Path) -> Path:
+    """The demo's ``draws.nc`` in the folder ``out``, created if missing; an earlier demo's
+    draws there are removed."""
     if out.exists() and not out.is_dir():
         raise ValueError(
             f"--output {str(out)!r} is a file; give a folder for the plots and draws.nc (it is "
@@ -119,36 +133,41 @@ def demo(args) -> int:
         )
     out.mkdir(parents=True, exist_ok=True)
     netcdf = out / "draws.nc"
-    netcdf.unlink(missing_ok=True)  # the draws of an earlier demo in this folder are replaced
+    netcdf.unlink(missing_ok=True)
+    return netcdf
 
-    def sampler_for(system):
-        return lie_poisson_langevin(
-            system,
-            beta=args.beta,
-            sigma=args.sigma,
-            step_size=args.step_size,
-            integrator=args.integrator,
-        )
 
-    system = systems.rigid_body(args.inertia)
-    algorithm = sampler_for(system)
-    target = system.reference(args.beta, [args.radius, 0.0, 0.0])
-    key_start, key_run, key_iso = jax.random.split(jax.random.key(args.seed), 3)
-    starts = _random_points_on_sphere(key_start, args.chains, args.radius)  # both runs
-    thinning = max(1, round(0.5 / args.step_size))  # a draw every ~half time unit
+def _sampler(args: argparse.Namespace, system):
+    """The demo's Lie–Poisson–Langevin sampler of ``system``."""
+    from liesample import lie_poisson_langevin
+
+    return lie_poisson_langevin(
+        system,
+        beta=args.beta,
+        sigma=args.sigma,
+        step_size=args.step_size,
+        integrator=args.integrator,
+    )
+
+
+def _sample_gibbs_law(args: argparse.Namespace, system, starts, key, netcdf: Path):
+    """The chains of ``system`` from ``starts``, a draw every ~half time unit after a warm-up of
+    20 time units (many relaxation times), written to ``netcdf`` as they run."""
+    from liesample.run.runner import sample
+
+    thinning = max(1, round(0.5 / args.step_size))
     num_draws = max(10, round(args.time / (args.step_size * thinning)))
-    num_warmup = round(20.0 / args.step_size)  # 20 time units: many relaxation times
     print(
         f"liesample demo: rigid body I={tuple(args.inertia)}, β={args.beta}, σ={args.sigma}, "
         f"|μ|={args.radius}; integrator {args.integrator}, dt={args.step_size}; "
         f"{args.chains} chains × {num_draws} draws (thinning {thinning})"
     )
-    tree = sample(
-        algorithm,
-        key_run,
+    return sample(
+        _sampler(args, system),
+        key,
         starts,
         num_draws,
-        num_warmup=num_warmup,
+        num_warmup=round(20.0 / args.step_size),
         thinning=thinning,
         progress_bar=not args.no_progress,
         output=netcdf,  # written chunk by chunk; liesample.load_chains reads it
@@ -162,6 +181,18 @@ def demo(args) -> int:
             "integrator": args.integrator,
         },
     )
+
+
+def _report_averages(args: argparse.Namespace, system, target, tree) -> bool:
+    """Print the ergodic averages against the exact Gibbs law, the Casimir drift and the
+    non-finite steps; ``False`` if every draw diverged."""
+    from liesample.analysis.diagnostics import (
+        casimir_drift,
+        count_nonfinite,
+        expectation_table,
+        format_table,
+    )
+
     wall_time = tree.attrs["sampling_time"]
     mu = tree.posterior["mu"].values
     stats = tree.sample_stats
@@ -170,30 +201,33 @@ def demo(args) -> int:
     draws["E[μ₁μ₂]"] = mu[..., 0] * mu[..., 1]
     exact = {f"E[{n}²]": exact_moments[i, i] for i, n in enumerate(system.component_names)}
     exact["E[μ₁μ₂]"] = 0.0
-    energy = stats["energy"].values
     if len(set(args.inertia)) > 1:  # an isotropic body's h is constant on the orbit
-        draws["E[h]"], exact["E[h]"] = energy, float(target.mean_energy())
+        draws["E[h]"], exact["E[h]"] = stats["energy"].values, float(target.mean_energy())
     table = expectation_table(draws, exact, wall_time=wall_time)
     print(f"\nErgodic averages vs the exact Gibbs law ({wall_time:.2f} s of sampling):")
     print(format_table(table))
     drift = casimir_drift({"casimir_error": stats["casimir_error"].values})
     nonfinite = count_nonfinite({"nonfinite": stats["diverging"].values})
     print(f"\nCasimir |μ|² relative drift: max {drift['max']:.2e}; non-finite steps: {nonfinite}")
-    if nonfinite == stats["diverging"].size or not np.all(np.isfinite(mu)):
-        print(
-            f"liesample demo: error: every draw of the {args.integrator!r} run diverged "
-            "(non-finite states); reduce --step-size or choose another --integrator",
-            file=sys.stderr,
-        )
-        return 1
+    return nonfinite < stats["diverging"].size and bool(np.all(np.isfinite(mu)))
 
-    # Isotropic body: uniform law, exact autocorrelation r² exp(−σ² t). A path study from exact
-    # starts (uniform on the sphere), not a posterior estimate: the low-level loop, whose draws
-    # are every step and which leaves the convergence checks of estimates to its caller.
-    iso_algorithm = sampler_for(systems.rigid_body((2.0, 2.0, 2.0)))
+
+def _isotropic_autocorrelation(args: argparse.Namespace, starts, key):
+    """``(lag_times, per-chain autocovariances, exact)`` of the isotropic body, whose law is
+    uniform and whose autocorrelation is ``r² exp(−σ² t)``; the largest error is printed.
+
+    A path study from exact starts (uniform on the sphere), not a posterior estimate: the
+    low-level loop, whose draws are every step and which leaves the convergence checks of
+    estimates to its caller."""
+    from liesample import systems
+    from liesample.analysis.diagnostics import autocovariance
+    from liesample.run.runner import sample_chains
+    from liesample.targets import isotropic_autocorrelation
+
+    iso_algorithm = _sampler(args, systems.rigid_body((2.0, 2.0, 2.0)))
     iso_draws = round(200.0 / args.step_size)
     iso_mu = np.asarray(
-        sample_chains(iso_algorithm, key_iso, starts, iso_draws, progress_bar=False).positions
+        sample_chains(iso_algorithm, key, starts, iso_draws, progress_bar=False).positions
     )
     max_lag = min(iso_draws - 1, round(3.0 / (args.sigma**2 * args.step_size)))
     per_chain = np.stack([autocovariance(chain[None], max_lag, center=False) for chain in iso_mu])
@@ -204,9 +238,23 @@ def demo(args) -> int:
         f"Isotropic body: max |E[μ(t)·μ(0)] − r²e^(−σ²t)| over t ≤ {lag_times[-1]:.1f} = "
         f"{acf_error:.3f} (r² = {args.radius**2:.2f})"
     )
+    return lag_times, per_chain, exact_acf
 
+
+def _plots(args: argparse.Namespace, system, target, mu, autocorrelation) -> list[Path]:
+    """The demo's figures in ``args.output``: traces, the isotropic autocorrelation, the
+    marginals and the density on the sphere, each against the exact law."""
+    from liesample.analysis.plots import (
+        plot_autocorrelation,
+        plot_marginals,
+        plot_sphere_density,
+        plot_traces,
+    )
+
+    out = args.output
+    lag_times, per_chain, exact_acf = autocorrelation
     flat = mu.reshape(-1, 3)
-    paths = [
+    return [
         plot_traces(mu[:4], out / "trace.png", names=system.component_names, max_draws=200),
         plot_autocorrelation(
             lag_times,
@@ -233,13 +281,11 @@ def demo(args) -> int:
             title="Density of μ/|μ| on S²: sampled vs exact",
         ),
     ]
-    print(f"\nWrote {netcdf} and plots:")
-    for path in paths:
-        print(f"  {path}")
-    return 0
 
 
-def main(argv=None) -> int:
+def main(argv: list[str] | None = None) -> int:
+    """The ``liesample`` command: parse ``argv`` (default ``sys.argv[1:]``), run the command,
+    return its exit status (2 for a bad argument, named without a traceback)."""
     args = _parse(sys.argv[1:] if argv is None else argv)
     if args.command == "demo":
         start = time.perf_counter()

@@ -372,7 +372,7 @@ ROWS = [
         ),
         TypeError,
         r"rng_key.*PRNGKey",
-    ),  # fmt: skip
+    ),
     (
         "accuracy tolerance and relative_tolerance",
         lambda: liesample.integrators.accuracy.choose_step_size(
@@ -381,7 +381,7 @@ ROWS = [
         ),
         ValueError,
         "not both",
-    ),  # fmt: skip
+    ),
     ("sample adapt without warmup", lambda: _sample(adapt=True), ValueError, "num_warmup > 0"),
     (
         "sample adapt unsupported",
@@ -391,7 +391,7 @@ ROWS = [
         ),
         ValueError,
         "no warm-up adaptation.*window_adaptation",
-    ),  # fmt: skip
+    ),
     (
         "sample min_acceptance_rate",
         lambda: _sample(min_acceptance_rate=-0.1),
@@ -399,7 +399,7 @@ ROWS = [
         "min_acceptance_rate",
     ),
     ("sample rng_key int", lambda: liesample.sample_chains(ALGORITHM, 7, STARTS, 2),
-     TypeError, r"rng_key.*PRNGKey"),  # fmt: skip
+     TypeError, r"rng_key.*PRNGKey"),
     (
         "sample start nan energy names the chain",
         lambda: liesample.sample_chains(
@@ -408,7 +408,7 @@ ROWS = [
         ),
         ValueError,
         r"initial_positions\[1\].*energy h = nan",
-    ),  # fmt: skip
+    ),
     (
         "sample magnetic start names the chain",
         lambda: liesample.sample_chains(
@@ -417,7 +417,7 @@ ROWS = [
         ),
         ValueError,
         r"initial_positions\[1\].*logdensity_fn",
-    ),  # fmt: skip
+    ),
     (
         "sample beyond bound names the chain",
         lambda: liesample.sample_chains(

@@ -33,6 +33,8 @@ def test_binder_example_runs(tmp_path, capsys, run_example):
     assert run_example("binder_3d", [*argv, "--warmup", "10", "--plot", str(plot)]) == 0
     out = capsys.readouterr().out
     assert "crossing L = 3/4: beta* =" in out
-    values = [float(line.split("U = ")[1].split()[0]) for line in out.splitlines() if "U = " in line]
+    values = [
+        float(line.split("U = ")[1].split()[0]) for line in out.splitlines() if "U = " in line
+    ]
     assert len(values) == 4 and all(0.0 < u <= 1.0 for u in values), values
     assert plot.stat().st_size > 0

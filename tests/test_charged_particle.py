@@ -170,9 +170,9 @@ def test_bracket_matches_the_poisson_tensor_and_is_antisymmetric():
 def test_vector_potential_field_is_the_curl_and_divergence_free():
     field = field_from_vector_potential(bottle_potential)
     positions = np.random.default_rng(4).normal(size=(6, 3))
-    fields, divergences = liesample.jit(jax.vmap(lambda q: (field(q), jnp.trace(jax.jacfwd(field)(q)))))(
-        jnp.asarray(positions)
-    )
+    fields, divergences = liesample.jit(
+        jax.vmap(lambda q: (field(q), jnp.trace(jax.jacfwd(field)(q))))
+    )(jnp.asarray(positions))
     np.testing.assert_allclose(fields, np.stack([bottle_field(q) for q in positions]), atol=ATOL)
     np.testing.assert_allclose(divergences, 0.0, atol=ATOL)
 
@@ -385,7 +385,9 @@ def stationary_moments(system, beta, sigma, key, num_chains=256, num_steps=4000,
     cov_q = np.linalg.inv(STIFFNESS) / beta
     q0 = jax.random.multivariate_normal(key_q, jnp.zeros(2), jnp.asarray(cov_q), (num_chains,))
     p0 = jnp.sqrt(mass / beta) * jax.random.normal(key_p, (num_chains, 2))
-    run = liesample.jit(jax.vmap(lambda k, z: dynamics.path(k, z, step_size, num_steps, 4).states[1:]))
+    run = liesample.jit(
+        jax.vmap(lambda k, z: dynamics.path(k, z, step_size, num_steps, 4).states[1:])
+    )
     states = run(jax.random.split(key_run, num_chains), jnp.concatenate([q0, p0], axis=1))
     q, p = states[..., :2], states[..., 2:]
     per_chain = jnp.stack(

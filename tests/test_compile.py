@@ -84,7 +84,9 @@ def test_plain_jax_jit_on_this_host():
 
 
 def test_safe_compiler_options_keep_user_options():
-    options = safe_compiler_options({"xla_disable_hlo_passes": "foo", "xla_cpu_enable_fast_math": False})
+    options = safe_compiler_options(
+        {"xla_disable_hlo_passes": "foo", "xla_cpu_enable_fast_math": False}
+    )
     assert options["xla_cpu_enable_fast_math"] is False
     assert options["xla_disable_hlo_passes"].split(",") == [
         "foo",

@@ -1,4 +1,5 @@
-"""Tests for liesample.analysis.diagnostics and liesample.analysis.plots on synthetic chains with known answers."""
+"""Tests for liesample.analysis.diagnostics and liesample.analysis.plots on synthetic chains with
+known answers."""
 
 from collections import namedtuple
 
@@ -122,6 +123,30 @@ def test_to_datatree_without_info_and_dict_info_and_other_event_shapes(tmp_path)
     )
     assert dt["posterior"]["mu"].dims == ("chain", "draw", "row", "col")
     assert list(dt["posterior"]["row"].values) == ["a", "b", "c"]
+
+
+def test_to_datatree_names_h_apart_from_hmc_energy_and_writes_booleans_as_integers(tmp_path):
+    """``energy_name="hamiltonian"`` keeps ``h`` of a momentum-free sampler away from ArviZ's
+    HMC-energy diagnostics (BFMI refuses the tree instead of reporting a number); a boolean
+    attribute is stored as 1/0, which NetCDF can hold and which keeps its truth value."""
+    import arviz_stats
+
+    rng = np.random.default_rng(2)
+    mu, info = make_run(rng)
+    dt = diag.to_datatree(mu, info, energy_name="hamiltonian", attrs={"adapted": False})
+    assert "energy" not in dt.sample_stats
+    np.testing.assert_array_equal(dt.sample_stats["hamiltonian"].values, info.energy)
+    with pytest.raises(KeyError, match="energy"):
+        arviz_stats.bfmi(dt)
+    assert arviz_stats.bfmi(diag.to_datatree(mu, info))["energy"].shape == (3,)
+    dt.to_netcdf(tmp_path / "x.nc", engine="h5netcdf")
+    back = xr.open_datatree(tmp_path / "x.nc")
+    try:
+        assert back.attrs["adapted"] == 0 and not back.attrs["adapted"]
+    finally:
+        back.close()
+    with pytest.raises(ValueError, match="energy_name must be a non-empty string"):
+        diag.to_datatree(mu, info, energy_name="")
 
 
 @pytest.mark.parametrize(

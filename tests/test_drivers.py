@@ -139,7 +139,9 @@ def test_ito_without_its_correction_is_wrong():
 
         return jax.lax.scan(step, jnp.asarray(MU0), jnp.arange(num_steps))[0]
 
-    samples = np.asarray(liesample.jit(jax.vmap(one))(jax.random.split(jax.random.key(7), NUM_PATHS)))
+    samples = np.asarray(
+        liesample.jit(jax.vmap(one))(jax.random.split(jax.random.key(7), NUM_PATHS))
+    )
     se = samples.std(0) / np.sqrt(NUM_PATHS)
     assert np.max(np.abs(samples.mean(0) - mean) / se) > 10
 

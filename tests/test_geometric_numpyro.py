@@ -1,4 +1,5 @@
-"""liesample.interop.numpyro_distributions: von Mises–Fisher and matrix Fisher distributions (log_prob, exact draws)."""
+"""liesample.interop.numpyro_distributions: von Mises–Fisher and matrix Fisher distributions
+(log_prob, exact draws)."""
 
 import importlib
 import sys

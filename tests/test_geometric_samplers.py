@@ -294,7 +294,7 @@ def test_blackjax_driver_info_contract_and_divergences_are_rejected():
         return jnp.where(x[2] > -0.2, 2.0 * x[2], jnp.nan)
 
     sampler = liesample.geometric_hmc(logdensity, space, step_size=0.7, num_integration_steps=5)
-    final, (positions, infos) = blackjax.util.run_inference_algorithm(
+    _, (positions, infos) = blackjax.util.run_inference_algorithm(
         jax.random.key(8), sampler, num_steps=300, initial_position=jnp.array([0.0, 0.0, 1.0]),
         transform=lambda state, info: (state.position, info),
     )

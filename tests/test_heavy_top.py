@@ -203,9 +203,9 @@ def test_without_gravity_pi_follows_the_rigid_body(integrator):
             return state, state.position
 
         return np.asarray(
-            liesample.jit(lambda s: jax.lax.scan(step, s, jax.random.split(jax.random.key(5), 400))[1])(
-                state
-            )
+            liesample.jit(
+                lambda s: jax.lax.scan(step, s, jax.random.split(jax.random.key(5), 400))[1]
+            )(state)
         )
 
     top_path = trajectory(free_top, mu0)

@@ -77,7 +77,8 @@ def _within(draws, exact, name, z=5.0):
     assert abs(float(draws.mean()) - exact) < z * mcse, (name, float(draws.mean()), exact, mcse)
 
 
-@pytest.mark.slow  # a latent concentration inside a model runs by default (test_numpyro_distributions)
+# A latent concentration inside a model runs by default (test_numpyro_distributions).
+@pytest.mark.slow
 def test_latent_concentration_posterior_matches_quadrature_with_four_chains():
     y = simulate()
     mcmc = MCMC(

@@ -449,7 +449,10 @@ def test_bad_sampler_options_raise():
     with pytest.raises(ValueError, match="coordinates"):
         liesample.magnetic_langevin(*base, 1.0, J2).init(jnp.zeros(3))
     # Starting where log π is not finite.
-    for sampler in (liesample.magnetic_hmc(*base, 3, J2), liesample.magnetic_langevin(*base, 1.0, J2)):  # fmt: skip
+    for sampler in (
+        liesample.magnetic_hmc(*base, 3, J2),
+        liesample.magnetic_langevin(*base, 1.0, J2),
+    ):
         with pytest.raises(ValueError, match="not finite"):
             sampler.init(jnp.array([np.inf, 0.0]))
 

@@ -8,6 +8,7 @@ its row ``s % B``; only the block size changes the draws.
 from __future__ import annotations
 
 import functools
+import itertools
 
 import jax
 import jax.numpy as jnp
@@ -49,7 +50,7 @@ def _ranges_runner(name, block_size):
     @jit
     def run(key, position, bounds):
         state = algorithm.init(position)
-        for first, last in zip(bounds[:-1], bounds[1:], strict=True):
+        for first, last in itertools.pairwise(bounds):
             state, _ = run_steps(algorithm, key, state, first, last - first)
         return state.position
 

@@ -20,7 +20,8 @@ def test_the_librarys_linear_noises_span_their_orbits():
         assert span.final and span.rank == span.orbit_dimension == dimension, system.name
 
 
-@pytest.mark.slow  # the linear-noise closure runs by default on the rigid body, heavy top, spins and Zeitlin ℓ = 1
+# The linear-noise closure runs by default on the rigid body, heavy top, spins and Zeitlin ℓ = 1.
+@pytest.mark.slow
 def test_zeitlin_degree_two_modes_generate_the_whole_orbit():
     """ℓ ≤ 2 modes and their brackets reach every direction of a generic su(N) orbit
     (dimension N² − N), the fact ``zeitlin_euler`` declares."""

@@ -170,13 +170,13 @@ def test_bad_settings_and_starts_are_refused():
 
 @pytest.mark.slow
 def test_vectorized_chains_equal_chains_run_alone():
-    """NumPyro compiles the vmapped chains with plain jax.jit (liesample.foundation.compile): each chain
-    must still give the draws of the same chain run alone, to round-off. Short runs: HMC
+    """NumPyro compiles the vmapped chains with plain jax.jit (liesample.foundation.compile): each
+    chain must still give the draws of the same chain run alone, to round-off. Short runs: HMC
     amplifies round-off (1e-16 after 10 transitions, ~1e-5 after 90, measured). Nothing is
     adapted: vectorized chains adapt together (pooled), so with adaptation they differ from
     chains run alone by design."""
-    kwargs = dict(num_warmup=10, num_samples=10, progress_bar=False)
-    fixed = dict(adapt_step_size=False, adapt_mass_matrix=False, integration_time=1.0)
+    kwargs = {"num_warmup": 10, "num_samples": 10, "progress_bar": False}
+    fixed = {"adapt_step_size": False, "adapt_mass_matrix": False, "integration_time": 1.0}
     mcmc = MCMC(GeometricHMC(rotation_and_axis_model, **fixed), num_chains=3,
                 chain_method="vectorized", **kwargs)  # fmt: skip
     mcmc.run(jax.random.key(2))

@@ -1,4 +1,5 @@
-"""Point vortices on the sphere (MATH.md §2): structure, exact laws, scenes, collisions, bad input."""
+"""Point vortices on the sphere (MATH.md §2): structure, exact laws, scenes, collisions, bad
+input."""
 
 import math
 from pathlib import Path
@@ -499,7 +500,7 @@ def test_splitting_pieces_with_one_mode_equal_the_generic_pieces():
     @liesample.jit
     def pieces(groups):
         return [
-            jax.vmap(lambda g: dynamics.group_generator(x, g, 0.05, dW))(groups)
+            jax.vmap(dynamics.group_generator, in_axes=(None, 0, None, None))(x, groups, 0.05, dW)
             for dynamics in (fast, slow)
         ]
 

@@ -118,7 +118,9 @@ EDITS = {
     "a draw": (lambda f: f["posterior/mu"].__setitem__((0, 5, 0), 7.0), "chunk 1 .*checksum"),
     "the state": (
         lambda f: [
-            f[f"liesample_run/{name}"].__setitem__(Ellipsis, f[f"liesample_run/{name}"][...] * 1.001)
+            f[f"liesample_run/{name}"].__setitem__(
+                Ellipsis, f[f"liesample_run/{name}"][...] * 1.001
+            )
             for name in f["liesample_run"]
             if name.startswith("state_") and f[f"liesample_run/{name}"].dtype.kind == "f"
         ],
@@ -151,7 +153,9 @@ def test_truncated_empty_and_foreign_files_are_refused_with_their_path(saved, tm
     text = tmp_path / "text.nc"
     text.write_text("not a run\n")
     plain = tmp_path / "plain.nc"
-    liesample.analysis.diagnostics.to_datatree(np.zeros((2, 4, 3))).to_netcdf(plain, engine="h5netcdf")
+    liesample.analysis.diagnostics.to_datatree(np.zeros((2, 4, 3))).to_netcdf(
+        plain, engine="h5netcdf"
+    )
     for path, match in (
         (truncated, "not a readable NetCDF-4|incomplete or corrupt"),
         (empty, "not a readable NetCDF-4"),
@@ -171,7 +175,9 @@ def test_a_second_writer_is_refused_at_once_naming_the_holder(tmp_path):
 
     def second_writer(draws_done):
         for resume in (True, False):
-            with pytest.raises(OutputLockedError, match=rf"{re.escape(str(path))}.*pid {os.getpid()}"):
+            with pytest.raises(
+                OutputLockedError, match=rf"{re.escape(str(path))}.*pid {os.getpid()}"
+            ):
                 run(path, 12, resume=resume)
             refused.append(resume)
 
@@ -180,7 +186,9 @@ def test_a_second_writer_is_refused_at_once_naming_the_holder(tmp_path):
     np.testing.assert_array_equal(load_chains(path).posterior["mu"], first.positions)
 
 
-def test_a_missing_directory_or_an_existing_file_is_refused_before_compiling(saved, tmp_path, monkeypatch):
+def test_a_missing_directory_or_an_existing_file_is_refused_before_compiling(
+    saved, tmp_path, monkeypatch
+):
     def no_compiling(*args):
         raise AssertionError("compiled before refusing the output")
 
@@ -203,7 +211,7 @@ def test_the_file_is_the_tree_that_sample_returns(tmp_path):
     assert isinstance(saved, xr.DataTree)
     assert set(saved.children) == set(tree.children) == {"posterior", "sample_stats"}
     stamps = {"created_at"}
-    assert {k: v for k, v in saved.attrs.items()} == dict(tree.attrs)
+    assert dict(saved.attrs) == dict(tree.attrs)
     for name in tree.children:
         mine, theirs = saved[name].to_dataset(), tree[name].to_dataset()
         xr.testing.assert_identical(mine.drop_attrs(), theirs.drop_attrs())

@@ -73,7 +73,9 @@ def test_draws_do_not_depend_on_chunking(plain, chunk_draws):
     np.testing.assert_allclose(
         result.info["casimir_error"], plain.info["casimir_error"][:, :NUM_DRAWS], rtol=0, atol=1e-15
     )
-    np.testing.assert_array_equal(result.info["is_divergent"], plain.info["is_divergent"][:, :NUM_DRAWS])
+    np.testing.assert_array_equal(
+        result.info["is_divergent"], plain.info["is_divergent"][:, :NUM_DRAWS]
+    )
 
 
 @pytest.mark.parametrize("thinning", [3, 5])

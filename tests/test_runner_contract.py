@@ -17,6 +17,7 @@ import warnings
 from collections import namedtuple
 
 import arviz_stats as azs
+import blackjax
 import cases
 import jax
 import jax.numpy as jnp
@@ -66,6 +67,22 @@ def test_check_info_names_the_missing_contract_fields():
     with pytest.raises(TypeError, match=r"lacks the Info contract's fields \['is_divergent', 'acc"):
         check_info(namedtuple("OldInfo", ["energy", "nonfinite"]))
     assert CONTRACT_FIELDS == ("is_divergent", "acceptance_rate", "energy")
+
+
+def test_energy_is_named_for_what_it_is():
+    """ArviZ's ``energy`` only for HMC's total energy (a state with a momentum, or a plain
+    BlackJAX algorithm); ``hamiltonian`` for h of a momentum-free state."""
+    from liesample.samplers.contract import as_sampler, energy_name
+
+    position = jnp.asarray(STARTS[0])
+    orbit = liesample.lie_poisson_langevin(RIGID, beta=1.0, step_size=0.05)
+    assert energy_name(orbit, position) == "hamiltonian"
+    spins = liesample.heisenberg_metropolis(systems.heisenberg((4,)), beta=1.0)
+    assert energy_name(spins, jnp.tile(position, (4, 1))) == "hamiltonian"
+    hmc = liesample.magnetic_hmc(lambda q: -0.5 * q @ q, 0.1, jnp.ones(3), 3, jnp.zeros((3, 3)))
+    assert energy_name(hmc, position) == "energy"
+    plain = blackjax.hmc(lambda q: -0.5 * q @ q, 0.1, jnp.ones(3), 3)
+    assert energy_name(as_sampler(plain), position) == "energy"
 
 
 def test_both_key_styles_give_the_same_draws():
@@ -136,7 +153,9 @@ def test_stuck_chains_are_named():
     """The chains are named and the advice is the sampler's own (a call that works for it)."""
     sampler = liesample.adjusted_lie_poisson(VMF, beta=1.0, step_size=1.0)
     starts = np.tile(MU_HAT, (3, 1))
-    with pytest.warns(RuntimeWarning, match=r"3 chain\(s\) are stuck.*chains 0, 1, 2.*smaller") as caught:
+    with pytest.warns(
+        RuntimeWarning, match=r"3 chain\(s\) are stuck.*chains 0, 1, 2.*smaller"
+    ) as caught:
         liesample.sample_chains(sampler, jax.random.key(0), starts, 20, progress_bar=False)
     assert any(sampler.stuck_advice in str(w.message) for w in caught)
 
@@ -163,9 +182,12 @@ def test_many_starts_are_checked_in_one_call_naming_the_first_bad_chain(monkeypa
     sampler = liesample.adjusted_lie_poisson(RIGID, beta=1.0, step_size=0.1)
     calls = []
     original = type(RIGID).check_position
-    monkeypatch.setattr(
-        type(RIGID), "check_position", lambda self, *a, **k: calls.append(1) or original(self, *a, **k)
-    )  # fmt: skip
+
+    def counted(self, *args, **kwargs):
+        calls.append(1)
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(type(RIGID), "check_position", counted)
     sampler.check_positions(starts)
     assert len(calls) == 0  # no per-start Python loop
     bad = starts.copy()
@@ -226,7 +248,9 @@ def test_float32_warning_rule():
 def test_vmf_as_written_raises_naming_the_bound():
     sampler = liesample.lie_poisson_langevin(VMF, beta=1.0, sigma=1.0, step_size=0.05)
     with pytest.raises(ValueError, match=r"κ = .* > 2 .*step_size must be <= 0\.00"):
-        liesample.sample(sampler, jax.random.key(0), np.tile(MU_HAT, (2, 1)), 10, progress_bar=False)
+        liesample.sample(
+            sampler, jax.random.key(0), np.tile(MU_HAT, (2, 1)), 10, progress_bar=False
+        )
 
 
 def _check_vmf(tree, bias_tolerance=0.0):

@@ -198,7 +198,7 @@ def test_tuple_positions_and_naming_errors():
     rng = np.random.default_rng(1)
     tree = to_datatree((rng.standard_normal((2, 4, 2)), rng.standard_normal((2, 4))))
     assert set(tree.posterior.data_vars) == {"x0", "x1"}
-    with pytest.raises(ValueError, match="both named 'a.b'"):
+    with pytest.raises(ValueError, match=r"both named 'a\.b'"):
         to_datatree({"a.b": np.zeros((1, 4)), "a": {"b": np.zeros((1, 4))}})
     with pytest.raises(ValueError, match="var_name names a single array"):
         to_datatree({"a": np.zeros((1, 4))}, var_name="a")

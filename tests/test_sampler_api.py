@@ -216,7 +216,8 @@ def test_every_integrator_by_name(integrator):
 
 
 def unstable():
-    """Ambient Euler–Heun at dt = 50 with θ = 500: |μ| grows ~cubically and overflows in ~3 steps."""
+    """Ambient Euler–Heun at dt = 50 with θ = 500: |μ| grows ~cubically and overflows in ~3
+    steps."""
     return lie_poisson_langevin(
         SYSTEM, beta=1e3, sigma=1.0, step_size=50.0, integrator="euler_heun"
     )
@@ -238,7 +239,9 @@ def test_nonfinite_step_is_flagged_and_rejected():
 def test_runner_warns_on_nonfinite():
     positions = np.stack([MU0, 2.0 * MU0])
     with pytest.warns(RuntimeWarning, match="non-finite"):
-        result = sample_chains(unstable(), KEY, positions, 10, progress_bar=False, on_nonfinite="warn")
+        result = sample_chains(
+            unstable(), KEY, positions, 10, progress_bar=False, on_nonfinite="warn"
+        )
     assert result.info["is_divergent"].any()
     assert np.all(np.isfinite(result.positions))
 

@@ -118,7 +118,8 @@ def test_splitting_bias_is_second_order():
 
     Observable f = μ₃² − μ₁² (its bias is the largest). With b₁ = bias(0.1), b₂ = bias(0.05) and
     s the combined SE: b₂ is consistent with b₁/4 (|b₂ − b₁/4| < 3s) and inconsistent with
-    b₁/2 (|b₂ − b₁/2| > 3s); the run length makes s ≈ b₁/25 so the test has power (about 12 minutes on 2 cores).
+    b₁/2 (|b₂ − b₁/2| > 3s); the run length makes s ≈ b₁/25 so the test has power (about 12
+    minutes on 2 cores).
     """
     moments = exact_second_moments(3.0)
     exact = moments[2] - moments[0]
@@ -159,7 +160,9 @@ def test_isotropic_autocorrelation_matches_exact():
 
     num_chains = 20000
     keys = jax.random.split(jax.random.key(11), num_chains)
-    products = np.asarray(liesample.jit(jax.vmap(chain))(keys, jnp.asarray(start_points(num_chains))))
+    products = np.asarray(
+        liesample.jit(jax.vmap(chain))(keys, jnp.asarray(start_points(num_chains)))
+    )
     estimate = products.mean(0)
     se = products.std(0, ddof=1) / np.sqrt(num_chains)
     exact = np.asarray(isotropic_autocorrelation(lags * dt, RADIUS, sigma))

@@ -7,8 +7,8 @@ so the comparison runs in a subprocess. Each chain executes the same operations 
 XLA may compile a batch of 2 chains per device and a batch of 4 differently, so positions are
 compared to 1e-13 (a miscompile, as once caught by
 ``tests/stability/test_stability.py::test_batched_step_equals_one_chain``, would differ by far
-more). The non-finite flags are equal; the per-draw diagnostics (``energy``, ``casimir_error``) agree
-to round-off (energies to 1e-13, ~1e-16 absolute on a Casimir drift
+more). The non-finite flags are equal; the per-draw diagnostics (``energy``, ``casimir_error``)
+agree to round-off (energies to 1e-13, ~1e-16 absolute on a Casimir drift
 that is itself round-off), as across chunk sizes in ``tests/test_runner.py``.
 """
 

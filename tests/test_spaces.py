@@ -1,5 +1,5 @@
-"""Spaces (liesample.geometry.spaces): validation, Haar draws, exact flows, trivialised gradients; and
-the exact references of liesample.targets.groups against independent quadrature."""
+"""Spaces (liesample.geometry.spaces): validation, Haar draws, exact flows, trivialised gradients;
+and the exact references of liesample.targets.groups against independent quadrature."""
 
 import jax
 import jax.numpy as jnp
@@ -227,11 +227,13 @@ def test_sampler_init_refuses_bad_starts():
 
 
 def test_vmf_mean_resultant_length_matches_quadrature():
+    def weight(t, d, kappa):  # the law of t = x·μ on S^{d-1}, unnormalised
+        return (1 - t * t) ** ((d - 3) / 2) * np.exp(kappa * (t - 1))
+
     for d, kappa in [(3, 4.0), (6, 10.0), (3, 0.3)]:
-        w = lambda t: (1 - t * t) ** ((d - 3) / 2) * np.exp(kappa * (t - 1))
-        opts = dict(epsabs=0.0, epsrel=1e-13)
-        num = integrate.quad(lambda t: t * w(t), -1, 1, **opts)[0]
-        num /= integrate.quad(w, -1, 1, **opts)[0]
+        opts = {"args": (d, kappa), "epsabs": 0.0, "epsrel": 1e-13}
+        num = integrate.quad(lambda t, *args: t * weight(t, *args), -1, 1, **opts)[0]
+        num /= integrate.quad(weight, -1, 1, **opts)[0]
         assert vmf_mean_resultant_length(kappa, d) == pytest.approx(num, rel=1e-10)
     assert vmf_mean_resultant_length(4.0, 3) == pytest.approx(1 / np.tanh(4.0) - 0.25)
 

@@ -203,7 +203,7 @@ def test_precession_keeps_the_energy_to_round_off():
         assert np.max(np.abs(np.asarray(final.position) - np.asarray(starts))) > 0.5
         np.testing.assert_array_equal(np.asarray(infos.acceptance_rate), 1.0)
     reflect = liesample.heisenberg_heat_bath(system, beta=1.0, heat_bath_sweeps=0)
-    state, info = reflect.step(jax.random.key(0), reflect.init(starts[0]))
+    _, info = reflect.step(jax.random.key(0), reflect.init(starts[0]))
     assert float(info.energy) == pytest.approx(float(energies[0]), abs=1e-12)
 
 

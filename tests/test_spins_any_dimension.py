@@ -190,7 +190,7 @@ def test_cluster_moves_refuse_what_reflections_do_not_sample():
         for make in (liesample.heisenberg_cluster, liesample.heisenberg_wolff):
             with pytest.raises(ValueError, match=f"{name}.*heisenberg_heat_bath"):
                 make(system, beta=0.5)
-    with pytest.raises(ValueError, match="beta.*heisenberg_heat_bath"):
+    with pytest.raises(ValueError, match=r"beta.*heisenberg_heat_bath"):
         liesample.heisenberg_cluster(heisenberg((4,)), beta=-1.0)
     with pytest.raises(ValueError, match="clusters"):
         liesample.heisenberg_cluster(heisenberg((4,)), beta=1.0, clusters="some")

@@ -146,7 +146,9 @@ def test_midpoint_strong_order(noise_momentum, order):
     1/2 without (``{H_1, H_2} ≠ 0`` and no Lévy areas). The fitted slope over ``Δt = 1/8 … 1/64``
     (128 paths, fixed key) is within ±0.15 of the order; the two cases differ by 0.5, so the
     bounds separate them."""
-    rms, slope = strong_errors(liesample.systems.stochastic_pendulum(1.0, noise_momentum), "midpoint")
+    rms, slope = strong_errors(
+        liesample.systems.stochastic_pendulum(1.0, noise_momentum), "midpoint"
+    )
     assert abs(slope - order) < 0.15, (rms, slope)
     assert rms[-1] < 0.05
 

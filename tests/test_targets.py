@@ -108,7 +108,9 @@ def test_project_notes_rigid_body_moments():
 def test_jit_and_vmap_agree():
     lams = jnp.array([LAMS[0], LAMS[2], LAMS[5]])
     direct = np.array([bingham_second_moments(lam) for lam in lams])
-    np.testing.assert_allclose(liesample.jit(jax.vmap(bingham_second_moments))(lams), direct, rtol=1e-13)
+    np.testing.assert_allclose(
+        liesample.jit(jax.vmap(bingham_second_moments))(lams), direct, rtol=1e-13
+    )
 
 
 @pytest.mark.parametrize("lam", [LAMS[0], LAMS[2], LAMS[3], LAMS[5], LAMS[8]])

@@ -367,7 +367,8 @@ def _check_dipole_law(size, beta, enstrophy, step_size, num_chains, num_steps, b
         assert abs(other - exact[0]) > 2 * 4.5 * mcse[0]
 
 
-@pytest.mark.slow  # the N = 3 orbit law runs by default (test_zeitlin); the exact laws themselves are tested here
+# The N = 3 orbit law runs by default (test_zeitlin); the exact laws themselves are tested here.
+@pytest.mark.slow
 def test_adjusted_sampler_matches_the_exact_dipole_law_n8():
     _check_dipole_law(8, beta=-6.0, enstrophy=12.0, step_size=1.0, num_chains=16,
                       num_steps=1000, burn_in=200)

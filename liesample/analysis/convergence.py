@@ -15,7 +15,10 @@ round-off.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
+
 import numpy as np
+import numpy.typing as npt
 import scipy.fft
 from scipy.special import ndtri
 
@@ -105,7 +108,7 @@ def _ess(x):
     return np.where(constant, float(size), ess)
 
 
-def rank_diagnostics(x):
+def rank_diagnostics(x: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(r_hat, ess_bulk, ess_tail)`` of every element of ``x (elements, chains, draws)``:
     ArviZ's rank-normalised split R-hat (NaN with one chain), bulk ESS and tail ESS (the smaller
     of the 5 % and 95 % quantiles' ESS), each an array ``(elements,)``. Needs 4 draws."""
@@ -203,7 +206,9 @@ def _rows(variables, groups):
     return rows, not_finite
 
 
-def convergence_warnings(variables, groups=None) -> list[str]:
+def convergence_warnings(
+    variables: Mapping[str, npt.ArrayLike], groups: npt.ArrayLike | Sequence | None = None
+) -> list[str]:
     """Messages on the convergence of every element of every variable (empty: nothing found).
 
     Parameters

@@ -13,13 +13,15 @@ from __future__ import annotations
 import dataclasses
 import math
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, NamedTuple
 
 import jax
 import numpy as np
+import numpy.typing as npt
 import scipy.fft
 
+from liesample.foundation.types import PyTree
 from liesample.foundation.validation import is_single_array
 from liesample.samplers.contract import SAMPLE_STATS_NAMES
 
@@ -104,7 +106,12 @@ def _chain_draw_array(x, name: str, *, min_draws: int = 1, ndims: Sequence[int] 
 
 
 def _netcdf_attr(value):
-    """Convert ``value`` to something NetCDF can store as an attribute, or ``None`` to drop it."""
+    """Convert ``value`` to something NetCDF can store as an attribute, or ``None`` to drop it.
+
+    NetCDF has no boolean attribute (xarray refuses to write one): a boolean (``adapted``,
+    say) is stored as the integer ``1`` or ``0``, which keeps its truth value when read back
+    (the strings ``"true"``/``"false"`` would not: ``"false"`` is truthy), as are the entries
+    of a boolean array. Arrays become lists, other objects their ``str``."""
     if value is None:
         return None
     if isinstance(value, (bool, np.bool_)):
@@ -142,7 +149,7 @@ def _leaf_name(path) -> str:
     return ".".join(parts)
 
 
-def pytree_variables(positions) -> dict[str, tuple[np.ndarray, str]]:
+def pytree_variables(positions: PyTree) -> dict[str, tuple[np.ndarray, str]]:
     """``{variable name: (real array, leaf name)}`` for the leaves of a pytree of draws.
 
     Each leaf ``(chains, draws, *event)`` is named from its key path (:func:`_leaf_name`); a
@@ -186,8 +193,8 @@ DEFAULT_EVENT_DIMS = {0: (), 1: ("component",), 2: ("row", "col")}
 
 
 def to_datatree(
-    positions,
-    info=None,
+    positions: PyTree | None,
+    info: Mapping | tuple | object | None = None,
     *,
     var_name: str | None = None,
     event_dims: Sequence[str] | Mapping[str, Sequence[str]] | None = None,
@@ -195,29 +202,30 @@ def to_datatree(
     step_size: float | None = None,
     thinning: int = 1,
     attrs: Mapping | None = None,
-    observables=None,
+    observables: PyTree | None = None,
+    energy_name: str = "energy",
 ) -> xr.DataTree:
     """Package sampler output as an ArviZ ``DataTree``.
 
     Parameters
     ----------
     positions : array_like ``(chains, draws, *event_shape)``, a pytree of such arrays, or None
-        Sampled states (``None``: only ``observables`` were kept). A pytree (dict, tuple, named tuple: the positions of the geometric
-        samplers on product spaces) gives one posterior variable per leaf, named from its key
-        path: dict keys and named-tuple fields as given (``mu``, ``log_kappa``), tuple entries
-        ``x0``, ``x1``…, nested keys joined with ``.`` (``{"a": {"b": …}}`` -> ``a.b``). Its
-        event dims are ``<name>_dim_0``, ``<name>_dim_1``…. A complex leaf ``U`` (``SU(n)``
-        matrices) is stored as the two real variables ``U.real`` and ``U.imag``, sharing the
-        dims of ``U``. ESS, R-hat and MCSE computed from the tree are those of these ambient
-        coordinates (vector components, matrix entries), not of intrinsic coordinates on the
-        group or sphere. A list is read as one array.
+        Sampled states (``None``: only ``observables`` were kept). A pytree (dict, tuple, named
+        tuple: the positions of the geometric samplers on product spaces) gives one posterior
+        variable per leaf, named from its key path: dict keys and named-tuple fields as given
+        (``mu``, ``log_kappa``), tuple entries ``x0``, ``x1``…, nested keys joined with ``.``
+        (``{"a": {"b": …}}`` -> ``a.b``). Its event dims are ``<name>_dim_0``, ``<name>_dim_1``…. A
+        complex leaf ``U`` (``SU(n)`` matrices) is stored as the two real variables ``U.real`` and
+        ``U.imag``, sharing the dims of ``U``. ESS, R-hat and MCSE computed from the tree are those
+        of these ambient coordinates (vector components, matrix entries), not of intrinsic
+        coordinates on the group or sphere. A list is read as one array.
     info : mapping, NamedTuple or dataclass, optional
         Per-draw arrays shaped ``(chains, draws)`` (the Info contract of
         :mod:`liesample.samplers.contract`). Recognised keys are renamed to ArviZ's
         ``sample_stats`` names: ``is_divergent`` -> ``diverging`` (stored as bool; a legacy
-        ``nonfinite`` too), ``acceptance_rate``, ``energy`` and ``casimir_error`` unchanged.
-        Other keys are stored under their own names. ``None`` gives a tree without
-        ``sample_stats``.
+        ``nonfinite`` too), ``energy`` -> ``energy_name``, ``acceptance_rate`` and
+        ``casimir_error`` unchanged. Other keys are stored under their own names. ``None``
+        gives a tree without ``sample_stats``.
     var_name : str, default "mu"
         Name of the sampled variable in the ``posterior`` group (single-array positions, split
         into ``<var_name>.real`` and ``<var_name>.imag`` when complex; a pytree's variables are
@@ -236,13 +244,19 @@ def to_datatree(
         Thinning factor between stored draws, stored as an attribute.
     attrs : mapping, optional
         Extra run metadata (sampler name, seed, ...). Stored on the root and on both groups;
-        ``None`` values are dropped and other values are converted to NetCDF-safe types.
+        ``None`` values are dropped and the others made NetCDF-safe, so that
+        ``tree.to_netcdf(path)`` writes them: a boolean is stored as ``1`` or ``0``
+        (:func:`_netcdf_attr`).
     observables : array_like ``(chains, draws, *shape)`` or a pytree of such arrays, optional
         Functions of the state recorded at each draw (``observables=`` of
         :func:`liesample.sample`): extra ``posterior`` variables, so that ArviZ's summary, ESS
         and R-hat act on them. A dict's keys (key paths, as for pytree positions) name them, a
         single array is named ``observable``; dims ``<name>_dim_k`` unless ``event_dims`` (a
         mapping) names them. Their names must differ from the positions'.
+    energy_name : str, default "energy"
+        The ``sample_stats`` name of ``info["energy"]``: ``"energy"`` (ArviZ's, which its
+        ``bfmi`` and ``plot_energy`` read as HMC's total energy) or ``"hamiltonian"`` (``h``
+        of a state without a momentum; :func:`liesample.samplers.contract.energy_name`).
 
     Returns
     -------
@@ -252,75 +266,118 @@ def to_datatree(
     if positions is None and observables is None:
         raise ValueError("to_datatree needs positions, observables or both; got neither")
     single = positions is not None and is_single_array(positions)
-    if positions is None:
-        if var_name is not None:
-            raise ValueError("var_name names the positions, and there are none (positions=None)")
-        variables, leaf_dims = {}, {}
-    elif single:
-        var_name = "mu" if var_name is None else var_name
-        if not isinstance(var_name, str) or not var_name:
-            raise ValueError(f"var_name must be a non-empty string, got {var_name!r}")
-        if isinstance(event_dims, Mapping):
-            raise TypeError("event_dims must be a sequence of dim names for array positions")
-        pos = np.asarray(positions)
-        if pos.ndim < 2:
-            raise ValueError(
-                f"positions must have shape (chains, draws, *event_shape), got shape {pos.shape}"
-            )
-        if event_dims is None:
-            event_dims = DEFAULT_EVENT_DIMS.get(
-                pos.ndim - 2, tuple(f"dim_{k}" for k in range(pos.ndim - 2))
-            )
-        if np.iscomplexobj(pos):  # as for a pytree's complex leaf: two real variables
-            variables = {f"{var_name}.real": (pos.real, var_name)}
-            variables[f"{var_name}.imag"] = (pos.imag, var_name)
-        else:
-            variables = {var_name: (pos, var_name)}
-        leaf_dims = {var_name: tuple(event_dims)}
-    else:
-        if var_name is not None:
-            raise ValueError(
-                "var_name names a single array of positions; the variables of pytree positions "
-                "are named from their key paths"
-            )
-        variables = pytree_variables(positions)
-    if observables is not None:
-        observed = {"observable": observables} if is_single_array(observables) else observables
-        try:
-            observed = pytree_variables(observed)
-        except ValueError as error:
-            raise ValueError(str(error).replace("positions", "observables")) from None
-        clash = sorted(set(observed) & set(variables))
-        if clash:
-            raise ValueError(
-                f"observables {clash} have the names of position variables: rename them"
-            )
-    else:
-        observed = {}
-    if not single:
-        given = {} if event_dims is None else event_dims
-        if not isinstance(given, Mapping):
-            raise TypeError(
-                "event_dims for pytree positions must be a mapping {leaf name: dims}, got "
-                f"{event_dims!r}"
-            )
-        leaf_names = {leaf for _, leaf in [*variables.values(), *observed.values()]}
-        unknown = sorted(set(given) - leaf_names)
-        if unknown:
-            raise ValueError(f"event_dims names no leaf of positions: {unknown}")
-        leaf_dims = {leaf: tuple(dims) for leaf, dims in given.items()}
-    for value, leaf in [*variables.values(), *observed.values()]:
+    variables, leaf_dims = _posterior_variables(positions, var_name, event_dims, observables)
+    if isinstance(thinning, bool) or int(thinning) != thinning or thinning < 1:
+        raise ValueError(f"thinning must be a positive integer, got {thinning!r}")
+    dims, all_coords = _dims_and_coords(variables, leaf_dims, single, coords)
+    sample_shape = next(iter(variables.values()))[0].shape[:2]
+    sample_stats = _sample_stats(info, sample_shape, energy_name)
+    run_attrs = _tree_attrs({"thinning": int(thinning), "step_size": step_size, **(attrs or {})})
+    data = {"posterior": {name: value for name, (value, _) in variables.items()}}
+    group_attrs = {"/": run_attrs, "posterior": run_attrs}
+    if sample_stats:
+        data["sample_stats"] = sample_stats
+        group_attrs["sample_stats"] = run_attrs
+    from arviz_base import from_dict
+
+    return from_dict(data, dims=dims, coords=all_coords, attrs=group_attrs)
+
+
+def _tree_attrs(attrs: Mapping) -> dict:
+    """``attrs`` as NetCDF-safe attributes (:func:`_netcdf_attr`), ``None`` values dropped."""
+    converted = {str(k): _netcdf_attr(v) for k, v in attrs.items()}
+    return {k: v for k, v in converted.items() if v is not None}
+
+
+def _posterior_variables(positions, var_name, event_dims, observables):
+    """``({variable: (array, leaf name)}, {leaf name: event dims})`` of the positions and the
+    observables, which must have the same ``(chains, draws)`` sizes."""
+    variables, leaf_dims = _position_variables(positions, var_name, event_dims)
+    observed = _observed_variables(observables, variables)
+    if positions is None or not is_single_array(positions):
+        leaf_dims = _pytree_leaf_dims(event_dims, [*variables.values(), *observed.values()])
+    variables = {**variables, **observed}
+    for value, leaf in variables.values():
         leaf_dims.setdefault(leaf, tuple(f"{leaf}_dim_{k}" for k in range(value.ndim - 2)))
-    shapes = {value.shape[:2] for value, _ in [*variables.values(), *observed.values()]}
+    shapes = {value.shape[:2] for value, _ in variables.values()}
     if len(shapes) > 1:
         raise ValueError(
             "positions and observables must have the same (chains, draws) sizes, got "
             f"{sorted(shapes)}"
         )
-    variables = {**variables, **observed}
-    if isinstance(thinning, bool) or int(thinning) != thinning or thinning < 1:
-        raise ValueError(f"thinning must be a positive integer, got {thinning!r}")
+    return variables, leaf_dims
 
+
+def _position_variables(positions, var_name, event_dims):
+    """``({variable: (array, leaf name)}, {leaf name: event dims})`` of the positions (the
+    second is empty for a pytree, whose dims :func:`_pytree_leaf_dims` reads)."""
+    if positions is None:
+        if var_name is not None:
+            raise ValueError("var_name names the positions, and there are none (positions=None)")
+        return {}, {}
+    if not is_single_array(positions):
+        if var_name is not None:
+            raise ValueError(
+                "var_name names a single array of positions; the variables of pytree positions "
+                "are named from their key paths"
+            )
+        return pytree_variables(positions), {}
+    var_name = "mu" if var_name is None else var_name
+    if not isinstance(var_name, str) or not var_name:
+        raise ValueError(f"var_name must be a non-empty string, got {var_name!r}")
+    if isinstance(event_dims, Mapping):
+        raise TypeError("event_dims must be a sequence of dim names for array positions")
+    pos = np.asarray(positions)
+    if pos.ndim < 2:
+        raise ValueError(
+            f"positions must have shape (chains, draws, *event_shape), got shape {pos.shape}"
+        )
+    if event_dims is None:
+        event_dims = DEFAULT_EVENT_DIMS.get(
+            pos.ndim - 2, tuple(f"dim_{k}" for k in range(pos.ndim - 2))
+        )
+    if np.iscomplexobj(pos):  # as for a pytree's complex leaf: two real variables
+        variables = {f"{var_name}.real": (pos.real, var_name)}
+        variables[f"{var_name}.imag"] = (pos.imag, var_name)
+    else:
+        variables = {var_name: (pos, var_name)}
+    return variables, {var_name: tuple(event_dims)}
+
+
+def _observed_variables(observables, variables) -> dict[str, tuple[np.ndarray, str]]:
+    """The observables' variables (as :func:`pytree_variables`), whose names must differ from
+    the positions' ``variables``."""
+    if observables is None:
+        return {}
+    observed = {"observable": observables} if is_single_array(observables) else observables
+    try:
+        observed = pytree_variables(observed)
+    except ValueError as error:
+        raise ValueError(str(error).replace("positions", "observables")) from None
+    clash = sorted(set(observed) & set(variables))
+    if clash:
+        raise ValueError(f"observables {clash} have the names of position variables: rename them")
+    return observed
+
+
+def _pytree_leaf_dims(event_dims, variables) -> dict[str, tuple[str, ...]]:
+    """The event dims that ``event_dims`` (a mapping, or ``None``) gives the leaves of pytree
+    positions and observables, whose ``(value, leaf name)`` pairs are ``variables``."""
+    given = {} if event_dims is None else event_dims
+    if not isinstance(given, Mapping):
+        raise TypeError(
+            "event_dims for pytree positions must be a mapping {leaf name: dims}, got "
+            f"{event_dims!r}"
+        )
+    unknown = sorted(set(given) - {leaf for _, leaf in variables})
+    if unknown:
+        raise ValueError(f"event_dims names no leaf of positions: {unknown}")
+    return {leaf: tuple(dims) for leaf, dims in given.items()}
+
+
+def _dims_and_coords(variables, leaf_dims, single, coords):
+    """``({variable: its event dims}, {dim: coordinate values})``: ``coords`` where given, else
+    ``x, y, z`` for a single axis of length 3, else ``0, 1, …``; checked against the sizes."""
     all_coords: dict[str, Sequence] = {}
     dims: dict[str, list[str]] = {}
     for name, (value, leaf) in variables.items():
@@ -340,44 +397,38 @@ def to_datatree(
                 all_coords.setdefault(dim, list(range(size)))
     if coords is not None:
         all_coords.update(coords)
-    for name, (value, leaf) in variables.items():
+    for name, (value, _) in variables.items():
         for dim, size in zip(dims[name], value.shape[2:], strict=True):
             if len(all_coords[dim]) != size:
                 raise ValueError(
                     f"coords[{dim!r}] has {len(all_coords[dim])} values but positions "
                     f"{name!r} has {size} along that axis"
                 )
-    n_chains, n_draws = next(iter(variables.values()))[0].shape[:2]
+    return dims, all_coords
 
+
+def _sample_stats(info, sample_shape, energy_name: str) -> dict[str, np.ndarray]:
+    """``info``'s arrays under their ``sample_stats`` names (the divergence flag as bool,
+    ``energy`` as ``energy_name``), each checked to have the ``(chains, draws)`` sizes
+    ``sample_shape``."""
+    if not isinstance(energy_name, str) or not energy_name:
+        raise ValueError(
+            f"energy_name must be a non-empty string (\"energy\" or \"hamiltonian\"), got "
+            f"{energy_name!r}"
+        )
+    names = {**_SAMPLE_STATS_NAMES, "energy": energy_name}
     sample_stats: dict[str, np.ndarray] = {}
     for key, value in _info_dict(info).items():
-        if value.shape[:2] != (n_chains, n_draws):
+        if value.shape[:2] != sample_shape:
             raise ValueError(
                 f"info[{key!r}] must have leading shape (chains, draws) = "
-                f"{(n_chains, n_draws)} like positions, got shape {value.shape}"
+                f"{sample_shape} like positions, got shape {value.shape}"
             )
-        name = _SAMPLE_STATS_NAMES.get(key, key)
+        name = names.get(key, key)
         if name == "diverging":
             value = value.astype(bool)
         sample_stats[name] = value
-
-    run_attrs = {"thinning": int(thinning), "step_size": step_size, **dict(attrs or {})}
-    run_attrs = {str(k): _netcdf_attr(v) for k, v in run_attrs.items()}
-    run_attrs = {k: v for k, v in run_attrs.items() if v is not None}
-
-    data = {"posterior": {name: value for name, (value, _) in variables.items()}}
-    group_attrs = {"/": run_attrs, "posterior": run_attrs}
-    if sample_stats:
-        data["sample_stats"] = sample_stats
-        group_attrs["sample_stats"] = run_attrs
-    from arviz_base import from_dict
-
-    return from_dict(
-        data,
-        dims=dims,
-        coords=all_coords,
-        attrs=group_attrs,
-    )
+    return sample_stats
 
 
 # --------------------------------------------------------------------------- tables
@@ -513,7 +564,7 @@ def format_table(df: pd.DataFrame) -> str:
 # --------------------------------------------------------------------------- time correlations
 
 
-def autocovariance(x, max_lag: int, *, center: bool = True) -> np.ndarray:
+def autocovariance(x: npt.ArrayLike, max_lag: int, *, center: bool = True) -> np.ndarray:
     """Autocovariance over lags ``0..max_lag``, averaged over chains and time, via FFT.
 
     ``c[k] = sum over chains and t of (x_t - m) . (x_{t+k} - m) / (chains * (draws - k))``,
@@ -555,7 +606,7 @@ def autocovariance(x, max_lag: int, *, center: bool = True) -> np.ndarray:
 # --------------------------------------------------------------------------- health checks
 
 
-def casimir_drift(info) -> dict[str, float]:
+def casimir_drift(info: Mapping | tuple | object) -> dict[str, float]:
     """Summarise the relative Casimir error recorded by the sampler.
 
     Parameters
@@ -577,7 +628,7 @@ def casimir_drift(info) -> dict[str, float]:
     return {"max": float(np.max(err)), "final": float(np.max(err[:, -1]))}
 
 
-def count_nonfinite(info) -> int:
+def count_nonfinite(info: Mapping | tuple | object) -> int:
     """Number of draws, over all chains, flagged divergent (non-finite state or energy).
 
     Parameters
@@ -651,7 +702,7 @@ def _blocking_levels(x):
     return levels
 
 
-def blocking_error(x, *, warn: bool = True) -> BlockingResult:
+def blocking_error(x: npt.ArrayLike, *, warn: bool = True) -> BlockingResult:
     """Standard error of the mean of correlated draws by blocking (Flyvbjerg and Petersen 1989),
     with the level chosen automatically (Jonsson 2018).
 
@@ -669,8 +720,9 @@ def blocking_error(x, *, warn: bool = True) -> BlockingResult:
       Booth and Alavi 2011): ``b^3 > 2 · draws · tau_k^2``, ``draws`` over all chains and
       ``tau_k = (error_k / error_0)^2``.
 
-    Chains are combined at that common level: ``Var(mean) = sum_c s_{c,k}^2 / (n_k - 1) / chains^2`` (the grand mean
-    averages the chains' means; a chain that sits apart from the others is not seen here:
+    Chains are combined at that common level:
+    ``Var(mean) = sum_c s_{c,k}^2 / (n_k - 1) / chains^2`` (the grand mean averages the chains'
+    means; a chain that sits apart from the others is not seen here:
     use R-hat for that).
 
     Parameters
@@ -785,7 +837,9 @@ def _leave_one_out(function, block_means):
     return full, error, (num - 1) * (mean_left_out - full)
 
 
-def jackknife(function, *series, block_size: int | None = None) -> JackknifeResult:
+def jackknife(
+    function: Callable[..., float], *series: npt.ArrayLike, block_size: int | None = None
+) -> JackknifeResult:
     """Jackknife estimate and error of ``function(mean of series[0], mean of series[1], …)``.
 
     For variance-type quantities, which are functions of several means (the specific heat
@@ -907,7 +961,9 @@ def _positive(name, value):
     return value
 
 
-def specific_heat(energy, beta, num_sites, *, block_size=None) -> JackknifeResult:
+def specific_heat(
+    energy: npt.ArrayLike, beta: float, num_sites: int, *, block_size: int | None = None
+) -> JackknifeResult:
     """Specific heat per site ``C = β² (⟨E²⟩ − ⟨E⟩²) / N`` with its jackknife error.
 
     Parameters
@@ -938,7 +994,12 @@ def specific_heat(energy, beta, num_sites, *, block_size=None) -> JackknifeResul
 
 
 def susceptibility(
-    magnetisation, beta, num_sites, *, connected: bool = True, block_size=None
+    magnetisation: npt.ArrayLike,
+    beta: float,
+    num_sites: int,
+    *,
+    connected: bool = True,
+    block_size: int | None = None,
 ) -> JackknifeResult:
     """Magnetic susceptibility per site with its jackknife error.
 
@@ -970,7 +1031,9 @@ def susceptibility(
     return jackknife(lambda m2: beta * num_sites * m2, norm**2, block_size=block_size)
 
 
-def binder_cumulant(magnetisation, *, block_size=None) -> JackknifeResult:
+def binder_cumulant(
+    magnetisation: npt.ArrayLike, *, block_size: int | None = None
+) -> JackknifeResult:
     """Binder cumulant ``U = 1 − ⟨m⁴⟩ / (3 ⟨m²⟩²)`` with its jackknife error.
 
     ``m² = |m|²`` for a vector magnetisation. With this (Ising) normalisation ``U → 2/3`` in

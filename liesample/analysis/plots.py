@@ -8,11 +8,13 @@ backend (no pyplot state, no display needed), writes a PNG and returns its path.
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 
 if TYPE_CHECKING:  # matplotlib is imported only when a figure is drawn
     from matplotlib.figure import Figure
@@ -102,7 +104,14 @@ def _save(fig: Figure, path) -> Path:
     return path
 
 
-def plot_traces(positions, path, *, names=("μ₁", "μ₂", "μ₃"), max_draws: int = 2000, title=None):
+def plot_traces(
+    positions: npt.ArrayLike,
+    path: str | os.PathLike,
+    *,
+    names: Sequence[str] | None = ("μ₁", "μ₂", "μ₃"),
+    max_draws: int = 2000,
+    title: str | None = None,
+) -> Path:
     """Trace plot: one panel per component, one line per chain.
 
     Parameters
@@ -149,14 +158,14 @@ def plot_traces(positions, path, *, names=("μ₁", "μ₂", "μ₃"), max_draws
 
 
 def plot_autocorrelation(
-    lag_times,
-    empirical,
-    path,
+    lag_times: npt.ArrayLike,
+    empirical: npt.ArrayLike | tuple[npt.ArrayLike, npt.ArrayLike],
+    path: str | os.PathLike,
     *,
-    exact=None,
+    exact: npt.ArrayLike | None = None,
     ylabel: str = "E[μ(t)·μ(0)]",
     title: str | None = None,
-):
+) -> Path:
     """Empirical time correlation against lag, with the exact curve if known.
 
     Parameters
@@ -220,14 +229,14 @@ def plot_autocorrelation(
 
 
 def plot_marginals(
-    samples,
-    path,
+    samples: npt.ArrayLike,
+    path: str | os.PathLike,
     *,
     exact_densities: Sequence[Callable | None] | None = None,
-    names=("μ₁", "μ₂", "μ₃"),
+    names: Sequence[str] | None = ("μ₁", "μ₂", "μ₃"),
     bins: int = 60,
     title: str | None = None,
-):
+) -> Path:
     """Histogram of each component's marginal, with exact densities overlaid.
 
     Parameters
@@ -300,13 +309,13 @@ def _sphere_grid(n_points: int, bins) -> tuple[int, int]:
 
 
 def plot_sphere_density(
-    unit_vectors,
-    path,
+    unit_vectors: npt.ArrayLike,
+    path: str | os.PathLike,
     *,
     logdensity_fn: Callable | None = None,
     title: str | None = None,
-    bins=None,
-):
+    bins: int | tuple[int, int] | None = None,
+) -> Path:
     """Density of points on the sphere in an equal-area (Lambert cylindrical) projection.
 
     Points are mapped to longitude φ = atan2(y, x) and z = cos θ; equal rectangles in (φ, z)
@@ -385,13 +394,13 @@ def plot_sphere_density(
 
 def plot_accuracy_cost(
     rows: Sequence[Mapping],
-    path,
+    path: str | os.PathLike,
     *,
     x: str = "seconds",
     y: str = "abs_bias",
     label: str = "integrator",
     title: str | None = None,
-):
+) -> Path:
     """Log–log error against cost, one line per ``label`` value.
 
     Parameters
@@ -472,15 +481,15 @@ def _spectrum_rows(values, name, size=None):
 
 
 def plot_spectra(
-    spectra,
-    path,
+    spectra: npt.ArrayLike,
+    path: str | os.PathLike,
     *,
     kind: str = "energy",
     labels: Sequence[str] | None = None,
-    errors=None,
-    exact=None,
+    errors: npt.ArrayLike | None = None,
+    exact: npt.ArrayLike | None = None,
     title: str | None = None,
-):
+) -> Path:
     """Spectra per degree ``ℓ = 1, 2, …`` on log–log axes, one line per row.
 
     Parameters
@@ -542,8 +551,14 @@ def plot_spectra(
 
 
 def plot_vorticity(
-    values, theta, phi, path, *, labels: Sequence[str] | None = None, title: str | None = None
-):
+    values: npt.ArrayLike,
+    theta: npt.ArrayLike,
+    phi: npt.ArrayLike,
+    path: str | os.PathLike,
+    *,
+    labels: Sequence[str] | None = None,
+    title: str | None = None,
+) -> Path:
     """Vorticity maps ``ω(θ, φ)`` (latitude–longitude), one panel per field, one colour scale
     symmetric about 0.
 

@@ -15,6 +15,8 @@ Every loop the library compiles goes through :func:`jit`. A user who writes thei
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
+from typing import Any
 
 import jax
 
@@ -62,7 +64,7 @@ def _inside_staged_computation() -> bool:
         return not core.trace_state_clean()
 
 
-def jit(fun=None, /, **jit_kwargs):
+def jit(fun: Callable | None = None, /, **jit_kwargs: Any) -> Callable:
     """``jax.jit`` with :func:`safe_compiler_options`; usable as ``@jit`` or ``@jit(...)``.
 
     Takes every keyword of ``jax.jit`` (``static_argnums``, ``donate_argnums``, …). Called at top

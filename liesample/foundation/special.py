@@ -29,6 +29,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import gammaln, i0e, i1e
+from jax.typing import ArrayLike
 
 from liesample.foundation.validation import finite_float
 
@@ -124,7 +125,7 @@ def _log_half_power(order, kappa):
     return jnp.where(zero, 0.0, order * jnp.log(0.5 * safe) - gammaln(order + 1.0))
 
 
-def log_bessel_iv_reduced(order, kappa):
+def log_bessel_iv_reduced(order: ArrayLike, kappa: ArrayLike) -> jax.Array:
     """``log[Γ(ν+1) (κ/2)^{−ν} I_ν(κ)]``: smooth and even in ``κ``, ``0`` at ``κ = 0``.
 
     Parameters
@@ -149,7 +150,7 @@ def _reduced(order, kappa):
     return jnp.where(small, _log_series(order, k_small), large)
 
 
-def log_bessel_ive(order, kappa):
+def log_bessel_ive(order: ArrayLike, kappa: ArrayLike) -> jax.Array:
     """``log(I_ν(κ) e^{−κ})`` (as ``log scipy.special.ive``) for ``ν ≥ 0``, ``κ ≥ 0``.
 
     ``−inf`` at ``κ = 0`` for ``ν > 0``. Differentiable in ``κ`` to any order for ``κ > 0``.
@@ -164,7 +165,7 @@ def _log_ive(order, kappa):
     return jnp.where(small, series, _log_ive_debye(order, k_large))
 
 
-def log_bessel_iv(order, kappa):
+def log_bessel_iv(order: ArrayLike, kappa: ArrayLike) -> jax.Array:
     """``log I_ν(κ)`` for a fixed order ``ν ≥ 0`` and ``κ ≥ 0`` (module docstring), shaped like
     ``kappa``; the arguments are those of :func:`log_bessel_iv_reduced`. ``−inf`` at ``κ = 0``
     for ``ν > 0``; ``d/dκ log I_ν(κ) = I_{ν+1}(κ)/I_ν(κ) + ν/κ``, and higher derivatives, by
@@ -179,7 +180,7 @@ def _log_iv(order, kappa):
     return jnp.where(small, series, _log_ive_debye(order, k_large) + k_large)
 
 
-def bessel_iv_ratio(order, kappa):
+def bessel_iv_ratio(order: ArrayLike, kappa: ArrayLike) -> jax.Array:
     """``I_{ν+1}(κ) / I_ν(κ)`` (``0`` at ``κ = 0``), differentiable in ``κ`` to any order."""
     return _ratio(_order(order), kappa)
 
@@ -198,7 +199,7 @@ def _ratio(order, kappa):
 
 
 @jax.custom_jvp
-def log_bessel_i0(y):
+def log_bessel_i0(y: ArrayLike) -> jax.Array:
     """``log I₀(y)`` for ``y ≥ 0`` from ``jax.scipy.special.i0e`` (Chebyshev expansions, cheaper
     than :func:`log_bessel_iv` for quadrature rules with many nodes).
 

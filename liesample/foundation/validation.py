@@ -4,12 +4,16 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Sequence
 
 import jax
 import numpy as np
+from jax.typing import ArrayLike
+
+from liesample.foundation.types import PyTree
 
 
-def float_array(value, requirement: str, error: type[Exception] = ValueError) -> np.ndarray:
+def float_array(value: object, requirement: str, error: type[Exception] = ValueError) -> np.ndarray:
     """``np.array(value, dtype=float)``, or ``error("<requirement>, got <value>")`` when ``value``
     is not an array of real numbers."""
     try:
@@ -19,7 +23,12 @@ def float_array(value, requirement: str, error: type[Exception] = ValueError) ->
 
 
 def finite_float(
-    name: str, value, *, positive: bool = False, nonnegative: bool = False, rate: bool = False
+    name: str,
+    value: object,
+    *,
+    positive: bool = False,
+    nonnegative: bool = False,
+    rate: bool = False,
 ) -> float:
     """``value`` as a Python float, or a ``ValueError``/``TypeError`` that says what is allowed
     (``rate``: strictly between 0 and 1, as a target acceptance rate)."""
@@ -40,7 +49,7 @@ def finite_float(
     return x
 
 
-def principal_moments(inertia) -> tuple[float, float, float]:
+def principal_moments(inertia: Sequence[float]) -> tuple[float, float, float]:
     """Three finite, positive principal moments of inertia, or a ``ValueError`` naming the bad
     one."""
     if np.ndim(inertia) != 1 or len(inertia) != 3:
@@ -51,7 +60,7 @@ def principal_moments(inertia) -> tuple[float, float, float]:
     return tuple(finite_float(f"inertia[{i}]", v, positive=True) for i, v in enumerate(inertia))
 
 
-def nonzero_vector3(name: str, value) -> np.ndarray:
+def nonzero_vector3(name: str, value: ArrayLike) -> np.ndarray:
     """A finite, nonzero, read-only float array of shape (3,), or a ``ValueError`` naming it."""
     vector = float_array(value, f"{name} must be a 3-vector of finite reals")
     if vector.shape != (3,):
@@ -64,7 +73,7 @@ def nonzero_vector3(name: str, value) -> np.ndarray:
     return vector
 
 
-def concrete_array(value):
+def concrete_array(value: ArrayLike) -> np.ndarray | None:
     """``np.asarray(value)``, or ``None`` when ``value`` is a tracer (checks then happen outside
     jit)."""
     try:
@@ -73,7 +82,7 @@ def concrete_array(value):
         return None
 
 
-def nonzero_circulations(circulations) -> np.ndarray:
+def nonzero_circulations(circulations: ArrayLike) -> np.ndarray:
     """Point-vortex circulations ``(Γ_1, …, Γ_N)``: a read-only 1-D array, finite and nonzero."""
     gamma = float_array(
         circulations, "circulations must be a 1-D sequence of nonzero finite reals", TypeError
@@ -94,7 +103,7 @@ def nonzero_circulations(circulations) -> np.ndarray:
     return gamma
 
 
-def prng_key(rng_key, name: str = "rng_key"):
+def prng_key(rng_key: ArrayLike, name: str = "rng_key") -> jax.Array:
     """A typed JAX key from either key style: ``jax.random.key(seed)`` (returned as is) or the
     raw ``uint32`` key data of ``jax.random.PRNGKey(seed)`` (wrapped, same random stream); a
     leading batch axis is kept. Anything else is a ``TypeError`` that says what is allowed."""
@@ -113,7 +122,7 @@ def prng_key(rng_key, name: str = "rng_key"):
     )
 
 
-def is_single_array(positions) -> bool:
+def is_single_array(positions: PyTree) -> bool:
     """Whether ``positions`` is one array (an array, a number or a nested list), not a pytree
     of several leaves (dict, tuple, named tuple, …)."""
     structure = jax.tree.structure(positions)

@@ -28,8 +28,10 @@ from __future__ import annotations
 
 import dataclasses
 
+import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike, DTypeLike
 
 from liesample.geometry.spaces import Space
 
@@ -50,17 +52,19 @@ class PositiveReals(Space):
             raise ValueError(f"PositiveReals shape must be a tuple of ints >= 0, got {shape!r}")
         object.__setattr__(self, "shape", shape)
 
-    def constraint_error(self, x) -> float:
+    def constraint_error(self, x: ArrayLike) -> float:
         return float("inf") if np.any(np.asarray(x) <= 0.0) else 0.0
 
-    def uniform(self, rng_key, dtype=None):
+    def uniform(self, rng_key: jax.Array, dtype: DTypeLike | None = None) -> jax.Array:
         raise ValueError("PositiveReals has no uniform probability law; give the start explicitly")
 
-    def perturb(self, x, eps):
+    def perturb(self, x: ArrayLike, eps: ArrayLike) -> jax.Array:
         return x * jnp.exp(eps)
 
-    def flow(self, x, p, inverse_mass, t):
+    def flow(
+        self, x: ArrayLike, p: ArrayLike, inverse_mass: ArrayLike, t: ArrayLike
+    ) -> tuple[jax.Array, jax.Array]:
         return x * jnp.exp(t * inverse_mass * p), p
 
-    def log(self, x, y):
+    def log(self, x: ArrayLike, y: ArrayLike) -> jax.Array:
         return jnp.log(y / x)

@@ -29,9 +29,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+import jax
 import jax.numpy as jnp
 import jax.scipy.linalg
 import numpy as np
+from jax.typing import ArrayLike
 
 from liesample.foundation.validation import float_array
 
@@ -47,24 +49,26 @@ class LieAlgebra:
 
     name: str = "g"
 
-    def pairing(self, mu, xi):
+    def pairing(self, mu: ArrayLike, xi: ArrayLike) -> jax.Array:
         """``⟨μ, ξ⟩``: the duality pairing, summed over every axis of the element."""
         return jnp.sum(mu * xi)
 
-    def bracket(self, xi, eta):  # pragma: no cover - interface
+    def bracket(self, xi: ArrayLike, eta: ArrayLike) -> jax.Array:  # pragma: no cover - interface
         raise NotImplementedError
 
-    def ad_star(self, xi, mu):  # pragma: no cover - interface
+    def ad_star(self, xi: ArrayLike, mu: ArrayLike) -> jax.Array:  # pragma: no cover - interface
         raise NotImplementedError
 
-    def coadjoint_exp(self, zeta, mu):  # pragma: no cover - interface
+    def coadjoint_exp(
+        self, zeta: ArrayLike, mu: ArrayLike
+    ) -> jax.Array:  # pragma: no cover - interface
         raise NotImplementedError
 
-    def casimirs(self, mu):  # pragma: no cover - interface
+    def casimirs(self, mu: ArrayLike) -> jax.Array:  # pragma: no cover - interface
         raise NotImplementedError
 
 
-def cross(a, b):
+def cross(a: ArrayLike, b: ArrayLike) -> jax.Array:
     """``a × b`` over the last axis (length 3), broadcasting."""
     return jnp.cross(a, b)
 
@@ -103,15 +107,15 @@ class SO3(LieAlgebra):
 
     name: str = "so(3)"
 
-    def bracket(self, xi, eta):
+    def bracket(self, xi: ArrayLike, eta: ArrayLike) -> jax.Array:
         """``[ξ, η] = ξ × η``."""
         return cross(xi, eta)
 
-    def ad_star(self, xi, mu):
+    def ad_star(self, xi: ArrayLike, mu: ArrayLike) -> jax.Array:
         """``ad*_ξ μ = μ × ξ``, from ``⟨μ, ξ × η⟩ = ⟨μ × ξ, η⟩``."""
         return cross(mu, xi)
 
-    def coadjoint_exp(self, zeta, mu):
+    def coadjoint_exp(self, zeta: ArrayLike, mu: ArrayLike) -> jax.Array:
         """``Ad*_{exp ζ} μ``: the time-one flow of ``μ̇ = μ × ζ``.
 
         That flow is the rotation by angle ``|ζ|`` about the axis ``−ζ/|ζ|`` (Rodrigues):
@@ -127,7 +131,7 @@ class SO3(LieAlgebra):
             + one_minus_cos_over_theta_sq * cross(zeta, zeta_cross_mu)
         )
 
-    def casimirs(self, mu):
+    def casimirs(self, mu: ArrayLike) -> jax.Array:
         """``|μ_k|²`` for each copy (shape ``mu.shape[:-1]``)."""
         return jnp.sum(mu * mu, axis=-1)
 
@@ -179,17 +183,17 @@ class SE3(LieAlgebra):
     def _split(x):
         return x[..., :3], x[..., 3:]
 
-    def bracket(self, xi, eta):
+    def bracket(self, xi: ArrayLike, eta: ArrayLike) -> jax.Array:
         """``[(ξ, v), (η, w)] = (ξ×η, ξ×w − η×v)``."""
         (a, v), (b, w) = self._split(xi), self._split(eta)
         return jnp.concatenate([cross(a, b), cross(a, w) - cross(b, v)], axis=-1)
 
-    def ad_star(self, xi, mu):
+    def ad_star(self, xi: ArrayLike, mu: ArrayLike) -> jax.Array:
         """``ad*_{(ξ,v)}(Π, Γ) = (Π×ξ + Γ×v, Γ×ξ)``."""
         (a, v), (pi, gamma) = self._split(xi), self._split(mu)
         return jnp.concatenate([cross(pi, a) + cross(gamma, v), cross(gamma, a)], -1)
 
-    def coadjoint_exp(self, zeta, mu):
+    def coadjoint_exp(self, zeta: ArrayLike, mu: ArrayLike) -> jax.Array:
         """``Ad*_{exp ζ} μ``: the time-one flow of ``μ̇ = ad*_ζ μ`` for constant ``ζ = (ξ, v)``.
 
         ``Γ̇ = Γ×ξ`` is the so(3) flow, ``Γ(t) = R(t)Γ₀`` with ``R(t) = exp(−t ξ̂)``. Then
@@ -218,7 +222,7 @@ class SE3(LieAlgebra):
         pi_new = so3.coadjoint_exp(a, pi) + cross(gamma_new, w)
         return jnp.concatenate([pi_new, gamma_new], axis=-1)
 
-    def casimirs(self, mu):
+    def casimirs(self, mu: ArrayLike) -> jax.Array:
         """``(|Γ|², Π·Γ)``, shape ``(..., 2)``."""
         pi, gamma = self._split(mu)
         return jnp.stack([jnp.sum(gamma * gamma, axis=-1), jnp.sum(pi * gamma, axis=-1)], -1)
@@ -264,7 +268,7 @@ class StructureConstants(LieAlgebra):
     constants: np.ndarray = field(default=None, repr=False)
     casimir_function: Callable | None = None
 
-    def __init__(self, constants, casimirs: Callable | None = None, name: str = "g"):
+    def __init__(self, constants: ArrayLike, casimirs: Callable | None = None, name: str = "g"):
         c = float_array(constants, "structure constants must be a real array of shape (n, n, n)")
         if c.ndim != 3 or not (c.shape[0] == c.shape[1] == c.shape[2]) or c.shape[0] == 0:
             raise ValueError(
@@ -299,26 +303,26 @@ class StructureConstants(LieAlgebra):
     def dimension(self) -> int:
         return self.constants.shape[0]
 
-    def bracket(self, xi, eta):
+    def bracket(self, xi: ArrayLike, eta: ArrayLike) -> jax.Array:
         """``[ξ, η]_k = Σ_{ij} ξ_i η_j c_{ij}^k``."""
         return jnp.einsum("...i,...j,ijk->...k", xi, eta, self.constants)
 
-    def coadjoint_matrix(self, zeta):
+    def coadjoint_matrix(self, zeta: ArrayLike) -> jax.Array:
         """``M(ζ)_{jk} = Σ_i ζ_i c_{ij}^k``, the matrix of ``μ ↦ ad*_ζ μ``; shape
         ``(..., n, n)``."""
         return jnp.einsum("...i,ijk->...jk", zeta, self.constants)
 
-    def ad_star(self, xi, mu):
+    def ad_star(self, xi: ArrayLike, mu: ArrayLike) -> jax.Array:
         """``(ad*_ξ μ)_j = Σ_{ik} ξ_i μ_k c_{ij}^k``."""
         return jnp.einsum("...i,...k,ijk->...j", xi, mu, self.constants)
 
-    def coadjoint_exp(self, zeta, mu):
+    def coadjoint_exp(self, zeta: ArrayLike, mu: ArrayLike) -> jax.Array:
         """``expm(M(ζ)) μ``: the time-one flow of ``μ̇ = ad*_ζ μ``."""
         zeta, mu = jnp.broadcast_arrays(zeta, mu)
         flow = jax.scipy.linalg.expm(self.coadjoint_matrix(zeta))
         return jnp.einsum("...jk,...k->...j", flow, mu)
 
-    def casimirs(self, mu):
+    def casimirs(self, mu: ArrayLike) -> jax.Array:
         """The declared Casimirs, or an empty array of shape ``μ.shape[:-1] + (0,)``."""
         if self.casimir_function is None:
             return _no_casimirs(mu)
@@ -438,14 +442,14 @@ class Unitary(LieAlgebra):
                 f"got shape {jnp.shape(x)}"
             )
 
-    def to_matrix(self, x):
+    def to_matrix(self, x: ArrayLike) -> jax.Array:
         """The skew-Hermitian matrix ``W`` (complex) of the real coordinates ``x``."""
         self._check(x)
         x = jnp.asarray(x)
         xt = _transpose(x)
         return 0.5 * (x - xt) + 0.5j * (x + xt)
 
-    def from_matrix(self, w):
+    def from_matrix(self, w: ArrayLike) -> jax.Array:
         """The real coordinates of the skew-Hermitian part ``(W − W*)/2`` of a complex matrix.
 
         For a skew-Hermitian ``W`` this is ``Re W + Im W``, the inverse of :meth:`to_matrix`.
@@ -455,37 +459,37 @@ class Unitary(LieAlgebra):
         re, im = jnp.real(w), jnp.imag(w)
         return 0.5 * (re - _transpose(re)) + 0.5 * (im + _transpose(im))
 
-    def bracket(self, xi, eta):
+    def bracket(self, xi: ArrayLike, eta: ArrayLike) -> jax.Array:
         """``[Ξ, H] = ΞH − HΞ``."""
         a, b = self.to_matrix(xi), self.to_matrix(eta)
         return self.from_matrix(a @ b - b @ a)
 
-    def ad_star(self, xi, mu):
+    def ad_star(self, xi: ArrayLike, mu: ArrayLike) -> jax.Array:
         """``ad*_Ξ W = [W, Ξ] = WΞ − ΞW``."""
         a, w = self.to_matrix(xi), self.to_matrix(mu)
         return self.from_matrix(w @ a - a @ w)
 
-    def group_element(self, zeta):
+    def group_element(self, zeta: ArrayLike) -> jax.Array:
         """``U = e^{−Z}`` (unitary), so that ``coadjoint_exp(ζ, W) = U W U*``."""
         return jax.scipy.linalg.expm(-self.to_matrix(zeta))
 
-    def coadjoint_exp(self, zeta, mu):
+    def coadjoint_exp(self, zeta: ArrayLike, mu: ArrayLike) -> jax.Array:
         """``e^{−Z} W e^{Z}``: the time-one flow of ``Ẇ = [W, Z]`` (isospectral)."""
         zeta, mu = jnp.broadcast_arrays(jnp.asarray(zeta), jnp.asarray(mu))
         u = self.group_element(zeta)
         w = self.to_matrix(mu)
         return self.from_matrix(u @ w @ jnp.conj(_transpose(u)))
 
-    def spectrum(self, mu):
+    def spectrum(self, mu: ArrayLike) -> jax.Array:
         """Eigenvalues of the Hermitian matrix ``iW``, ascending, shape ``(..., N)``."""
         return jnp.linalg.eigvalsh(1j * self.to_matrix(mu))
 
-    def casimirs(self, mu):
+    def casimirs(self, mu: ArrayLike) -> jax.Array:
         """``(spectrum of iW, ‖W‖²)``, shape ``(..., N + 1)``; ``‖W‖² = Σ_ij x_ij²``."""
         norm_sq = jnp.sum(jnp.asarray(mu) ** 2, axis=(-2, -1))
         return jnp.concatenate([self.spectrum(mu), norm_sq[..., None]], axis=-1)
 
-    def casimir_scale(self, mu):
+    def casimir_scale(self, mu: ArrayLike) -> jax.Array:
         """Round-off scale of each Casimir: ``‖W‖`` for the eigenvalues, ``‖W‖²`` for the norm."""
         norm_sq = jnp.sum(jnp.asarray(mu) ** 2, axis=(-2, -1))[..., None]
         size = jnp.sqrt(norm_sq)

@@ -34,14 +34,16 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import jax.scipy.linalg
 import numpy as np
+from jax.typing import ArrayLike, DTypeLike
 
+from liesample.foundation.types import PyTree
 from liesample.foundation.validation import concrete_array
 from liesample.geometry import spaces
 from liesample.geometry.poisson import kinetic_magnetic_exponential
@@ -108,7 +110,9 @@ ANTISYMMETRY_TOLERANCE = 1e-10  # relative to max|G|: round-off of a user-built 
 # --------------------------------------------------------------------------- the OU step
 
 
-def ornstein_uhlenbeck(momentum, noise, rate, diffusion, time):
+def ornstein_uhlenbeck(
+    momentum: ArrayLike, noise: ArrayLike, rate: ArrayLike, diffusion: ArrayLike, time: ArrayLike
+) -> jax.Array:
     """Exact solution of ``dp = −r p dt + √D dW`` over ``time``, coordinate by coordinate.
 
     ``p ← e^{−rt} p + s ξ`` with ``s² = D (1 − e^{−2rt})/(2r)`` (``D t`` at ``r = 0``: pure
@@ -137,13 +141,13 @@ class Metric(NamedTuple):
     eigenvalues: jax.Array  # of M⁻¹, (d,)
     eigenvectors: jax.Array | None  # None when diagonal
 
-    def velocity(self, momentum):
+    def velocity(self, momentum: ArrayLike) -> jax.Array:
         """``M⁻¹ p``."""
         if self.eigenvectors is None:
             return self.inverse_mass_matrix * momentum
         return self.inverse_mass_matrix @ momentum
 
-    def kinetic_energy(self, momentum):
+    def kinetic_energy(self, momentum: ArrayLike) -> jax.Array:
         """``½ pᵀ M⁻¹ p``."""
         return 0.5 * jnp.dot(momentum, self.velocity(momentum))
 
@@ -153,12 +157,14 @@ class Metric(NamedTuple):
     def _to_eigenbasis(self, x):
         return x if self.eigenvectors is None else self.eigenvectors.T @ x
 
-    def sample_momentum(self, rng_key, dtype):
+    def sample_momentum(self, rng_key: jax.Array, dtype: DTypeLike) -> jax.Array:
         """A draw of ``N(0, M)``: ``U (ξ / √λ)``."""
         z = jax.random.normal(rng_key, self.eigenvalues.shape, dtype)
         return self._from_eigenbasis(z / jnp.sqrt(self.eigenvalues))
 
-    def ornstein_uhlenbeck(self, rng_key, momentum, friction, time):
+    def ornstein_uhlenbeck(
+        self, rng_key: jax.Array, momentum: ArrayLike, friction: ArrayLike, time: ArrayLike
+    ) -> jax.Array:
         """Exact ``dp = −γ M⁻¹ p dt + √(2γ) dW`` over ``time`` (law ``N(0, M)`` kept): in the
         eigenbasis of ``M⁻¹`` a scalar OU process of rate ``γλ`` per coordinate."""
         z = jax.random.normal(rng_key, self.eigenvalues.shape, momentum.dtype)
@@ -167,7 +173,7 @@ class Metric(NamedTuple):
         return self._from_eigenbasis(moved)
 
 
-def make_metric(inverse_mass_matrix, dtype=None) -> Metric:
+def make_metric(inverse_mass_matrix: ArrayLike, dtype: DTypeLike | None = None) -> Metric:
     """:class:`Metric` from a diagonal ``(d,)`` or dense ``(d, d)`` inverse mass matrix."""
     imm = jnp.asarray(inverse_mass_matrix, dtype=dtype)
     if imm.ndim == 1:
@@ -190,13 +196,17 @@ class KineticMagneticFlow(NamedTuple):
     propagator: jax.Array | None  # E, (d, d)
     displacement: jax.Array  # Φ, (d, d), or the time t
 
-    def __call__(self, metric: Metric, position, momentum):
+    def __call__(
+        self, metric: Metric, position: ArrayLike, momentum: ArrayLike
+    ) -> tuple[jax.Array, jax.Array]:
         if self.propagator is None:
             return position + metric.velocity(self.displacement * momentum), momentum
         return position + metric.velocity(self.displacement @ momentum), self.propagator @ momentum
 
 
-def kinetic_magnetic_flow(magnetic_field, metric: Metric, time) -> KineticMagneticFlow:
+def kinetic_magnetic_flow(
+    magnetic_field: ArrayLike | None, metric: Metric, time: ArrayLike
+) -> KineticMagneticFlow:
     """:class:`KineticMagneticFlow` of a constant field over ``time`` (``None``: no field).
 
     ``B = GM⁻¹``; one ``expm`` of a ``2d × 2d`` matrix (paper, ``sec:brownian-particle``). The
@@ -214,7 +224,7 @@ def kinetic_magnetic_flow(magnetic_field, metric: Metric, time) -> KineticMagnet
     return KineticMagneticFlow(*kinetic_magnetic_exponential(generator, time))
 
 
-def check_magnetic_field(magnetic_field, dimension: int | None = None):
+def check_magnetic_field(magnetic_field: ArrayLike, dimension: int | None = None) -> None:
     """Validate an antisymmetric ``(d, d)`` field; raise a ``ValueError`` that says what is wrong.
 
     ``dimension`` is the number of (Euclidean, raveled) position coordinates, if known. Value
@@ -267,7 +277,7 @@ class CotangentBundle:
     metric: Metric | None  # of the Euclidean coordinates (None when there are none)
 
     @property
-    def structure(self):
+    def structure(self) -> jax.tree_util.PyTreeDef:
         return jax.tree.structure(self.space, is_leaf=spaces.is_space)
 
     @property
@@ -306,10 +316,10 @@ class CotangentBundle:
         count = sum(not e for e in self.euclidean) + (self.metric is not None)
         return iter([rng_key] if count == 1 else list(jax.random.split(rng_key, count)))
 
-    def zero_momentum(self, position):
+    def zero_momentum(self, position: PyTree) -> PyTree:
         return spaces.zero_momentum(self.space, position)
 
-    def kinetic_energy(self, momentum):
+    def kinetic_energy(self, momentum: PyTree) -> jax.Array:
         """``½ pᵀM⁻¹p`` summed over every block."""
         leaves = self._leaves(momentum)
         masses = self._leaves(self.inverse_mass)
@@ -336,7 +346,7 @@ class CotangentBundle:
             out = self._unflat(out, euclidean(next(keys), self._flat(ps)))
         return self.structure.unflatten(out)
 
-    def sample_momentum(self, rng_key, position):
+    def sample_momentum(self, rng_key: jax.Array, position: PyTree) -> PyTree:
         """A draw of ``N(0, M)`` in each tangent space."""
         zero = self.zero_momentum(position)
         return self._momentum_noise(
@@ -347,7 +357,14 @@ class CotangentBundle:
             lambda p, m, z: z / jnp.sqrt(m),
         )
 
-    def ornstein_uhlenbeck(self, rng_key, position, momentum, friction, time):
+    def ornstein_uhlenbeck(
+        self,
+        rng_key: jax.Array,
+        position: PyTree,
+        momentum: PyTree,
+        friction: ArrayLike,
+        time: ArrayLike,
+    ) -> PyTree:
         """Exact OU step ``dp = −γ M⁻¹p dt + √(2γ) dW`` over ``time`` (``N(0, M)`` kept)."""
         return self._momentum_noise(
             rng_key,
@@ -357,7 +374,7 @@ class CotangentBundle:
             lambda p, m, z: ornstein_uhlenbeck(p, z, friction * m, 2.0 * friction, time),
         )
 
-    def kinetic_flow(self, time, sign=1.0) -> Drift:
+    def kinetic_flow(self, time: ArrayLike, sign: float = 1.0) -> Drift:
         """The flow of ``K`` (and of the field times ``sign``) over ``time``; its matrices are
         computed here, once, for :meth:`drift`."""
         metric = self.metric
@@ -366,7 +383,7 @@ class CotangentBundle:
         field = None if self.magnetic_field is None else sign * self.magnetic_field
         return Drift(jnp.asarray(time), kinetic_magnetic_flow(field, metric, time))
 
-    def drift(self, flow: Drift, position, momentum):
+    def drift(self, flow: Drift, position: PyTree, momentum: PyTree) -> tuple[PyTree, PyTree]:
         """Apply a :meth:`kinetic_flow`: ``(g, p) ↦ (g', p')``."""
         xs, ps = self._leaves(position), self._leaves(momentum)
         masses = self._leaves(self.inverse_mass)
@@ -382,7 +399,12 @@ class CotangentBundle:
         return self.structure.unflatten(new_x), self.structure.unflatten(new_p)
 
 
-def cotangent_bundle(space, inverse_mass_matrix=None, magnetic_field=None, dtype=None):
+def cotangent_bundle(
+    space: spaces.Space | PyTree,
+    inverse_mass_matrix: ArrayLike | PyTree | None = None,
+    magnetic_field: ArrayLike | None = None,
+    dtype: DTypeLike | None = None,
+) -> CotangentBundle:
     """:class:`CotangentBundle` of ``space`` with ``M⁻¹`` (see
     :func:`liesample.geometry.spaces.check_inverse_mass`: dense ``(n, n)`` allowed on ``Euclidean``
     blocks) and an optional constant antisymmetric field on the ``Euclidean`` coordinates."""
@@ -441,7 +463,7 @@ def evaluated(point: PhasePoint, value_and_grad: Callable) -> PhasePoint:
     return point._replace(logdensity=logdensity, logdensity_grad=grad)
 
 
-def kick(value_and_grad: Callable, step_size):
+def kick(value_and_grad: Callable, step_size: ArrayLike) -> Callable:
     """``B``: ``p ← p + t ∇log π(g)`` (``ġ = 0``; the Lie–Poisson term vanishes as ``U`` does not
     depend on ``p``). Evaluates the gradient only where a drift has moved the position."""
 
@@ -455,7 +477,7 @@ def kick(value_and_grad: Callable, step_size):
     return effect
 
 
-def drift(bundle: CotangentBundle, flows: dict):
+def drift(bundle: CotangentBundle, flows: dict) -> Callable:
     """``A``: the exact kinetic (and magnetic) flow, ``flows[fraction]`` from
     :meth:`CotangentBundle.kinetic_flow` (computed once per step size)."""
 
@@ -467,7 +489,7 @@ def drift(bundle: CotangentBundle, flows: dict):
     return effect
 
 
-def refresh(bundle: CotangentBundle, step_size, friction):
+def refresh(bundle: CotangentBundle, step_size: ArrayLike, friction: ArrayLike) -> Callable:
     """``O``: the exact OU flow of the friction ``γ`` and noise ``√(2γ)`` over the fraction."""
 
     def effect(point, fraction, key):
@@ -482,12 +504,14 @@ def refresh(bundle: CotangentBundle, step_size, friction):
     return effect
 
 
-def fractions(scheme, effect: str) -> tuple:
+def fractions(scheme: Sequence[tuple[str, float]], effect: str) -> tuple:
     """The distinct fractions of the step at which ``scheme`` applies ``effect``."""
     return tuple(sorted({fraction for name, fraction in scheme if name == effect}))
 
 
-def check_scheme(scheme, effects: str = "ABO", name: str = "integrator") -> tuple:
+def check_scheme(
+    scheme: str | Sequence[tuple[str, float]], effects: str = "ABO", name: str = "integrator"
+) -> tuple:
     """A scheme as a tuple of ``(effect, fraction)`` pairs; a name of :data:`SCHEMES` is looked
     up. Raises a ``ValueError`` that says what is wrong unless every effect is one of
     ``effects``, every fraction is finite and > 0, and the fractions of each effect present
@@ -521,7 +545,7 @@ def check_scheme(scheme, effects: str = "ABO", name: str = "integrator") -> tupl
     return pairs
 
 
-def gradient_evaluations(scheme) -> int:
+def gradient_evaluations(scheme: Sequence[tuple[str, float]]) -> int:
     """Gradients of ``log π`` one step of ``scheme`` evaluates, the step starting and ending at
     an evaluated point: one per ``B`` that follows an ``A`` (:func:`kick` reuses the gradient
     where the position has not moved), and one at the end if the step ends after an ``A``."""
@@ -534,7 +558,7 @@ def gradient_evaluations(scheme) -> int:
     return count + (not fresh)
 
 
-def compose(scheme, effects: dict) -> Callable:
+def compose(scheme: Sequence[tuple[str, float]], effects: dict) -> Callable:
     """``step(point, rng_key=None)``: the effects applied in the order of ``scheme``.
 
     ``effects`` maps ``"B"``, ``"A"``, ``"O"`` to ``effect(point, fraction, key)`` (from

@@ -40,6 +40,7 @@ import jax
 import jax.numpy as jnp
 import jax.scipy.linalg
 import numpy as np
+from jax.typing import ArrayLike
 
 from liesample.foundation.validation import finite_float, float_array
 from liesample.geometry.algebras import LieAlgebra
@@ -52,18 +53,18 @@ _ANTISYMMETRY_RTOL = 1e-10
 class PoissonStructure:
     """Interface: a Poisson tensor ``J(z)``, known through ``apply(z, ζ) = J(z) ζ``."""
 
-    def apply(self, z, covector):  # pragma: no cover - interface
+    def apply(self, z: ArrayLike, covector: ArrayLike) -> jax.Array:  # pragma: no cover - interface
         raise NotImplementedError
 
-    def hamiltonian_vector_field(self, f, z):
+    def hamiltonian_vector_field(self, f: Callable, z: ArrayLike) -> jax.Array:
         """``X_f(z) = J(z) ∇f(z)``."""
         return self.apply(z, jax.grad(f)(z))
 
-    def bracket(self, f, g, z):
+    def bracket(self, f: Callable, g: Callable, z: ArrayLike) -> jax.Array:
         """``{f, g}(z) = ∇f(z)ᵀ J(z) ∇g(z) = df(X_g)``."""
         return jnp.vdot(jax.grad(f)(z), self.hamiltonian_vector_field(g, z))
 
-    def poisson_tensor(self, z):
+    def poisson_tensor(self, z: ArrayLike) -> jax.Array:
         """The matrix ``J(z)`` (dense; for tests and small systems)."""
         flat = jnp.ravel(z)
         basis = jnp.eye(flat.size, dtype=flat.dtype).reshape((flat.size, *jnp.shape(z)))
@@ -77,11 +78,11 @@ class LiePoissonStructure(PoissonStructure):
 
     algebra: LieAlgebra
 
-    def apply(self, z, covector):
+    def apply(self, z: ArrayLike, covector: ArrayLike) -> jax.Array:
         return self.algebra.ad_star(covector, z)
 
 
-def cross_product_matrix(field) -> np.ndarray:
+def cross_product_matrix(field: ArrayLike) -> np.ndarray:
     """The antisymmetric ``F`` with ``F w = w × B`` for a 3-vector ``B`` (``F_kj = ε_kjl B_l``)."""
     b1, b2, b3 = field
     return np.array([[0.0, b3, -b2], [-b3, 0.0, b1], [b2, -b1, 0.0]])
@@ -113,7 +114,7 @@ def field_strength_from_vector_potential(vector_potential: Callable) -> Callable
     return field_strength
 
 
-def antisymmetric_matrix(name: str, value, dimension: int | None = None) -> np.ndarray:
+def antisymmetric_matrix(name: str, value: ArrayLike, dimension: int | None = None) -> np.ndarray:
     """A finite, antisymmetric, read-only ``(n, n)`` float array, or a ``ValueError`` naming it."""
     matrix = float_array(value, f"{name} must be an array of finite reals")
     if matrix.ndim != 2 or matrix.shape[0] != matrix.shape[1] or matrix.shape[0] == 0:
@@ -168,10 +169,10 @@ class CanonicalStructure(PoissonStructure):
         """``True`` when ``G`` is a constant array (its flow is then solved exactly)."""
         return self.magnetic and not callable(self.magnetic_term)
 
-    def split(self, z):
+    def split(self, z: ArrayLike) -> tuple[jax.Array, jax.Array]:
         return z[: self.dimension], z[self.dimension :]
 
-    def magnetic_matrix(self, q):
+    def magnetic_matrix(self, q: ArrayLike) -> jax.Array | None:
         """``G(q)``, or ``None`` for the canonical structure."""
         if self.magnetic_term is None:
             return None
@@ -179,7 +180,7 @@ class CanonicalStructure(PoissonStructure):
             return self.magnetic_term(q)
         return jnp.asarray(self.magnetic_term, dtype=jnp.result_type(q))
 
-    def apply(self, z, covector):
+    def apply(self, z: ArrayLike, covector: ArrayLike) -> jax.Array:
         q, _ = self.split(z)
         covector_q, covector_p = self.split(covector)
         force = -covector_q
@@ -206,7 +207,11 @@ def _dimension(dimension) -> int:
 
 
 def magnetic_structure(
-    *, magnetic_field=None, vector_potential=None, charge=1.0, dimension=None
+    *,
+    magnetic_field: ArrayLike | None = None,
+    vector_potential: Callable | None = None,
+    charge: float = 1.0,
+    dimension: int | None = None,
 ) -> CanonicalStructure:
     """``T*Rⁿ`` with the magnetic term ``G = e F`` of a field (paper, ``sec:brownian-particle``).
 
@@ -269,7 +274,9 @@ def magnetic_structure(
     return CanonicalStructure(matrix.shape[0], magnetic_term)
 
 
-def kinetic_magnetic_exponential(generator, time):
+def kinetic_magnetic_exponential(
+    generator: ArrayLike, time: ArrayLike
+) -> tuple[jax.Array, jax.Array]:
     """``(e^{tB}, t φ₁(tB))`` for ``B = G M⁻¹`` from one ``expm([[tB, tI], [0, 0]])``.
 
     ``φ₁(X) = Σ_k X^k/(k+1)!``, so ``t φ₁(tB) = ∫₀^t e^{sB} ds``: the exact flow of

@@ -51,12 +51,14 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike, DTypeLike
 
+from liesample.foundation.types import PyTree
 from liesample.foundation.validation import concrete_array
 
 __all__ = [
@@ -172,11 +174,11 @@ class Space:
         """Dimension of the manifold (all copies)."""
         return self.copy_dimension * math.prod(self.shape)
 
-    def position_dtype(self, dtype):
+    def position_dtype(self, dtype: DTypeLike) -> np.dtype:
         return jnp.dtype(dtype)
 
     # ---------------------------------------------------------------- checks
-    def check(self, x, name: str = "position") -> None:
+    def check(self, x: ArrayLike, name: str = "position") -> None:
         """Raise a ``ValueError``/``TypeError`` unless ``x`` is a point of this space.
 
         Shape and dtype are always checked; the manifold constraint only when ``x`` is concrete
@@ -208,33 +210,35 @@ class Space:
 
     _off_manifold_hint = ""
 
-    def constraint_error(self, x) -> float:  # numpy, concrete
+    def constraint_error(self, x: ArrayLike) -> float:  # numpy, concrete
         return 0.0
 
     # ---------------------------------------------------------------- geometry
-    def momentum_dtype(self, x):
+    def momentum_dtype(self, x: ArrayLike) -> np.dtype:
         return jnp.real(x).dtype
 
-    def uniform(self, rng_key, dtype=None):
+    def uniform(self, rng_key: jax.Array, dtype: DTypeLike | None = None) -> jax.Array:
         raise NotImplementedError
 
-    def perturb(self, x, eps):
+    def perturb(self, x: ArrayLike, eps: ArrayLike) -> jax.Array:
         """A curve through ``x`` with velocity ``eps`` at 0 (first order suffices)."""
         raise NotImplementedError
 
-    def flow(self, x, p, inverse_mass, t):
+    def flow(
+        self, x: ArrayLike, p: ArrayLike, inverse_mass: ArrayLike, t: ArrayLike
+    ) -> tuple[jax.Array, jax.Array]:
         """Exact flow of ``½ m⁻¹|p|²`` over time ``t``."""
         raise NotImplementedError
 
-    def project(self, x, p):
+    def project(self, x: ArrayLike, p: ArrayLike) -> jax.Array:
         """The tangent part of an ambient momentum (identity except on spheres)."""
         return p
 
-    def exp(self, x, v):
+    def exp(self, x: ArrayLike, v: ArrayLike) -> jax.Array:
         """The exponential map: the point reached from ``x`` with velocity ``v`` at time 1."""
         return self.flow(x, v, jnp.ones(self.mass_array_shape, v.dtype), 1.0)[0]
 
-    def log(self, x, y):
+    def log(self, x: ArrayLike, y: ArrayLike) -> jax.Array:
         raise NotImplementedError(f"log is not implemented for {self!r}")
 
 
@@ -253,18 +257,20 @@ class Euclidean(Space):
 
     copy_dim = "component"
 
-    def uniform(self, rng_key, dtype=None):
+    def uniform(self, rng_key: jax.Array, dtype: DTypeLike | None = None) -> jax.Array:
         raise ValueError(
             "Euclidean space has no uniform probability law; give the starting position explicitly"
         )
 
-    def perturb(self, x, eps):
+    def perturb(self, x: ArrayLike, eps: ArrayLike) -> jax.Array:
         return x + eps
 
-    def flow(self, x, p, inverse_mass, t):
+    def flow(
+        self, x: ArrayLike, p: ArrayLike, inverse_mass: ArrayLike, t: ArrayLike
+    ) -> tuple[jax.Array, jax.Array]:
         return x + t * inverse_mass * p, p
 
-    def log(self, x, y):
+    def log(self, x: ArrayLike, y: ArrayLike) -> jax.Array:
         return y - x
 
 
@@ -284,17 +290,19 @@ class U1(Space):
     def __post_init__(self):
         object.__setattr__(self, "shape", _shape("U1 shape", self.shape))
 
-    def uniform(self, rng_key, dtype=None):
+    def uniform(self, rng_key: jax.Array, dtype: DTypeLike | None = None) -> jax.Array:
         dtype = jnp.dtype(dtype or jnp.zeros(()).dtype)
         return jax.random.uniform(rng_key, self.shape, dtype, -jnp.pi, jnp.pi)
 
-    def perturb(self, x, eps):
+    def perturb(self, x: ArrayLike, eps: ArrayLike) -> jax.Array:
         return x + eps
 
-    def flow(self, x, p, inverse_mass, t):
+    def flow(
+        self, x: ArrayLike, p: ArrayLike, inverse_mass: ArrayLike, t: ArrayLike
+    ) -> tuple[jax.Array, jax.Array]:
         return _wrap(x + t * inverse_mass * p), p
 
-    def log(self, x, y):
+    def log(self, x: ArrayLike, y: ArrayLike) -> jax.Array:
         return _wrap(y - x)
 
 
@@ -318,37 +326,39 @@ class Sphere(Space):
         object.__setattr__(self, "shape", _shape("Sphere shape", self.shape))
 
     @property
-    def point_shape(self):
+    def point_shape(self) -> tuple[int, ...]:
         return (self.n + 1,)
 
     @property
-    def momentum_shape(self):
+    def momentum_shape(self) -> tuple[int, ...]:
         return (self.n + 1,)
 
     mass_shape = (1,)
 
     @property
-    def copy_dimension(self):
+    def copy_dimension(self) -> int:
         return self.n
 
     _off_manifold_hint = "Points of a sphere are unit vectors: divide by the norm first."
 
-    def constraint_error(self, x):
+    def constraint_error(self, x: ArrayLike) -> float:
         return float(np.max(np.abs(np.linalg.norm(x, axis=-1) - 1.0), initial=0.0))
 
-    def uniform(self, rng_key, dtype=None):
+    def uniform(self, rng_key: jax.Array, dtype: DTypeLike | None = None) -> jax.Array:
         dtype = jnp.dtype(dtype or jnp.zeros(()).dtype)
         z = jax.random.normal(rng_key, self.position_array_shape, dtype)
         return z / jnp.linalg.norm(z, axis=-1, keepdims=True)
 
-    def project(self, x, p):
+    def project(self, x: ArrayLike, p: ArrayLike) -> jax.Array:
         return p - jnp.sum(p * x, -1, keepdims=True) * x
 
-    def perturb(self, x, eps):
+    def perturb(self, x: ArrayLike, eps: ArrayLike) -> jax.Array:
         # The tangent part of eps: the gradient is then the Riemannian one, (I − xxᵀ)∇.
         return x + self.project(x, eps)
 
-    def flow(self, x, p, inverse_mass, t):
+    def flow(
+        self, x: ArrayLike, p: ArrayLike, inverse_mass: ArrayLike, t: ArrayLike
+    ) -> tuple[jax.Array, jax.Array]:
         speed = _norm(p, keepdims=True)  # |p|; |v| = m⁻¹|p|
         angle = t * inverse_mass * speed
         cos, sin = jnp.cos(angle), jnp.sin(angle)
@@ -358,7 +368,7 @@ class Sphere(Space):
         new_x = new_x / jnp.linalg.norm(new_x, axis=-1, keepdims=True)
         return new_x, new_p
 
-    def log(self, x, y):
+    def log(self, x: ArrayLike, y: ArrayLike) -> jax.Array:
         """Tangent vector at ``x`` pointing to ``y`` with length the geodesic distance."""
         c = jnp.clip(jnp.sum(x * y, -1, keepdims=True), -1.0, 1.0)
         w = y - c * x
@@ -482,16 +492,16 @@ class SO(_MatrixGroup):
     draw_name = "R"
 
     @property
-    def copy_dimension(self):
+    def copy_dimension(self) -> int:
         return self.n * (self.n - 1) // 2
 
     @property
-    def basis(self):
+    def basis(self) -> np.ndarray:
         return _so_basis(self.n)
 
     _off_manifold_hint = "Rotations must satisfy RᵀR = I and det R = 1."
 
-    def uniform(self, rng_key, dtype=None):
+    def uniform(self, rng_key: jax.Array, dtype: DTypeLike | None = None) -> jax.Array:
         dtype = jnp.dtype(dtype or jnp.zeros(()).dtype)
         z = jax.random.normal(rng_key, self.position_array_shape, dtype)
         q, r = jnp.linalg.qr(z)
@@ -500,14 +510,14 @@ class SO(_MatrixGroup):
         flip = jnp.ones(self.n, dtype).at[0].set(-1.0)
         return jnp.where((det < 0)[..., None, None], q * flip, q)  # Haar on SO(n)
 
-    def exponential(self, c):
+    def exponential(self, c: ArrayLike) -> jax.Array:
         if self.n != 3:
             return super().exponential(c)
         theta = _norm(c)[..., None, None]
         K = self.hat(c)
         return jnp.eye(3, dtype=c.dtype) + _sinc(theta) * K + _versine(theta) * (K @ K)
 
-    def log(self, x, y):
+    def log(self, x: ArrayLike, y: ArrayLike) -> jax.Array:
         """Coordinates of ``log(xᵀy)`` for n = 3 (rotation angles below π)."""
         if self.n != 3:
             return super().log(x, y)
@@ -530,23 +540,23 @@ class SU(_MatrixGroup):
     draw_name = "U"
 
     @property
-    def copy_dimension(self):
+    def copy_dimension(self) -> int:
         return self.n**2 - 1
 
     @property
-    def basis(self):
+    def basis(self) -> np.ndarray:
         return _su_basis(self.n)
 
     _off_manifold_hint = "Elements of SU(n) must satisfy U†U = I and det U = 1."
 
-    def position_dtype(self, dtype):
+    def position_dtype(self, dtype: DTypeLike) -> np.dtype:
         return jnp.result_type(jnp.dtype(dtype), jnp.complex64)
 
     def _check_dtype(self, dtype, name):
         if not jnp.issubdtype(dtype, jnp.complexfloating):
             raise TypeError(f"{name} must be a complex array for {self!r}, got {dtype}")
 
-    def uniform(self, rng_key, dtype=None):
+    def uniform(self, rng_key: jax.Array, dtype: DTypeLike | None = None) -> jax.Array:
         real = jnp.dtype(dtype or jnp.zeros(()).dtype)
         k1, k2 = jax.random.split(rng_key)
         shape = self.position_array_shape
@@ -557,13 +567,13 @@ class SU(_MatrixGroup):
         det = jnp.linalg.det(q)
         return q / (det ** (1.0 / self.n))[..., None, None]  # Haar on SU(n)
 
-    def exponential(self, c):
+    def exponential(self, c: ArrayLike) -> jax.Array:
         if self.n != 2:
             return super().exponential(c)
         angle = _norm(c)[..., None, None]
         return jnp.cos(angle) * jnp.eye(2) + _sinc(angle) * self.hat(c)
 
-    def log(self, x, y):
+    def log(self, x: ArrayLike, y: ArrayLike) -> jax.Array:
         """Coordinates of ``log(x†y)`` for n = 2 (away from ``−I``)."""
         if self.n != 2:
             return super().log(x, y)
@@ -576,7 +586,7 @@ class SU(_MatrixGroup):
 # ====================================================================== pytrees of spaces
 
 
-def is_space(value) -> bool:
+def is_space(value: object) -> bool:
     return isinstance(value, Space)
 
 
@@ -595,12 +605,12 @@ def _map(fn: Callable, space, *trees):
     return jax.tree.map(fn, space, *trees, is_leaf=is_space)
 
 
-def dimension(space) -> int:
+def dimension(space: Space | PyTree) -> int:
     """Dimension of a space or product of spaces."""
     return sum(s.dimension for s in _spaces(space))
 
 
-def check_position(space, position, name: str = "position") -> None:
+def check_position(space: Space | PyTree, position: PyTree, name: str = "position") -> None:
     """Structure, shape, dtype and manifold constraint of a position (clear errors)."""
     _spaces(space)
     space_structure = jax.tree.structure(space, is_leaf=is_space)
@@ -615,14 +625,14 @@ def check_position(space, position, name: str = "position") -> None:
         s.check(x, name + jax.tree_util.keystr(path))
 
 
-def uniform(space, rng_key, dtype=None):
+def uniform(space: Space | PyTree, rng_key: jax.Array, dtype: DTypeLike | None = None) -> PyTree:
     """A draw from the uniform (Haar) law of every block (Euclidean blocks have none)."""
     leaves = _spaces(space)
     keys = iter(jax.random.split(rng_key, len(leaves)))
     return _map(lambda s: s.uniform(next(keys), dtype), space)
 
 
-def real_finite_array(name, value, ndims):
+def real_finite_array(name: str, value: ArrayLike, ndims: Sequence[int]) -> np.ndarray | None:
     """Rank check always; dtype and finiteness only when ``value`` is concrete (not a tracer).
     Returns the concrete numpy array, or ``None`` for a traced value."""
     shape = np.shape(value)
@@ -638,7 +648,9 @@ def real_finite_array(name, value, ndims):
     return array
 
 
-def check_inverse_mass_matrix(inverse_mass_matrix, dimension=None, name="inverse_mass_matrix"):
+def check_inverse_mass_matrix(
+    inverse_mass_matrix: ArrayLike, dimension: int | None = None, name: str = "inverse_mass_matrix"
+) -> None:
     """A flat ``M⁻¹``: diagonal (``(d,)``, entries > 0) or dense (``(d, d)``, symmetric positive
     definite); value checks only when concrete."""
     imm = real_finite_array(name, inverse_mass_matrix, (1, 2))
@@ -661,7 +673,7 @@ def check_inverse_mass_matrix(inverse_mass_matrix, dimension=None, name="inverse
             raise ValueError(f"{name} (dense) must be positive definite")
 
 
-def is_dense_inverse_mass(space: Space, inverse_mass) -> bool:
+def is_dense_inverse_mass(space: Space, inverse_mass: ArrayLike) -> bool:
     """Whether ``inverse_mass`` is a dense ``(n, n)`` matrix for a ``Euclidean`` block of ``n``
     coordinates (raveled order), rather than a diagonal broadcast to its shape."""
     n = math.prod(space.shape)
@@ -669,7 +681,9 @@ def is_dense_inverse_mass(space: Space, inverse_mass) -> bool:
     return isinstance(space, Euclidean) and shape == (n, n) and shape != space.shape
 
 
-def check_inverse_mass(space, inverse_mass, dtype=None):
+def check_inverse_mass(
+    space: Space | PyTree, inverse_mass: ArrayLike | PyTree | None, dtype: DTypeLike | None = None
+) -> PyTree:
     """``None`` (unit mass), a positive scalar, or a pytree like ``space`` of arrays that
     broadcast to each block's ``mass_array_shape`` → a pytree of arrays of those shapes.
 
@@ -716,7 +730,7 @@ def check_inverse_mass(space, inverse_mass, dtype=None):
 # ---------------------------------------------------------------------- gradients and momenta
 
 
-def trivialised_value_and_grad(logdensity_fn: Callable, space):
+def trivialised_value_and_grad(logdensity_fn: Callable, space: Space | PyTree) -> Callable:
     """``x ↦ (log π(x), ∇ log π(x))`` with the gradient in algebra coordinates: left-trivialised
     on groups (``d/dε log π(g exp(εX_k))``), Riemannian on spheres, ordinary on ``Rᵈ``."""
 
@@ -730,7 +744,7 @@ def trivialised_value_and_grad(logdensity_fn: Callable, space):
     return value_and_grad
 
 
-def zero_momentum(space, position):
+def zero_momentum(space: Space | PyTree, position: PyTree) -> PyTree:
     return _map(
         lambda s, x: jnp.zeros(s.momentum_array_shape, s.momentum_dtype(x)), space, position
     )

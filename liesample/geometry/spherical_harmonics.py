@@ -30,8 +30,11 @@ from __future__ import annotations
 import functools
 import math
 
+import jax
 import jax.numpy as jnp
 import numpy as np
+import numpy.typing as npt
+from jax.typing import ArrayLike
 
 __all__ = [
     "degrees_and_orders",
@@ -129,7 +132,7 @@ def _legendre_and_angular(x, max_degree):
     return q, jnp.stack(sin_part[:0:-1] + cos_part, axis=-1)
 
 
-def real_spherical_harmonics(x, max_degree: int, min_degree: int = 0):
+def real_spherical_harmonics(x: ArrayLike, max_degree: int, min_degree: int = 0) -> jax.Array:
     """Real orthonormal ``Y_ℓ^m(x/|x|)`` for ``ℓ_min ≤ ℓ ≤ L``, shape ``(..., (L+1)² − ℓ_min²)``.
 
     ``x`` has shape ``(..., 3)`` and must be nonzero. Orthonormal on the unit sphere:
@@ -159,7 +162,7 @@ def _transport_scale(max_degree):
     return np.where(m == 0, 1.0, math.sqrt(2.0)) / np.sqrt(ell * (ell + 1.0))
 
 
-def transport_modes(x, max_degree: int):
+def transport_modes(x: ArrayLike, max_degree: int) -> jax.Array:
     """``ψ_ℓm = Y_ℓ^m / √(ℓ(ℓ+1))`` for ``1 ≤ ℓ ≤ L``, shape ``(..., L(L+2))``.
 
     The noise potentials of the paper's ``eq:stoch-diss-point-vortex``: their velocity fields
@@ -218,7 +221,7 @@ def _angular_binomials(max_degree):
 _MONOMIAL_ACCURACY = 1e-10
 
 
-def transport_mode(x, max_degree: int, index):
+def transport_mode(x: ArrayLike, max_degree: int, index: ArrayLike) -> jax.Array:
     """The single column ``index`` of :func:`transport_modes` (``index`` may be traced), shape
     ``x.shape[:-1]``: one mode without evaluating all ``L(L+2)`` of them.
 
@@ -262,7 +265,9 @@ def transport_mode(x, max_degree: int, index):
 # ---------------------------------------------------------------------------------------------
 
 
-def gauss_legendre_grid(max_degree: int, num_theta: int | None = None, num_phi: int | None = None):
+def gauss_legendre_grid(
+    max_degree: int, num_theta: int | None = None, num_phi: int | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A grid on which :func:`harmonic_analysis` is exact for degree ``≤ L``.
 
     Returns ``(theta, phi, weights)``: ``num_theta ≥ L + 1`` Gauss–Legendre colatitudes
@@ -324,7 +329,12 @@ def _check_grid(values, theta, max_degree):
     return values, theta
 
 
-def harmonic_analysis(values, theta, max_degree: int, weights=None) -> np.ndarray:
+def harmonic_analysis(
+    values: npt.ArrayLike,
+    theta: npt.ArrayLike,
+    max_degree: int,
+    weights: npt.ArrayLike | None = None,
+) -> np.ndarray:
     """Coefficients ``c_ℓm`` (order of :func:`degrees_and_orders`) of ``f ≈ Σ c_ℓm Y_ℓ^m`` from
     samples ``values[..., t, p] = f(θ_t, φ_p)``, ``φ_p = 2πp/num_phi`` (``num_phi ≥ 2L + 1``).
 
@@ -371,7 +381,9 @@ def harmonic_analysis(values, theta, max_degree: int, weights=None) -> np.ndarra
     return out
 
 
-def harmonic_synthesis(coefficients, theta, num_phi: int) -> np.ndarray:
+def harmonic_synthesis(
+    coefficients: npt.ArrayLike, theta: npt.ArrayLike, num_phi: int
+) -> np.ndarray:
     """``f(θ_t, φ_p) = Σ c_ℓm Y_ℓ^m`` on colatitudes ``theta`` and ``num_phi`` equispaced
     longitudes from 0: shape ``(..., num_theta, num_phi)``; the inverse of
     :func:`harmonic_analysis` for band-limited fields. ``coefficients`` has ``(L + 1)²`` entries

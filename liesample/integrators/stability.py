@@ -182,7 +182,8 @@ def stiffness_on_orbits(system, theta, positions) -> np.ndarray:
 
 
 def stability_number(system, step_size, theta, position) -> float:
-    """``κ = step_size · |θ| · max_i |h''_i|`` on the orbit through ``position`` (θ < 0 at β < 0)."""
+    """``κ = step_size · |θ| · max_i |h''_i|`` on the orbit through ``position``
+    (θ < 0 at β < 0)."""
     return step_size * stiffness(system, theta, position)
 
 

@@ -82,7 +82,9 @@ def check_variables(
     convergence = convergence_warnings(variables, groups)
     if convergence:
         warnings.warn(
-            "convergence checks: " + "; ".join(convergence) + ".", UserWarning, stacklevel=stacklevel
+            "convergence checks: " + "; ".join(convergence) + ".",
+            UserWarning,
+            stacklevel=stacklevel,
         )
     return messages + convergence
 

@@ -98,7 +98,8 @@ def run_fingerprint(
 
     ``variables``: the recorded variables' names and dims in the ``DataTree``
     (``{group/name: dims}``); ``observe``: the observables' function of one position, or
-    ``None``; ``log_likelihood``: the pointwise log-likelihoods' function, or ``None``; ``names``: the ``[var_name, event_dims]`` that named them (adopted on resume)."""
+    ``None``; ``log_likelihood``: the pointwise log-likelihoods' function, or ``None``;
+    ``names``: the ``[var_name, event_dims]`` that named them (adopted on resume)."""
     first = jax.tree.map(lambda leaf: jnp.asarray(leaf)[0], initial_positions)
     fields = {
         "format": FORMAT,

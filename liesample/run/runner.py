@@ -38,8 +38,10 @@ from __future__ import annotations
 
 import dataclasses
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any
 
+from liesample.foundation.types import PyTree
 from liesample.run import arguments
 from liesample.run.checks import (
     DEFAULT_MIN_ACCEPTANCE_RATE,
@@ -49,6 +51,14 @@ from liesample.run.checks import (
 )
 from liesample.run.loop import ChainsResult, RunOptions, TreeSpec, run_attrs, run_chains
 from liesample.run.store import load_chains, saved_num_warmup
+
+if TYPE_CHECKING:
+    import os
+
+    import jax
+    import xarray as xr
+    from blackjax.base import SamplingAlgorithm
+    from jax.sharding import NamedSharding
 
 __all__ = [
     "DEFAULT_MIN_ACCEPTANCE_RATE",
@@ -79,9 +89,9 @@ def _progress_bar(progress_bar, progress, stacklevel=3) -> bool:
 
 
 def sample_chains(
-    algorithm,
-    rng_key,
-    initial_positions,
+    algorithm: SamplingAlgorithm,
+    rng_key: jax.Array,
+    initial_positions: PyTree,
     num_draws: int,
     *,
     num_warmup: int = 0,
@@ -89,12 +99,12 @@ def sample_chains(
     progress_bar: bool = True,
     chunk_draws: int | None = None,
     on_nonfinite: str = "warn",
-    devices=None,
-    output=None,
+    devices: str | int | Sequence[jax.Device] | NamedSharding | None = None,
+    output: str | os.PathLike | None = None,
     resume: bool = False,
     adapt: bool | None = None,
     min_acceptance_rate: float = DEFAULT_MIN_ACCEPTANCE_RATE,
-    observables=None,
+    observables: Callable | Mapping[str, Callable] | None = None,
     keep_positions: bool = True,
     callback: Callable | None = None,
     log_likelihood: dict | None = None,
@@ -189,19 +199,19 @@ def sample_chains(
 
 
 def sample(
-    algorithm,
-    rng_key,
-    initial_positions,
+    algorithm: SamplingAlgorithm,
+    rng_key: jax.Array,
+    initial_positions: PyTree,
     num_draws: int,
     *,
     num_warmup: int | None = None,
     exact_starts: bool = False,
     var_name: str | None = None,
-    event_dims=None,
-    coords=None,
-    attrs=None,
-    **run_options,
-):
+    event_dims: Sequence[str] | Mapping[str, Sequence[str]] | None = None,
+    coords: Mapping[str, Sequence] | None = None,
+    attrs: Mapping | None = None,
+    **run_options: Any,
+) -> xr.DataTree:
     """Run chains with :func:`sample_chains` and return an ArviZ ``DataTree``.
 
     The tree has ``posterior/<var_name>`` with dims ``(chain, draw, *event_dims)`` and

@@ -111,6 +111,24 @@ def _run_group(f, path):
     return group
 
 
+def _check_names(f, tree, path):
+    """Refuse to add ``tree``'s draws to a file whose groups lack one of its variables (a file
+    written by a liesample that named them otherwise: ``h`` of a momentum-free sampler was once
+    ``sample_stats/energy``, now ``hamiltonian``)."""
+    missing = [
+        f"{name}/{var}"
+        for name, child in tree.children.items()
+        for var in child.data_vars
+        if name not in f.groups or var not in f.groups[name].variables
+    ]
+    if missing:
+        raise RunFileError(
+            f"cannot resume {path!r}: it has no variables {missing} (it was written by a "
+            "liesample that named its draws otherwise); load_chains still reads it; start a "
+            "new output to go on sampling"
+        )
+
+
 def _json_attr(group, name, path):
     try:
         return json.loads(group.attrs[name])
@@ -378,6 +396,7 @@ class RunFile:
             for var in sorted(tree[name].data_vars):
                 chunk[f"{name}/{var}"] = np.ascontiguousarray(_to_stored(tree[name][var].values))
         with _open(self.path, "a") as f:
+            _check_names(f, tree, self.path)
             for name, child in tree.children.items():
                 group = f.groups[name]
                 group.resize_dimension("draw", end)

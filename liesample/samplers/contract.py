@@ -14,7 +14,10 @@ NamedTuple with at least these scalar fields (per chain), in these meanings:
     only diverges reads as stuck.
 ``energy`` (float)
     The energy of the chain's state after the step: ``h`` on an orbit, ``H = −log π + ½pᵀM⁻¹p``
-    on ``T*Rⁿ`` (magnetic HMC: of the proposal, as in BlackJAX).
+    on ``T*Rⁿ`` (magnetic HMC: of the proposal, as in BlackJAX). In a ``DataTree`` it is
+    ArviZ's ``energy`` only where it is that total energy of a state with a momentum, which
+    ArviZ's BFMI and energy plot assume; ``h`` of a state without one is ``hamiltonian``
+    (:func:`energy_name`).
 
 Samplers add their own fields after these (``casimir_error``, ``is_accepted``, …); the
 reduction of a field over the ``thinning`` steps of one stored draw is in
@@ -68,6 +71,7 @@ __all__ = [
     "StepSizeTuning",
     "as_sampler",
     "check_info",
+    "energy_name",
     "first_bad_chain",
     "sampling_api",
     "setting",
@@ -224,6 +228,10 @@ class Sampler(blackjax.base.SamplingAlgorithm, DeclaresNoiseBlocks):
         What to do when a chain is stuck (its acceptance rate near 0): a call that works for
         this sampler, which the runner's stuck-chain warning quotes. ``None`` (default): the
         runner's generic advice.
+    energy_name : str or None
+        The ``sample_stats`` name of ``info.energy`` (:func:`energy_name`): ``"energy"`` for
+        HMC's total energy ``H(q, p)``, ``"hamiltonian"`` for ``h`` of a state. ``None``
+        (default): decided by whether the state carries a ``momentum``.
     """
 
     settings: Mapping = MappingProxyType({})
@@ -232,6 +240,7 @@ class Sampler(blackjax.base.SamplingAlgorithm, DeclaresNoiseBlocks):
     draw_names: DrawNames | None = None
     law_groups: Callable | None = None
     stuck_advice: str | None = None
+    energy_name: str | None = None
 
     def __new__(cls, init, step, **hooks):
         unknown = sorted(set(hooks) - set(HOOKS))
@@ -252,6 +261,7 @@ HOOKS = {
     "draw_names": None,
     "law_groups": None,
     "stuck_advice": None,
+    "energy_name": None,
 }
 """The hooks a :class:`Sampler` declares, each with the factory of its default (``None``:
 the default is ``None``); keyword arguments of ``Sampler(init, step, **hooks)``."""
@@ -267,10 +277,28 @@ def rebuilt(build: Callable, source: str, *args, **kwargs) -> Sampler:
 
 def as_sampler(algorithm) -> Sampler:
     """``algorithm`` as a :class:`Sampler`: itself if it is one, else a ``Sampler`` with its
-    ``init`` and ``step`` and the defaults (a plain BlackJAX ``SamplingAlgorithm``)."""
+    ``init`` and ``step`` and the defaults (a plain BlackJAX ``SamplingAlgorithm``, whose
+    ``info.energy``, where it has one, is HMC's total energy: ``energy_name="energy"``)."""
     if isinstance(algorithm, Sampler):
         return algorithm
-    return Sampler(algorithm.init, algorithm.step)
+    return Sampler(algorithm.init, algorithm.step, energy_name="energy")
+
+
+def energy_name(sampler: Sampler, position) -> str:
+    """The ``sample_stats`` name of ``sampler``'s ``info.energy`` in a ``DataTree``.
+
+    ``"energy"`` (ArviZ's name) where it is HMC's total energy ``H(q, p) = −log π(q) +
+    kinetic(p)``: ArviZ's ``bfmi`` and ``plot_energy`` read that variable and assume it is.
+    ``"hamiltonian"`` where it is ``h`` of a state without a momentum (the orbit, spin and
+    gauge heat-bath samplers): a function of the position, on which those diagnostics would
+    report a number that means nothing. The sampler's ``energy_name`` hook decides where it is
+    set; otherwise the state that ``sampler.init(position)`` returns does: ``"energy"`` if it
+    has a ``momentum`` field, else ``"hamiltonian"``.
+    """
+    if sampler.energy_name is not None:
+        return sampler.energy_name
+    state = jax.eval_shape(sampler.init, position)
+    return "energy" if hasattr(state, "momentum") else "hamiltonian"
 
 
 def setting(value):

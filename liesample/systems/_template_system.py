@@ -35,6 +35,8 @@ Imports may only point down the layers: ``foundation``, ``geometry``, ``targets`
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import jax.numpy as jnp
 import numpy as np
 
@@ -46,7 +48,7 @@ from liesample.targets.groups import VonMisesFisherLaw
 __all__ = ["moment_in_field"]
 
 
-def moment_in_field(field=(0.0, 0.0, 1.0)) -> LiePoissonSystem:
+def moment_in_field(field: Sequence[float] = (0.0, 0.0, 1.0)) -> LiePoissonSystem:
     """A magnetic moment on so(3)* precessing in the constant field ``field``.
 
     Parameters

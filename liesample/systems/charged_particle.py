@@ -31,11 +31,12 @@ from __future__ import annotations
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
 from liesample.dynamics.poisson_langevin import Scene, make_dynamics
 from liesample.dynamics.sde import PoissonLangevinSDE, stratonovich_heun_step
@@ -106,13 +107,13 @@ class ChargedParticleSystem:
     def event_shape(self) -> tuple[int]:
         return (2 * self.dimension,)
 
-    def potential(self, q, beta=None):
+    def potential(self, q: ArrayLike, beta: float | None = None) -> jax.Array:
         """``V(q)``; for a log-density, ``−log π(q)/β`` (``β = 1`` when there is no noise)."""
         if self.potential_fn is not None:
             return self.potential_fn(q)
         return -self.logdensity_fn(q) / (1.0 if beta is None else beta)
 
-    def hamiltonian_fn(self, beta=None) -> Callable:
+    def hamiltonian_fn(self, beta: float | None = None) -> Callable:
         """``z ↦ h(z) = |p|²/2m + V(q)``."""
 
         def hamiltonian(z):
@@ -121,11 +122,11 @@ class ChargedParticleSystem:
 
         return hamiltonian
 
-    def noise_hamiltonians(self, z):
+    def noise_hamiltonians(self, z: ArrayLike) -> jax.Array:
         """``ĥ_i = −q_i``: ``X_{ĥ_i} = (0, e_i)``, a random force on every coordinate."""
         return -self.structure.split(z)[0]
 
-    def check_state(self, state, name: str = "initial_state"):
+    def check_state(self, state: ArrayLike, name: str = "initial_state") -> None:
         shape = tuple(jnp.shape(state))
         if shape != self.event_shape:
             raise ValueError(
@@ -141,7 +142,7 @@ def charged_particle(
     potential_fn: Callable | None = None,
     logdensity_fn: Callable | None = None,
     *,
-    magnetic_field=None,
+    magnetic_field: ArrayLike | None = None,
     vector_potential: Callable | None = None,
     mass: float = 1.0,
     charge: float = 1.0,
@@ -244,14 +245,21 @@ class ChargedParticleDynamics:
     def structure(self) -> CanonicalStructure:
         return self.sde.structure
 
-    def make_step(self, step_size) -> Callable:
+    def make_step(self, step_size: float) -> Callable:
         """``step(rng_key, z) -> (z', converged)`` for a fixed ``step_size`` (matrices built
         once)."""
         if self.integrator == "heun":
             return self._heun_step(step_size)
         return self._baoab_step(step_size)
 
-    def path(self, rng_key, initial_state, step_size, num_steps: int, thinning: int = 1):
+    def path(
+        self,
+        rng_key: jax.Array,
+        initial_state: ArrayLike,
+        step_size: float,
+        num_steps: int,
+        thinning: int = 1,
+    ) -> ChargedParticlePath:
         """Simulate ``num_steps`` steps, keeping every ``thinning``-th state (and the start)."""
         if num_steps % thinning:
             raise ValueError(f"num_steps ({num_steps}) must be a multiple of thinning ({thinning})")
@@ -407,9 +415,9 @@ def _derived_friction_rate(system: ChargedParticleSystem, sde: PoissonLangevinSD
 def charged_particle_dynamics(
     system: ChargedParticleSystem,
     *,
-    beta=None,
-    sigma=1.0,
-    theta=None,
+    beta: float | None = None,
+    sigma: float = 1.0,
+    theta: float | None = None,
     hamiltonian: bool = True,
     magnetic: bool = True,
     integrator: str = "baoab",
@@ -452,13 +460,13 @@ def charged_particle_dynamics(
 
 def charged_particle_path(
     system: ChargedParticleSystem,
-    rng_key,
-    initial_state,
+    rng_key: jax.Array,
+    initial_state: ArrayLike,
     *,
-    step_size,
+    step_size: float,
     num_steps: int,
     thinning: int = 1,
-    **dynamics_options,
+    **dynamics_options: Any,
 ) -> ChargedParticlePath:
     """Simulate one path of the charged particle (validated, jit-compiled).
 

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
 from liesample.dynamics.system import LiePoissonSystem
 from liesample.geometry.algebras import LieAlgebra
@@ -18,10 +20,10 @@ def lie_poisson_system(
     algebra: LieAlgebra,
     hamiltonian: Callable,
     noise_hamiltonians: Callable,
-    position,
+    position: ArrayLike,
     *,
     name: str = "Lie–Poisson system",
-    **options,
+    **options: Any,
 ) -> LiePoissonSystem:
     """A user-defined system from the three things the equation needs.
 

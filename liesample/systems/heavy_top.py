@@ -15,6 +15,8 @@ the orbit is invariant (the paper's ``app:semidirect-noise-dissipation`` prints
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import jax.numpy as jnp
 import numpy as np
 
@@ -26,8 +28,12 @@ from liesample.targets import HeavyTopGibbs
 
 
 def heavy_top(
-    inertia=(1.0, 2.0, 4.0), mgl=1.0, chi=(0.0, 0.0, 1.0), gravity=True, split_hamiltonian=False
-):
+    inertia: Sequence[float] = (1.0, 2.0, 4.0),
+    mgl: float = 1.0,
+    chi: Sequence[float] = (0.0, 0.0, 1.0),
+    gravity: bool = True,
+    split_hamiltonian: bool = False,
+) -> LiePoissonSystem:
     """The heavy top (a rigid body with a fixed point in gravity).
 
     Parameters

@@ -3,7 +3,8 @@
 The state is a stack of unit spins ``s`` of shape ``(*shape, 3)`` on the product
 ``(so(3)*)^N`` (``so3`` acts copy by copy), ``N = prod(shape)``: ``shape = (N,)`` is a chain,
 ``shape = (L₁, L₂)`` a square lattice, ``(L₁, L₂, L₃)`` a simple cubic one, and so on in any
-dimension (the hypercubic lattice ``Z^d``, each site with ``2d`` neighbours). The Hamiltonian (classical Heisenberg model) is
+dimension (the hypercubic lattice ``Z^d``, each site with ``2d`` neighbours). The Hamiltonian
+(classical Heisenberg model) is
 
     h(s) = −J Σ_⟨jk⟩ s_j·s_k  −  B·Σ_k s_k  −  D Σ_k (s_k·e_z)²
 
@@ -31,10 +32,12 @@ from __future__ import annotations
 
 import math
 import operator
+from collections.abc import Sequence
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
 from liesample.dynamics.system import LiePoissonSystem
 from liesample.foundation.validation import concrete_array, finite_float
@@ -63,7 +66,7 @@ class SpinLatticeSystem(LiePoissonSystem):
     names the first offending site.
     """
 
-    def check_position(self, position, name: str = "position"):
+    def check_position(self, position: ArrayLike, name: str = "position") -> None:
         super().check_position(position, name)
         value = concrete_array(position)
         if value is None:  # traced: value checks happen outside jit
@@ -79,7 +82,7 @@ class SpinLatticeSystem(LiePoissonSystem):
             )
 
 
-def lattice_shape(shape) -> tuple[int, ...]:
+def lattice_shape(shape: int | Sequence[int]) -> tuple[int, ...]:
     """``shape`` as a non-empty tuple of positive ints (one per lattice axis), or a
     ``TypeError``/``ValueError``."""
     if not isinstance(shape, (tuple, list)):
@@ -128,7 +131,7 @@ def _bond_sum(s, periodic: bool):
     return total
 
 
-def neighbour_sum(s, periodic: bool):
+def neighbour_sum(s: ArrayLike, periodic: bool) -> jax.Array:
     """``Σ_{j ~ k} s_j`` for every site ``k`` (shape of ``s``): the exchange field over ``J``."""
     total = jnp.zeros_like(s)
     for axis in range(s.ndim - 1):
@@ -147,7 +150,7 @@ def neighbour_sum(s, periodic: bool):
     return total
 
 
-def neighbour_table(shape, periodic: bool) -> np.ndarray:
+def neighbour_table(shape: int | Sequence[int], periodic: bool) -> np.ndarray:
     """``(N, 2·dim)`` flat indices of each site's neighbours, ``N`` where there is none."""
     num_sites = math.prod(shape)
     index = np.arange(num_sites).reshape(shape)
@@ -163,7 +166,7 @@ def neighbour_table(shape, periodic: bool) -> np.ndarray:
     return np.stack(columns, axis=1)
 
 
-def colouring(shape, periodic: bool) -> tuple[np.ndarray, int]:
+def colouring(shape: int | Sequence[int], periodic: bool) -> tuple[np.ndarray, int]:
     """A proper colouring of the lattice: ``(colours of shape `shape`, number of colours)``.
 
     Axis colourings ``c_a(i) = i mod 2`` (path or even cycle) or, on an odd cycle, the same with
@@ -183,7 +186,7 @@ def colouring(shape, periodic: bool) -> tuple[np.ndarray, int]:
     return total % k, k
 
 
-def noise_groups(shape, periodic: bool) -> np.ndarray:
+def noise_groups(shape: int | Sequence[int], periodic: bool) -> np.ndarray:
     """Commuting groups of the ``3N`` noise directions, for the splitting integrator.
 
     Direction ``(k, i)`` (flat index ``3k + i``) gets label ``3·colour(k) + i``: one group is
@@ -197,11 +200,11 @@ def noise_groups(shape, periodic: bool) -> np.ndarray:
 
 
 def heisenberg(
-    shape,
-    coupling=1.0,
+    shape: int | Sequence[int],
+    coupling: float = 1.0,
     periodic: bool = False,
-    field=(0.0, 0.0, 0.0),
-    anisotropy=0.0,
+    field: Sequence[float] = (0.0, 0.0, 0.0),
+    anisotropy: float = 0.0,
 ) -> SpinLatticeSystem:
     """The classical Heisenberg model on a hypercubic lattice of any dimension.
 

@@ -57,11 +57,13 @@ hamiltonian=False)``, whose step bias vanishes as ``dt → 0`` without substeps.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
 from liesample.dynamics.poisson_langevin import Scene
 from liesample.dynamics.system import LiePoissonSystem
@@ -109,18 +111,18 @@ class ScaledSO3Product(LieAlgebra):
     def _w(self, like):
         return jnp.asarray(self.weights, dtype=like.dtype)[:, None]
 
-    def bracket(self, xi, eta):
+    def bracket(self, xi: ArrayLike, eta: ArrayLike) -> jax.Array:
         return self._w(xi) * cross(xi, eta)
 
-    def ad_star(self, xi, mu):
+    def ad_star(self, xi: ArrayLike, mu: ArrayLike) -> jax.Array:
         """``ad*_ξ μ = μ × (w ξ)``, from ``⟨μ, [ξ, η]⟩ = Σ_k w_k μ_k·(ξ_k × η_k)``."""
         return cross(mu, self._w(mu) * xi)
 
-    def coadjoint_exp(self, zeta, mu):
+    def coadjoint_exp(self, zeta: ArrayLike, mu: ArrayLike) -> jax.Array:
         """The time-one flow of ``μ̇ = μ × (w ζ)``: so(3)'s Rodrigues rotation by ``w ζ``."""
         return so3.coadjoint_exp(self._w(mu) * zeta, mu)
 
-    def casimirs(self, mu):
+    def casimirs(self, mu: ArrayLike) -> jax.Array:
         return jnp.sum(mu * mu, axis=-1)
 
 
@@ -134,7 +136,7 @@ def _pair_geometry(x):
     return d2, off_diagonal
 
 
-def vortex_velocity(x, circulations, radius=1.0):
+def vortex_velocity(x: ArrayLike, circulations: ArrayLike, radius: float = 1.0) -> jax.Array:
     """The classical velocity ``(1/4πR) Σ_{j≠k} Γ_j (x_j × x_k)/(R² − x_j·x_k)``, shape ``(N, 3)``.
 
     Written out directly (not via the engine), with ``R² − x_j·x_k = d²_jk/2``.
@@ -146,18 +148,18 @@ def vortex_velocity(x, circulations, radius=1.0):
     return cross(weights @ x, x)
 
 
-def angular_momentum(x, circulations):
+def angular_momentum(x: ArrayLike, circulations: ArrayLike) -> jax.Array:
     """``Σ_k Γ_k x_k``, the momentum map of the diagonal rotations (shape ``(3,)``)."""
     return jnp.einsum("k,ki->i", jnp.asarray(circulations, dtype=x.dtype), x)
 
 
-def minimum_distance(x):
+def minimum_distance(x: ArrayLike) -> jax.Array:
     """Smallest chordal distance between two vortices (``inf`` for one vortex)."""
     d2, off = _pair_geometry(jnp.asarray(x))
     return jnp.sqrt(jnp.min(jnp.where(off, d2, jnp.inf)))
 
 
-def all_modes_dissipation(x, circulations, radius=1.0):
+def all_modes_dissipation(x: ArrayLike, circulations: ArrayLike, radius: float = 1.0) -> jax.Array:
     """The paper's closed-form dissipation velocity per unit ``θ`` (``eq:stoch-diss-point-vortex``).
 
     As printed, with ``u_k`` the classical velocity (:func:`vortex_velocity`):
@@ -179,7 +181,7 @@ def all_modes_dissipation(x, circulations, radius=1.0):
     return -cross(a @ u + b @ x, x)
 
 
-def collision_rate(x, circulations):
+def collision_rate(x: ArrayLike, circulations: ArrayLike) -> jax.Array:
     """``max_{j<k} (|Γ_j| + |Γ_k|)/(2π d²_jk)``: how fast the Hamiltonian drift turns the closest
     pairs (a co-rotating pair at distance ``d`` turns at ``(Γ_j + Γ_k)/(2πd²)``), 1/time."""
     x = jnp.asarray(x)
@@ -190,7 +192,12 @@ def collision_rate(x, circulations):
 
 
 def unresolved_fraction(
-    positions, circulations, step_size, *, safety=None, max_substeps=None
+    positions: ArrayLike,
+    circulations: ArrayLike,
+    step_size: float,
+    *,
+    safety: float | None = None,
+    max_substeps: int | None = None,
 ) -> float:
     """Fraction of the states ``positions`` (``(..., N, 3)``, e.g. a run's draws) at which a step
     of the Hamiltonian drift does not resolve the closest pair's rotation: ``rate·dt > 1``
@@ -204,7 +211,7 @@ def unresolved_fraction(
     return float(np.mean(rates * float(step_size) > limit))
 
 
-def fibonacci_sphere(num_points: int, radius=1.0) -> np.ndarray:
+def fibonacci_sphere(num_points: int, radius: float = 1.0) -> np.ndarray:
     """``num_points`` distinct, nearly uniform points on the sphere (golden-angle spiral)."""
     k = np.arange(num_points) + 0.5
     z = 1.0 - 2.0 * k / num_points
@@ -226,7 +233,7 @@ class PointVortexSystem(LiePoissonSystem):
     radius: float = 1.0
     max_degree: int = 1
 
-    def check_position(self, position, name: str = "position"):
+    def check_position(self, position: ArrayLike, name: str = "position") -> None:
         super().check_position(position, name)
         value = concrete_array(position)
         if value is None:  # traced: value checks happen outside jit
@@ -253,20 +260,22 @@ class PointVortexSystem(LiePoissonSystem):
                     "Hamiltonian is singular there; start from distinct positions"
                 )
 
-    def velocity(self, x):
+    def velocity(self, x: ArrayLike) -> jax.Array:
         """Classical velocity of every vortex (:func:`vortex_velocity`)."""
         return vortex_velocity(x, self.circulations, self.radius)
 
-    def angular_momentum(self, x):
+    def angular_momentum(self, x: ArrayLike) -> jax.Array:
         """``Σ_k Γ_k x_k``."""
         return angular_momentum(x, self.circulations)
 
-    def collision_rate(self, x):
+    def collision_rate(self, x: ArrayLike) -> jax.Array:
         """:func:`collision_rate` for this system's circulations."""
         return collision_rate(x, self.circulations)
 
 
-def point_vortices(circulations, max_degree: int = 2, radius: float = 1.0) -> PointVortexSystem:
+def point_vortices(
+    circulations: ArrayLike, max_degree: int = 2, radius: float = 1.0
+) -> PointVortexSystem:
     """Point vortices on the sphere with transport noise of degrees ``1 … L`` (module docstring).
 
     Parameters
@@ -398,7 +407,9 @@ def _with_all_modes_dissipation(system: PointVortexSystem, base):
     )
 
 
-def substep_rate(system: PointVortexSystem, dissipation: str = "truncated"):
+def substep_rate(
+    system: PointVortexSystem, dissipation: str = "truncated"
+) -> Callable[[object, jax.Array], jax.Array]:
     """The rate ``(dynamics, x) ↦ λ`` (1/time) that drives the substeps of
     :func:`point_vortex_integrator`: ``ω = max_{j<k} (|Γ_j| + |Γ_k|)/(2π d_jk²)`` when the scene has
     the Hamiltonian drift, plus ``θ ω²`` when the closed-form dissipation is on (its terms grow
@@ -420,7 +431,7 @@ def substep_rate(system: PointVortexSystem, dissipation: str = "truncated"):
 
 def point_vortex_integrator(
     system: PointVortexSystem,
-    base="splitting",
+    base: str | Integrator = "splitting",
     *,
     dissipation: str = "truncated",
     collision_safe: bool = True,

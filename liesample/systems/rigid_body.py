@@ -11,8 +11,12 @@ whose invariant law on ``|μ| = r`` is the restricted Gaussian ``∝ exp(−(β/
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
+
+import jax
 import jax.numpy as jnp
 import numpy as np
+import numpy.typing as npt
 
 from liesample.dynamics.system import LiePoissonSystem
 from liesample.foundation.validation import principal_moments
@@ -20,7 +24,9 @@ from liesample.geometry.algebras import so3
 from liesample.targets import RestrictedGaussian
 
 
-def kinetic_pieces(inverse_inertia, momentum):
+def kinetic_pieces(
+    inverse_inertia: npt.ArrayLike, momentum: Callable[[jax.Array], jax.Array]
+) -> tuple[Callable[[jax.Array], jax.Array], ...]:
     """``½ Π·I⁻¹Π = ½|Π|²/I₁ + Σ_{i=2,3} ½ (1/I_i − 1/I₁) Π_i²`` as exactly solvable pieces.
 
     Each piece's gradient is constant along its own flow (``Π`` rotates about itself or about
@@ -37,7 +43,9 @@ def kinetic_pieces(inverse_inertia, momentum):
     return tuple(pieces)
 
 
-def rigid_body(inertia=(1.0, 2.0, 4.0), split_hamiltonian: bool = False) -> LiePoissonSystem:
+def rigid_body(
+    inertia: Sequence[float] = (1.0, 2.0, 4.0), split_hamiltonian: bool = False
+) -> LiePoissonSystem:
     """The free rigid body with principal moments of inertia ``inertia``.
 
     Parameters

@@ -4,13 +4,15 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from liesample.dynamics.symplectic import symplectic_diffusion
+from liesample.dynamics.symplectic import SymplecticDiffusion, symplectic_diffusion
 from liesample.foundation.validation import finite_float
 
 __all__ = ["stochastic_pendulum"]
 
 
-def stochastic_pendulum(noise_position=0.5, noise_momentum=0.3, quadratic_momentum_noise=False):
+def stochastic_pendulum(
+    noise_position: float = 0.5, noise_momentum: float = 0.3, quadratic_momentum_noise: bool = False
+) -> SymplecticDiffusion:
     """The stochastic pendulum: ``H_0 = p²/2 − cos q``, ``H_1 = σ₁ cos q``, ``H_2 = σ₂ p``.
 
     ``H_1`` kicks the momentum (``dp ∋ σ₁ sin q ∘ dW¹``, multiplicative); ``H_2`` moves the

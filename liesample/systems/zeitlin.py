@@ -54,6 +54,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import scipy.linalg
+from jax.typing import ArrayLike
 
 from liesample.dynamics.system import LiePoissonSystem
 from liesample.foundation.validation import concrete_array
@@ -172,7 +173,7 @@ class QuantisedHarmonics:
 
     # -- operators ------------------------------------------------------------------------
 
-    def laplacian(self, x):
+    def laplacian(self, x: ArrayLike) -> jax.Array:
         """``Δ_N W = −Σ_k [S_k, [S_k, W]]`` (eigenvalues ``−ℓ(ℓ+1)``), in O(N²)."""
         p = self._pack(x)
         lo, d, up = (jnp.asarray(b) for b in self._operator_bands())
@@ -194,7 +195,7 @@ class QuantisedHarmonics:
         lo[:, 1:] = up[:, :-1]
         return lo * valid, d * valid, up * valid
 
-    def inverse_laplacian(self, x):
+    def inverse_laplacian(self, x: ArrayLike) -> jax.Array:
         """``P = Δ_N⁻¹ W`` on trace-free ``W`` (the trace part is sent to 0): one batched
         tridiagonal solve over the diagonals, O(N²)."""
         n = self.size
@@ -209,13 +210,13 @@ class QuantisedHarmonics:
         y = y.at[..., 0, 0, :].set(y0).at[..., 1, 0, :].set(y0)
         return -self._unpack(y * jnp.asarray(self._valid, p.dtype))
 
-    def energy(self, x):
+    def energy(self, x: ArrayLike) -> jax.Array:
         """``h = −½⟨W, Δ_N⁻¹W⟩ = ½ Σ ω_ℓm²/(ℓ(ℓ+1))`` (shape ``x.shape[:-2]``)."""
         return -0.5 * jnp.sum(x * self.inverse_laplacian(x), axis=(-2, -1))
 
     # -- spherical-harmonic coefficients --------------------------------------------------
 
-    def coefficients(self, x):
+    def coefficients(self, x: ArrayLike) -> jax.Array:
         """``ω_ℓm`` with ``W = Σ ω_ℓm E_ℓm``, shape ``(..., N²)``, order ``(ℓ, m)`` as in
         :func:`liesample.geometry.spherical_harmonics.degrees_and_orders` (``ℓ ≤ N−1``). O(N³)."""
         v = jnp.asarray(self.eigenvectors, dtype=jnp.result_type(x, float))
@@ -225,7 +226,7 @@ class QuantisedHarmonics:
         upper, lower = flat[..., 0, self._coef_rows], flat[..., 1, self._coef_rows]
         return self._coef_upper * upper + self._coef_lower * lower
 
-    def from_coefficients(self, coefficients):
+    def from_coefficients(self, coefficients: ArrayLike) -> jax.Array:
         """The inverse of :meth:`coefficients` (the transform is orthogonal)."""
         coefficients = jnp.asarray(coefficients)
         n = self.size
@@ -255,7 +256,7 @@ class QuantisedHarmonics:
         unit[np.arange(last - first), np.arange(first, last)] = 1.0
         return np.asarray(_compiled_from_coefficients(self)(jnp.asarray(unit)))
 
-    def energy_spectrum(self, x):
+    def energy_spectrum(self, x: ArrayLike) -> jax.Array:
         """Energy per degree ``ε_ℓ = ½ Σ_m ω_ℓm²/(ℓ(ℓ+1))``, ``ℓ = 1 … N−1``; shape
         ``(..., N−1)``."""
         c = self.coefficients(x)
@@ -265,7 +266,9 @@ class QuantisedHarmonics:
         onehot = (ell[:, None] == np.arange(1, self.size)[None, :]).astype(float)
         return per_mode @ jnp.asarray(onehot, dtype=per_mode.dtype)
 
-    def grid(self, x, num_theta: int = 64, num_phi: int = 128):
+    def grid(
+        self, x: ArrayLike, num_theta: int = 64, num_phi: int = 128
+    ) -> tuple[np.ndarray, np.ndarray, jax.Array]:
         """The vorticity ``ω(θ, φ) = Σ ω_ℓm Y_ℓm`` on a ``(num_theta, num_phi)`` grid
         (cell-centred colatitudes, longitudes from 0): ``(theta, phi, values)``, values of shape
         ``x.shape[:-2] + (num_theta, num_phi)``. Evaluated row by row (bounded memory)."""
@@ -302,7 +305,9 @@ def _compiled_from_coefficients(harmonics):
     return jax.jit(harmonics.from_coefficients)
 
 
-def random_vorticity(size: int, seed: int = 0, slope: float = 1.0, enstrophy: float = 0.5):
+def random_vorticity(
+    size: int, seed: int = 0, slope: float = 1.0, enstrophy: float = 0.5
+) -> np.ndarray:
     """A trace-free vorticity with Gaussian coefficients ``ω_ℓm ∝ ℓ^{−slope/2}`` (all ``ℓ ≥ 1``),
     scaled to the enstrophy ``½∫ω² = ½‖W‖² = enstrophy``; real coordinates, shape ``(N, N)``.
     The default ``0.5`` is ``‖W‖² = 1``. (For a given energy spectrum:
@@ -316,14 +321,14 @@ def random_vorticity(size: int, seed: int = 0, slope: float = 1.0, enstrophy: fl
     return np.asarray(_compiled_from_coefficients(basis)(jnp.asarray(c)))
 
 
-def su2_from_so3(mu):
+def su2_from_so3(mu: ArrayLike) -> jax.Array:
     """``μ ∈ so(3)* ↦ W = −i Σ_k μ_k σ_k ∈ su(2)*`` in real coordinates, shape ``(..., 2, 2)``."""
     mu = jnp.asarray(mu)
     m1, m2, m3 = mu[..., 0], mu[..., 1], mu[..., 2]
     return jnp.stack([jnp.stack([-m3, -m1 - m2], -1), jnp.stack([m2 - m1, m3], -1)], -2)
 
 
-def so3_from_su2(x):
+def so3_from_su2(x: ArrayLike) -> jax.Array:
     """The inverse of :func:`su2_from_so3` (the trace part of ``x`` is dropped); its transpose is
     ``½ su2_from_so3``, so gradients map to the matching su(2) generators."""
     x = jnp.asarray(x)
@@ -414,7 +419,7 @@ class SkewHermitianUnitary(Unitary):
     an eigendecomposition with its degenerate eigenvalues is not.
     """
 
-    def group_element(self, zeta):
+    def group_element(self, zeta: ArrayLike) -> jax.Array:
         """``U = e^{−Z}`` (unitary to round-off)."""
         return _skew_hermitian_exponential(-self.to_matrix(zeta))
 
@@ -422,7 +427,7 @@ class SkewHermitianUnitary(Unitary):
 class ZeitlinSystem(LiePoissonSystem):
     """A :class:`LiePoissonSystem` whose states must also be trace-free (su(N), not u(N))."""
 
-    def step_casimir_error(self, mu, reference_casimirs):
+    def step_casimir_error(self, mu: ArrayLike, reference_casimirs: ArrayLike) -> jax.Array:
         """Relative drift of the Casimir ``‖W‖² = −tr(W²)`` alone: O(N²), what the adjusted
         sampler reports per step (``casimir_error`` of its Info).
 
@@ -434,7 +439,7 @@ class ZeitlinSystem(LiePoissonSystem):
         reference = reference_casimirs[..., -1]
         return jnp.abs(norm_sq - reference) / jnp.maximum(jnp.abs(reference), norm_sq)
 
-    def check_position(self, position, name: str = "position"):
+    def check_position(self, position: ArrayLike, name: str = "position") -> None:
         super().check_position(position, name)
         value = concrete_array(position)
         if value is not None:
@@ -447,8 +452,11 @@ class ZeitlinSystem(LiePoissonSystem):
 
 
 def zeitlin_euler(
-    size: int, noise_degree: int | None = None, noise_smoothness: int = 1, position=None
-):
+    size: int,
+    noise_degree: int | None = None,
+    noise_smoothness: int = 1,
+    position: ArrayLike | None = None,
+) -> ZeitlinSystem:
     """Zeitlin's su(N) Euler equations on the sphere with transport noise (module docstring).
 
     **Choosing the noise.** The Gibbs law ``exp(−βh)`` on the orbit does not depend on the

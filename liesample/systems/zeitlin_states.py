@@ -29,6 +29,8 @@ from collections.abc import Callable
 import jax
 import jax.numpy as jnp
 import numpy as np
+import numpy.typing as npt
+from jax.typing import ArrayLike
 
 from liesample.foundation.validation import finite_float
 from liesample.geometry.spherical_harmonics import (
@@ -82,7 +84,9 @@ def _from_coefficients(size, coefficients):
     return np.asarray(transform(jnp.asarray(coefficients)))
 
 
-def vorticity_from_grid(values, theta, size: int, weights=None) -> np.ndarray:
+def vorticity_from_grid(
+    values: npt.ArrayLike, theta: npt.ArrayLike, size: int, weights: npt.ArrayLike | None = None
+) -> np.ndarray:
     """``W`` (real coordinates, shape ``(..., N, N)``) of the vorticity sampled as
     ``values[..., t, p] = ω(θ_t, φ_p)``, ``φ_p = 2πp/num_phi``, ``num_phi ≥ 2N − 1``.
 
@@ -97,7 +101,7 @@ def vorticity_from_grid(values, theta, size: int, weights=None) -> np.ndarray:
     return _from_coefficients(size, harmonic_analysis(values, theta, size - 1, weights))
 
 
-def vorticity_on_grid(x, theta, num_phi: int) -> np.ndarray:
+def vorticity_on_grid(x: ArrayLike, theta: npt.ArrayLike, num_phi: int) -> np.ndarray:
     """``ω(θ_t, φ_p)`` of the state ``x`` (``(..., N, N)``) on colatitudes ``theta`` and
     ``num_phi`` equispaced longitudes from 0, shape ``(..., num_theta, num_phi)``: the inverse of
     :func:`vorticity_from_grid` on trace-free states."""
@@ -116,7 +120,9 @@ def _unit_vectors(points, name):
     return points / norms
 
 
-def vortex_blobs(size: int, centres, strengths, widths=0.2) -> np.ndarray:
+def vortex_blobs(
+    size: int, centres: npt.ArrayLike, strengths: npt.ArrayLike, widths: npt.ArrayLike = 0.2
+) -> np.ndarray:
     """Gaussian vortex patches ``ω(u) = Σ_k Γ_k exp(−|u − c_k|² / (2 w_k²))`` (chordal distance
     on the unit sphere; ``Γ_k`` the peak vorticity of patch ``k``), projected onto ``ℓ ≤ N − 1``
     and without its mean; real coordinates ``(N, N)``.
@@ -250,13 +256,13 @@ def _per_degree(x, energy):
     return per_mode @ jnp.asarray(onehot, dtype=per_mode.dtype)
 
 
-def enstrophy_spectrum(x):
+def enstrophy_spectrum(x: ArrayLike) -> jax.Array:
     """Enstrophy per degree ``ζ_ℓ = ½ Σ_m ω_ℓm²``, ``ℓ = 1 … N − 1``: shape ``(..., N − 1)``
     for states ``(..., N, N)``; ``Σ ζ_ℓ = ½‖W‖²`` on trace-free states. JAX (jit/vmap)."""
     return _per_degree(jnp.asarray(x, dtype=jnp.result_type(x, float)), energy=False)
 
 
-def energy_spectrum(x):
+def energy_spectrum(x: ArrayLike) -> jax.Array:
     """Energy per degree ``ε_ℓ = ζ_ℓ / (ℓ(ℓ + 1))``, ``ℓ = 1 … N − 1``: shape ``(..., N − 1)``;
     ``Σ ε_ℓ`` is the Hamiltonian ``h``. JAX (jit/vmap)."""
     return _per_degree(jnp.asarray(x, dtype=jnp.result_type(x, float)), energy=True)

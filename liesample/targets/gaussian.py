@@ -14,11 +14,15 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
+import jax
 import jax.numpy as jnp
 import numpy as np
+import numpy.typing as npt
 import scipy.linalg
+from jax.typing import ArrayLike
 
 from liesample.foundation.validation import finite_float
 
@@ -62,7 +66,7 @@ class Gaussian:
     def precision(self) -> np.ndarray:
         return np.linalg.inv(self.covariance)
 
-    def logdensity_fn(self, x):
+    def logdensity_fn(self, x: ArrayLike) -> jax.Array:
         """``−½(x − m)ᵀ K (x − m)`` (JAX-traceable)."""
         r = x - jnp.asarray(self.mean)
         return -0.5 * r @ (jnp.asarray(self.precision) @ r)
@@ -72,7 +76,14 @@ class Gaussian:
         return self.covariance + np.outer(self.mean, self.mean)
 
 
-def correlated_gaussian(dimension, condition_number, *, seed=0, rotate=True, mean=None):
+def correlated_gaussian(
+    dimension: int,
+    condition_number: float,
+    *,
+    seed: int = 0,
+    rotate: bool = True,
+    mean: npt.ArrayLike | None = None,
+) -> Gaussian:
     """``N(mean, R diag(λ) Rᵀ)``, ``λ`` log-spaced in ``[1/√κ, √κ]``, ``R`` a random rotation.
 
     For ``dimension = 2`` the eigenvalues are ``1 ± ρ`` with ``ρ = (κ − 1)/(κ + 1)`` on the
@@ -100,7 +111,12 @@ def correlated_gaussian(dimension, condition_number, *, seed=0, rotate=True, mea
     return Gaussian(mean, cov)
 
 
-def ou_drift(precision, inverse_mass_matrix, magnetic_field, friction):
+def ou_drift(
+    precision: npt.ArrayLike,
+    inverse_mass_matrix: npt.ArrayLike,
+    magnetic_field: npt.ArrayLike,
+    friction: float,
+) -> tuple[np.ndarray, np.ndarray]:
     """``(A, ΣΣᵀ)`` of the magnetic Langevin SDE on a Gaussian target (``β = 1``, ``σ² = 2θ``)."""
     k = np.atleast_2d(np.asarray(precision, dtype=float))
     d = k.shape[0]
@@ -113,18 +129,22 @@ def ou_drift(precision, inverse_mass_matrix, magnetic_field, friction):
     return a, diffusion
 
 
-def ou_stationary_covariance(drift, diffusion):
+def ou_stationary_covariance(drift: npt.ArrayLike, diffusion: npt.ArrayLike) -> np.ndarray:
     """``C₀`` with ``A C₀ + C₀ Aᵀ + ΣΣᵀ = 0``."""
     c0 = scipy.linalg.solve_continuous_lyapunov(np.asarray(drift), -np.asarray(diffusion))
     return 0.5 * (c0 + c0.T)
 
 
-def ou_cross_covariance(drift, stationary_covariance, time):
+def ou_cross_covariance(
+    drift: npt.ArrayLike, stationary_covariance: npt.ArrayLike, time: float
+) -> np.ndarray:
     """``Cov(z_t, z_0) = e^{At} C₀`` (entry ``[i, j] = Cov(z_i(t), z_j(0))``)."""
     return scipy.linalg.expm(np.asarray(drift) * time) @ np.asarray(stationary_covariance)
 
 
-def linear_step_moments(transition, noise, lags=(0, 1)):
+def linear_step_moments(
+    transition: npt.ArrayLike, noise: npt.ArrayLike, lags: Sequence[int] = (0, 1)
+) -> dict[int, np.ndarray]:
     """Exact stationary moments of the affine chain ``z' = T z + N ξ``, ``ξ ~ N(0, I)``.
 
     Parameters

@@ -21,11 +21,15 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+from types import ModuleType
 
+import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 from scipy import integrate, special
 
+from liesample.foundation.types import PyTree
 from liesample.foundation.validation import finite_float
 from liesample.targets import orbits
 
@@ -40,7 +44,7 @@ __all__ = [
 ]
 
 
-def vmf_mean_resultant_length(kappa, d: int) -> float:
+def vmf_mean_resultant_length(kappa: float, d: int) -> float:
     """``A_d(κ) = I_{d/2}(κ)/I_{d/2−1}(κ)``: ``E[μ·x]`` for the vMF law on ``S^{d−1}``."""
     kappa = finite_float("kappa", kappa, nonnegative=True)
     if kappa == 0.0:
@@ -48,13 +52,13 @@ def vmf_mean_resultant_length(kappa, d: int) -> float:
     return float(special.ive(d / 2.0, kappa) / special.ive(d / 2.0 - 1.0, kappa))
 
 
-def u1_plaquette_mean(beta) -> float:
+def u1_plaquette_mean(beta: float) -> float:
     """``E[cos θ_P] = I₁(β)/I₀(β)`` (2-D U(1) gauge theory, open boundaries)."""
     beta = finite_float("beta", beta)
     return float(special.ive(1, beta) / special.ive(0, beta))
 
 
-def su2_plaquette_mean(beta) -> float:
+def su2_plaquette_mean(beta: float) -> float:
     """``E[½ tr U_P] = I₂(β)/I₁(β)`` (2-D SU(2) gauge theory, open boundaries, β > 0)."""
     beta = finite_float("beta", beta, positive=True)
     return float(special.ive(2, beta) / special.ive(1, beta))
@@ -91,7 +95,7 @@ class VonMisesFisherLaw:
     def d(self) -> int:
         return self.mean_direction.size
 
-    def logdensity(self, x):
+    def logdensity(self, x: ArrayLike) -> jax.Array:
         """Unnormalised ``κ μ·x`` (jax-traceable)."""
         return self.kappa * jnp.sum(jnp.asarray(self.mean_direction) * x, -1)
 
@@ -150,7 +154,7 @@ class MatrixFisherLaw:
             raise ValueError(f"F must be a finite 3x3 matrix, got {self.F!r}")
         object.__setattr__(self, "F", F)
 
-    def proper_svd(self):
+    def proper_svd(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(U, s, V)`` with ``F = U diag(s) Vᵀ``, ``U, V ∈ SO(3)``."""
         u, s, vt = np.linalg.svd(self.F)
         v = vt.T
@@ -195,7 +199,7 @@ class MatrixFisherLaw:
             diag.append(dz / z)
         return u @ np.diag(diag) @ v.T
 
-    def logdensity(self, R):
+    def logdensity(self, R: ArrayLike) -> jax.Array:
         return jnp.sum(jnp.asarray(self.F) * R, axis=(-2, -1))
 
     def quaternion_form(self) -> np.ndarray:
@@ -215,7 +219,7 @@ class MatrixFisherLaw:
                 B[i, j] = B[j, i] = 0.5 * (form(basis[i] + basis[j]) - diagonal[i] - diagonal[j])
         return B
 
-    def sample(self, rng_key, num_samples: int):
+    def sample(self, rng_key: jax.Array, num_samples: int) -> jax.Array:
         """Exact i.i.d. rotations ``(num_samples, 3, 3)``: Bingham draws of the quaternion
         (:meth:`quaternion_form`, angular-central-Gaussian rejection, acceptance ≳ 45 %)."""
         eigenvalues, eigenvectors = np.linalg.eigh(self.quaternion_form())
@@ -223,7 +227,7 @@ class MatrixFisherLaw:
         return quaternion_to_rotation(x @ jnp.asarray(eigenvectors).T)
 
 
-def quaternion_to_rotation(q, xp=jnp):
+def quaternion_to_rotation(q: ArrayLike, xp: ModuleType = jnp) -> jax.Array | np.ndarray:
     """The rotation of a unit quaternion ``(w, x, y, z)`` (``±q`` give the same one); the
     entries are homogeneous quadratics in ``q``. Leading axes broadcast; ``xp=numpy`` computes
     it eagerly (also inside a trace)."""
@@ -268,7 +272,7 @@ class VonMisesFisherPosterior:
     def resultant(self) -> np.ndarray:
         return self.data.sum(0)
 
-    def logdensity(self, position):
+    def logdensity(self, position: PyTree) -> jax.Array:
         """``position = {"direction": unit 3-vector, "log_kappa": scalar}`` (jax-traceable)."""
         mu, eta = position["direction"], position["log_kappa"]
         kappa = jnp.exp(eta)

@@ -17,13 +17,16 @@ envelope (Kent, Ganeiber & Mardia 2018).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+import numpy.typing as npt
 from jax.scipy.special import i0e, i1e, logsumexp
+from jax.typing import ArrayLike
 from scipy.special import roots_legendre
 
 from liesample.foundation.compile import jit
@@ -104,7 +107,7 @@ def _log_integral(lk, la, lb):
     return jnp.log(2.0) + logsumexp(log_w + _log_kernel(nodes, lk, la, lb))
 
 
-def bingham_log_normalizer(lam):
+def bingham_log_normalizer(lam: ArrayLike) -> jax.Array:
     """Log normaliser of the Bingham law ``∝ exp(−Σ_i λ_i x_i²)`` on the unit sphere S².
 
     Parameters
@@ -137,7 +140,7 @@ def _log_normalizer(lam):
 _second_moments = jit(lambda lam: -jax.grad(_log_normalizer)(lam))
 
 
-def bingham_second_moments(lam):
+def bingham_second_moments(lam: ArrayLike) -> jax.Array:
     """Exact ``E[x_i²] = −∂ log Z/∂λ_i`` of the Bingham law (``E[x_i x_j] = 0`` for ``i ≠ j``).
 
     Parameters
@@ -153,7 +156,7 @@ def bingham_second_moments(lam):
     return _second_moments(_as_lam(lam))
 
 
-def bingham_marginal_density(t, lam, axis: int):
+def bingham_marginal_density(t: ArrayLike, lam: ArrayLike, axis: int) -> jax.Array:
     """Density of the coordinate ``x_axis`` of the Bingham law, at ``t ∈ [−1, 1]``.
 
     Parameters
@@ -256,7 +259,7 @@ def _sample_bingham(rng_key, lam, num_samples: int):
     return out, accepted / proposed
 
 
-def sample_bingham(rng_key, lam, num_samples: int):
+def sample_bingham(rng_key: jax.Array, lam: ArrayLike, num_samples: int) -> jax.Array:
     """Exact i.i.d. draws from the Bingham law ``∝ exp(−Σ_i λ_i x_i²)`` on ``S^{q−1}``
     (``q = len(λ)``; ``S²`` for three concentrations).
 
@@ -291,7 +294,7 @@ def sample_bingham(rng_key, lam, num_samples: int):
     return _sample_bingham(rng_key, lam, num_samples)
 
 
-def isotropic_autocorrelation(t, radius, sigma):
+def isotropic_autocorrelation(t: ArrayLike, radius: float, sigma: float) -> jax.Array:
     """Exact ``E[μ(t)·μ(0)] = r² exp(−σ²|t|)`` of Brownian motion on the sphere ``|μ| = r``.
 
     This is the stationary process for isotropic inertia ``I = c(1, 1, 1)`` (uniform law).
@@ -337,35 +340,35 @@ class RestrictedGaussian:
         object.__setattr__(self, "radius", finite_float("radius", self.radius, positive=True))
 
     @property
-    def lam(self):
+    def lam(self) -> jax.Array:
         """Bingham concentrations ``λ_i = β r² / (2 I_i)``, shape (3,)."""
         return self.beta * self.radius**2 / (2.0 * jnp.asarray(self.inertia, dtype=float))
 
-    def log_normalizer(self):
+    def log_normalizer(self) -> jax.Array:
         """``log ∫_{|μ|=r} exp(−(β/2) μ·I⁻¹μ) dA(μ) = log Z(λ) + 2 log r``."""
         return bingham_log_normalizer(self.lam) + 2.0 * math.log(self.radius)
 
-    def logdensity(self, mu):
+    def logdensity(self, mu: ArrayLike) -> jax.Array:
         """Normalised log density w.r.t. area on ``|μ| = r``; ``mu`` has shape ``(..., 3)``."""
         mu = jnp.asarray(mu, dtype=float)
         inv_inertia = 1.0 / jnp.asarray(self.inertia, dtype=mu.dtype)
         return -0.5 * self.beta * jnp.sum(inv_inertia * mu * mu, axis=-1) - self.log_normalizer()
 
-    def second_moments(self):
+    def second_moments(self) -> jax.Array:
         """``E[μ_i μ_j]``, a diagonal (3, 3) array."""
         return jnp.diag(self.radius**2 * bingham_second_moments(self.lam))
 
-    def mean_energy(self):
+    def mean_energy(self) -> jax.Array:
         """``E[h]``, ``h = ½ μ·I⁻¹μ``."""
         m2 = self.radius**2 * bingham_second_moments(self.lam)
         return 0.5 * jnp.sum(m2 / jnp.asarray(self.inertia, dtype=m2.dtype))
 
-    def marginal_density(self, m, axis: int):
+    def marginal_density(self, m: ArrayLike, axis: int) -> jax.Array:
         """Density of ``μ_axis`` at ``m ∈ [−r, r]`` (zero outside)."""
         m = jnp.asarray(m, dtype=float)
         return bingham_marginal_density(m / self.radius, self.lam, axis) / self.radius
 
-    def sample(self, rng_key, num_samples: int):
+    def sample(self, rng_key: jax.Array, num_samples: int) -> jax.Array:
         """Exact i.i.d. draws on ``|μ| = r``, shape ``(num_samples, 3)``."""
         x, _ = sample_bingham(rng_key, self.lam, num_samples)
         return self.radius * x
@@ -479,13 +482,13 @@ class HeavyTopGibbs:
         w = np.exp(log_w - top)
         return n, w / np.sum(w), top + np.log(np.sum(w))
 
-    def gamma_expectation(self, fn):
+    def gamma_expectation(self, fn: Callable[[np.ndarray], npt.ArrayLike]) -> np.ndarray:
         """``E[f(Γ)]`` by quadrature; ``fn`` maps Γ of shape ``(N, 3)`` to ``(N, ...)`` (numpy)."""
         n, w, _ = self._gamma_rule()
         values = np.asarray(fn(self.radius * n), dtype=float)
         return np.tensordot(w, values, axes=1)
 
-    def log_normalizer(self):
+    def log_normalizer(self) -> float:
         """``log ∫ exp(−βh) dA(Γ) dΠ_⊥`` over the orbit (Liouville measure as in the class doc).
 
         The plane integral is ``(2π/β) √(det I / q) exp(−β s²/(2q))`` (a Gaussian integral over
@@ -533,7 +536,7 @@ class HeavyTopGibbs:
             0.5 * np.sum(self.pi_second_moments() / inertia) + self.mgl * self.mean_gamma_chi()
         )
 
-    def logdensity(self, mu):
+    def logdensity(self, mu: ArrayLike) -> jax.Array:
         """Normalised log density of ``μ = (Π, Γ)`` (``(..., 6)``, on the orbit) w.r.t.
         Liouville."""
         mu = np.asarray(mu, dtype=float)
@@ -545,7 +548,7 @@ class HeavyTopGibbs:
 
     # -- exact i.i.d. draws -------------------------------------------------------------------
 
-    def sample(self, rng_key, num_samples: int):
+    def sample(self, rng_key: jax.Array, num_samples: int) -> jax.Array:
         """Exact i.i.d. draws ``μ = (Π, Γ)`` on the orbit, shape ``(num_samples, 6)``.
 
         ``n = Γ/r``: rejection from the von Mises–Fisher law ``∝ exp(−β mgl r n·χ)`` (sampled

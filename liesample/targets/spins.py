@@ -14,6 +14,8 @@ from dataclasses import dataclass
 import jax
 import jax.numpy as jnp
 import numpy as np
+import numpy.typing as npt
+from jax.typing import ArrayLike
 
 from liesample.foundation.compile import jit
 from liesample.foundation.validation import finite_float
@@ -29,7 +31,7 @@ __all__ = [
 ]
 
 
-def langevin_function(x):
+def langevin_function(x: npt.ArrayLike) -> np.ndarray:
     """``L(x) = coth x − 1/x`` (``x/3`` near 0, odd), stable for every finite ``x``."""
     x = np.asarray(x, dtype=float)
     small = np.abs(x) < 1e-3
@@ -38,7 +40,9 @@ def langevin_function(x):
     return np.where(small, series, 1.0 / np.tanh(safe) - 1.0 / safe)
 
 
-def heisenberg_chain_correlation(n, beta, coupling=1.0):
+def heisenberg_chain_correlation(
+    n: npt.ArrayLike, beta: float, coupling: float = 1.0
+) -> np.ndarray:
     """Exact ``E[s_k·s_{k+n}] = u^n``, ``u = coth(βJ) − 1/(βJ)`` (Fisher 1964).
 
     For the open classical Heisenberg chain without field or anisotropy, at any length and for
@@ -69,7 +73,7 @@ class HeisenbergChainReference:
     def u(self) -> float:
         return float(langevin_function(self.beta * self.coupling))
 
-    def correlation(self, n):
+    def correlation(self, n: npt.ArrayLike) -> np.ndarray:
         """``E[s_k·s_{k+n}] = u^n``."""
         return heisenberg_chain_correlation(n, self.beta, self.coupling)
 
@@ -128,7 +132,7 @@ class HeisenbergRingReference:
         finite_float("beta", self.beta)
         finite_float("coupling", self.coupling)
 
-    def correlation(self, n):
+    def correlation(self, n: npt.ArrayLike) -> np.ndarray:
         """``E[s_k·s_{k+n}]`` on the ring, for integer ``0 ≤ n ≤ length``."""
         n = np.asarray(n)
         if not np.issubdtype(n.dtype, np.integer) or np.any(n < 0) or np.any(n > self.length):
@@ -160,7 +164,7 @@ def _orthonormal_frame(n):
     return e1, e2
 
 
-def von_mises_fisher_cosine(uniform, kappa):
+def von_mises_fisher_cosine(uniform: ArrayLike, kappa: ArrayLike) -> jax.Array:
     """``1 − w`` for ``w = cos`` of the angle to the mean of a von Mises–Fisher draw on ``S²``.
 
     ``w`` has density ``∝ exp(κ w)`` on ``[−1, 1]`` (``κ ≥ 0``); inverting its distribution
@@ -175,7 +179,7 @@ def von_mises_fisher_cosine(uniform, kappa):
     return jnp.clip(jnp.where(positive, one_minus_w, 2.0 * uniform), 0.0, 2.0)
 
 
-def von_mises_fisher(rng_key, direction, kappa):
+def von_mises_fisher(rng_key: jax.Array, direction: ArrayLike, kappa: ArrayLike) -> jax.Array:
     """Exact draws ``s ∈ S²`` with density ``∝ exp(κ s·direction)``, one per leading index.
 
     ``direction`` (..., 3) are unit vectors and ``kappa`` (...) any finite reals (``κ < 0``
@@ -201,7 +205,9 @@ def von_mises_fisher(rng_key, direction, kappa):
     )
 
 
-def sample_heisenberg_chain(rng_key, num_samples, length, beta, coupling=1.0):
+def sample_heisenberg_chain(
+    rng_key: jax.Array, num_samples: int, length: int, beta: float, coupling: float = 1.0
+) -> jax.Array:
     """Exact i.i.d. configurations of the open chain (``B = 0``, ``D = 0``): ``(num, length, 3)``.
 
     ``s_0`` is uniform and, the bond angles being independent (Fisher 1964), each

@@ -27,10 +27,13 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import jax
 import numpy as np
+import numpy.typing as npt
+from jax.typing import ArrayLike
 
 from liesample.foundation.validation import finite_float, nonzero_circulations
 
@@ -46,7 +49,7 @@ __all__ = [
 _ENUMERATE_UP_TO = 12
 
 
-def pair_exponents(circulations, beta) -> np.ndarray:
+def pair_exponents(circulations: ArrayLike, beta: float) -> np.ndarray:
     """``p_jk = βΓ_jΓ_k/(4π)`` for every pair (symmetric matrix, zero diagonal)."""
     gamma = nonzero_circulations(circulations)
     beta = finite_float("beta", beta)
@@ -55,7 +58,7 @@ def pair_exponents(circulations, beta) -> np.ndarray:
     return p
 
 
-def beta_bounds(circulations) -> tuple[float, float]:
+def beta_bounds(circulations: ArrayLike) -> tuple[float, float]:
     """The open interval ``(β_min, β_max)`` of ``β`` for which the Gibbs law is normalisable.
 
     ``β < 0``: a cluster ``S`` needs ``β Σ_{j<k∈S} Γ_jΓ_k /(4π) > −(n−1)``. Split a mixed
@@ -88,7 +91,7 @@ def beta_bounds(circulations) -> tuple[float, float]:
     return beta_min, beta_max
 
 
-def check_vortex_beta(circulations, beta) -> None:
+def check_vortex_beta(circulations: ArrayLike, beta: float) -> None:
     """``ValueError`` naming the bound when ``exp(−βh)`` is not normalisable (see
     :func:`beta_bounds`)."""
     beta = finite_float("beta", beta)
@@ -121,14 +124,14 @@ class VortexPairLaw:
             )
 
     @classmethod
-    def from_circulations(cls, circulations, beta) -> VortexPairLaw:
+    def from_circulations(cls, circulations: ArrayLike, beta: float) -> VortexPairLaw:
         gamma = nonzero_circulations(circulations)
         if gamma.shape != (2,):
             raise ValueError(f"the pair law needs exactly 2 circulations, got {gamma.size}")
         check_vortex_beta(gamma, beta)
         return cls(float(beta) * gamma[0] * gamma[1] / (4.0 * math.pi))
 
-    def density(self, c):
+    def density(self, c: npt.ArrayLike) -> np.ndarray:
         """``2(p+1)(2 − 2c)^p / 4^{p+1}`` on ``[−1, 1]``."""
         c = np.asarray(c, dtype=float)
         p = self.exponent
@@ -138,7 +141,7 @@ class VortexPairLaw:
             value = 0.5 * (p + 1.0) * u**p
         return np.where(inside, value, 0.0)
 
-    def cdf(self, c):
+    def cdf(self, c: npt.ArrayLike) -> np.ndarray:
         """``P(x₁·x₂ ≤ c) = 1 − ((1 − c)/2)^{p+1}``."""
         u = np.clip((1.0 - np.asarray(c, dtype=float)) / 2.0, 0.0, 1.0)
         return 1.0 - u ** (self.exponent + 1.0)
@@ -153,21 +156,26 @@ class VortexPairLaw:
         p = self.exponent
         return 4.0 * (p + 1.0) / ((p + 2.0) ** 2 * (p + 3.0))
 
-    def sample(self, rng_key, num_samples: int):
+    def sample(self, rng_key: jax.Array, num_samples: int) -> np.ndarray:
         """Exact i.i.d. draws of ``c``: ``u = V^{1/(p+1)}``, ``V`` uniform."""
         v = np.asarray(jax.random.uniform(rng_key, (num_samples,), dtype=float))
         return 1.0 - 2.0 * v ** (1.0 / (self.exponent + 1.0))
 
 
-def uniform_sphere_points(rng_key, shape):
+def uniform_sphere_points(rng_key: jax.Array, shape: tuple[int, ...]) -> np.ndarray:
     """I.i.d. uniform unit vectors, shape ``(*shape, 3)`` (normalised Gaussians), as numpy."""
     g = np.asarray(jax.random.normal(rng_key, (*shape, 3), dtype=float))
     return g / np.linalg.norm(g, axis=-1, keepdims=True)
 
 
 def gibbs_expectation(
-    circulations, beta, observable, rng_key, num_samples: int = 2**20, chunk: int = 2**16
-):
+    circulations: ArrayLike,
+    beta: float,
+    observable: Callable[[np.ndarray], npt.ArrayLike],
+    rng_key: jax.Array,
+    num_samples: int = 2**20,
+    chunk: int = 2**16,
+) -> tuple[np.ndarray, np.ndarray, float]:
     """``E[f(x)]`` under the Gibbs law by self-normalised importance sampling from uniform points.
 
     An independent reference (no dynamics): weights ``Π_{j<k} (|x_j − x_k|²)^{p_jk}`` on i.i.d.

@@ -25,6 +25,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from liesample.foundation.validation import finite_float
 
@@ -85,7 +86,7 @@ class UnitaryOrbitLaw:
 
     def expectations(
         self, functions: Callable, num_samples: int = 200_000, seed: int = 0, batch: int = 20_000
-    ):
+    ) -> tuple[np.ndarray, np.ndarray, float]:
         """``(E_π[f], standard error)`` for ``f = functions(x)`` of shape ``(K, p)`` on a stack.
 
         Self-normalised importance sampling; the standard error is the delta-method one,
@@ -136,7 +137,9 @@ def _pair_half_gaps(spectrum, coupling):
     return finite_float("coupling", coupling) * (b[j] - b[k]) / (2.0 * _spin_norm(b.size))
 
 
-def dipole_gibbs_moments(spectrum, beta: float, coupling: float = 1.0):
+def dipole_gibbs_moments(
+    spectrum: npt.ArrayLike, beta: float, coupling: float = 1.0
+) -> tuple[float, float]:
     """Exact ``(E[h], Var[h])`` of ``h = κ ω_10`` under ``∝ exp(−βh)`` on a unitary orbit.
 
     ``ω_10 = ⟨W, E_10⟩`` is the ``ℓ = 1, m = 0`` coefficient of the vorticity (its dipole

@@ -14,8 +14,8 @@ For the rigid body ``max_i |h''_i| = r² (1/I_min − 1/I_max)``. Explicit Euler
 ``κ = 1.95`` and all settle on a spurious 2-cycle at ``κ = 2.05``, for ``I = (1, 2, 4)`` and for
 the stiff ``I = (0.01, 1, 100)`` (ratio 1:10⁴), with or without the Hamiltonian drift. So the
 bound is **κ ≤ 2** for every orbit-preserving integrator; the sampler estimates κ on the orbit
-of the initial state and refuses (default, ``stability="raise"``) or warns (``"warn"``) beyond it. On the
-compact rigid-body orbit an unstable step stays finite but samples a wrong law; on the heavy
+of the initial state and refuses (default, ``stability="raise"``) or warns (``"warn"``) beyond it.
+On the compact rigid-body orbit an unstable step stays finite but samples a wrong law; on the heavy
 top's non-compact orbit ``Π`` overflows and the sampler flags every such step ``is_divergent``,
 keeps the previous state, and the runner reports it (``test_overflow_is_flagged_and_reported``).
 For the heavy top the estimate (curvature at orbit points with ``|Π| ≲ 2|Γ|``) is conservative
@@ -44,8 +44,9 @@ A miscompile found by this suite: XLA:CPU's ``small-while-loop-hoisting`` pass (
 0.11 with a raised threshold) made ``jit(vmap(loop))`` of the samplers' steps give each chain a
 different result from the single-chain step (4e-3 after one rigid-body step at β = 30; 0.09 after
 20 heavy-top steps), and stationary chains missed the Gibbs law (E[μ₁²] +22 % at β = 10³).
-liesample compiles every loop with that pass disabled (``liesample.jit``, ``tests/test_compile.py``);
-``test_batched_step_equals_one_chain`` guards every integrator and system through that path.
+liesample compiles every loop with that pass disabled (``liesample.jit``,
+``tests/test_compile.py``); ``test_batched_step_equals_one_chain`` guards every integrator and
+system through that path.
 
 The 10⁷-step runs (``lax.fori_loop``, nothing stored, moments accumulated on the fly) are
 ``@pytest.mark.slow`` (``make test-slow``).
@@ -344,7 +345,8 @@ def test_batched_step_equals_one_chain(integrator, system_name):
 
     states = jax.vmap(algorithm.init)(positions)
     batched = liesample.jit(jax.vmap(twenty_steps))(keys, states)
-    single_chain = liesample.jit(twenty_steps)  # jit alone compiles correctly (checked against eager)
+    # jit alone compiles correctly (checked against eager).
+    single_chain = liesample.jit(twenty_steps)
     for chain in (0, 5):
         single = single_chain(keys[chain], algorithm.init(positions[chain]))
         np.testing.assert_allclose(batched[chain], single, rtol=0, atol=1e-12)
