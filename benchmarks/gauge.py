@@ -91,10 +91,11 @@ def plain_hmc(system, beta, step_size, num_steps):
     n = system.n
 
     def force(links):
-        return jnp.stack(
-            [-(2.0 * beta / n) * _traceless_antihermitian(system.staples(links, mu) @ links[mu])
-             for mu in range(system.dim)]  # fmt: skip
-        )
+        forces = [
+            -(2.0 * beta / n) * _traceless_antihermitian(system.staples(links, mu) @ links[mu])
+            for mu in range(system.dim)
+        ]
+        return jnp.stack(forces)
 
     def kinetic(p):
         return -0.25 * jnp.sum(jnp.real(jnp.einsum("...ij,...ji->...", p, p)))
@@ -131,8 +132,8 @@ def su3_rows(size, counts, thermalisation, seed=0):
     links = system.hot_start(jax.random.key(seed))
     heat_bath = liesample.wilson_heat_bath(system, beta=beta, overrelaxation=4)
     runs = {"heat bath + OR (1 + 4 sweeps)": make_run(heat_bath.step, system.mean_plaquette)}
-    state, _, _, _ = _chain(runs["heat bath + OR (1 + 4 sweeps)"], heat_bath.init(links), jax.random.key(seed + 1),
-                            thermalisation)  # fmt: skip
+    first = runs["heat bath + OR (1 + 4 sweeps)"]
+    state, _, _, _ = _chain(first, heat_bath.init(links), jax.random.key(seed + 1), thermalisation)
     links = state.position
     eps, steps = 0.05, 20
     samplers = {

@@ -90,9 +90,8 @@ def _reference_vmf(key, mean, kappa):
     e1 = e1 / jnp.linalg.norm(e1, axis=-1, keepdims=True)
     e2 = jnp.cross(mean, e1)
     sine = jnp.sqrt(1.0 - w**2)
-    return (
-        w[..., None] * mean + (sine * jnp.cos(phi))[..., None] * e1 + (sine * jnp.sin(phi))[..., None] * e2
-    )
+    across = (sine * jnp.cos(phi))[..., None] * e1 + (sine * jnp.sin(phi))[..., None] * e2
+    return w[..., None] * mean + across
 
 
 def _field(s):

@@ -8,8 +8,8 @@ A suite of ``benchmarks/run.py`` (``benchmarks/suites.py``); alone::
 
 Writes ``spins_2d.json`` and ``spins_2d.png`` (the 3-D critical point is ``benchmarks/spins.py``).
 On ``heisenberg((32, 32), periodic=True)``, J = 1, no field, at β = 0.5, 1.1, 1.4, 8 chains from
-random spins, each sampler gets the same wall-time budget: two 200-step pilots (counted as warm-up, time included) measure the cost per step and
-the sweeps per step, then the run stores
+random spins, each sampler gets the same wall-time budget: two 200-step pilots (counted as
+warm-up, time included) measure the cost per step and the sweeps per step, then the run stores
 one draw per sweep (a Wolff draw every ≈ N / cluster size clusters) for as many draws as fill
 the budget; the first 20 % of the steps is warm-up and discarded. Samplers:
 
