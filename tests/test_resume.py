@@ -90,7 +90,14 @@ def uninterrupted():
     return run()
 
 
-@pytest.mark.parametrize("script", [SCRIPT, MIDWRITE], ids=["between chunks", "while writing"])
+@pytest.mark.parametrize(
+    "script",
+    [  # the kill between chunks in make test-slow (the in-process resumes below cover that file)
+        pytest.param(SCRIPT, marks=pytest.mark.slow),
+        MIDWRITE,
+    ],
+    ids=["between chunks", "while writing"],
+)
 def test_killed_run_resumes_to_the_same_draws(tmp_path, uninterrupted, script):
     path = tmp_path / "run.nc"
     completed = subprocess.run(

@@ -250,6 +250,7 @@ TWO_WRITERS = textwrap.dedent(
 )
 
 
+@pytest.mark.slow  # two interpreters compiling at once; the refusal itself is tested above
 def test_two_writers_started_together_exactly_one_succeeds(tmp_path):
     path, go = tmp_path / "run.nc", tmp_path / "go"
     readies = [tmp_path / f"ready{i}" for i in range(2)]
