@@ -22,11 +22,15 @@ refused. A Swendsen–Wang step gives every site a new bond configuration and a 
 is one sweep of the lattice, so a warm-up of ``n`` steps is ``n`` sweeps. A Wolff step moves one
 cluster only (at high temperature one site), however large the lattice.
 
-The connected components come from label propagation with pointer jumping (no site-by-site
-loop): every site points to a site of smaller index in its cluster; each round hooks the root
-of every site onto the smallest label across its open bonds (a scatter-min) and halves the
-pointer paths twice; the round repeats until nothing changes, a number of rounds that grows
-like the logarithm of the cluster diameter rather than the diameter itself.
+The bonds live on the grid (``bond_open[a][x]`` joins ``x`` and ``x + e_a``), so neighbours are
+``jnp.roll`` shifts, not gathers; the uniform of each bond is drawn in the order of
+:func:`bond_table` whichever end sees it. The connected components come from label propagation
+with pointer jumping (no site-by-site loop): every site points to a site of smaller index in its
+cluster; each round hooks the root of every site onto the smallest label across its open bonds
+(a scatter-min) and halves the pointer paths twice; the round repeats until nothing changes, a
+number of rounds that grows like the logarithm of the cluster diameter rather than the diameter
+itself. The root of a cluster is its smallest site index, whatever the search, so the coin of
+each cluster (drawn per root) does not depend on how the components are found.
 """
 
 from __future__ import annotations
@@ -141,7 +145,9 @@ def connected_components(bond_open):
     of ``k`` onto it (scatter-min) and jumps pointers twice. A round that changes nothing leaves
     every tree a star whose linked sites share the root, so the loop stops exactly at the
     components. Under ``jax.vmap`` the lattices of the batch are labelled as one disjoint union
-    (labels offset by ``N`` per lattice), so the hooks and jumps stay one-dimensional.
+    (labels offset by ``N`` per lattice), so the hooks and jumps stay one-dimensional gathers and
+    scatters, cheaper than batched ones; the price is that chains sharded over several devices
+    gather their bonds onto each device for this search.
     """
     return _components(bond_open[None])[0]
 
@@ -190,8 +196,7 @@ def _components(bond_open):
 @_components.def_vmap
 def _components_batched(axis_size, in_batched, bond_open):
     """A batch of unions is one larger union (so nested ``vmap`` stays flat too)."""
-    if not in_batched[0]:
-        bond_open = jnp.broadcast_to(bond_open, (axis_size, *bond_open.shape))
+    del in_batched  # the rule runs only when its one argument is batched
     roots = _components(bond_open.reshape(axis_size * bond_open.shape[1], *bond_open.shape[2:]))
     return roots.reshape(axis_size, -1, roots.shape[-1]), True
 
