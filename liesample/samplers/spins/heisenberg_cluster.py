@@ -218,10 +218,10 @@ def build_kernel(system: SpinLatticeSystem, clusters: str = "all"):
     shape = params["shape"]
     _, bonds, ends = bond_table(shape, params["periodic"])
     num_sites, num_bonds = bonds.shape[0], ends.shape[0]
-    # The bond from x to x + e_a (column 2a + 1 of the neighbour table) as ``bond ids[a][x]``:
-    # the uniform of bond ``b`` is the ``b``-th draw, whichever end the grid sees it from.
-    bond_ids = jnp.asarray(bonds[:, 1::2].T.reshape(len(shape), *shape), jnp.int32)
-    exists = jnp.asarray(bonds[:, 1::2].T.reshape(len(shape), *shape) < num_bonds)
+    # ``up[a][x]``: the id of the bond from x to x + e_a (column 2a + 1 of the neighbour table;
+    # ``num_bonds`` past an open edge), so that bond ``b`` gets the ``b``-th uniform.
+    up = bonds[:, 1::2].T.reshape(len(shape), *shape)
+    bond_ids, exists = jnp.asarray(up, jnp.int32), jnp.asarray(up < num_bonds)
 
     def kernel(rng_key, state: SpinState, beta):
         s = state.position.reshape(num_sites, 3)
