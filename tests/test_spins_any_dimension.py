@@ -180,6 +180,38 @@ def test_cluster_and_heat_bath_agree_at_the_critical_point():
     assert np.all(np.abs(a.mean(0) - b.mean(0)) < Z_MAX * se), (a.mean(0), b.mean(0), se)
 
 
+def test_connected_components_match_scipy_one_lattice_or_a_batch():
+    """The roots of :func:`connected_components` are the smallest site index of each component
+    scipy finds on the same bonds, for one lattice, a batch (``vmap``) and a batch of batches
+    (the lattices of a batch are searched as one union: no root may cross between them)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components as scipy_components
+
+    from liesample.samplers.spins.heisenberg_cluster import bond_table, connected_components
+
+    rng = np.random.default_rng(0)
+    for shape, periodic in (((5, 3, 4), False), ((4, 6), True)):
+        neighbours, _, _ = bond_table(shape, periodic)
+        num_sites, dim = neighbours.shape[0], len(shape)
+        up = neighbours[:, 1::2].T  # x + e_a, num_sites where the open edge has none
+        bonds = rng.random((2, 3, dim, num_sites)) < 0.45
+        bonds &= up < num_sites
+        roots = jax.jit(jax.vmap(jax.vmap(connected_components)))(
+            jnp.asarray(bonds.reshape(2, 3, dim, *shape))
+        )
+        single = jax.jit(connected_components)(jnp.asarray(bonds[1, 2].reshape(dim, *shape)))
+        np.testing.assert_array_equal(single, roots[1, 2])
+        for index in np.ndindex(2, 3):
+            rows = np.repeat(np.arange(num_sites)[None], dim, 0)[bonds[index]]
+            graph = coo_matrix(
+                (np.ones(rows.size), (rows, up[bonds[index]])), shape=(num_sites, num_sites)
+            )
+            _, labels = scipy_components(graph, directed=False)
+            smallest = np.full(labels.max() + 1, num_sites)
+            np.minimum.at(smallest, labels, np.arange(num_sites))
+            np.testing.assert_array_equal(roots[index], smallest[labels])
+
+
 def test_cluster_moves_refuse_what_reflections_do_not_sample():
     for kwargs, name in (
         ({"coupling": -1.0}, "coupling"),

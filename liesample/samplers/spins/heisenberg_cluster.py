@@ -22,15 +22,20 @@ refused. A Swendsen–Wang step gives every site a new bond configuration and a 
 is one sweep of the lattice, so a warm-up of ``n`` steps is ``n`` sweeps. A Wolff step moves one
 cluster only (at high temperature one site), however large the lattice.
 
-The connected components come from label propagation with pointer jumping (no site-by-site
-loop): every site points to a site of smaller index in its cluster; each round hooks the root
-of every site onto the smallest label across its open bonds (a scatter-min) and halves the
-pointer paths twice; the round repeats until nothing changes, a number of rounds that grows
-like the logarithm of the cluster diameter rather than the diameter itself.
+The bonds live on the grid (``bond_open[a][x]`` joins ``x`` and ``x + e_a``), so neighbours are
+``jnp.roll`` shifts, not gathers; the uniform of each bond is drawn in the order of
+:func:`bond_table` whichever end sees it. The connected components come from label propagation
+with pointer jumping (no site-by-site loop): every site points to a site of smaller index in its
+cluster; each round hooks the root of every site onto the smallest label across its open bonds
+(a scatter-min) and halves the pointer paths twice; the round repeats until nothing changes, a
+number of rounds that grows like the logarithm of the cluster diameter rather than the diameter
+itself. The root of a cluster is its smallest site index, whatever the search, so the coin of
+each cluster (drawn per root) does not depend on how the components are found.
 """
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import jax
@@ -130,29 +135,70 @@ def bond_table(shape, periodic: bool):
     return table, bonds.reshape(table.shape), ends.astype(np.int64).reshape(-1, 2)
 
 
-def connected_components(linked):
-    """``root[k]``, the smallest site index in ``k``'s component, for ``linked`` (N, degree)
-    int: the sites each site is joined to (``k`` itself where a bond is closed or missing).
+def connected_components(bond_open):
+    """``root`` (flat, ``N = prod(shape)``), the smallest flat site index in each site's
+    component, for ``bond_open`` (bool, ``(dim, *shape)``): ``bond_open[a][x]`` joins site ``x``
+    to ``x + e_a`` (periodically wrapped; an open lattice passes ``False`` on its last layer).
 
-    Label propagation with pointer jumping: ``parent[k] ≤ k`` always; a round hooks the root of
-    every ``k`` onto the smallest parent across its links (scatter-min) and jumps pointers twice.
-    A round that changes nothing leaves every tree a star whose linked sites share the root, so
-    the loop stops exactly at the components.
+    Label propagation with pointer jumping: ``parent[k] ≤ k`` always; a round takes at every
+    ``k`` the smallest parent across its open bonds (``jnp.roll`` on the grid), hooks the parent
+    of ``k`` onto it (scatter-min) and jumps pointers twice. A round that changes nothing leaves
+    every tree a star whose linked sites share the root, so the loop stops exactly at the
+    components. Under ``jax.vmap`` the lattices of the batch are labelled as one disjoint union
+    (labels offset by ``N`` per lattice), so the hooks and jumps stay one-dimensional gathers and
+    scatters, cheaper than batched ones; the price is that chains sharded over several devices
+    gather their bonds onto each device for this search.
     """
-    num_sites = linked.shape[0]
+    return _components(bond_open[None])[0]
+
+
+@jax.custom_batching.custom_vmap
+def _components(bond_open):
+    """:func:`connected_components` of ``bond_open`` (``(lattices, dim, *shape)``) as one graph,
+    roots ``(lattices, N)`` counted within each lattice."""
+    lattices, dim, *shape = bond_open.shape
+    num_sites = math.prod(shape)
+    total = lattices * num_sites
+    if total > np.iinfo(np.int32).max and not jax.config.jax_enable_x64:
+        raise ValueError(
+            f"connected_components: {lattices} lattices of {num_sites} sites need 64-bit labels; "
+            "enable them with jax.config.update('jax_enable_x64', True) or run fewer chains "
+            "per call"
+        )
+    dtype = jnp.int32 if total <= np.iinfo(np.int32).max else jnp.int64
+    grid_shape = (lattices, *shape)
+    # Bond ``a`` of site ``x`` seen from both ends: to ``x + e_a`` and from ``x − e_a``.
+    up = [bond_open[:, a] for a in range(dim)]
+    down = [jnp.roll(bond_open[:, a], 1, axis=1 + a) for a in range(dim)]
+
+    def smallest_linked(parent):
+        grid = parent.reshape(grid_shape)
+        smallest = grid
+        for a in range(dim):
+            smallest = jnp.minimum(smallest, jnp.where(up[a], jnp.roll(grid, -1, 1 + a), grid))
+            smallest = jnp.minimum(smallest, jnp.where(down[a], jnp.roll(grid, 1, 1 + a), grid))
+        return smallest.reshape(-1)
 
     def round_(carry):
         parent, _ = carry
-        smallest = jnp.min(parent[linked], axis=1)
-        hooked = parent.at[parent].min(smallest)
+        hooked = parent.at[parent].min(smallest_linked(parent))
         jumped = hooked[hooked]
         jumped = jumped[jumped]
         return jumped, jnp.any(jumped != parent)
 
     parent, _ = jax.lax.while_loop(
-        lambda carry: carry[1], round_, (jnp.arange(num_sites, dtype=linked.dtype), True)
+        lambda carry: carry[1], round_, (jnp.arange(total, dtype=dtype), True)
     )
-    return parent
+    offset = jnp.arange(lattices, dtype=dtype)[:, None] * num_sites
+    return (parent.reshape(lattices, num_sites) - offset).astype(jnp.int32)
+
+
+@_components.def_vmap
+def _components_batched(axis_size, in_batched, bond_open):
+    """A batch of unions is one larger union (so nested ``vmap`` stays flat too)."""
+    del in_batched  # the rule runs only when its one argument is batched
+    roots = _components(bond_open.reshape(axis_size * bond_open.shape[1], *bond_open.shape[2:]))
+    return roots.reshape(axis_size, -1, roots.shape[-1]), True
 
 
 def build_kernel(system: SpinLatticeSystem, clusters: str = "all"):
@@ -169,22 +215,25 @@ def build_kernel(system: SpinLatticeSystem, clusters: str = "all"):
     check_cluster_system(system, "heisenberg_cluster")
     params = system.params
     coupling = params["coupling"]
-    table, bonds, ends = bond_table(params["shape"], params["periodic"])
-    num_sites = table.shape[0]
-    sites = np.arange(num_sites)[:, None]
-    table, bonds, ends = (jnp.asarray(a, jnp.int32) for a in (table, bonds, ends))
-    sites = jnp.asarray(sites, jnp.int32)
+    shape = params["shape"]
+    _, bonds, ends = bond_table(shape, params["periodic"])
+    num_sites, num_bonds = bonds.shape[0], ends.shape[0]
+    # ``up[a][x]``: the id of the bond from x to x + e_a (column 2a + 1 of the neighbour table;
+    # ``num_bonds`` past an open edge), so that bond ``b`` gets the ``b``-th uniform.
+    up = bonds[:, 1::2].T.reshape(len(shape), *shape)
+    bond_ids, exists = jnp.asarray(up, jnp.int32), jnp.asarray(up < num_bonds)
 
     def kernel(rng_key, state: SpinState, beta):
         s = state.position.reshape(num_sites, 3)
         key_r, key_seed, key_bonds = jax.random.split(rng_key, 3)
         r = von_mises_fisher(key_r, jnp.array([0.0, 0.0, 1.0], s.dtype), 0.0)  # uniform on S²
         projection = s @ r
-        product = projection[ends[:, 0]] * projection[ends[:, 1]]
+        grid = projection.reshape(shape)
+        product = jnp.stack([grid * jnp.roll(grid, -1, a) for a in range(len(shape))])
         p_bond = -jnp.expm1(jnp.minimum(0.0, -2.0 * beta * coupling * product))
-        bond_open = jax.random.uniform(key_bonds, p_bond.shape, dtype=s.dtype) < p_bond
-        bond_open = jnp.append(bond_open, False)  # the missing bond of an open edge
-        root = connected_components(jnp.where(bond_open[bonds], table, sites))
+        uniform = jax.random.uniform(key_bonds, (num_bonds,), dtype=s.dtype)
+        bond_open = exists & (jnp.append(uniform, 1.0)[bond_ids] < p_bond)
+        root = connected_components(bond_open)
         if clusters == "all":
             coin = jax.random.bernoulli(key_seed, 0.5, (num_sites,))
             flip = coin[root]
@@ -192,6 +241,7 @@ def build_kernel(system: SpinLatticeSystem, clusters: str = "all"):
             seed = jax.random.randint(key_seed, (), 0, num_sites, dtype=jnp.int32)
             flip = root == root[seed]
         new = jnp.where(flip[:, None], s - 2.0 * projection[:, None] * r, s)
+        new = jax.lax.optimization_barrier(new)  # computed once, not once per use below
         return finish_step(
             system,
             state.position,
