@@ -446,9 +446,18 @@ def trajectory_cost(move: Move, num_integration_steps):
 
 
 def partial_refresh(fresh, momentum, momentum_persistence):
-    """``α p + √(1 − α²) ξ`` (``α = 0``: the fresh draw ``ξ ~ N(0, M)`` itself)."""
+    """``α p + √(1 − α²) ξ`` (``α = 0``: the fresh draw ``ξ ~ N(0, M)`` itself).
+
+    A carried momentum that is exactly zero (what :func:`init` sets: none drawn yet) is replaced
+    by ``ξ``, a null set of ``N(0, M)``, so the chain's law is unchanged. Refreshing it partially
+    would start the dynamics with almost no kinetic energy: the leapfrog then turns about half of
+    the potential energy into kinetic energy (a quench; a thermalised lattice gauge field orders),
+    and where steps are accepted rarely the chain stays trapped there.
+    """
     if isinstance(momentum_persistence, (int, float)) and momentum_persistence == 0:
         return fresh
     alpha = jnp.asarray(momentum_persistence, jnp.result_type(*jax.tree.leaves(fresh)))
+    drawn = jnp.any(jnp.array([jnp.any(p != 0) for p in jax.tree.leaves(momentum)]))
+    alpha = jnp.where(drawn, alpha, jnp.zeros_like(alpha))
     scale = jnp.sqrt(1.0 - alpha**2)
     return jax.tree.map(lambda p, xi: alpha * p + scale * xi, momentum, fresh)
