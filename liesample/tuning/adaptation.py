@@ -60,6 +60,7 @@ from liesample.samplers.contract import first_bad_chain
 from liesample.samplers.cotangent._core import check_starts
 from liesample.samplers.cotangent._euclidean import default_magnetic_field
 from liesample.samplers.cotangent.magnetic_hmc import magnetic_hmc
+from liesample.tuning.protocol import pooled_rate
 from liesample.tuning.trajectory import (
     CHEES_LEARNING_RATE,
     DEFAULT_INTEGRATION_TIME,
@@ -162,25 +163,6 @@ class WarmupState(NamedTuple):
     inverse_mass: object
     welford: tuple
     smoothed: jax.Array  # each chain's running Metropolis rate (batched; else one value)
-
-
-RATE_SMOOTHING = 0.9
-"""Weight of the past in each chain's running Metropolis rate (about ten transitions)."""
-
-
-def pooled_rate(rates, smoothed):
-    """``(rate, smoothed)``: the rate dual averaging reads from a batch of chains, and their
-    updated running rates. The rate is the chains' mean rate times the ratio of the harmonic
-    to the arithmetic mean of their running rates: near 1 for chains that accept alike (the
-    step then meets the target), near 0 while one chain stays stuck (the step is lowered until
-    it moves). (The harmonic mean of the per-transition rates would also free a stuck chain,
-    but per-transition rates are noisy and it ends well above the target.)"""
-    own = jnp.where(jnp.isfinite(rates), rates, 0.0)
-    smoothed = RATE_SMOOTHING * smoothed + (1.0 - RATE_SMOOTHING) * own
-    harmonic = 1.0 / jnp.mean(1.0 / jnp.maximum(smoothed, 1e-30))
-    arithmetic = jnp.mean(smoothed)
-    ratio = jnp.where(arithmetic > 0, harmonic / jnp.maximum(arithmetic, 1e-30), 1.0)
-    return jnp.mean(own) * ratio, smoothed
 
 
 class WarmupPieces(NamedTuple):

@@ -48,7 +48,7 @@ chain, which :func:`liesample.sample` reports). Without ``step_size`` the step i
 :mod:`liesample.integrators.stability`; ``m`` noise directions), MALA's optimal scaling for a
 near-Gaussian target: on the orbit of the system's default position when the sampler is built,
 on the orbit of the first start in :func:`liesample.sample`. The sampler declares its step
-tunable by dual averaging (``tuning``, :class:`liesample.samplers.contract.StepSizeTuning`):
+tunable by dual averaging (``adaptation``, :class:`liesample.samplers.contract.Tunable`):
 under ``liesample.sample(..., num_warmup=N)`` the warm-up of :mod:`liesample.tuning` tunes it
 (Hoffman & Gelman 2014, as in ``blackjax.window_adaptation``) so that the mean acceptance rate
 over the chains reaches ``target_acceptance_rate`` (default 0.574, MALA's optimal rate, Roberts
@@ -68,7 +68,7 @@ from liesample.dynamics.system import LiePoissonSystem, checked_beta
 from liesample.foundation.validation import concrete_array, finite_float
 from liesample.integrators.chain_loop import DEFAULT_NOISE_BLOCK_SIZE, NoiseBlocks, check_block_size
 from liesample.integrators.stability import check_precision, stiffness
-from liesample.samplers.contract import Sampler, StepSizeTuning, rebuilt, sampling_api
+from liesample.samplers.contract import Sampler, Tunable, rebuilt, sampling_api
 from liesample.samplers.orbit._starts import (
     check_orbit_starts,
     check_start_energy,
@@ -347,7 +347,7 @@ def as_top_level_api(
     liesample.samplers.contract.Sampler
         ``init(position)`` and ``step(rng_key, state) -> (state, info)`` (``info``: the Info
         contract plus ``is_accepted`` and ``casimir_error``); ``rng_key`` may be
-        ``jax.random.key`` or ``jax.random.PRNGKey``. It declares ``tuning`` (dual averaging)
+        ``jax.random.key`` or ``jax.random.PRNGKey``. It declares ``adaptation`` (dual averaging)
         and ``noise_blocks``.
     """
     if not isinstance(system, LiePoissonSystem):
@@ -399,7 +399,7 @@ def as_top_level_api(
         if step_size_checks:
             check_orbits(positions, distinct_orbits(casimirs))
 
-    def at(value, sigma=sigma, beta=beta, settings=None, tuning=None):
+    def at(value, sigma=sigma, beta=beta, settings=None, adaptation=None):
         """The sampler with step ``value`` (floats, or traced in the warm-up)."""
 
         def step_fn(rng_key, state):
@@ -416,7 +416,7 @@ def as_top_level_api(
             step_fn,
             settings=settings,
             check_positions=check_positions,
-            tuning=tuning,
+            adaptation=adaptation,
             noise_blocks=NoiseBlocks(noise_block_size, draw_block, block_step),
             law_groups=orbit_groups(system),
             stuck_advice=(
@@ -426,7 +426,7 @@ def as_top_level_api(
             ),
         )
 
-    tuning = StepSizeTuning(
+    tunable = Tunable(
         "dual_averaging",
         given,
         choose,
@@ -438,7 +438,7 @@ def as_top_level_api(
         # proposal is accepted and dual averaging would grow the step without bound
         max_step_size=MAX_STEP_FACTOR * step_size,
     )
-    return at(step_size, settings=settings, tuning=tuning)
+    return at(step_size, settings=settings, adaptation=tunable)
 
 
 adjusted_lie_poisson = sampling_api(

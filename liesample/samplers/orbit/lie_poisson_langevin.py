@@ -9,8 +9,8 @@ Safe defaults: a step size beyond the measured stability bound
 (:mod:`liesample.integrators.stability`) is refused, and without a step size the sampler picks
 one below the bound whose predicted bias is at most :data:`DEFAULT_BIAS_TOLERANCE` posterior
 standard deviations (:func:`liesample.integrators.accuracy.default_step_size`). The sampler
-declares that choice as its ``tuning`` (method ``"rule"``,
-:class:`liesample.samplers.contract.StepSizeTuning`), which :func:`liesample.sample` runs on the
+declares that choice as its ``adaptation`` (method ``"rule"``,
+:class:`liesample.samplers.contract.Tunable`), which :func:`liesample.sample` runs on the
 run's starts (:mod:`liesample.tuning.warmup`); ``step`` never changes the step size.
 
 The Brownian increments of a run are drawn in blocks of ``noise_block_size`` steps
@@ -40,7 +40,7 @@ from liesample.integrators.stability import (
     check_step_size,
     stiffness_on_orbits,
 )
-from liesample.samplers.contract import Sampler, StepSizeTuning, rebuilt, sampling_api
+from liesample.samplers.contract import Sampler, Tunable, rebuilt, sampling_api
 from liesample.samplers.orbit import _starts
 
 __all__ = [
@@ -377,7 +377,7 @@ def as_top_level_api(
         step_fn,
         settings=settings,
         check_positions=check_positions,
-        tuning=StepSizeTuning("rule", given, choose, rebuild),
+        adaptation=Tunable("rule", given, choose, rebuild),
         # Without noise nothing is drawn: the per-step loop is already lean.
         noise_blocks=NoiseBlocks(noise_block_size, draw_block, block_step) if scene.noise else None,
         law_groups=_starts.orbit_groups(system),

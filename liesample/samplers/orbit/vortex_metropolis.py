@@ -37,7 +37,7 @@ import numpy as np
 
 from liesample.dynamics.system import checked_beta
 from liesample.foundation.validation import finite_float
-from liesample.samplers.contract import BasicInfo, Sampler, StepSizeTuning, rebuilt, sampling_api
+from liesample.samplers.contract import BasicInfo, Sampler, Tunable, rebuilt, sampling_api
 from liesample.samplers.orbit._starts import orbit_settings
 from liesample.systems.point_vortices import PointVortexSystem
 
@@ -186,7 +186,7 @@ def as_top_level_api(
     liesample.samplers.contract.Sampler
         ``init(position) -> VortexState`` and ``step(rng_key, state) -> (state, VortexInfo)``,
         one step being one sweep over the vortices; jit- and vmap-able, usable with
-        ``liesample.sample``. It declares ``tuning`` (dual averaging of ``proposal_scale``).
+        ``liesample.sample``. It declares ``adaptation`` (dual averaging of ``proposal_scale``).
     """
     _check_system(system)
     beta = checked_beta(system, beta)
@@ -230,21 +230,20 @@ def as_top_level_api(
         options = {"proposal": proposal, "target_acceptance_rate": target}
         return rebuilt(as_top_level_api, source, system, beta=beta, proposal_scale=value, **options)
 
-    def at(value, beta=beta, settings=None, tuning=None):
+    def at(value, beta=beta, settings=None, adaptation=None):
         """The sampler with proposal scale ``value`` (a float, or traced in the warm-up)."""
 
         def step_fn(rng_key, state):
             return kernel(rng_key, state, beta, value)
 
-        return Sampler(
-            init_fn, step_fn, settings=settings, check_positions=check_positions, tuning=tuning
-        )
+        checks = {"check_positions": check_positions, "adaptation": adaptation}
+        return Sampler(init_fn, step_fn, settings=settings, **checks)
 
     # dual averaging of the proposal scale at ``target``, up to MAX_PROPOSAL_SCALE
-    tuning = StepSizeTuning(
+    tunable = Tunable(
         "dual_averaging", given, choose, rebuild, at, {"beta": beta}, target, MAX_PROPOSAL_SCALE
     )
-    return at(settings["step_size"], settings=settings, tuning=tuning)
+    return at(settings["step_size"], settings=settings, adaptation=tunable)
 
 
 vortex_metropolis = sampling_api(
