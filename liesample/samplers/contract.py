@@ -143,17 +143,24 @@ def check_info(info) -> None:
 
 
 class Tunable(NamedTuple):
-    """What a sampler's warm-up tunes, and how (``Sampler.adaptation``).
+    """What a sampler's warm-up tunes, and how: the one declaration the tuning layer reads.
 
-    A declaration only: :mod:`liesample.tuning.warmup` (a higher layer) makes of it an instance
-    of the one adaptation protocol (:mod:`liesample.tuning.protocol`), which
-    :func:`liesample.sample`'s warm-up runs.
+    A declaration only: :mod:`liesample.tuning` (a higher layer) makes of it an instance of the
+    one adaptation protocol (:mod:`liesample.tuning.protocol`). An orbit sampler declares it as
+    ``Sampler.adaptation`` (:mod:`liesample.tuning.warmup` reads it, for
+    :func:`liesample.sample`'s warm-up); a T*G sampler's API object as
+    ``sampling_api(adaptation=…)`` (:func:`liesample.window_adaptation` and the NumPyro kernel
+    read it; the fields ``given`` to ``max_step_size`` are then unused).
 
     method : str
         ``"dual_averaging"`` (the shared step of all chains tuned to a target of their pooled
-        acceptance rate, :func:`liesample.tuning.protocol.step_size_adaptation`) or ``"rule"``
+        acceptance rate, :func:`liesample.tuning.protocol.step_size_adaptation`), ``"rule"``
         (the step computed from the run's starts by ``choose``, nothing learnt from the
-        transitions, :func:`liesample.tuning.protocol.fixed`).
+        transitions, :func:`liesample.tuning.protocol.fixed`), ``"window"`` (Stan's windows:
+        step size, mass and, for HMC, the integration time,
+        :func:`liesample.tuning.windows.windows_adaptation`) or ``"chees"`` (the same on
+        several chains with the field of magnetic HMC,
+        :func:`liesample.magnetic_window_adaptation`).
     given : bool
         The user gave the step size: without ``adapt=True`` the warm-up keeps it.
     choose : callable
@@ -176,18 +183,28 @@ class Tunable(NamedTuple):
         The largest step ``"dual_averaging"`` may use (where every proposal is accepted, at
         ``β = 0`` say, it would grow the step without bound); ``None``: no bound.
     adapted : tuple of str
-        The parameters the warm-up tunes (``("step_size",)`` for the orbit samplers).
+        The parameters the warm-up tunes (``("step_size",)`` for the orbit samplers;
+        ``step_size``, ``inverse_mass_matrix``, ``num_integration_steps``, ``magnetic_field``).
+    accepts : tuple of str
+        The kernel's parameters a caller of the window adaptation may give.
+    options : tuple of str
+        ``build_kernel``'s keywords (the integration scheme ``integrator`` among them).
+    defaults : dict
+        Values used for parameters not given (e.g. ``friction``).
     """
 
     method: str
-    given: bool
-    choose: Callable
-    rebuild: Callable
+    given: bool = False
+    choose: Callable | None = None
+    rebuild: Callable | None = None
     at: Callable | None = None
     parameters: dict | None = None
     target_acceptance_rate: float | None = None
     max_step_size: float | None = None
     adapted: tuple = ("step_size",)
+    accepts: tuple = ()
+    options: tuple = ()
+    defaults: Mapping = MappingProxyType({})
 
 
 class DrawNames(NamedTuple):
@@ -310,15 +327,9 @@ def sampling_api(as_top_level_api, init, build_kernel, name: str, module: str, *
     and ``__doc__`` are ``as_top_level_api``'s docstring (plus the precision rule) and whose
     call signature is that of ``as_top_level_api``.
 
-    ``adaptation``, stored as the object's ``.adaptation`` (``None``: none), declares how
-    :func:`liesample.window_adaptation` (and the NumPyro kernel) tunes the sampler: a mapping
-    with ``"schedule"`` (``"window"``: Stan's windows on one chain; ``"chees"``: chains tuned
-    together, trajectory length by ChEES), ``"adapted"`` (the parameters it sets:
-    ``step_size``, ``inverse_mass_matrix``, ``num_integration_steps``, ``magnetic_field``),
-    ``"parameters"`` (the kernel's arguments a caller may give), ``"options"``
-    (``build_kernel``'s keywords, e.g. ``integrator``), ``"defaults"`` (values used for
-    parameters not given, e.g. ``friction``) and ``"target_acceptance_rate"`` (dual
-    averaging's default target)."""
+    ``adaptation``, a :class:`Tunable` stored as the object's ``.adaptation`` (``None``:
+    none), declares how :func:`liesample.window_adaptation` (and the NumPyro kernel) tunes the
+    sampler."""
     doc = inspect.cleandoc(as_top_level_api.__doc__ or "")
     doc = doc + "\n" + _PRECISION_NOTE.format(name=name)
 
@@ -340,7 +351,9 @@ def sampling_api(as_top_level_api, init, build_kernel, name: str, module: str, *
         },
     )
     api = cls(as_top_level_api, init, build_kernel)
-    api.adaptation = None if adaptation is None else dict(adaptation)
+    if adaptation is not None and not isinstance(adaptation, Tunable):
+        raise TypeError(f"adaptation must be a Tunable, got {type(adaptation).__name__}")
+    api.adaptation = adaptation
     return api
 
 

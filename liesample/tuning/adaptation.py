@@ -3,8 +3,9 @@
 ``liesample.window_adaptation(algorithm, logdensity_fn, space, **parameters)`` mirrors
 ``blackjax.window_adaptation``: ``.run(rng_key, initial_position, num_steps)`` returns
 ``((state, parameters), info)`` and ``algorithm(logdensity_fn, space, **parameters)`` is the
-tuned sampler. What is tuned, and how, the sampler declares: ``algorithm.adaptation``
-(:func:`liesample.samplers.contract.sampling_api`) names the schedule, the adapted parameters,
+tuned sampler. What is tuned, and how, the sampler declares: ``algorithm.adaptation`` (a
+:class:`liesample.samplers.contract.Tunable`, given to
+:func:`liesample.samplers.contract.sampling_api`) names the method, the adapted parameters,
 the kernel's parameters and ``build_kernel`` options (the integration scheme ``integrator``
 among them, passed through) and the default target. Stan's schedule (:func:`window_schedule`):
 a fast window (step size only), doubling slow windows (step size and mass; the step size is
@@ -56,7 +57,6 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-from blackjax.adaptation.step_size import dual_averaging_adaptation
 from jax.flatten_util import ravel_pytree
 
 from liesample.foundation.compile import jit
@@ -66,7 +66,7 @@ from liesample.samplers.contract import Sampler, as_sampler, first_bad_chain
 from liesample.samplers.cotangent._core import check_starts
 from liesample.samplers.cotangent._euclidean import default_magnetic_field
 from liesample.samplers.cotangent.magnetic_hmc import magnetic_hmc
-from liesample.tuning.protocol import pooled_rate, run_adaptation, schedule
+from liesample.tuning.protocol import run_adaptation, schedule
 from liesample.tuning.trajectory import (
     CHEES_LEARNING_RATE,
     DEFAULT_INTEGRATION_TIME,
@@ -81,7 +81,6 @@ from liesample.tuning.windows import (
     inverse_mass,
     regularised_variance,
     statistic,
-    welford_batch,
     windows_adaptation,
 )
 
@@ -111,9 +110,6 @@ class AdaptationInfo(NamedTuple):
     num_integration_steps: jax.Array
 
 
-_mass_of = inverse_mass  # (warmup_pieces shadows the name)
-
-
 def window_schedule(num_steps: int) -> tuple[np.ndarray, np.ndarray]:
     """Stan's warm-up windows for ``num_steps`` transitions: ``(stage, window_end)`` per step,
     ``stage`` 0 in a fast window and 1 in a slow one, ``window_end`` true at the last step of a
@@ -126,96 +122,6 @@ def integration_steps(step_size, integration_time):
     """``L = ceil(T / ε)``, clipped to ``[1, MAX_NUM_INTEGRATION_STEPS]`` (traceable)."""
     steps = jnp.ceil(integration_time / step_size)
     return jnp.clip(steps, 1, MAX_NUM_INTEGRATION_STEPS).astype(int)
-
-
-class WarmupState(NamedTuple):
-    """Adaptation carry: dual-averaging state, current step size and inverse mass, Welford
-    moments ``(mean, m2, count)`` of :func:`_statistic` in the current slow window."""
-
-    da_state: object
-    step_size: jax.Array
-    inverse_mass: object
-    welford: tuple
-    smoothed: jax.Array  # each chain's running Metropolis rate (batched; else one value)
-
-
-class WarmupPieces(NamedTuple):
-    """One warm-up step's bookkeeping, shared by :func:`window_adaptation` and samplers that
-    adapt inside another library's chain loop (``liesample.interop.numpyro_kernel``)."""
-
-    init: Callable  # (sampler state, initial step size, inverse mass) -> WarmupState
-    update: Callable  # (WarmupState, new state, info, stage, window_end) -> WarmupState
-    final_step_size: Callable  # WarmupState -> the averaged step size of dual averaging
-
-
-def _close_window(window_end, new_inverse_mass, da_init, da_final, operands):
-    """At the end of a slow window (Stan's schedule): the mass from the window's Welford moments
-    ``new_inverse_mass(mean, m2, count)``, dual averaging restarted from its averaged step size,
-    the moments reset. Otherwise ``operands = (da_state, inverse_mass, welford)`` unchanged."""
-
-    def close(operands):
-        da_state, _, (mean, m2, count) = operands
-        welford = (jnp.zeros_like(mean), jnp.zeros_like(m2), 0 * count)
-        return da_init(da_final(da_state)), new_inverse_mass(mean, m2, count), welford
-
-    return jax.lax.cond(window_end, close, lambda operands: operands, operands)
-
-
-def warmup_pieces(
-    space, target_acceptance_rate: float, adapt_mass: bool = True, batched: bool = False
-) -> WarmupPieces:
-    """Dual averaging of the step size towards ``target_acceptance_rate`` and the Welford mass
-    of :func:`_inverse_mass`, one transition at a time, on Stan's schedule: ``stage`` 1 (slow
-    window) accumulates the mass statistic, ``window_end`` sets the mass and restarts dual
-    averaging from its averaged step size. ``batched``: states carry a leading chain axis; the
-    chains share the step size and mass, dual averaging follows :func:`pooled_rate` (a stuck
-    chain lowers the step) and the mass pools their moments."""
-    da_init, da_update, da_final = dual_averaging_adaptation(target_acceptance_rate)
-    batch_statistic = jax.vmap(functools.partial(statistic, space)) if batched else None
-
-    def init(state, initial_step_size, inverse_mass):
-        num_chains = jnp.shape(state.logdensity)[0] if batched else 1
-        if batched:
-            state = jax.tree.map(lambda leaf: leaf[0], state)
-        dtype = jnp.asarray(state.logdensity).dtype
-        size = statistic(space, state).shape[0]
-        welford = (jnp.zeros(size, dtype), jnp.zeros(size, dtype), jnp.asarray(0))
-        step_size = jnp.asarray(initial_step_size, dtype)
-        smoothed = jnp.full(num_chains, target_acceptance_rate, dtype)
-        return WarmupState(da_init(step_size), step_size, inverse_mass, welford, smoothed)
-
-    def update(warm, state, info, stage, window_end):
-        da_state, _, inverse_mass, welford, smoothed = warm
-        slow = (stage == 1) & adapt_mass
-        if batched:
-            rate, smoothed = pooled_rate(info.metropolis_rate, smoothed)
-            da_state = da_update(da_state, rate)
-            updated = welford_batch(welford, batch_statistic(state))
-        else:
-            rate = jnp.where(jnp.isfinite(info.metropolis_rate), info.metropolis_rate, 0.0)
-            da_state = da_update(da_state, rate)
-            mean, m2, count = welford
-            x = statistic(space, state)
-            new_count = count + 1
-            delta = x - mean
-            new_mean = mean + delta / new_count
-            updated = (new_mean, m2 + delta * (x - new_mean), new_count)
-        welford = jax.tree.map(lambda a, b: jnp.where(slow, a, b), updated, welford)
-
-        da_state, inverse_mass, welford = _close_window(
-            window_end & adapt_mass,
-            functools.partial(_mass_of, space),
-            da_init,
-            da_final,
-            (da_state, inverse_mass, welford),
-        )
-        step_size = jnp.exp(da_state.log_step_size)
-        return WarmupState(da_state, step_size, inverse_mass, welford, smoothed)
-
-    def final_step_size(warm):
-        return da_final(warm.da_state)
-
-    return WarmupPieces(init, update, final_step_size)
 
 
 def _num_chains(space, position) -> int | None:
@@ -278,7 +184,7 @@ def window_adaptation(
         raise TypeError(
             f"{name} declares no window adaptation (no adaptation= in its sampling_api)"
         )
-    if declared["schedule"] == "chees":
+    if declared.method == "chees":
         if space is not None:
             raise TypeError(
                 f"{name} samples on R^d and takes no space; call "
@@ -336,9 +242,9 @@ class _WindowPlan(NamedTuple):
 def _window_plan(algorithm, declared, target_acceptance_rate, integration_time, parameters):
     """Validate ``window_adaptation``'s arguments against the sampler's declaration."""
     name = type(algorithm).__name__
-    build_options = {k: parameters.pop(k) for k in declared["options"] if k in parameters}
+    build_options = {k: parameters.pop(k) for k in declared.options if k in parameters}
     kernel = algorithm.build_kernel(**build_options)
-    is_hmc = "num_integration_steps" in declared["adapted"]
+    is_hmc = "num_integration_steps" in declared.adapted
     fixed_steps = parameters.pop("num_integration_steps", None)
     if not is_hmc and (fixed_steps is not None or integration_time is not None):
         raise ValueError("num_integration_steps and integration_time are HMC parameters")
@@ -351,18 +257,18 @@ def _window_plan(algorithm, declared, target_acceptance_rate, integration_time, 
     time = DEFAULT_INTEGRATION_TIME if integration_time is None else integration_time
     time = finite_float("integration_time", time, positive=True)
     learn = is_hmc and fixed_steps is None and integration_time is None
-    for key, value in declared["defaults"].items():
+    for key, value in declared.defaults.items():
         parameters.setdefault(key, value)
     if target_acceptance_rate is None:
-        target_acceptance_rate = declared["target_acceptance_rate"]
+        target_acceptance_rate = declared.target_acceptance_rate
     target = finite_float("target_acceptance_rate", target_acceptance_rate, rate=True)
     if "step_size" in parameters:
         raise TypeError("step_size is what window_adaptation tunes: give initial_step_size")
-    unknown = set(parameters) - set(declared["parameters"])
+    unknown = set(parameters) - set(declared.accepts)
     if unknown:
         raise TypeError(
             f"unknown parameters for {name}: {sorted(unknown)}; it takes "
-            f"{sorted(declared['parameters'])} and the options {sorted(declared['options'])}"
+            f"{sorted(declared.accepts)} and the options {sorted(declared.options)}"
         )
     initial_mass = parameters.pop("inverse_mass_matrix", None)
     fixed = None if fixed_steps is None else int(fixed_steps)
@@ -465,7 +371,7 @@ DEFAULT_ANGLE = 0.0
 """Default field of :func:`magnetic_window_adaptation`, as the angle (rad) per step: no field.
 A field helps on some targets (strongly correlated or curved ones) and slows the slowest
 directions of others, so it is opt-in; ``angle > 0`` turns it on, adapted jointly."""
-CHEES_TARGET_ACCEPTANCE_RATE = magnetic_hmc.adaptation["target_acceptance_rate"]
+CHEES_TARGET_ACCEPTANCE_RATE = magnetic_hmc.adaptation.target_acceptance_rate
 
 
 class MagneticAdaptationInfo(NamedTuple):
@@ -550,30 +456,11 @@ def magnetic_window_adaptation(
 
     **Trajectory length (ChEES).** Each transition integrates for ``t = u T`` with ``u`` from the
     base-2 Halton sequence (the same for every chain), ``L = ceil(t / ε)`` steps; ``log T`` is
-    moved by ``learning_rate`` times the estimated gradient (clipped to ``[−2, 2]``) of the log
-    of the squared distance's ESS per gradient, ``(1 − ρ)/((1 + ρ) T)``, with ``1 − ρ``
-    read off ChEES normalised by its value for independent draws
-    (:func:`_log_efficiency_gradient`, from running means of the estimates of
-    :func:`_chees_terms`). Every step of a scheme costs the same number of gradients, so the
-    rule is the same per gradient for every ``integrator``. ChEES alone saturates once the
-    trajectory outlasts the slowest direction's decorrelation time, and its noisy gradient
-    then lets ``T`` drift; ChEES per unit length has a maximum but favours the fast
-    directions. The gradient is dimensionless and bounded, so the step is plain stochastic
-    ascent, not Adam (Adam's normalised steps keep their size where the mean gradient
-    vanishes, so ``T`` wanders around the optimum). The derivative is taken at the time
-    integrated, ``L ε`` (at least one step), not at ``u T``: below ``ε`` the two differ, and a
-    rule fed ``u T`` there sees no gain in a longer ``T`` and lets it shrink without end.
-    At ``T <= ε`` every transition is one step whatever ``T`` is, so ``T`` is not lowered
-    there (near the step's stability limit one step can look better than two to the gradient,
-    which would otherwise move ``T`` down without end). After each update ``T`` is pulled
-    down towards ``min(L_max ε, π √(tr Σ̃))`` when above it, ``tr Σ̃`` the running mean of the
-    chains' whitened squared distance to their centre
-    (:func:`_bound_log_time`): a Gaussian's slowest direction turns back after
-    ``π √(tr Σ̃)`` at most, so the noisy gradient cannot carry ``T`` far past it. The pull is
-    rate-limited, so that a momentary tiny ``ε`` does not drag ``T`` far down (transitions
-    never exceed ``L_max`` steps). The returned ``T`` is ``exp`` of the mean of ``log T``
-    over the last slow window and the final fast window; ``integration_time=T`` fixes ``T``
-    instead.
+    learnt by the ChEES-type rule of :mod:`liesample.tuning.trajectory` (stochastic ascent on
+    the squared distance's ESS per gradient, the same per gradient for every ``integrator``,
+    bounded above by the chains' spread). The returned ``T`` is ``exp`` of the mean of
+    ``log T`` over the last slow window and the final fast window; ``integration_time=T``
+    fixes ``T`` instead.
 
     Parameters
     ----------
@@ -599,6 +486,38 @@ def magnetic_window_adaptation(
         The sampler tuned: ``liesample.magnetic_hmc`` or one with its signature.
     """
     del progress_bar  # accepted for BlackJAX compatibility; the warm-up is one compiled loop
+    plan = _magnetic_plan(
+        algorithm, logdensity_fn, angle, initial_step_size, target_acceptance_rate,
+        integration_time, initial_integration_time, learning_rate, adapt_mass,
+        divergence_threshold, max_num_integration_steps, integrator,
+    )  # fmt: skip
+
+    def run(rng_key, initial_positions, num_steps: int = 1000):
+        """Warm up ``C`` chains for ``num_steps`` transitions; ``((states, parameters), info)``."""
+        return _magnetic_run(plan, rng_key, initial_positions, num_steps)
+
+    return GeometricAdaptation(run)
+
+
+class _MagneticPlan(NamedTuple):
+    """What :func:`magnetic_window_adaptation` checked."""
+
+    algorithm: object
+    logdensity_fn: Callable
+    angle: float
+    target: float
+    initial_step_size: float
+    adapt_mass: bool
+    max_steps: int
+    options: dict  # the sampler's keywords: divergence_threshold and the scheme
+    lengths: object
+
+
+def _magnetic_plan(algorithm, logdensity_fn, angle, initial_step_size, target_acceptance_rate,
+                   integration_time, initial_integration_time, learning_rate, adapt_mass,
+                   divergence_threshold, max_num_integration_steps,
+                   integrator) -> _MagneticPlan:  # fmt: skip
+    """:func:`magnetic_window_adaptation`'s arguments checked, each error naming its parameter."""
     scheme = {} if integrator is None else {"integrator": integrator}
     algorithm.build_kernel(**scheme)  # validates the scheme now
     angle = finite_float("angle", angle, nonnegative=True)
@@ -622,30 +541,10 @@ def magnetic_window_adaptation(
         learn=integration_time is None,
     )
     options = {"divergence_threshold": divergence_threshold, **scheme}
-    plan = _MagneticPlan(
+    return _MagneticPlan(
         algorithm, logdensity_fn, angle, target, initial_step_size, adapt_mass, max_steps,
         options, lengths,
     )  # fmt: skip
-
-    def run(rng_key, initial_positions, num_steps: int = 1000):
-        """Warm up ``C`` chains for ``num_steps`` transitions; ``((states, parameters), info)``."""
-        return _magnetic_run(plan, rng_key, initial_positions, num_steps)
-
-    return GeometricAdaptation(run)
-
-
-class _MagneticPlan(NamedTuple):
-    """What :func:`magnetic_window_adaptation` checked."""
-
-    algorithm: object
-    logdensity_fn: Callable
-    angle: float
-    target: float
-    initial_step_size: float
-    adapt_mass: bool
-    max_steps: int
-    options: dict  # the sampler's keywords: divergence_threshold and the scheme
-    lengths: object
 
 
 def _magnetic_run(plan: _MagneticPlan, rng_key, initial_positions, num_steps):

@@ -131,9 +131,11 @@ def pooled_rate(rates, smoothed):
 
 
 class StepSizeState(NamedTuple):
-    """Dual averaging's state (``blackjax``'s) and each chain's running rate."""
+    """Dual averaging's state (``blackjax``'s), the step the next transition uses (the given
+    one at first, then ``exp`` of dual averaging's iterate) and each chain's running rate."""
 
     da: object
+    step_size: jax.Array
     smoothed: jax.Array
 
 
@@ -151,17 +153,20 @@ def step_size_adaptation(target: float, rate_field: str = "acceptance_rate",
     def init(states, parameters):
         step = jnp.asarray(parameters["step_size"])
         num_chains = jax.tree.leaves(states)[0].shape[0]
-        return StepSizeState(da_init(step), jnp.full(num_chains, target, step.dtype))
+        return StepSizeState(da_init(step), step, jnp.full(num_chains, target, step.dtype))
 
     def current(state, row=None):
-        return {"step_size": jnp.minimum(jnp.exp(state.da.log_step_size), max_step_size)}
+        return {"step_size": jnp.minimum(state.step_size, max_step_size)}
 
     def update(state, row, parameters, before, after, infos):
         rate, smoothed = pooled_rate(getattr(infos, rate_field), state.smoothed)
-        return StepSizeState(da_update(state.da, rate), smoothed)
+        da = da_update(state.da, rate)
+        return StepSizeState(da, jnp.exp(da.log_step_size), smoothed)
 
     def final(state):
-        return {"step_size": jnp.minimum(da_final(state.da), max_step_size)}
+        # before any update dual averaging's average is not yet defined: the current step
+        averaged = jnp.where(state.da.step > 1, da_final(state.da), state.step_size)
+        return {"step_size": jnp.minimum(averaged, max_step_size)}
 
     return Adaptation(init, current, update, final)
 
@@ -171,7 +176,8 @@ def restart_step_size(state: StepSizeState, target: float, step_size=None) -> St
     average."""
     da_init, _, da_final = dual_averaging_adaptation(target)
     start = da_final(state.da) if step_size is None else step_size
-    return state._replace(da=da_init(start))
+    da = da_init(start)
+    return state._replace(da=da, step_size=jnp.exp(da.log_step_size))
 
 
 def fixed(parameters: dict) -> Adaptation:

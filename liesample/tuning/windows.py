@@ -136,6 +136,8 @@ class Windows(NamedTuple):
     extra : ``(row, step_size, inverse_mass) -> dict`` of further parameters (the field), or
         ``None``.
     dense : :class:`DenseBlocks` or ``None``.
+    jitter : ``L = ceil(u T / ε)`` with ``u`` the Halton point (default), else ``u = 1``.
+    step_size : a step size kept fixed (not adapted), or ``None``.
     """
 
     target: float
@@ -150,6 +152,8 @@ class Windows(NamedTuple):
     max_steps: int = MAX_NUM_INTEGRATION_STEPS
     extra: Callable | None = None
     dense: DenseBlocks | None = None
+    jitter: bool = True
+    step_size: float | None = None
 
 
 class WindowState(NamedTuple):
@@ -199,17 +203,21 @@ def windows_adaptation(w: Windows) -> Adaptation:
         welford = (zero, zero, jnp.asarray(0))
         return WindowState(step.init(states, parameters), mass, welford, dense, length)
 
+    def step_size_of(parameters):
+        if w.step_size is not None:
+            return jnp.asarray(w.step_size, parameters["step_size"].dtype)
+        return parameters["step_size"]
+
     def current(state, row):
-        step_size = step.current(state.step)["step_size"]
+        step_size = step_size_of(step.current(state.step))
         out = {"step_size": step_size, "inverse_mass_matrix": state.inverse_mass}
         if w.fixed_steps is not None:
             out["num_integration_steps"] = jnp.asarray(w.fixed_steps)
         elif w.lengths is not None:
             time = jnp.exp(state.length.log_time)
             out["integration_time"] = time
-            out["num_integration_steps"] = jittered_steps(
-                halton(row.index), time, step_size, w.max_steps
-            )
+            u = halton(row.index) if w.jitter else 1.0
+            out["num_integration_steps"] = jittered_steps(u, time, step_size, w.max_steps)
         if w.extra is not None:
             out.update(w.extra(row, step_size, state.inverse_mass))
         return out
@@ -244,7 +252,7 @@ def windows_adaptation(w: Windows) -> Adaptation:
         return WindowState(restarted, mass, _zeroed(state.welford), dense, state.length)
 
     def final(state):
-        out = {"step_size": step.final(state.step)["step_size"],
+        out = {"step_size": step_size_of(step.final(state.step)),
                "inverse_mass_matrix": state.inverse_mass}  # fmt: skip
         if w.lengths is not None:
             out["integration_time"] = w.lengths.final(state.length)

@@ -32,7 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from liesample.foundation.validation import concrete_array
-from liesample.samplers.contract import Sampler, sampling_api, setting
+from liesample.samplers.contract import Sampler, Tunable, sampling_api, setting
 from liesample.samplers.cotangent._core import (
     GeometricInfo,
     GeometricState,
@@ -53,14 +53,13 @@ from liesample.samplers.cotangent._core import (
 
 __all__ = ["ADAPTATION", "as_top_level_api", "build_kernel", "geometric_hmc", "init"]
 
-ADAPTATION = {
-    "schedule": "window",
-    "adapted": ("step_size", "inverse_mass_matrix", "num_integration_steps"),
-    "parameters": ("num_integration_steps", "inverse_mass_matrix", "magnetic_field"),
-    "options": ("divergence_threshold", "momentum_persistence", "persistent", "integrator"),
-    "defaults": {},
-    "target_acceptance_rate": 0.8,
-}
+ADAPTATION = Tunable(
+    "window",
+    target_acceptance_rate=0.8,
+    adapted=("step_size", "inverse_mass_matrix", "num_integration_steps"),
+    accepts=("num_integration_steps", "inverse_mass_matrix", "magnetic_field"),
+    options=("divergence_threshold", "momentum_persistence", "persistent", "integrator"),
+)
 """How :func:`liesample.window_adaptation` tunes geometric HMC (``sampling_api(adaptation=)``)."""
 
 
