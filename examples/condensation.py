@@ -21,8 +21,8 @@ that point.
 
 The whole sweep is compiled once: the adjusted kernel takes ``β`` and the step as traced
 arguments, so the warm-up (dual averaging of one step per ``β``, shared by that ``β``'s chains,
-to the sampler's target acceptance rate; ``liesample.tuning.dual_averaging``) and the sampling
-are each one ``vmap`` over ``β`` and the chains, instead of one ``liesample.sample`` call per
+to the sampler's target acceptance rate;
+``liesample.tuning.protocol.step_size_adaptation``) and the sampling are each one ``vmap`` over ``β`` and the chains, instead of one ``liesample.sample`` call per
 ``β`` (each compiles its own warm-up and sampling loops). Dual averaging starts from
 ``dt = 1``. At ``β = 0`` every move is accepted, so there is no acceptance signal to tune on:
 that row keeps the step tuned at the smallest ``|β|``, and needs no warm-up (its starts are
@@ -74,7 +74,7 @@ from liesample.systems.zeitlin_states import (
     vorticity_on_grid,
 )
 from liesample.targets.zeitlin import UnitaryOrbitLaw, uniform_orbit_energy_spectrum
-from liesample.tuning.dual_averaging import dual_averaging
+from liesample.tuning.protocol import run_adaptation, step_size_adaptation
 
 DEFAULT_B = "-4,-3,-1,0,1,2"
 SPECTRAL_SLOPE = -3.0  # energy spectrum ε_ℓ ∝ ℓ^slope of the orbit's representative
@@ -92,14 +92,16 @@ def parse_b(text: str) -> np.ndarray:
 def tune_and_warm_up(sampler, betas, starts, keys, num_warmup):
     """Dual averaging of one step per ``β`` (its chains share it), all ``β`` in one compiled
     ``vmap``, from the sampler's step; returns the warmed-up states and the tuned steps."""
-    tuning = sampler.tuning
-    initial = sampler.settings["step_size"]
+    tunable = sampler.adaptation
+    adaptation = step_size_adaptation(tunable.target_acceptance_rate)
+    initial = {"step_size": jnp.asarray(sampler.settings["step_size"])}
 
     def one_beta(beta, chain_keys, chain_starts):
         states = jax.vmap(sampler.init)(chain_starts)
-        result = dual_averaging(tuning.at, chain_keys, states, initial, num_warmup,
-                                tuning.target_acceptance_rate, {"sigma": SIGMA, "beta": beta})
-        return result.states, result.step_size
+        sampler_at = lambda step_size: tunable.at(step_size, sigma=SIGMA, beta=beta)
+        states, tuned, _ = run_adaptation(adaptation, sampler_at, chain_keys, states, initial,
+                                          num_warmup)
+        return states, tuned["step_size"]
 
     run = liesample.jit(jax.vmap(one_beta))
     return run(jnp.asarray(betas), keys, jnp.asarray(starts))

@@ -207,14 +207,19 @@ def test_trajectory_length_below_one_step_grows_again():
     # and stayed there). Below ε every transition is one step of length ε whatever T is; the
     # ChEES gradient taken at u·T instead of the time integrated saw no gain in a longer T, so
     # T stayed at 0.01 here. At the time integrated it asks for more: T grows at the largest
-    # rate the learning rate allows (0.02 in log T per transition).
+    # rate the learning rate allows (0.02 in log T per transition) where the noisy gradient
+    # estimate is positive, and it is never lowered while below one step.
     # (Where the mass changes, T is rescaled to the new whitened units: those transitions are
-    # left out.)
+    # left out.) How fast it grows depends on the draws: over twelve keys, before and after the
+    # warm-up ran on the adaptation protocol's driver, T grew 4-16x in the first 150
+    # transitions (with stretches of zero growth where the estimate was negative) and ended
+    # between 0.04 and 0.26; the regression left it at 0.01.
     parameters, times = _scaled_gaussian_run(0.01)
-    assert times[-1] > 0.1, times[::25]
+    assert times[-1] > 0.03, times[::25]
     growth = np.diff(np.log(times[:150]))
     rescaled = np.flatnonzero(window_schedule(300)[1]) + 1
-    assert np.all(np.delete(growth, rescaled[rescaled < growth.size]) > 0.0), times[:150:10]
+    assert np.all(np.delete(growth, rescaled[rescaled < growth.size]) >= 0.0), times[:150:10]
+    assert times[149] > 3.0 * times[0], times[:150:10]
     assert parameters["num_integration_steps"] >= 1
 
 

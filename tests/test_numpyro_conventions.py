@@ -391,9 +391,9 @@ def test_shapes_are_checked_in_init_before_any_transition(monkeypatch):
     assert calls == []
 
 
-def test_init_docstring_lists_every_parameter():
-    doc = GeometricHMC.__init__.__doc__
-    assert doc is not None and "Parameters\n        ----------" in doc
+def test_class_docstring_lists_every_parameter():
+    doc = GeometricHMC.__doc__  # numpydoc: __init__'s parameters on the class
+    assert doc is not None and "Parameters\n    ----------" in doc
     for name in inspect.signature(GeometricHMC.__init__).parameters:
         if name != "self":
             assert name in doc, name

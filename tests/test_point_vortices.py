@@ -638,7 +638,7 @@ def test_vortex_metropolis_tunes_its_proposal_and_follows_the_contract():
     energies = jax.vmap(system.hamiltonian)(jnp.asarray(run.positions[:, -1]))
     np.testing.assert_allclose(run.info["energy"][:, -1], energies, rtol=1e-10, atol=1e-10)
     given = liesample.vortex_metropolis(system, beta=-4.0, proposal_scale=0.3)
-    assert given.settings["step_size"] == 0.3 and given.tuning.given
+    assert given.settings["step_size"] == 0.3 and given.adaptation.given
     untuned = liesample.vortex_metropolis(system, beta=-4.0)
     assert untuned.settings["step_size"] == 0.5
     with pytest.raises(ValueError, match="non-normalisable"):

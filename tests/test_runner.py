@@ -200,7 +200,7 @@ def test_a_plain_blackjax_algorithm_runs_as_a_sampler_with_the_defaults(plain):
         blackjax.base.SamplingAlgorithm(ALGORITHM.init, ALGORITHM.step)
     )
     assert bare.settings == {} and bare.check_positions is None
-    assert bare.tuning is None and bare.noise_blocks is None
+    assert bare.adaptation is None and bare.noise_blocks is None
     result = sample_chains(bare, KEY, POSITIONS, 4, progress_bar=False)
     assert result.positions.shape == (3, 4, 3) and result.settings == {
         "num_warmup": 0,
@@ -216,7 +216,7 @@ def test_the_warm_up_tunes_a_new_sampler_and_leaves_the_given_one(name):
     sampler (recorded in its settings); the sampler passed in is not changed, and its step
     never changes its settings."""
     sampler = getattr(liesample, name)(SYSTEM, beta=3.0)
-    assert sampler.tuning is not None and not sampler.tuning.given
+    assert sampler.adaptation is not None and not sampler.adaptation.given
     before = dict(sampler.settings)
     result = sample_chains(sampler, KEY, POSITIONS, 4, num_warmup=20, progress_bar=False)
     assert result.settings["adapted"] and result.settings["step_size"] > 0

@@ -33,21 +33,22 @@ the nearest point of the manifold), ``dense_mass``, ``inverse_mass_matrix``, ``s
 on ``Euclidean`` sites only: the exact drift on a sphere or a group needs one inverse mass per
 copy (:mod:`liesample.samplers.cotangent.geometric_hmc`).
 
-**Warm-up.** During NumPyro's ``num_warmup`` iterations the kernel adapts as
-:func:`liesample.window_adaptation` does, sharing its pieces
-(:func:`liesample.tuning.adaptation.warmup_pieces`,
-:func:`liesample.tuning.adaptation.window_schedule` and :mod:`liesample.tuning.trajectory`) and
-reading what to adapt from ``liesample.geometric_hmc.adaptation``: Stan's windows, dual averaging of
-the step size towards ``target_accept_prob``, the inverse mass from Welford moments in algebra
-coordinates (for a ``dense_mass`` block the Welford covariance, shrunk towards ``1e-3 I`` as Stan
-does), and a jittered integration time ``u T`` (``L = ceil(u T/ε)`` steps of the ``integrator``
-scheme, ``u`` from the base-2 Halton sequence) with ``T`` learnt by the ChEES-type rule, unless
-``num_integration_steps`` or ``integration_time`` is given. Vectorized chains
+**Warm-up.** During NumPyro's ``num_warmup`` iterations the kernel adapts by the one adaptation
+protocol (:mod:`liesample.tuning.protocol`) with the adaptation :func:`liesample.window_adaptation`
+runs (:func:`liesample.tuning.windows.windows_adaptation`): NumPyro drives the loop, so each
+iteration calls its ``current`` (the parameters of the transition) and, after the transition,
+its ``update``. It reads what to adapt from ``liesample.geometric_hmc.adaptation``: Stan's
+windows, dual averaging of the step size towards ``target_accept_prob``, the inverse mass from
+Welford moments in algebra coordinates (for a ``dense_mass`` block the Welford covariance, shrunk
+towards ``1e-3 I`` as Stan does), and a jittered integration time ``u T``
+(``L = ceil(u T/ε)`` steps of the ``integrator`` scheme, ``u`` from the base-2 Halton sequence)
+with ``T`` learnt by the ChEES-type rule, unless ``num_integration_steps`` or
+``integration_time`` is given. Vectorized chains
 (``chain_method="vectorized"``) adapt together: one step size (their pooled rate,
-:func:`liesample.tuning.adaptation.pooled_rate`), one mass (pooled moments) and one ``T``;
-sequential chains adapt alone. At the last warm-up iteration the step size becomes dual averaging's
-average and ``T`` the rule's; after that nothing changes. ``num_warmup=0`` with anything left to
-adapt warns.
+:func:`liesample.tuning.protocol.pooled_rate`), one mass (pooled moments) and one ``T``;
+sequential chains adapt alone. After the warm-up the adaptation's ``final`` parameters are used
+(dual averaging's average step, the rule's ``T``); nothing changes any more. ``num_warmup=0``
+with anything left to adapt warns.
 
 **State and diagnostics.** The sample field is ``z``: the manifold sites' points and the other
 sites' unconstrained values (``init_params`` takes the same form); ``postprocess_fn`` maps it to
@@ -69,6 +70,7 @@ to round-off, a slow test), as XLA:CPU's vmapped-loop miscompile
 
 from __future__ import annotations
 
+import functools
 import math
 import warnings
 from collections.abc import Callable
@@ -90,7 +92,6 @@ except ImportError as error:  # an optional integration module
 import jax
 import jax.numpy as jnp
 import numpy as np
-from blackjax.adaptation.step_size import dual_averaging_adaptation
 
 from liesample.foundation.compile import jit
 from liesample.foundation.validation import concrete_array, finite_float
@@ -98,16 +99,22 @@ from liesample.geometry import spaces
 from liesample.geometry.cotangent import cotangent_bundle
 from liesample.interop.numpyro_distributions import rotation
 from liesample.samplers.cotangent.geometric_hmc import geometric_hmc
-from liesample.tuning.adaptation import WarmupState, warmup_pieces, window_schedule
+from liesample.tuning.protocol import restart_step_size, row_at, schedule
 from liesample.tuning.trajectory import (
     DEFAULT_INTEGRATION_TIME,
-    TrajectoryState,
-    averaged_steps,
     chain_move,
     euclidean_size,
     halton,
     jittered_steps,
     trajectory_adaptation,
+)
+from liesample.tuning.windows import (
+    DenseBlocks,
+    Windows,
+    WindowState,
+    inverse_mass,
+    statistic,
+    windows_adaptation,
 )
 
 __all__ = ["AdaptState", "GeometricHMC", "GeometricHMCState"]
@@ -125,26 +132,18 @@ class AdaptState(NamedTuple):
     """``extra_fields=("adapt_state",)`` (the names of NumPyro's ``HMCAdaptState``): what the
     warm-up adapted, as the next transition uses it: the step size, the inverse mass (keyed by
     tuples of site names: one per site, one per ``dense_mass`` group) and the integration time
-    ``T`` (each transition integrates ``u T`` when jittered, ``u`` in ``(0, 1)``)."""
+    ``T`` (each transition integrates ``u T`` when jittered, ``u`` in ``(0, 1)``; ``ε L`` for a
+    fixed ``L``)."""
 
     step_size: jax.Array
     inverse_mass_matrix: dict
     trajectory_length: jax.Array
 
 
-class DenseMass(NamedTuple):
-    """The dense inverse masses of ``dense_mass`` blocks and their window's Welford moments
-    (dicts keyed by block; empty without ``dense_mass``)."""
-
-    matrices: dict
-    mean: dict
-    m2: dict
-    count: jax.Array
-
-
 class GeometricHMCState(NamedTuple):
     """One chain's state; ``z`` is the sample field, the others are ``extra_fields`` (module
-    docstring). ``inner``, ``warmup`` and ``dense`` are the sampler's and the warm-up's carry."""
+    docstring). ``inner`` is the sampler's state, ``adaptation`` the warm-up's (the protocol's
+    state; each chain carries a copy, with its own running rate)."""
 
     i: jax.Array
     z: dict
@@ -158,9 +157,7 @@ class GeometricHMCState(NamedTuple):
     trajectory_length: jax.Array
     adapt_state: AdaptState
     inner: object  # the liesample.geometric_hmc state
-    warmup: WarmupState
-    dense: DenseMass
-    length: TrajectoryState
+    adaptation: WindowState
     rng_key: jax.Array
 
 
@@ -341,10 +338,139 @@ def _steps_argument(num_integration_steps):
     return int(num_integration_steps)
 
 
+def _check_model(model, potential_fn, init_strategy, kinetic_fn, forward_mode_differentiation,
+                 regularize_mass_matrix):  # fmt: skip
+    """The model-side arguments of :class:`GeometricHMC` checked against NumPyro's HMC."""
+    if potential_fn is not None and model is not None:
+        raise ValueError("give model or potential_fn, not both (as numpyro.infer.HMC)")
+    if potential_fn is None and not callable(model):
+        raise TypeError(
+            f"model must be a NumPyro model (a callable), or give potential_fn; got {model!r}"
+        )
+    if potential_fn is not None and not callable(potential_fn):
+        raise TypeError(f"potential_fn must be a callable, got {potential_fn!r}")
+    if kinetic_fn is not None:
+        raise ValueError(
+            "kinetic_fn is not supported by GeometricHMC (its kinetic energy is ½ pᵀM⁻¹p in "
+            "algebra coordinates, set by the geometry); allowed: kinetic_fn=None"
+        )
+    _check_flag("forward_mode_differentiation", forward_mode_differentiation, False,
+                "gradients are taken in reverse mode")  # fmt: skip
+    _check_flag("regularize_mass_matrix", regularize_mass_matrix, True,
+                "the adapted mass is always shrunk as Stan does")  # fmt: skip
+    if init_strategy is not None and not callable(init_strategy):
+        raise TypeError(
+            f"init_strategy must be a NumPyro initialisation strategy, got {init_strategy!r}"
+        )
+    if init_strategy is not None and potential_fn is not None:
+        raise ValueError(
+            "init_strategy needs a model; with potential_fn give init_params to MCMC.run"
+        )
+
+
+def _trajectory_arguments(num_integration_steps, integration_time, num_steps,
+                          trajectory_length):  # fmt: skip
+    """``(L or None, T, whether T is learnt)`` from the trajectory arguments of
+    :class:`GeometricHMC` and their NumPyro names, checked."""
+    for alias, name, value in (
+        ("num_steps", "num_integration_steps", num_integration_steps),
+        ("trajectory_length", "integration_time", integration_time),
+    ):
+        given = num_steps if alias == "num_steps" else trajectory_length
+        if given is not None and value is not None:
+            raise ValueError(f"{alias} is NumPyro's name for {name}: give one of them")
+    if num_steps is not None:
+        num_integration_steps = num_steps
+    if trajectory_length is not None:
+        integration_time = trajectory_length
+    if num_integration_steps is not None and integration_time is not None:
+        raise ValueError(
+            "give integration_time (trajectory_length) or num_integration_steps "
+            "(num_steps), not both"
+        )
+    num_integration_steps = _steps_argument(num_integration_steps)
+    time = DEFAULT_INTEGRATION_TIME if integration_time is None else integration_time
+    time = finite_float("integration_time", time, positive=True)
+    learn = integration_time is None and num_integration_steps is None
+    return num_integration_steps, time, learn
+
+
+def _chain_move(space, before, after, infos, inverse_mass):
+    return chain_move(space, before, after, infos, inverse_mass, batched=True)
+
+
 class GeometricHMC(MCMCKernel):
     """Geometric HMC on a NumPyro model's sites, on spheres, SO(3), circles and ``Rᵈ``; a
     ``numpyro.infer.mcmc.MCMCKernel`` with the keywords of ``numpyro.infer.HMC`` (module
-    docstring; the parameters are documented on ``__init__``)."""
+    docstring). Nothing is traced or compiled until ``init``.
+
+    Parameters
+    ----------
+    model : callable, optional
+        A NumPyro model (module docstring for the supports it handles). Give ``model`` or
+        ``potential_fn``.
+    potential_fn : callable, optional
+        NumPyro's model-free form: ``z ↦ −log π(z)`` of an array or a dict of arrays, every
+        coordinate in ``Rᵈ`` (Lebesgue measure). ``init_params`` must then be given to
+        ``MCMC.run`` (with a leading chain axis for several chains, as in NumPyro); the
+        draws are ``z`` itself.
+    step_size : float
+        Initial step size of the warm-up (the step size when ``adapt_step_size=False``).
+    num_integration_steps, num_steps : int, optional
+        Fixed steps of the scheme per transition (``num_steps`` is NumPyro's name; give
+        one), neither jittered nor learnt; by default ``ceil(u T / ε)`` (``jitter``).
+    integration_time, trajectory_length : float, optional
+        A fixed integration time ``T`` (``trajectory_length`` is NumPyro's name), in the
+        units set by the mass. By default ``T`` is learnt in the warm-up by the ChEES-type
+        rule of :mod:`liesample.tuning.trajectory` from ``π/2`` (kept at ``π/2`` without
+        a warm-up or without ``Euclidean`` sites, the rule's coordinates).
+    inverse_mass_matrix : None, float or dict
+        Starting ``M⁻¹`` (unit by default): a positive scalar, or a dict keyed by site name
+        or by tuple of site names (NumPyro's keys) → a value shaped as
+        :func:`liesample.geometric_hmc` takes it (one value per copy of a sphere or group,
+        one per coordinate of ``Euclidean`` and ``U1`` sites); a ``dense_mass`` group
+        takes an ``(n, n)`` matrix (or ``(n,)`` diagonal) on its ``n`` unconstrained
+        coordinates, in the group's order.
+    dense_mass : bool or list of tuples of str
+        As in NumPyro: ``True`` is one dense ``M⁻¹`` over every latent site (sorted by
+        name), ``[("a", "b"), ("c",)]`` one per group, ``False`` diagonal. Dense blocks
+        are possible on ``Euclidean`` sites only; a sphere, rotation or circle site named
+        is refused, by name, when the kernel is initialised.
+    adapt_step_size, adapt_mass_matrix : bool
+        What the warm-up adapts (of what ``liesample.geometric_hmc.adaptation`` declares).
+    target_accept_prob : float, optional
+        Dual averaging's target Metropolis rate (by default the declared one, 0.8).
+    find_heuristic_step_size : bool
+        As in NumPyro: with ``adapt_step_size``, before the warm-up and at the end of each
+        mass window, double or halve the step size until one step's acceptance rate
+        ``min(1, e^{−ΔH})`` crosses 0.8, and restart dual averaging from there.
+    init_strategy : callable, optional
+        A NumPyro initialisation strategy (``init_to_median()``, ``init_to_value(values=
+        …)``, ``init_to_sample``, ``init_to_uniform``, …), retried with new keys until the
+        log-density and its gradient are finite (at most 100 times). By default: uniform
+        on manifold sites and in ``(−2, 2)`` in the unconstrained coordinates of the others
+        (NumPyro's ``init_to_uniform``). ``init_params`` given to ``MCMC.run`` win.
+    divergence_threshold : float
+        ``ΔH`` above which a transition is flagged divergent.
+    integrator : str or sequence of (effect, fraction) pairs
+        The integration scheme, as for :func:`liesample.geometric_hmc` (``"leapfrog"`` by
+        default, ``"minimal_norm"``, or a palindromic coefficient list).
+    jitter : bool
+        Integrate ``u T`` with ``u`` from the base-2 Halton sequence (default): a fixed
+        ``T`` can sit at a resonance of the target (a direction whose half period is
+        ``T``, whose chain then barely moves). ``False`` integrates ``T`` itself.
+    kinetic_fn, forward_mode_differentiation, regularize_mass_matrix
+        NumPyro's, accepted at their defaults only (``None``, ``False``, ``True``): the
+        kinetic energy is ``½ pᵀM⁻¹p`` in algebra coordinates, gradients are taken in
+        reverse mode, and the adapted mass is always regularised (Stan's shrinkage).
+
+    Raises
+    ------
+    TypeError, ValueError
+        For a missing model, both ``model`` and ``potential_fn``, a setting out of range,
+        two names given for one setting, or a NumPyro keyword at an unsupported value (the
+        message names what is allowed).
+    """
 
     sample_field = "z"
 
@@ -372,124 +498,17 @@ class GeometricHMC(MCMCKernel):
         forward_mode_differentiation: bool = False,
         regularize_mass_matrix: bool = True,
     ):
-        """Set up the kernel (nothing is traced or compiled until ``init``).
-
-        Parameters
-        ----------
-        model : callable, optional
-            A NumPyro model (module docstring for the supports it handles). Give ``model`` or
-            ``potential_fn``.
-        potential_fn : callable, optional
-            NumPyro's model-free form: ``z ↦ −log π(z)`` of an array or a dict of arrays, every
-            coordinate in ``Rᵈ`` (Lebesgue measure). ``init_params`` must then be given to
-            ``MCMC.run`` (with a leading chain axis for several chains, as in NumPyro); the
-            draws are ``z`` itself.
-        step_size : float
-            Initial step size of the warm-up (the step size when ``adapt_step_size=False``).
-        num_integration_steps, num_steps : int, optional
-            Fixed steps of the scheme per transition (``num_steps`` is NumPyro's name; give
-            one), neither jittered nor learnt; by default ``ceil(u T / ε)`` (``jitter``).
-        integration_time, trajectory_length : float, optional
-            A fixed integration time ``T`` (``trajectory_length`` is NumPyro's name), in the
-            units set by the mass. By default ``T`` is learnt in the warm-up by the ChEES-type
-            rule of :mod:`liesample.tuning.trajectory` from ``π/2`` (kept at ``π/2`` without
-            a warm-up or without ``Euclidean`` sites, the rule's coordinates).
-        inverse_mass_matrix : None, float or dict
-            Starting ``M⁻¹`` (unit by default): a positive scalar, or a dict keyed by site name
-            or by tuple of site names (NumPyro's keys) → a value shaped as
-            :func:`liesample.geometric_hmc` takes it (one value per copy of a sphere or group,
-            one per coordinate of ``Euclidean`` and ``U1`` sites); a ``dense_mass`` group
-            takes an ``(n, n)`` matrix (or ``(n,)`` diagonal) on its ``n`` unconstrained
-            coordinates, in the group's order.
-        dense_mass : bool or list of tuples of str
-            As in NumPyro: ``True`` is one dense ``M⁻¹`` over every latent site (sorted by
-            name), ``[("a", "b"), ("c",)]`` one per group, ``False`` diagonal. Dense blocks
-            are possible on ``Euclidean`` sites only; a sphere, rotation or circle site named
-            is refused, by name, when the kernel is initialised.
-        adapt_step_size, adapt_mass_matrix : bool
-            What the warm-up adapts (of what ``liesample.geometric_hmc.adaptation`` declares).
-        target_accept_prob : float, optional
-            Dual averaging's target Metropolis rate (by default the declared one, 0.8).
-        find_heuristic_step_size : bool
-            As in NumPyro: with ``adapt_step_size``, before the warm-up and at the end of each
-            mass window, double or halve the step size until one step's acceptance rate
-            ``min(1, e^{−ΔH})`` crosses 0.8, and restart dual averaging from there.
-        init_strategy : callable, optional
-            A NumPyro initialisation strategy (``init_to_median()``, ``init_to_value(values=
-            …)``, ``init_to_sample``, ``init_to_uniform``, …), retried with new keys until the
-            log-density and its gradient are finite (at most 100 times). By default: uniform
-            on manifold sites and in ``(−2, 2)`` in the unconstrained coordinates of the others
-            (NumPyro's ``init_to_uniform``). ``init_params`` given to ``MCMC.run`` win.
-        divergence_threshold : float
-            ``ΔH`` above which a transition is flagged divergent.
-        integrator : str or sequence of (effect, fraction) pairs
-            The integration scheme, as for :func:`liesample.geometric_hmc` (``"leapfrog"`` by
-            default, ``"minimal_norm"``, or a palindromic coefficient list).
-        jitter : bool
-            Integrate ``u T`` with ``u`` from the base-2 Halton sequence (default): a fixed
-            ``T`` can sit at a resonance of the target (a direction whose half period is
-            ``T``, whose chain then barely moves). ``False`` integrates ``T`` itself.
-        kinetic_fn, forward_mode_differentiation, regularize_mass_matrix
-            NumPyro's, accepted at their defaults only (``None``, ``False``, ``True``): the
-            kinetic energy is ``½ pᵀM⁻¹p`` in algebra coordinates, gradients are taken in
-            reverse mode, and the adapted mass is always regularised (Stan's shrinkage).
-
-        Raises
-        ------
-        TypeError, ValueError
-            For a missing model, both ``model`` and ``potential_fn``, a setting out of range,
-            two names given for one setting, or a NumPyro keyword at an unsupported value (the
-            message names what is allowed).
-        """
-        if potential_fn is not None and model is not None:
-            raise ValueError("give model or potential_fn, not both (as numpyro.infer.HMC)")
-        if potential_fn is None and not callable(model):
-            raise TypeError(
-                f"model must be a NumPyro model (a callable), or give potential_fn; got {model!r}"
-            )
-        if potential_fn is not None and not callable(potential_fn):
-            raise TypeError(f"potential_fn must be a callable, got {potential_fn!r}")
-        if kinetic_fn is not None:
-            raise ValueError(
-                "kinetic_fn is not supported by GeometricHMC (its kinetic energy is ½ pᵀM⁻¹p in "
-                "algebra coordinates, set by the geometry); allowed: kinetic_fn=None"
-            )
-        _check_flag("forward_mode_differentiation", forward_mode_differentiation, False,
-                    "gradients are taken in reverse mode")  # fmt: skip
-        _check_flag("regularize_mass_matrix", regularize_mass_matrix, True,
-                    "the adapted mass is always shrunk as Stan does")  # fmt: skip
-        if init_strategy is not None and not callable(init_strategy):
-            raise TypeError(
-                f"init_strategy must be a NumPyro initialisation strategy, got {init_strategy!r}"
-            )
-        if init_strategy is not None and potential_fn is not None:
-            raise ValueError(
-                "init_strategy needs a model; with potential_fn give init_params to MCMC.run"
-            )
+        """Set up the kernel (nothing is traced or compiled until ``init``); the parameters
+        are documented on the class."""
+        _check_model(model, potential_fn, init_strategy, kinetic_fn,
+                     forward_mode_differentiation, regularize_mass_matrix)  # fmt: skip
         self._model = model
         self._potential_fn = potential_fn
         self._init_strategy = init_strategy
         self._step_size = finite_float("step_size", step_size, positive=True)
-        for alias, name, value in (
-            ("num_steps", "num_integration_steps", num_integration_steps),
-            ("trajectory_length", "integration_time", integration_time),
-        ):
-            given = num_steps if alias == "num_steps" else trajectory_length
-            if given is not None and value is not None:
-                raise ValueError(f"{alias} is NumPyro's name for {name}: give one of them")
-        if num_steps is not None:
-            num_integration_steps = num_steps
-        if trajectory_length is not None:
-            integration_time = trajectory_length
-        if num_integration_steps is not None and integration_time is not None:
-            raise ValueError(
-                "give integration_time (trajectory_length) or num_integration_steps "
-                "(num_steps), not both"
-            )
-        num_integration_steps = _steps_argument(num_integration_steps)
-        time = DEFAULT_INTEGRATION_TIME if integration_time is None else integration_time
-        time = finite_float("integration_time", time, positive=True)
-        learn = integration_time is None and num_integration_steps is None
+        num_integration_steps, time, learn = _trajectory_arguments(
+            num_integration_steps, integration_time, num_steps, trajectory_length
+        )
         self._lengths = trajectory_adaptation(time, learn=learn)
         if not isinstance(jitter, bool):
             raise TypeError(f"jitter must be a bool, got {jitter!r}")
@@ -497,19 +516,19 @@ class GeometricHMC(MCMCKernel):
         self._num_integration_steps = num_integration_steps
         self._initial_mass = inverse_mass_matrix
         self._dense_mass = _dense_spec(dense_mass)
-        adapted = geometric_hmc.adaptation["adapted"]
+        adapted = geometric_hmc.adaptation.adapted
         self._adapt_step_size = bool(adapt_step_size) and "step_size" in adapted
         self._adapt_mass = bool(adapt_mass_matrix) and "inverse_mass_matrix" in adapted
         self._find_heuristic = bool(find_heuristic_step_size) and self._adapt_step_size
         if target_accept_prob is None:
-            target_accept_prob = geometric_hmc.adaptation["target_acceptance_rate"]
+            target_accept_prob = geometric_hmc.adaptation.target_acceptance_rate
         target = finite_float("target_accept_prob", target_accept_prob)
         if not 0.0 < target < 1.0:
             raise ValueError(f"target_accept_prob must be in (0, 1), got {target}")
         self._target = target
         self._kernel = geometric_hmc.build_kernel(divergence_threshold, integrator=integrator)
         self._sites = None
-        self._pieces = None
+        self._adaptation = None
         self._sample_fn = None
         self._num_warmup = 0
         self._array_params = False
@@ -569,10 +588,27 @@ class GeometricHMC(MCMCKernel):
             )
             for key, group in self._blocks.items()
         }
-        self._pieces = warmup_pieces(
-            self._inner_space, self._target, self._adapt_mass, batched=True
+        self._adaptation = windows_adaptation(self._windows())
+
+    def _windows(self) -> Windows:
+        """What the warm-up adapts (:class:`liesample.tuning.windows.Windows`), as
+        :func:`liesample.window_adaptation` does for ``liesample.geometric_hmc``."""
+        space = self._inner_space
+        fixed = self._num_integration_steps
+        return Windows(
+            self._target,
+            "metropolis_rate",
+            jax.vmap(functools.partial(statistic, space)),
+            functools.partial(inverse_mass, space),
+            self._adapt_mass,
+            lengths=self._lengths if fixed is None else None,
+            move=functools.partial(_chain_move, space),
+            dimension=euclidean_size(space),
+            fixed_steps=fixed,
+            dense=DenseBlocks(tuple(self._dense_keys)) if self._dense_keys else None,
+            jitter=self._jitter,
+            step_size=None if self._adapt_step_size else self._step_size,
         )
-        self._da_init = dual_averaging_adaptation(self._target)[0]
 
     def _dense_groups(self):
         spec = self._dense_mass
@@ -742,9 +778,9 @@ class GeometricHMC(MCMCKernel):
         return params
 
     # ------------------------------------------------------------------ masses
-    def _starting_masses(self, dtype):
-        """``(inverse mass of the warm-up pieces, DenseMass)`` from ``inverse_mass_matrix``:
-        the pieces hold a diagonal placeholder for each dense block."""
+    def _starting_mass(self, dtype):
+        """The starting inverse mass (a dict of blocks; an ``(n, n)`` matrix for each dense
+        block) from ``inverse_mass_matrix``."""
         given = self._initial_mass
         if isinstance(given, dict):
             by_key = {}
@@ -777,52 +813,11 @@ class GeometricHMC(MCMCKernel):
                 by_key[key] = jnp.ones(n, dtype)
         if by_key is not None and not self._dense_keys and not isinstance(given, dict):
             by_key = given  # a scalar, as before
-        pieces_mass = spaces.check_inverse_mass(self._inner_space, by_key, dtype)
-        zero = {key: jnp.zeros(m.shape[0], dtype) for key, m in matrices.items()}
-        dense = DenseMass(
-            matrices, zero, {key: jnp.zeros_like(m) for key, m in matrices.items()}, jnp.asarray(0)
-        )
-        return pieces_mass, dense
+        return {**spaces.check_inverse_mass(self._inner_space, by_key, dtype), **matrices}
 
-    def _kernel_mass(self, inverse_mass, dense):
-        return {**inverse_mass, **dense.matrices}
-
-    def _adapt_state(self, step_size, mass, length):
-        masses = {self._blocks[key]: m for key, m in mass.items()}
-        return AdaptState(step_size, masses, jnp.exp(length.log_time))
-
-    def _update_dense(self, dense, positions, stage, window_end):
-        """Welford covariance of each dense block in slow windows, pooled over the chains
-        (``positions`` with a leading chain axis); at a window's end the block's ``M⁻¹``
-        becomes it, shrunk towards ``1e-3 I`` (Stan's regularisation)."""
-        if not self._dense_keys or not self._adapt_mass:
-            return dense
-        slow = stage == 1
-        first = positions[self._dense_keys[0]]
-        batch = first.shape[0]
-        old = dense.count.astype(first.dtype)
-        count = jnp.where(slow, dense.count + batch, dense.count)
-        n = count.astype(first.dtype)
-        matrices, means, m2s = {}, {}, {}
-        for key in self._dense_keys:
-            x = positions[key]
-            batch_mean = jnp.mean(x, 0)
-            centred = x - batch_mean
-            delta = batch_mean - dense.mean[key]
-            total = old + batch
-            mean = dense.mean[key] + delta * (batch / total)
-            spread = jnp.outer(delta, delta) * (old * batch / total)
-            m2 = dense.m2[key] + centred.T @ centred + spread
-            mean = jnp.where(slow, mean, dense.mean[key])
-            m2 = jnp.where(slow, m2, dense.m2[key])
-            covariance = m2 / jnp.maximum(n - 1.0, 1.0)
-            covariance = 0.5 * (covariance + covariance.T)
-            eye = jnp.eye(x.shape[-1], dtype=x.dtype)
-            shrunk = (n / (n + 5.0)) * covariance + 1e-3 * (5.0 / (n + 5.0)) * eye
-            matrices[key] = jnp.where(window_end, shrunk, dense.matrices[key])
-            means[key] = jnp.where(window_end, jnp.zeros_like(mean), mean)
-            m2s[key] = jnp.where(window_end, jnp.zeros_like(m2), m2)
-        return DenseMass(matrices, means, m2s, jnp.where(window_end, 0 * count, count))
+    def _adapt_state(self, parameters):
+        masses = {self._blocks[key]: m for key, m in parameters["inverse_mass_matrix"].items()}
+        return AdaptState(parameters["step_size"], masses, parameters["integration_time"])
 
     def _heuristic_step_size(self, key, inner, logdensity, mass, step_size):
         """NumPyro's ``find_heuristic_step_size``: from ``step_size``, double (or halve) the
@@ -878,11 +873,9 @@ class GeometricHMC(MCMCKernel):
         if self._num_warmup == 0:
             self._warn_unadapted()
         if self._num_warmup > 0:
-            # constants (also under jit): stage, window end, in the T average
-            stages, ends = window_schedule(self._num_warmup)
-            self._schedule = (stages, ends, averaged_steps(stages, ends))
+            self._rows = schedule(self._num_warmup)  # constants, also under jit
         dtype = jnp.zeros(()).dtype
-        pieces_mass, dense = self._starting_masses(dtype)
+        starting_mass = self._starting_mass(dtype)
         logdensity = self._logdensity_fn(model_args, model_kwargs)
         inner_logdensity = self._inner_logdensity(model_args, model_kwargs)
         if self._init_strategy is None:
@@ -901,14 +894,13 @@ class GeometricHMC(MCMCKernel):
             step_size = jnp.asarray(self._step_size, dtype)
             if self._find_heuristic:
                 key, key_step = jax.random.split(key)
-                mass = self._kernel_mass(pieces_mass, dense)
                 step_size = self._heuristic_step_size(
-                    key_step, inner, inner_logdensity, mass, step_size
+                    key_step, inner, inner_logdensity, starting_mass, step_size
                 )
             one = jax.tree.map(lambda x: jnp.asarray(x)[None], inner)  # a batch of one
-            warm = self._pieces.init(one, step_size, pieces_mass)
-            mass = self._kernel_mass(warm.inverse_mass, dense)
-            length = self._lengths.init(euclidean_size(self._inner_space), dtype)
+            start = {"step_size": step_size, "inverse_mass_matrix": starting_mass}
+            adaptation = self._adaptation.init(one, start)
+            parameters = self._parameters(adaptation, jnp.asarray(0))
             zero = jnp.asarray(0.0, dtype)
             return GeometricHMCState(
                 jnp.asarray(0),
@@ -919,13 +911,11 @@ class GeometricHMC(MCMCKernel):
                 zero,
                 zero,
                 jnp.asarray(0),
-                warm.step_size,
+                parameters["step_size"],
                 zero,
-                self._adapt_state(warm.step_size, mass, length),
+                self._adapt_state(parameters),
                 inner,
-                warm,
-                dense,
-                length,
+                adaptation,
                 key,
             )
 
@@ -983,18 +973,20 @@ class GeometricHMC(MCMCKernel):
     def _sample_batch(self, state, model_args, model_kwargs):
         """One transition of every chain (a leading chain axis). The chains share the warm-up:
         one step size (dual averaging of their pooled rate), one mass (their pooled moments)
-        and one ``T`` (ChEES centred on their mean); each chain carries a copy (and its own
-        running rate)."""
+        and one ``T`` (ChEES centred on their mean); each chain carries a copy of the
+        adaptation state (and its own running rate)."""
         i = state.i[0]
         logdensity = self._inner_logdensity(model_args, model_kwargs or {})
         keys = jax.vmap(jax.random.split)(state.rng_key)
         rng_key, key = keys[:, 0], keys[:, 1]
         key_step = jax.random.fold_in(key[0], 1) if self._find_heuristic else None
-        first = lambda tree: jax.tree.map(lambda x: x[0], tree)
-        warm, dense, length = first(state.warmup), first(state.dense), first(state.length)
-        steps = self._steps_for(warm.step_size, length, i)
-        mass = self._kernel_mass(warm.inverse_mass, dense)
-        options = dict(step_size=warm.step_size, num_integration_steps=steps)
+        shared = jax.tree.map(lambda x: x[0], state.adaptation)
+        # each chain carries its own running rate: gathered, one per chain
+        smoothed = state.adaptation.step.smoothed[:, 0]
+        shared = shared._replace(step=shared.step._replace(smoothed=smoothed))
+        parameters = self._parameters(shared, i)
+        options = {name: parameters[name] for name in ("step_size", "num_integration_steps")}
+        mass = parameters["inverse_mass_matrix"]
 
         def transition(key, inner):
             space = self._inner_space
@@ -1004,9 +996,9 @@ class GeometricHMC(MCMCKernel):
         dtype = inner.logdensity.dtype
         kinetic = cotangent_bundle(self._inner_space, mass, None, dtype).kinetic_energy
         energy = -inner.logdensity + jax.vmap(kinetic)(inner.momentum)
-        new = (warm, dense, length)
+        new = shared
         if self._num_warmup > 0:
-            new = self._adapt(state, i, inner, info, mass, steps, logdensity, key_step)
+            new = self._adapt(shared, i, parameters, state.inner, inner, info, logdensity, key_step)
         # NumPyro's running mean, restarted when sampling begins.
         count = jnp.where(i < self._num_warmup, i + 1, i + 1 - self._num_warmup)
         mean_accept = state.mean_accept_prob + (
@@ -1016,11 +1008,11 @@ class GeometricHMC(MCMCKernel):
         share = lambda tree: jax.tree.map(
             lambda x: jnp.broadcast_to(x, (num_chains, *jnp.shape(x))), tree
         )
-        new_mass = self._kernel_mass(new[0].inverse_mass, new[1])
-        adapted = self._adapt_state(new[0].step_size, new_mass, new[2])
-        warmup = share(new[0]._replace(smoothed=jnp.zeros(1, dtype)))
-        smoothed = new[0].smoothed if self._num_warmup > 0 else state.warmup.smoothed[:, 0]
-        warmup = warmup._replace(smoothed=smoothed[:, None])
+        smoothed = new.step.smoothed
+        adaptation = share(new._replace(step=new.step._replace(smoothed=smoothed[:1])))
+        adaptation = adaptation._replace(
+            step=adaptation.step._replace(smoothed=smoothed[:, None])
+        )
         return GeometricHMCState(
             state.i + 1,
             jax.vmap(lambda p: self._to_user(self._unpack(p)))(inner.position),
@@ -1030,60 +1022,52 @@ class GeometricHMC(MCMCKernel):
             info.acceptance_rate,
             mean_accept,
             jnp.asarray(info.num_gradient_evaluations),
-            share(warm.step_size),
-            share(warm.step_size * steps),
-            share(adapted),
+            share(parameters["step_size"]),
+            share(parameters["step_size"] * parameters["num_integration_steps"]),
+            share(self._adapt_state(self._parameters(new, i + 1))),
             inner,
-            warmup,
-            *share(new[1:]),
+            adaptation,
             rng_key,
         )
 
-    def _adapt(self, state, i, inner, info, mass, steps, logdensity, key_step):
-        """The shared warm-up's update after transition ``i`` of every chain (Stan's schedule):
-        the step size, the masses and ``T``. At the last warm-up iteration the step size
-        becomes dual averaging's average and ``T`` the rule's tuned one; after the warm-up
-        nothing changes."""
-        first = lambda tree: jax.tree.map(lambda x: x[0], tree)
-        warm, dense, length = first(state.warmup), first(state.dense), first(state.length)
-        # each chain carries its own running rate: gathered, one per chain
-        warm = warm._replace(smoothed=state.warmup.smoothed[:, 0])
-        index = jnp.minimum(i, self._num_warmup - 1)
-        stage, window_end, average = (jnp.asarray(column)[index] for column in self._schedule)
-        updated = self._pieces.update(warm, inner, info, stage, window_end)
-        new_dense = self._update_dense(dense, inner.position, stage, window_end)
+    def _parameters(self, adaptation, i):
+        """The parameters of transition ``i``: the adaptation's ``current`` in the warm-up, its
+        ``final`` after it (``L`` then the fixed one, or ``ceil(u T / ε)``)."""
+        tuned = self._adaptation.final(adaptation)
+        step_size = tuned["step_size"]
+        if self._num_integration_steps is not None:
+            steps = jnp.asarray(self._num_integration_steps)
+            time = step_size * steps
+        else:
+            time = tuned["integration_time"]
+            u = halton(i) if self._jitter else 1.0
+            steps = jittered_steps(u, time, step_size)
+        after = {**tuned, "num_integration_steps": steps, "integration_time": time}
+        if self._num_warmup == 0:
+            return after
+        during = self._adaptation.current(adaptation, row_at(self._rows, i))
+        during.setdefault("integration_time", during["step_size"] * steps)
+        return jax.tree.map(lambda a, b: jnp.where(i < self._num_warmup, a, b), during, after)
+
+    def _adapt(self, adaptation, i, parameters, before, inner, info, logdensity, key_step):
+        """The shared warm-up's ``update`` after transition ``i`` of every chain; with
+        ``find_heuristic_step_size`` dual averaging restarts from NumPyro's search at a mass
+        window's end. After the warm-up nothing changes."""
+        row = row_at(self._rows, i)
+        updated = self._adaptation.update(adaptation, row, parameters, before, inner, info)
         if self._find_heuristic and self._adapt_mass:
 
-            def restart(warm):  # NumPyro's search, from the first chain
-                new_mass = self._kernel_mass(warm.inverse_mass, new_dense)
+            def restart(state):  # NumPyro's search, from the first chain
+                step = self._adaptation.current(state, row)["step_size"]
+                first = jax.tree.map(lambda x: x[0], inner)
                 step = self._heuristic_step_size(
-                    key_step, first(inner), logdensity, new_mass, warm.step_size
+                    key_step, first, logdensity, state.inverse_mass, step
                 )
-                da_state = self._da_init(step)
-                return warm._replace(da_state=da_state, step_size=jnp.exp(da_state.log_step_size))
+                return state._replace(step=restart_step_size(state.step, self._target, step))
 
-            updated = jax.lax.cond(window_end, restart, lambda warm: warm, updated)
-        last = i == self._num_warmup - 1
-        final = jnp.where(last, self._pieces.final_step_size(updated), updated.step_size)
-        if not self._adapt_step_size:
-            final = jnp.asarray(self._step_size, final.dtype)
-        updated = updated._replace(step_size=final)
-        move = chain_move(self._inner_space, state.inner, inner, info, mass, batched=True)
-        new_length = self._lengths.update(length, move, warm.step_size, steps, average)
-        tuned = jnp.log(self._lengths.final(new_length))
-        new_length = new_length._replace(
-            log_time=jnp.where(last, tuned, new_length.log_time).astype(tuned.dtype)
-        )
+            updated = jax.lax.cond(row.window_end, restart, lambda state: state, updated)
         in_warmup = i < self._num_warmup
-        keep = lambda new, old: jax.tree.map(lambda a, b: jnp.where(in_warmup, a, b), new, old)
-        return keep(updated, warm), keep(new_dense, dense), keep(new_length, length)
-
-    def _steps_for(self, step_size, length, i):
-        """Steps of the scheme for transition ``i``: the fixed ``L``, or ``ceil(u T / ε)``."""
-        if self._num_integration_steps is not None:
-            return jnp.asarray(self._num_integration_steps)
-        u = halton(i) if self._jitter else 1.0
-        return jittered_steps(u, jnp.exp(length.log_time), step_size)
+        return jax.tree.map(lambda a, b: jnp.where(in_warmup, a, b), updated, adaptation)
 
     def sample(self, state, model_args, model_kwargs):
         return self._sample_fn(state, model_args, model_kwargs)

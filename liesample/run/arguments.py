@@ -127,17 +127,17 @@ def check_run_arguments(num_draws, num_warmup, thinning, on_nonfinite, chunk_dra
 
 
 def wants_adaptation(sampler: Sampler, adapt, num_warmup, name: str) -> bool:
-    """``adapt=None``: adapt what the user left unset (a sampler declaring a ``tuning`` whose
+    """``adapt=None``: adapt what the user left unset (a sampler declaring an ``adaptation`` whose
     step size was not given) when there is a warm-up; ``True``: adapt (the sampler must declare
-    a ``tuning``); ``False``: never."""
-    if adapt is True and sampler.tuning is None:
+    an ``adaptation``); ``False``: never."""
+    if adapt is True and sampler.adaptation is None:
         raise ValueError(
             f"adapt=True: {name} has no warm-up adaptation; the orbit "
             "samplers (liesample.lie_poisson_langevin, liesample.adjusted_lie_poisson) have one, "
             "the magnetic samplers are tuned with blackjax.window_adaptation"
         )
     if adapt is None:
-        return sampler.tuning is not None and num_warmup > 0 and not sampler.tuning.given
+        return sampler.adaptation is not None and num_warmup > 0 and not sampler.adaptation.given
     return bool(adapt)
 
 

@@ -335,7 +335,7 @@ class _Run:
             sampler, o.adapt, o.num_warmup, type(self.algorithm).__name__
         )
         # The step size left unset and not adapted: the sampler's own choice for these starts.
-        choosing = not adapting and sampler.tuning is not None and not sampler.tuning.given
+        choosing = not adapting and sampler.adaptation is not None and not sampler.adaptation.given
         # Concrete checks (shape, orbit, constraints, energy, step size) of every start.
         arguments.check_starts(
             sampler, self.positions, self.num_chains, step_size_checks=not (adapting or choosing)

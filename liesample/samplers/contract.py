@@ -29,12 +29,12 @@ drift, the last step otherwise) and ArviZ's ``sample_stats`` names in
 ``SamplingAlgorithm`` (``init``, ``step``; unpacks and duck-types as one) that declares, as
 attributes with defaults, what the runner and the step loop read: ``settings`` (recorded in
 the ``DataTree`` attributes), ``check_positions`` (checks every start in one vectorised call),
-``tuning`` (a :class:`StepSizeTuning`: what the warm-up tunes and by which procedure of
-:mod:`liesample.tuning`) and ``noise_blocks``
+``adaptation`` (a :class:`Tunable`: what the warm-up tunes and how, an instance of the
+adaptation protocol of :mod:`liesample.tuning.protocol`) and ``noise_blocks``
 (:class:`liesample.integrators.chain_loop.NoiseBlocks`).
 :func:`as_sampler` reads a plain BlackJAX ``SamplingAlgorithm`` as a :class:`Sampler` with the
 defaults. ``step`` is pure: a sampler's parameters are fixed when it is built (a tuned value
-gives a new sampler, built by its declared ``tuning.rebuild``).
+gives a new sampler, built by its declared ``adaptation.rebuild``).
 
 **help().** :func:`sampling_api` builds the module-level ``liesample.<sampler>`` object, a
 ``blackjax.GenerateSamplingAPI`` whose ``help()`` is the top-level docstring.
@@ -68,7 +68,7 @@ __all__ = [
     "DrawNames",
     "Sampler",
     "SamplerInfo",
-    "StepSizeTuning",
+    "Tunable",
     "as_sampler",
     "check_info",
     "energy_name",
@@ -146,16 +146,25 @@ def check_info(info) -> None:
         )
 
 
-class StepSizeTuning(NamedTuple):
-    """How a sampler's step size is chosen when the user left it unset, and tuned in warm-up.
+class Tunable(NamedTuple):
+    """What a sampler's warm-up tunes, and how: the one declaration the tuning layer reads.
 
-    Declared by the sampler (``Sampler.tuning``); the procedures that use it are in
-    :mod:`liesample.tuning` (a higher layer), called by the runner.
+    A declaration only: :mod:`liesample.tuning` (a higher layer) makes of it an instance of the
+    one adaptation protocol (:mod:`liesample.tuning.protocol`). An orbit sampler declares it as
+    ``Sampler.adaptation`` (:mod:`liesample.tuning.warmup` reads it, for
+    :func:`liesample.sample`'s warm-up); a T*G sampler's API object as
+    ``sampling_api(adaptation=…)`` (:func:`liesample.window_adaptation` and the NumPyro kernel
+    read it; the fields ``given`` to ``max_step_size`` are then unused).
 
     method : str
-        The warm-up procedure: ``"dual_averaging"`` (the shared step of all chains tuned to a
-        mean acceptance rate, :mod:`liesample.tuning.dual_averaging`) or ``"rule"`` (the step
-        computed from the run's starts by ``choose``, no tuning loop).
+        ``"dual_averaging"`` (the shared step of all chains tuned to a target of their pooled
+        acceptance rate, :func:`liesample.tuning.protocol.step_size_adaptation`), ``"rule"``
+        (the step computed from the run's starts by ``choose``, nothing learnt from the
+        transitions, :func:`liesample.tuning.protocol.fixed`), ``"window"`` (Stan's windows:
+        step size, mass and, for HMC, the integration time,
+        :func:`liesample.tuning.windows.windows_adaptation`) or ``"chees"`` (the same on
+        several chains with the field of magnetic HMC,
+        :func:`liesample.magnetic_window_adaptation`).
     given : bool
         The user gave the step size: without ``adapt=True`` the warm-up keeps it.
     choose : callable
@@ -167,8 +176,8 @@ class StepSizeTuning(NamedTuple):
         ``source`` recorded as its ``settings["step_size_source"]``.
     at : callable or None
         ``(step_size, **parameters) -> Sampler`` whose step uses ``step_size`` and the values
-        of ``parameters``, all of which may be traced (the warm-up loop of
-        ``"dual_averaging"``); ``None`` for ``"rule"``.
+        of ``parameters``, all of which may be traced (the warm-up of ``"dual_averaging"``);
+        ``None`` for ``"rule"``.
     parameters : dict
         The sampler's other numeric parameters (name -> float), which the warm-up passes to
         ``at`` as arrays of the positions' dtype: one compiled warm-up serves every value.
@@ -177,16 +186,29 @@ class StepSizeTuning(NamedTuple):
     max_step_size : float or None
         The largest step ``"dual_averaging"`` may use (where every proposal is accepted, at
         ``β = 0`` say, it would grow the step without bound); ``None``: no bound.
+    adapted : tuple of str
+        The parameters the warm-up tunes (``("step_size",)`` for the orbit samplers;
+        ``step_size``, ``inverse_mass_matrix``, ``num_integration_steps``, ``magnetic_field``).
+    accepts : tuple of str
+        The kernel's parameters a caller of the window adaptation may give.
+    options : tuple of str
+        ``build_kernel``'s keywords (the integration scheme ``integrator`` among them).
+    defaults : dict
+        Values used for parameters not given (e.g. ``friction``).
     """
 
     method: str
-    given: bool
-    choose: Callable
-    rebuild: Callable
+    given: bool = False
+    choose: Callable | None = None
+    rebuild: Callable | None = None
     at: Callable | None = None
     parameters: dict | None = None
     target_acceptance_rate: float | None = None
     max_step_size: float | None = None
+    adapted: tuple = ("step_size",)
+    accepts: tuple = ()
+    options: tuple = ()
+    defaults: Mapping = MappingProxyType({})
 
 
 class DrawNames(NamedTuple):
@@ -212,8 +234,8 @@ class Sampler(blackjax.base.SamplingAlgorithm, DeclaresNoiseBlocks):
         one vectorised call, raising an error that names the first bad chain
         (``initial_positions[c]: …``). ``None`` (default): the runner calls ``init`` on every
         distinct start.
-    tuning : StepSizeTuning or None
-        How the step size is chosen and tuned in warm-up; ``None`` (default): nothing to tune.
+    adaptation : Tunable or None
+        What the warm-up tunes and how; ``None`` (default): nothing to tune.
     noise_blocks : liesample.integrators.chain_loop.NoiseBlocks or None
         How ``step`` consumes noise drawn in blocks; ``None`` (default): one key per step.
     law_groups : callable or None
@@ -236,7 +258,7 @@ class Sampler(blackjax.base.SamplingAlgorithm, DeclaresNoiseBlocks):
 
     settings: Mapping = MappingProxyType({})
     check_positions: Callable | None = None
-    tuning: StepSizeTuning | None = None
+    adaptation: Tunable | None = None
     draw_names: DrawNames | None = None
     law_groups: Callable | None = None
     stuck_advice: str | None = None
@@ -256,7 +278,7 @@ class Sampler(blackjax.base.SamplingAlgorithm, DeclaresNoiseBlocks):
 HOOKS = {
     "settings": dict,
     "check_positions": None,
-    "tuning": None,
+    "adaptation": None,
     "noise_blocks": None,
     "draw_names": None,
     "law_groups": None,
@@ -269,7 +291,7 @@ the default is ``None``); keyword arguments of ``Sampler(init, step, **hooks)``.
 
 def rebuilt(build: Callable, source: str, *args, **kwargs) -> Sampler:
     """``build(*args, **kwargs)`` recording ``source`` as its ``step_size_source`` setting (what a
-    :class:`StepSizeTuning`'s ``rebuild`` returns)."""
+    :class:`Tunable`'s ``rebuild`` returns)."""
     sampler = build(*args, **kwargs)
     sampler.settings["step_size_source"] = source
     return sampler
@@ -333,15 +355,9 @@ def sampling_api(as_top_level_api, init, build_kernel, name: str, module: str, *
     and ``__doc__`` are ``as_top_level_api``'s docstring (plus the precision rule) and whose
     call signature is that of ``as_top_level_api``.
 
-    ``adaptation``, stored as the object's ``.adaptation`` (``None``: none), declares how
-    :func:`liesample.window_adaptation` (and the NumPyro kernel) tunes the sampler: a mapping
-    with ``"schedule"`` (``"window"``: Stan's windows on one chain; ``"chees"``: chains tuned
-    together, trajectory length by ChEES), ``"adapted"`` (the parameters it sets:
-    ``step_size``, ``inverse_mass_matrix``, ``num_integration_steps``, ``magnetic_field``),
-    ``"parameters"`` (the kernel's arguments a caller may give), ``"options"``
-    (``build_kernel``'s keywords, e.g. ``integrator``), ``"defaults"`` (values used for
-    parameters not given, e.g. ``friction``) and ``"target_acceptance_rate"`` (dual
-    averaging's default target)."""
+    ``adaptation``, a :class:`Tunable` stored as the object's ``.adaptation`` (``None``:
+    none), declares how :func:`liesample.window_adaptation` (and the NumPyro kernel) tunes the
+    sampler."""
     doc = inspect.cleandoc(as_top_level_api.__doc__ or "")
     doc = doc + "\n" + _PRECISION_NOTE.format(name=name)
 
@@ -363,7 +379,9 @@ def sampling_api(as_top_level_api, init, build_kernel, name: str, module: str, *
         },
     )
     api = cls(as_top_level_api, init, build_kernel)
-    api.adaptation = None if adaptation is None else dict(adaptation)
+    if adaptation is not None and not isinstance(adaptation, Tunable):
+        raise TypeError(f"adaptation must be a Tunable, got {type(adaptation).__name__}")
+    api.adaptation = adaptation
     return api
 
 

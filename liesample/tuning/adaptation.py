@@ -3,8 +3,9 @@
 ``liesample.window_adaptation(algorithm, logdensity_fn, space, **parameters)`` mirrors
 ``blackjax.window_adaptation``: ``.run(rng_key, initial_position, num_steps)`` returns
 ``((state, parameters), info)`` and ``algorithm(logdensity_fn, space, **parameters)`` is the
-tuned sampler. What is tuned, and how, the sampler declares: ``algorithm.adaptation``
-(:func:`liesample.samplers.contract.sampling_api`) names the schedule, the adapted parameters,
+tuned sampler. What is tuned, and how, the sampler declares: ``algorithm.adaptation`` (a
+:class:`liesample.samplers.contract.Tunable`, given to
+:func:`liesample.samplers.contract.sampling_api`) names the method, the adapted parameters,
 the kernel's parameters and ``build_kernel`` options (the integration scheme ``integrator``
 among them, passed through) and the default target. Stan's schedule (:func:`window_schedule`):
 a fast window (step size only), doubling slow windows (step size and mass; the step size is
@@ -23,12 +24,19 @@ mean curvature of ``−log π`` along ``X_k``: for a Gaussian ``N(0, Σ)`` it is
 ideal mass. The ``+ 1`` is the unit sphere's own curvature scale: it keeps the mass finite for
 a nearly uniform law, where any mass would do.
 
-**Trajectory length (HMC).** Default: a fixed integration time ``T = π/2`` in the units set by
-the mass (a quarter period of a whitened Gaussian, whose position after ``T`` is independent
-of its start), with ``num_integration_steps = ceil(T / step_size)`` re-derived at every step
-of the warm-up and for the tuned sampler. Pass ``integration_time`` to change ``T`` or
-``num_integration_steps`` to fix ``L`` instead (then the integration time follows the step
-size, as in ``blackjax.window_adaptation``).
+**Trajectory length (HMC).** Default: each transition integrates ``u T`` (``u`` the base-2
+Halton point of its index), ``T`` learnt by the ChEES-type rule of
+:mod:`liesample.tuning.trajectory` from ``π/2`` in the units set by the mass; the tuned
+sampler gets ``num_integration_steps = ceil(T / step_size)`` and ``jitter=True``. Pass
+``integration_time`` to fix ``T`` (still jittered) or ``num_integration_steps`` to fix ``L``
+instead (then the integration time follows the step size, as in
+``blackjax.window_adaptation``).
+
+**One protocol.** Both adaptations are the instance of
+:func:`liesample.tuning.windows.windows_adaptation` for their sampler, run by
+:func:`liesample.tuning.protocol.run_adaptation`: every chain runs the chain loop of the
+sampling that follows (chain ``c`` with key ``split(rng_key, chains)[c]``), and the chains share
+one adaptation state.
 
 **Magnetic HMC** (``liesample.window_adaptation(liesample.magnetic_hmc, logdensity_fn)``, i.e.
 :func:`magnetic_window_adaptation`): several chains tuned together on the same schedule; the
@@ -49,28 +57,31 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-from blackjax.adaptation.step_size import dual_averaging_adaptation
-from blackjax.adaptation.window_adaptation import build_schedule
 from jax.flatten_util import ravel_pytree
 
 from liesample.foundation.compile import jit
 from liesample.foundation.validation import finite_float
 from liesample.geometry import spaces
-from liesample.samplers.contract import first_bad_chain
+from liesample.samplers.contract import Sampler, as_sampler, first_bad_chain
 from liesample.samplers.cotangent._core import check_starts
 from liesample.samplers.cotangent._euclidean import default_magnetic_field
 from liesample.samplers.cotangent.magnetic_hmc import magnetic_hmc
+from liesample.tuning.protocol import run_adaptation, schedule
 from liesample.tuning.trajectory import (
     CHEES_LEARNING_RATE,
     DEFAULT_INTEGRATION_TIME,
     MAX_NUM_INTEGRATION_STEPS,
     ChainMove,
-    averaged_steps,
     chain_move,
     euclidean_size,
-    halton,
-    jittered_steps,
     trajectory_adaptation,
+)
+from liesample.tuning.windows import (
+    Windows,
+    inverse_mass,
+    regularised_variance,
+    statistic,
+    windows_adaptation,
 )
 
 __all__ = [
@@ -99,167 +110,18 @@ class AdaptationInfo(NamedTuple):
     num_integration_steps: jax.Array
 
 
-def _statistic(space, state):
-    """Flat vector whose Welford moments give the mass: positions of Euclidean blocks, the
-    trivialised gradient of the others."""
-    leaves = spaces._map(
-        lambda s, x, g: jnp.ravel(x if not s.compact else g),
-        space,
-        state.position,
-        state.logdensity_grad,
-    )
-    return jnp.concatenate(jax.tree.leaves(leaves))
-
-
-def _regularised_variance(variance, count):
-    """Stan's diagonal inverse mass from ``count`` draws: shrunk towards ``1e-3``."""
-    return (count / (count + 5.0)) * variance + 1e-3 * (5.0 / (count + 5.0))
-
-
-def _inverse_mass(space, mean, m2, count, dtype):
-    """Inverse mass (pytree like ``space``) from Welford moments of :func:`_statistic`."""
-    variance = m2 / jnp.maximum(count - 1, 1)
-    n = count.astype(dtype)
-    out, offset = [], 0
-    for s in spaces._spaces(space):
-        size = math.prod(s.momentum_array_shape)
-        var = variance[offset : offset + size].reshape(s.momentum_array_shape)
-        mu = mean[offset : offset + size].reshape(s.momentum_array_shape)
-        offset += size
-        if not s.compact:
-            out.append(_regularised_variance(var, n))
-            continue
-        squared = var + mu**2
-        if s.mass_shape == (1,):
-            squared = jnp.sum(squared, -1, keepdims=True) / s.copy_dimension
-        out.append(1.0 / (squared + 1.0))
-    structure = jax.tree.structure(space, is_leaf=spaces.is_space)
-    return structure.unflatten(out)
-
-
 def window_schedule(num_steps: int) -> tuple[np.ndarray, np.ndarray]:
     """Stan's warm-up windows for ``num_steps`` transitions: ``(stage, window_end)`` per step,
     ``stage`` 0 in a fast window and 1 in a slow one, ``window_end`` true at the last step of a
-    slow window (``blackjax.adaptation.window_adaptation.build_schedule``; constants, also when
-    called under ``jit``)."""
-    with jax.ensure_compile_time_eval():
-        schedule = np.asarray(build_schedule(int(num_steps)))
-    return schedule[:, 0].astype(np.int32), schedule[:, 1].astype(bool)
+    slow window (:func:`liesample.tuning.protocol.schedule`)."""
+    rows = schedule(num_steps)
+    return rows.stage, rows.window_end
 
 
 def integration_steps(step_size, integration_time):
     """``L = ceil(T / ε)``, clipped to ``[1, MAX_NUM_INTEGRATION_STEPS]`` (traceable)."""
     steps = jnp.ceil(integration_time / step_size)
     return jnp.clip(steps, 1, MAX_NUM_INTEGRATION_STEPS).astype(int)
-
-
-class WarmupState(NamedTuple):
-    """Adaptation carry: dual-averaging state, current step size and inverse mass, Welford
-    moments ``(mean, m2, count)`` of :func:`_statistic` in the current slow window."""
-
-    da_state: object
-    step_size: jax.Array
-    inverse_mass: object
-    welford: tuple
-    smoothed: jax.Array  # each chain's running Metropolis rate (batched; else one value)
-
-
-RATE_SMOOTHING = 0.9
-"""Weight of the past in each chain's running Metropolis rate (about ten transitions)."""
-
-
-def pooled_rate(rates, smoothed):
-    """``(rate, smoothed)``: the rate dual averaging reads from a batch of chains, and their
-    updated running rates. The rate is the chains' mean rate times the ratio of the harmonic
-    to the arithmetic mean of their running rates: near 1 for chains that accept alike (the
-    step then meets the target), near 0 while one chain stays stuck (the step is lowered until
-    it moves). (The harmonic mean of the per-transition rates would also free a stuck chain,
-    but per-transition rates are noisy and it ends well above the target.)"""
-    own = jnp.where(jnp.isfinite(rates), rates, 0.0)
-    smoothed = RATE_SMOOTHING * smoothed + (1.0 - RATE_SMOOTHING) * own
-    harmonic = 1.0 / jnp.mean(1.0 / jnp.maximum(smoothed, 1e-30))
-    arithmetic = jnp.mean(smoothed)
-    ratio = jnp.where(arithmetic > 0, harmonic / jnp.maximum(arithmetic, 1e-30), 1.0)
-    return jnp.mean(own) * ratio, smoothed
-
-
-class WarmupPieces(NamedTuple):
-    """One warm-up step's bookkeeping, shared by :func:`window_adaptation` and samplers that
-    adapt inside another library's chain loop (``liesample.interop.numpyro_kernel``)."""
-
-    init: Callable  # (sampler state, initial step size, inverse mass) -> WarmupState
-    update: Callable  # (WarmupState, new state, info, stage, window_end) -> WarmupState
-    final_step_size: Callable  # WarmupState -> the averaged step size of dual averaging
-
-
-def _close_window(window_end, new_inverse_mass, da_init, da_final, operands):
-    """At the end of a slow window (Stan's schedule): the mass from the window's Welford moments
-    ``new_inverse_mass(mean, m2, count)``, dual averaging restarted from its averaged step size,
-    the moments reset. Otherwise ``operands = (da_state, inverse_mass, welford)`` unchanged."""
-
-    def close(operands):
-        da_state, _, (mean, m2, count) = operands
-        welford = (jnp.zeros_like(mean), jnp.zeros_like(m2), 0 * count)
-        return da_init(da_final(da_state)), new_inverse_mass(mean, m2, count), welford
-
-    return jax.lax.cond(window_end, close, lambda operands: operands, operands)
-
-
-def warmup_pieces(
-    space, target_acceptance_rate: float, adapt_mass: bool = True, batched: bool = False
-) -> WarmupPieces:
-    """Dual averaging of the step size towards ``target_acceptance_rate`` and the Welford mass
-    of :func:`_inverse_mass`, one transition at a time, on Stan's schedule: ``stage`` 1 (slow
-    window) accumulates the mass statistic, ``window_end`` sets the mass and restarts dual
-    averaging from its averaged step size. ``batched``: states carry a leading chain axis; the
-    chains share the step size and mass, dual averaging follows :func:`pooled_rate` (a stuck
-    chain lowers the step) and the mass pools their moments."""
-    da_init, da_update, da_final = dual_averaging_adaptation(target_acceptance_rate)
-    statistic = jax.vmap(functools.partial(_statistic, space)) if batched else None
-
-    def init(state, initial_step_size, inverse_mass):
-        num_chains = jnp.shape(state.logdensity)[0] if batched else 1
-        if batched:
-            state = jax.tree.map(lambda leaf: leaf[0], state)
-        dtype = jnp.asarray(state.logdensity).dtype
-        size = _statistic(space, state).shape[0]
-        welford = (jnp.zeros(size, dtype), jnp.zeros(size, dtype), jnp.asarray(0))
-        step_size = jnp.asarray(initial_step_size, dtype)
-        smoothed = jnp.full(num_chains, target_acceptance_rate, dtype)
-        return WarmupState(da_init(step_size), step_size, inverse_mass, welford, smoothed)
-
-    def update(warm, state, info, stage, window_end):
-        da_state, _, inverse_mass, welford, smoothed = warm
-        slow = (stage == 1) & adapt_mass
-        if batched:
-            rate, smoothed = pooled_rate(info.metropolis_rate, smoothed)
-            da_state = da_update(da_state, rate)
-            updated = _welford_batch(welford, statistic(state))
-        else:
-            rate = jnp.where(jnp.isfinite(info.metropolis_rate), info.metropolis_rate, 0.0)
-            da_state = da_update(da_state, rate)
-            mean, m2, count = welford
-            x = _statistic(space, state)
-            new_count = count + 1
-            delta = x - mean
-            new_mean = mean + delta / new_count
-            updated = (new_mean, m2 + delta * (x - new_mean), new_count)
-        welford = jax.tree.map(lambda a, b: jnp.where(slow, a, b), updated, welford)
-
-        da_state, inverse_mass, welford = _close_window(
-            window_end & adapt_mass,
-            lambda mean, m2, count: _inverse_mass(space, mean, m2, count, mean.dtype),
-            da_init,
-            da_final,
-            (da_state, inverse_mass, welford),
-        )
-        step_size = jnp.exp(da_state.log_step_size)
-        return WarmupState(da_state, step_size, inverse_mass, welford, smoothed)
-
-    def final_step_size(warm):
-        return da_final(warm.da_state)
-
-    return WarmupPieces(init, update, final_step_size)
 
 
 def _num_chains(space, position) -> int | None:
@@ -322,7 +184,7 @@ def window_adaptation(
         raise TypeError(
             f"{name} declares no window adaptation (no adaptation= in its sampling_api)"
         )
-    if declared["schedule"] == "chees":
+    if declared.method == "chees":
         if space is not None:
             raise TypeError(
                 f"{name} samples on R^d and takes no space; call "
@@ -380,9 +242,9 @@ class _WindowPlan(NamedTuple):
 def _window_plan(algorithm, declared, target_acceptance_rate, integration_time, parameters):
     """Validate ``window_adaptation``'s arguments against the sampler's declaration."""
     name = type(algorithm).__name__
-    build_options = {k: parameters.pop(k) for k in declared["options"] if k in parameters}
+    build_options = {k: parameters.pop(k) for k in declared.options if k in parameters}
     kernel = algorithm.build_kernel(**build_options)
-    is_hmc = "num_integration_steps" in declared["adapted"]
+    is_hmc = "num_integration_steps" in declared.adapted
     fixed_steps = parameters.pop("num_integration_steps", None)
     if not is_hmc and (fixed_steps is not None or integration_time is not None):
         raise ValueError("num_integration_steps and integration_time are HMC parameters")
@@ -395,18 +257,18 @@ def _window_plan(algorithm, declared, target_acceptance_rate, integration_time, 
     time = DEFAULT_INTEGRATION_TIME if integration_time is None else integration_time
     time = finite_float("integration_time", time, positive=True)
     learn = is_hmc and fixed_steps is None and integration_time is None
-    for key, value in declared["defaults"].items():
+    for key, value in declared.defaults.items():
         parameters.setdefault(key, value)
     if target_acceptance_rate is None:
-        target_acceptance_rate = declared["target_acceptance_rate"]
+        target_acceptance_rate = declared.target_acceptance_rate
     target = finite_float("target_acceptance_rate", target_acceptance_rate, rate=True)
     if "step_size" in parameters:
         raise TypeError("step_size is what window_adaptation tunes: give initial_step_size")
-    unknown = set(parameters) - set(declared["parameters"])
+    unknown = set(parameters) - set(declared.accepts)
     if unknown:
         raise TypeError(
             f"unknown parameters for {name}: {sorted(unknown)}; it takes "
-            f"{sorted(declared['parameters'])} and the options {sorted(declared['options'])}"
+            f"{sorted(declared.accepts)} and the options {sorted(declared.options)}"
         )
     initial_mass = parameters.pop("inverse_mass_matrix", None)
     fixed = None if fixed_steps is None else int(fixed_steps)
@@ -418,8 +280,9 @@ def _window_plan(algorithm, declared, target_acceptance_rate, integration_time, 
 
 def _window_run(plan, algorithm, logdensity_fn, space, initial_step_size, adapt_mass,
                 rng_key, initial_position, num_steps):  # fmt: skip
-    """``run`` of :func:`window_adaptation`: the chains' states, the warm-up's compiled
-    ``scan`` and the tuned parameters."""
+    """``run`` of :func:`window_adaptation`: the chains' states, the warm-up (the adaptation of
+    :func:`_window_windows` run by :func:`liesample.tuning.protocol.run_adaptation`) and the
+    tuned parameters."""
     if isinstance(num_steps, bool) or int(num_steps) != num_steps or num_steps < 20:
         raise ValueError(f"num_steps must be an integer >= 20, got {num_steps!r}")
     num_chains = _num_chains(space, initial_position)
@@ -427,73 +290,79 @@ def _window_run(plan, algorithm, logdensity_fn, space, initial_step_size, adapt_
     init = lambda x: algorithm.init(x, logdensity_fn, space)
     if batched:
         check_starts(space)(initial_position)
-    state = jax.vmap(init)(initial_position) if batched else init(initial_position)
-    pieces = warmup_pieces(space, plan.target, adapt_mass, batched)
-    dtype = jnp.asarray(state.logdensity).dtype
-    inverse_mass = spaces.check_inverse_mass(space, plan.initial_mass, dtype)
-    stages, ends = window_schedule(num_steps)
-    length = plan.lengths.init(euclidean_size(space), dtype)
-    carry = (state, pieces.init(state, initial_step_size, inverse_mass), length)
-    keys = jax.random.split(rng_key, int(num_steps))
-    schedule = (stages, ends, averaged_steps(stages, ends), np.arange(num_steps))
-    one_step = _window_step(plan, pieces, logdensity_fn, space, num_chains)
+        states = jax.vmap(init)(initial_position)
+    else:
+        states = jax.tree.map(lambda leaf: leaf[None], init(initial_position))
+    dtype = jnp.asarray(states.logdensity).dtype
+    start = {
+        "step_size": jnp.asarray(initial_step_size, dtype),
+        "inverse_mass_matrix": spaces.check_inverse_mass(space, plan.initial_mass, dtype),
+    }
+    adaptation = windows_adaptation(_window_windows(plan, space, adapt_mass))
+
+    def sampler_at(step_size, inverse_mass_matrix, num_integration_steps=None,
+                   integration_time=None):  # fmt: skip
+        del integration_time
+        extra = {"step_size": step_size, "inverse_mass_matrix": inverse_mass_matrix}
+        if num_integration_steps is not None:
+            extra["num_integration_steps"] = num_integration_steps
+
+        def step(key, state):
+            return plan.kernel(key, state, logdensity_fn, space, **extra, **plan.parameters)
+
+        return Sampler(init, step)
+
+    def record(parameters, state, info):
+        steps = parameters.get("num_integration_steps", jnp.asarray(plan.fixed_steps or 1))
+        return AdaptationInfo(state, info, parameters["step_size"], steps)
 
     @jit
-    def warmup(carry, keys, schedule):
-        return jax.lax.scan(one_step, carry, (keys, schedule))
+    def warmup(chain_keys, states, start):
+        return run_adaptation(adaptation, sampler_at, chain_keys, states, start, num_steps, record)
 
-    (state, warm, length), info = warmup(carry, keys, schedule)
-    step_size = float(pieces.final_step_size(warm))
-    tuned = {**plan.parameters, "step_size": step_size, "inverse_mass_matrix": warm.inverse_mass}
-    if plan.fixed_steps is not None:
-        tuned["num_integration_steps"] = plan.fixed_steps
-    elif plan.is_hmc:
-        time = float(plan.lengths.final(length))
-        tuned["num_integration_steps"] = int(integration_steps(step_size, time))
-        tuned["jitter"] = True
-    tuned.update(plan.build_options)
-    return (state, tuned), info
-
-
-def _window_step(plan, pieces, logdensity_fn, space, num_chains):
-    """One warm-up transition of :func:`window_adaptation` (a ``scan`` body): the kernel at
-    the current parameters (``L`` fixed, or ``ceil(u T / ε)``), then the updates of the step
-    size and mass and of ``T``."""
-    batched = num_chains is not None
-    jittered = plan.is_hmc and plan.fixed_steps is None
-
-    def transition(key, state, warm, steps):
-        extra = {"num_integration_steps": steps} if plan.is_hmc else {}
-        return plan.kernel(
-            key,
-            state,
-            logdensity_fn,
-            space,
-            step_size=warm.step_size,
-            inverse_mass_matrix=warm.inverse_mass,
-            **extra,
-            **plan.parameters,
+    chain_keys = jax.random.split(rng_key, num_chains or 1)
+    states, tuned, info = warmup(chain_keys, states, start)
+    info = AdaptationInfo(*_steps_first(info[:2]), *(x[0] for x in info[2:]))
+    if not batched:
+        states, info = jax.tree.map(lambda leaf: leaf[0], states), info._replace(
+            state=jax.tree.map(lambda x: x[:, 0], info.state),
+            info=jax.tree.map(lambda x: x[:, 0], info.info),
         )
+    step_size = float(tuned["step_size"])
+    parameters = {**plan.parameters, "step_size": step_size,
+                  "inverse_mass_matrix": tuned["inverse_mass_matrix"]}  # fmt: skip
+    if plan.fixed_steps is not None:
+        parameters["num_integration_steps"] = plan.fixed_steps
+    elif plan.is_hmc:
+        time = float(tuned["integration_time"])
+        parameters["num_integration_steps"] = int(integration_steps(step_size, time))
+        parameters["jitter"] = True
+    parameters.update(plan.build_options)
+    return (states, parameters), info
 
-    move = jax.vmap(transition, in_axes=(0, 0, None, None)) if batched else transition
 
-    def one_step(carry, xs):
-        before, warm, length = carry
-        key, (stage, window_end, average, index) = xs
-        if jittered:
-            steps = jittered_steps(halton(index), jnp.exp(length.log_time), warm.step_size)
-        else:
-            steps = jnp.asarray(plan.fixed_steps or 1)
-        if batched:
-            key = jax.random.split(key, num_chains)
-        state, info = move(key, before, warm, steps)
-        if jittered:
-            chains = chain_move(space, before, state, info, warm.inverse_mass, batched)
-            length = plan.lengths.update(length, chains, warm.step_size, steps, average)
-        warm = pieces.update(warm, state, info, stage, window_end)
-        return (state, warm, length), AdaptationInfo(state, info, warm.step_size, steps)
+def _steps_first(records):
+    """Per-chain records of :func:`liesample.tuning.protocol.run_adaptation` (chains,
+    transitions, …) as BlackJAX lays them out (transitions, chains, …)."""
+    return jax.tree.map(lambda x: jnp.swapaxes(x, 0, 1), records)
 
-    return one_step
+
+def _window_windows(plan, space, adapt_mass) -> Windows:
+    """:class:`liesample.tuning.windows.Windows` of a T*G sampler on ``space``: dual averaging
+    of the Metropolis rate, the mass of :func:`liesample.tuning.windows.inverse_mass`, ``T`` by
+    the trajectory rule when ``L`` is jittered."""
+    jittered = plan.is_hmc and plan.fixed_steps is None
+    return Windows(
+        plan.target,
+        "metropolis_rate",
+        jax.vmap(functools.partial(statistic, space)),
+        functools.partial(inverse_mass, space),
+        adapt_mass,
+        lengths=plan.lengths if jittered else None,
+        move=lambda before, after, infos, mass: chain_move(space, before, after, infos, mass, True),
+        dimension=euclidean_size(space),
+        fixed_steps=plan.fixed_steps if plan.is_hmc else None,
+    )
 
 
 # --------------------------------------------------------------------------- magnetic HMC
@@ -502,7 +371,7 @@ DEFAULT_ANGLE = 0.0
 """Default field of :func:`magnetic_window_adaptation`, as the angle (rad) per step: no field.
 A field helps on some targets (strongly correlated or curved ones) and slows the slowest
 directions of others, so it is opt-in; ``angle > 0`` turns it on, adapted jointly."""
-CHEES_TARGET_ACCEPTANCE_RATE = magnetic_hmc.adaptation["target_acceptance_rate"]
+CHEES_TARGET_ACCEPTANCE_RATE = magnetic_hmc.adaptation.target_acceptance_rate
 
 
 class MagneticAdaptationInfo(NamedTuple):
@@ -547,19 +416,6 @@ def _field_from(ends) -> int:
     return int(closes[0]) if closes.size else -1
 
 
-def _welford_batch(welford, x):
-    """Chan et al.'s update of ``(mean, m2, count)`` with a batch ``x`` of shape ``(n, d)``."""
-    mean, m2, count = welford
-    n = x.shape[0]
-    batch_mean = jnp.mean(x, 0)
-    batch_m2 = jnp.sum((x - batch_mean) ** 2, 0)
-    total = count + n
-    delta = batch_mean - mean
-    new_mean = mean + delta * (n / total)
-    new_m2 = m2 + batch_m2 + delta**2 * (count * n / total)
-    return new_mean, new_m2, total
-
-
 def magnetic_window_adaptation(
     logdensity_fn: Callable,
     *,
@@ -600,30 +456,11 @@ def magnetic_window_adaptation(
 
     **Trajectory length (ChEES).** Each transition integrates for ``t = u T`` with ``u`` from the
     base-2 Halton sequence (the same for every chain), ``L = ceil(t / ε)`` steps; ``log T`` is
-    moved by ``learning_rate`` times the estimated gradient (clipped to ``[−2, 2]``) of the log
-    of the squared distance's ESS per gradient, ``(1 − ρ)/((1 + ρ) T)``, with ``1 − ρ``
-    read off ChEES normalised by its value for independent draws
-    (:func:`_log_efficiency_gradient`, from running means of the estimates of
-    :func:`_chees_terms`). Every step of a scheme costs the same number of gradients, so the
-    rule is the same per gradient for every ``integrator``. ChEES alone saturates once the
-    trajectory outlasts the slowest direction's decorrelation time, and its noisy gradient
-    then lets ``T`` drift; ChEES per unit length has a maximum but favours the fast
-    directions. The gradient is dimensionless and bounded, so the step is plain stochastic
-    ascent, not Adam (Adam's normalised steps keep their size where the mean gradient
-    vanishes, so ``T`` wanders around the optimum). The derivative is taken at the time
-    integrated, ``L ε`` (at least one step), not at ``u T``: below ``ε`` the two differ, and a
-    rule fed ``u T`` there sees no gain in a longer ``T`` and lets it shrink without end.
-    At ``T <= ε`` every transition is one step whatever ``T`` is, so ``T`` is not lowered
-    there (near the step's stability limit one step can look better than two to the gradient,
-    which would otherwise move ``T`` down without end). After each update ``T`` is pulled
-    down towards ``min(L_max ε, π √(tr Σ̃))`` when above it, ``tr Σ̃`` the running mean of the
-    chains' whitened squared distance to their centre
-    (:func:`_bound_log_time`): a Gaussian's slowest direction turns back after
-    ``π √(tr Σ̃)`` at most, so the noisy gradient cannot carry ``T`` far past it. The pull is
-    rate-limited, so that a momentary tiny ``ε`` does not drag ``T`` far down (transitions
-    never exceed ``L_max`` steps). The returned ``T`` is ``exp`` of the mean of ``log T``
-    over the last slow window and the final fast window; ``integration_time=T`` fixes ``T``
-    instead.
+    learnt by the ChEES-type rule of :mod:`liesample.tuning.trajectory` (stochastic ascent on
+    the squared distance's ESS per gradient, the same per gradient for every ``integrator``,
+    bounded above by the chains' spread). The returned ``T`` is ``exp`` of the mean of
+    ``log T`` over the last slow window and the final fast window; ``integration_time=T``
+    fixes ``T`` instead.
 
     Parameters
     ----------
@@ -649,32 +486,10 @@ def magnetic_window_adaptation(
         The sampler tuned: ``liesample.magnetic_hmc`` or one with its signature.
     """
     del progress_bar  # accepted for BlackJAX compatibility; the warm-up is one compiled loop
-    scheme = {} if integrator is None else {"integrator": integrator}
-    algorithm.build_kernel(**scheme)  # validates the scheme now
-    angle = finite_float("angle", angle, nonnegative=True)
-    finite_float("initial_step_size", initial_step_size, positive=True)
-    target = finite_float("target_acceptance_rate", target_acceptance_rate, rate=True)
-    if integration_time is not None:
-        integration_time = finite_float("integration_time", integration_time, positive=True)
-    initial_time = finite_float("initial_integration_time", initial_integration_time, positive=True)
-    learning_rate = finite_float("learning_rate", learning_rate, positive=True)
-    if not isinstance(adapt_mass, bool):
-        raise TypeError(f"adapt_mass must be a bool, got {adapt_mass!r}")
-    max_steps = max_num_integration_steps
-    if isinstance(max_steps, bool) or int(max_steps) != max_steps or max_steps < 1:
-        raise ValueError(f"max_num_integration_steps must be an integer >= 1, got {max_steps!r}")
-    max_steps = int(max_steps)
-    divergence_threshold = finite_float("divergence_threshold", divergence_threshold, positive=True)
-    lengths = trajectory_adaptation(
-        initial_time if integration_time is None else integration_time,
-        learning_rate,
-        max_steps,
-        learn=integration_time is None,
-    )
-    options = {"divergence_threshold": divergence_threshold, **scheme}
-    plan = _MagneticPlan(
-        algorithm, logdensity_fn, angle, target, initial_step_size, adapt_mass, max_steps,
-        options, lengths,
+    plan = _magnetic_plan(
+        algorithm, logdensity_fn, angle, initial_step_size, target_acceptance_rate,
+        integration_time, initial_integration_time, learning_rate, adapt_mass,
+        divergence_threshold, max_num_integration_steps, integrator,
     )  # fmt: skip
 
     def run(rng_key, initial_positions, num_steps: int = 1000):
@@ -698,46 +513,73 @@ class _MagneticPlan(NamedTuple):
     lengths: object
 
 
+def _magnetic_plan(algorithm, logdensity_fn, angle, initial_step_size, target_acceptance_rate,
+                   integration_time, initial_integration_time, learning_rate, adapt_mass,
+                   divergence_threshold, max_num_integration_steps,
+                   integrator) -> _MagneticPlan:  # fmt: skip
+    """:func:`magnetic_window_adaptation`'s arguments checked, each error naming its parameter."""
+    scheme = {} if integrator is None else {"integrator": integrator}
+    algorithm.build_kernel(**scheme)  # validates the scheme now
+    angle = finite_float("angle", angle, nonnegative=True)
+    finite_float("initial_step_size", initial_step_size, positive=True)
+    target = finite_float("target_acceptance_rate", target_acceptance_rate, rate=True)
+    if integration_time is not None:
+        integration_time = finite_float("integration_time", integration_time, positive=True)
+    initial_time = finite_float("initial_integration_time", initial_integration_time, positive=True)
+    learning_rate = finite_float("learning_rate", learning_rate, positive=True)
+    if not isinstance(adapt_mass, bool):
+        raise TypeError(f"adapt_mass must be a bool, got {adapt_mass!r}")
+    max_steps = max_num_integration_steps
+    if isinstance(max_steps, bool) or int(max_steps) != max_steps or max_steps < 1:
+        raise ValueError(f"max_num_integration_steps must be an integer >= 1, got {max_steps!r}")
+    max_steps = int(max_steps)
+    divergence_threshold = finite_float("divergence_threshold", divergence_threshold, positive=True)
+    lengths = trajectory_adaptation(
+        initial_time if integration_time is None else integration_time,
+        learning_rate,
+        max_steps,
+        learn=integration_time is None,
+    )
+    options = {"divergence_threshold": divergence_threshold, **scheme}
+    return _MagneticPlan(
+        algorithm, logdensity_fn, angle, target, initial_step_size, adapt_mass, max_steps,
+        options, lengths,
+    )  # fmt: skip
+
+
 def _magnetic_run(plan: _MagneticPlan, rng_key, initial_positions, num_steps):
-    """``run`` of :func:`magnetic_window_adaptation`."""
+    """``run`` of :func:`magnetic_window_adaptation`: the adaptation of
+    :func:`_magnetic_windows` run by :func:`liesample.tuning.protocol.run_adaptation`."""
     if isinstance(num_steps, bool) or int(num_steps) != num_steps or num_steps < 20:
         raise ValueError(f"num_steps must be an integer >= 20, got {num_steps!r}")
     num_steps = int(num_steps)
     flat = _flat_starts(initial_positions, plan.logdensity_fn)
     num_chains, dimension = flat.shape
-    dtype = flat.dtype
     states = jax.vmap(lambda x: plan.algorithm.init(x, plan.logdensity_fn))(initial_positions)
-    stages, ends = window_schedule(num_steps)
-    da_init, _, da_final = dual_averaging_adaptation(plan.target)
-    welford = (jnp.zeros(dimension, dtype), jnp.zeros(dimension, dtype), jnp.asarray(0))
-    carry = (
-        states,
-        da_init(jnp.asarray(plan.initial_step_size, dtype)),
-        plan.lengths.init(dimension, dtype),
-        jnp.ones(dimension, dtype),
-        welford,
-        jnp.full(num_chains, plan.target, dtype),
-    )
-    xs = (
-        jax.random.split(rng_key, num_steps),
-        jnp.arange(num_steps),
-        jnp.asarray(stages),
-        jnp.asarray(ends),
-        jnp.asarray(averaged_steps(stages, ends)),
-        # The field is off until the first mass update (the end of the first slow window):
-        # see :func:`_field_from`.
-        jnp.asarray(np.arange(num_steps) > _field_from(ends)),
-    )
-    one_step = _magnetic_step(plan, num_chains, dimension, dtype)
+    start = {"step_size": jnp.asarray(plan.initial_step_size, flat.dtype),
+             "inverse_mass_matrix": jnp.ones(dimension, flat.dtype)}  # fmt: skip
+    adaptation = windows_adaptation(_magnetic_windows(plan, num_steps, dimension, flat.dtype))
+
+    def sampler_at(step_size, inverse_mass_matrix, num_integration_steps, integration_time,
+                   magnetic_field, strength):  # fmt: skip
+        del integration_time, strength
+        # the top-level API: the flows e^{±εGM⁻¹} are computed once per step for all chains
+        sampler = plan.algorithm(plan.logdensity_fn, step_size, inverse_mass_matrix,
+                                 num_integration_steps, magnetic_field, **plan.options)  # fmt: skip
+        return as_sampler(sampler)
+
+    def record(p, state, info):
+        return MagneticAdaptationInfo(state, info, p["step_size"], p["num_integration_steps"],
+                                      p["integration_time"], p["strength"])  # fmt: skip
 
     @jit
-    def warmup(carry, xs):
-        return jax.lax.scan(one_step, carry, xs)
+    def warmup(chain_keys, states, start):
+        return run_adaptation(adaptation, sampler_at, chain_keys, states, start, num_steps, record)
 
-    (states, da_state, length, inverse_mass, _, _), info = warmup(carry, xs)
-    step_size = float(da_final(da_state))
-    trajectory = float(plan.lengths.final(length))
-    inverse_mass = np.asarray(inverse_mass)
+    states, tuned, info = warmup(jax.random.split(rng_key, num_chains), states, start)
+    step_size = float(tuned["step_size"])
+    trajectory = float(tuned["integration_time"])
+    inverse_mass = np.asarray(tuned["inverse_mass_matrix"])
     if not (np.isfinite(step_size) and np.all(np.isfinite(inverse_mass))):
         raise FloatingPointError(
             "magnetic_window_adaptation ended with a non-finite step size or mass: the "
@@ -751,63 +593,48 @@ def _magnetic_run(plan: _MagneticPlan, rng_key, initial_positions, num_steps):
         "magnetic_field": default_magnetic_field(inverse_mass, plan.angle / step_size),
         **{k: v for k, v in plan.options.items() if k == "integrator"},
     }
-    info = info._replace(trajectory_length=info.trajectory_length.at[-1].set(trajectory))
+    info = MagneticAdaptationInfo(*_steps_first(info[:2]), *(x[0] for x in info[2:]))
+    times = info.trajectory_length  # the T of each transition, then the tuned one last
+    info = info._replace(trajectory_length=times.at[-1].set(trajectory))
     return (states, parameters), info
 
 
-def _magnetic_step(plan: _MagneticPlan, num_chains, dimension, dtype):
-    """One warm-up transition of :func:`magnetic_window_adaptation` (a ``scan`` body): every
-    chain moved by ``magnetic_hmc`` at the shared parameters, then the updates of the step
-    size (:func:`pooled_rate`), ``T``, and in slow windows the mass."""
-    da_init, da_update, da_final = dual_averaging_adaptation(plan.target)
+def _magnetic_windows(plan: _MagneticPlan, num_steps, dimension, dtype) -> Windows:
+    """:class:`liesample.tuning.windows.Windows` of magnetic HMC: dual averaging of the chains'
+    acceptance, the regularised variance of the flat positions, ``T`` by the trajectory rule,
+    and the field, off until the first slow window closes (:func:`_field_from`), then
+    ``default_magnetic_field(M⁻¹, angle / ε)``."""
     rotation = jnp.asarray(_rotation(dimension), dtype)
     zero_field = np.zeros((dimension, dimension))
+    field_from = _field_from(schedule(num_steps).window_end)
     angle = plan.angle
 
-    def variance(mean, m2, count):
-        return _regularised_variance(m2 / jnp.maximum(count - 1, 1), count.astype(dtype))
-
-    def one_step(carry, xs):
-        states, da_state, length, inverse_mass, welford, smoothed = carry
-        key, index, stage, window_end, average, on = xs
-        step_size = jnp.exp(da_state.log_step_size)
-        strength = jnp.where(on, angle / step_size, 0.0)
+    def field(row, step_size, inverse_mass):
+        strength = jnp.where(row.index > field_from, angle / step_size, 0.0)
         # angle 0: a concrete zero field, so the sampler takes the free drift (no expm)
-        field = zero_field if angle == 0.0 else _field(rotation, inverse_mass, strength)
-        trajectory = jnp.exp(length.log_time)
-        steps = jittered_steps(halton(index), trajectory, step_size, plan.max_steps)
-        # The top-level API: the flows e^{±εGM⁻¹} are computed once per step for all chains.
-        sampler = plan.algorithm(
-            plan.logdensity_fn, step_size, inverse_mass, steps, field, **plan.options
-        )
-        new_states, info = jax.vmap(sampler.step)(jax.random.split(key, num_chains), states)
-        rate, smoothed = pooled_rate(info.acceptance_rate, smoothed)
-        da_state = da_update(da_state, rate)
-        after = jax.vmap(_ravel)(new_states.position)
-        move = ChainMove(
-            jax.vmap(_ravel)(states.position),
-            after,
-            new_states.momentum,
-            info.is_accepted,
-            info.acceptance_rate,
-            inverse_mass,
-        )
-        length = plan.lengths.update(length, move, step_size, steps, average)
-        in_slow = (stage == 1) & plan.adapt_mass
-        welford = jax.tree.map(
-            lambda a, b: jnp.where(in_slow, a, b), _welford_batch(welford, after), welford
-        )
-        da_state, inverse_mass, welford = _close_window(
-            window_end & plan.adapt_mass,
-            variance,
-            da_init,
-            da_final,
-            (da_state, inverse_mass, welford),
-        )
-        record = MagneticAdaptationInfo(new_states, info, step_size, steps, trajectory, strength)
-        return (new_states, da_state, length, inverse_mass, welford, smoothed), record
+        value = zero_field if angle == 0.0 else _field(rotation, inverse_mass, strength)
+        return {"magnetic_field": value, "strength": strength}
 
-    return one_step
+    def move(before, after, infos, inverse_mass):
+        flat = jax.vmap(_ravel)
+        return ChainMove(flat(before.position), flat(after.position), after.momentum,
+                         infos.is_accepted, infos.acceptance_rate, inverse_mass)  # fmt: skip
+
+    def mass_from(mean, m2, count):
+        return regularised_variance(m2 / jnp.maximum(count - 1, 1), count.astype(m2.dtype))
+
+    return Windows(
+        plan.target,
+        "acceptance_rate",
+        lambda states: jax.vmap(_ravel)(states.position),
+        mass_from,
+        plan.adapt_mass,
+        lengths=plan.lengths,
+        move=move,
+        dimension=dimension,
+        max_steps=plan.max_steps,
+        extra=field,
+    )
 
 
 def _ravel(tree):

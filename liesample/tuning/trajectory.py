@@ -1,8 +1,10 @@
 """Trajectory length of HMC: a jittered integration time, its length learnt by a ChEES-type rule.
 
-Every HMC-type warm-up of liesample (:func:`liesample.tuning.adaptation.magnetic_window_adaptation`
-and the NumPyro kernel :class:`liesample.interop.numpyro_kernel.GeometricHMC`) runs this one
-rule, in BlackJAX's shape: :func:`trajectory_adaptation` returns ``(init, update, final)``.
+Every HMC-type warm-up of liesample runs this one rule, in BlackJAX's shape
+(:func:`trajectory_adaptation` returns ``(init, update, final)``), as the trajectory piece of
+the window adaptation (:func:`liesample.tuning.windows.windows_adaptation`), which
+:func:`liesample.window_adaptation`, :func:`liesample.tuning.adaptation.magnetic_window_adaptation`
+and the NumPyro kernel :class:`liesample.interop.numpyro_kernel.GeometricHMC` run.
 
 **Jitter.** Transition ``n`` integrates for ``t = u_n T`` (``L = ceil(u_n T / ε)`` steps, at least
 one), ``u_n`` the base-2 Halton sequence (:func:`halton`, the same for every chain). A fixed
@@ -22,7 +24,8 @@ transition is one step whatever ``T`` is). When the mass changes, ``T`` is resca
 whitened units (:func:`_rescale`). After each update ``T`` is pulled down towards
 ``min(L_max ε, π √(tr Σ̃))`` when above it (:func:`_bound_log_time`). The tuned ``T`` is
 ``exp`` of the mean of ``log T`` over the transitions updated with ``average=True`` (the last
-slow window and the final fast window of Stan's schedule).
+slow window and the final fast window of Stan's schedule,
+:func:`liesample.tuning.protocol.schedule`).
 """
 
 from __future__ import annotations
@@ -43,7 +46,6 @@ __all__ = [
     "MAX_NUM_INTEGRATION_STEPS",
     "TrajectoryAdaptation",
     "TrajectoryState",
-    "averaged_steps",
     "chain_move",
     "euclidean_size",
     "halton",
@@ -81,21 +83,6 @@ def halton(index):
     for bit in range(HALTON_BITS):
         u = u + ((n >> bit) & 1) * 0.5 ** (bit + 1)
     return u
-
-
-def averaged_steps(stages, ends) -> np.ndarray:
-    """The warm-up transitions whose ``T`` makes the tuned one: from the start of the last slow
-    window of Stan's schedule (``stages``, ``ends`` of
-    :func:`liesample.tuning.adaptation.window_schedule`) to the end; the second half without
-    a slow window."""
-    num_steps = len(stages)
-    slow = np.flatnonzero(np.asarray(stages) == 1)
-    if not slow.size:
-        start = num_steps // 2
-    else:
-        earlier = np.flatnonzero(np.asarray(ends)[: slow[-1]])  # ends before the last window's
-        start = int(earlier[-1]) + 1 if earlier.size else 0
-    return np.arange(num_steps) >= start
 
 
 def jittered_steps(u, trajectory_length, step_size, max_steps: int = MAX_NUM_INTEGRATION_STEPS):

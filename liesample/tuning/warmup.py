@@ -1,45 +1,50 @@
-"""The warm-up the runner runs: the step size a sampler declares tunable, chosen or tuned.
+"""The warm-up :func:`liesample.sample` runs: what an orbit sampler declares tunable, chosen or
+tuned through the adaptation protocol (:mod:`liesample.tuning.protocol`).
 
-A sampler declares how its step size is chosen (``Sampler.tuning``, a
-:class:`liesample.samplers.contract.StepSizeTuning`); this module runs that declaration, and
-:func:`liesample.sample` calls it:
+A sampler declares what its warm-up tunes (``Sampler.adaptation``, a
+:class:`liesample.samplers.contract.Tunable`); :func:`adaptation_of` makes the
+:class:`liesample.tuning.protocol.Adaptation` of that declaration and
+:func:`liesample.tuning.protocol.run_adaptation` runs it:
 
-- :func:`choose_from_starts` (no warm-up adaptation, step size left unset): the sampler's own
-  automatic step for the run's starts (``tuning.choose(positions, None)``);
-- :func:`warm_up` (adaptation): ``"dual_averaging"`` tunes the step over the warm-up steps
-  (:func:`liesample.tuning.dual_averaging.dual_averaging`) and returns the chains' states after
-  them; ``"rule"`` computes it from the starts with a key of the run
-  (``tuning.choose(positions, fold_in(rng_key, 1))``) and leaves the warm-up steps to the
-  runner.
+- ``"dual_averaging"``: :func:`liesample.tuning.protocol.step_size_adaptation`, the step shared
+  by the chains tuned to a target of their pooled acceptance rate;
+- ``"rule"``: :func:`liesample.tuning.protocol.fixed`, the step computed from the starts with a
+  key of the run (``choose(positions, fold_in(rng_key, 1))``), nothing learnt from the
+  transitions (the unadjusted sampler's bias model).
 
-Either returns a new sampler built by ``tuning.rebuild`` (the chosen step and how it was chosen
-in its ``settings``); the sampler given is not changed.
+:func:`choose_from_starts` is the same declaration without a warm-up (the step size left unset):
+the sampler's own automatic step for the run's starts (``choose(positions, None)``).
+
+Either returns a new sampler built by ``rebuild`` (the chosen step and how it was chosen in its
+``settings``); the sampler given is not changed.
 """
 
 from __future__ import annotations
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
+from liesample.foundation.compile import jit
 from liesample.samplers.contract import Sampler
-from liesample.tuning.dual_averaging import dual_averaging
+from liesample.tuning.protocol import fixed, run_adaptation, step_size_adaptation
 
-__all__ = ["WARM_UP_METHODS", "choose_from_starts", "warm_up"]
+__all__ = ["WARM_UP_METHODS", "adaptation_of", "choose_from_starts", "warm_up"]
 
 WARM_UP_METHODS = ("dual_averaging", "rule")
-"""The values of ``StepSizeTuning.method`` that :func:`warm_up` runs."""
+"""The values of ``Tunable.method`` that :func:`adaptation_of` builds."""
 
 
-def _tuning(sampler: Sampler):
-    tuning = sampler.tuning
-    if tuning is None:
-        raise ValueError("this sampler declares no step-size tuning (Sampler.tuning is None)")
-    if tuning.method not in WARM_UP_METHODS:
+def _declared(sampler: Sampler):
+    tunable = sampler.adaptation
+    if tunable is None:
+        raise ValueError("this sampler declares nothing to tune (Sampler.adaptation is None)")
+    if tunable.method not in WARM_UP_METHODS:
         raise ValueError(
-            f"unknown tuning method {tuning.method!r}; liesample.tuning.warmup runs "
+            f"unknown adaptation method {tunable.method!r}; liesample.tuning.warmup runs "
             f"{WARM_UP_METHODS}"
         )
-    return tuning
+    return tunable
 
 
 def _host(positions):
@@ -48,41 +53,66 @@ def _host(positions):
 
 def choose_from_starts(sampler: Sampler, initial_positions) -> Sampler:
     """The sampler with its automatic step for these starts (chains first), without warm-up."""
-    tuning = _tuning(sampler)
-    return tuning.rebuild(*tuning.choose(_host(initial_positions), None))
+    tunable = _declared(sampler)
+    return tunable.rebuild(*tunable.choose(_host(initial_positions), None))
+
+
+def adaptation_of(sampler: Sampler, initial_positions, rng_key):
+    """``(adaptation, starting step size, source)``: the protocol's instance for the sampler's
+    declaration (module docstring), from the run's starts and key."""
+    tunable = _declared(sampler)
+    positions = _host(initial_positions)
+    if tunable.method == "rule":
+        step_size, source = tunable.choose(positions, jax.random.fold_in(rng_key, 1))
+        return fixed({"step_size": step_size}), step_size, "warm-up " + source
+    if tunable.given:
+        initial = sampler.settings["step_size"]
+    else:
+        initial, _ = tunable.choose(positions, None)
+    cap = np.inf if tunable.max_step_size is None else float(tunable.max_step_size)
+    adaptation = step_size_adaptation(tunable.target_acceptance_rate, "acceptance_rate", cap)
+    return adaptation, initial, None
+
+
+def _acceptance(parameters, state, info):
+    del parameters, state
+    return info.acceptance_rate
 
 
 def warm_up(sampler: Sampler, rng_key, chain_keys, states, initial_positions, num_warmup: int):
-    """Tune ``sampler``'s step size in a warm-up of ``num_warmup`` steps.
+    """Tune ``sampler``'s declared parameters in a warm-up of ``num_warmup`` steps.
 
     Returns ``(tuned, states)``: the tuned sampler and the chains' states after the warm-up, or
-    ``None`` when the warm-up steps are still to be run (with ``tuned``). ``rng_key`` is the
-    run's key, ``chain_keys`` the chains' (``split(rng_key, chains)``), ``states`` the initial
-    states; from these alone, so a resumed run derives the same step.
+    ``None`` when the adaptation learns nothing from transitions (a rule) and the warm-up steps
+    are still to be run, as ordinary steps of ``tuned``. ``rng_key`` is the run's key,
+    ``chain_keys`` the chains' (``split(rng_key, chains)``), ``states`` the initial states; from
+    these alone, so a resumed run derives the same step.
     """
-    tuning = _tuning(sampler)
-    positions = _host(initial_positions)
-    if tuning.method == "rule":
-        step_size, source = tuning.choose(positions, jax.random.fold_in(rng_key, 1))
-        return tuning.rebuild(step_size, "warm-up " + source), None
-    if tuning.given:
-        initial = sampler.settings["step_size"]
-    else:
-        initial, _ = tuning.choose(positions, None)
-    result = dual_averaging(
-        tuning.at,
-        chain_keys,
-        states,
-        initial,
-        num_warmup,
-        tuning.target_acceptance_rate,
-        tuning.parameters,
-        tuning.max_step_size,
-    )
-    target = tuning.target_acceptance_rate
+    tunable = _declared(sampler)
+    adaptation, initial, source = adaptation_of(sampler, initial_positions, rng_key)
+    if adaptation.update is None:
+        step_size = adaptation.final(adaptation.init(states, {}))["step_size"]
+        return tunable.rebuild(float(step_size), source), None
+    dtype = jax.tree.leaves(states.position)[0].dtype
+    others = {name: jnp.asarray(v, dtype) for name, v in (tunable.parameters or {}).items()}
+
+    @jit
+    def run(chain_keys, states, initial, others):
+        def sampler_at(step_size):
+            return tunable.at(step_size, **others)
+
+        start = {"step_size": initial}
+        return run_adaptation(
+            adaptation, sampler_at, chain_keys, states, start, num_warmup, _acceptance
+        )
+
+    moved, parameters, rates = run(chain_keys, states, jnp.asarray(initial, dtype), others)
+    step_size = float(parameters["step_size"])
+    target = tunable.target_acceptance_rate
+    kept = np.asarray(rates)[:, num_warmup // 2 :]
     source = (
         f"warm-up dual averaging to mean acceptance {target:g} over chains, from "
         f"{initial:.4g}; mean acceptance in the second half of the warm-up "
-        f"{float(result.mean_acceptance):.3f}"
+        f"{float(np.mean(kept)):.3f}"
     )
-    return tuning.rebuild(float(result.step_size), source), result.states
+    return tunable.rebuild(step_size, source), moved

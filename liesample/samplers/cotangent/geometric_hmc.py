@@ -25,6 +25,7 @@ rejected or non-finite proposal keeps the state; a non-finite one is flagged ``i
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 
 import jax
@@ -32,7 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from liesample.foundation.validation import concrete_array
-from liesample.samplers.contract import Sampler, sampling_api, setting
+from liesample.samplers.contract import Sampler, Tunable, sampling_api, setting
 from liesample.samplers.cotangent._core import (
     GeometricInfo,
     GeometricState,
@@ -53,14 +54,13 @@ from liesample.samplers.cotangent._core import (
 
 __all__ = ["ADAPTATION", "as_top_level_api", "build_kernel", "geometric_hmc", "init"]
 
-ADAPTATION = {
-    "schedule": "window",
-    "adapted": ("step_size", "inverse_mass_matrix", "num_integration_steps"),
-    "parameters": ("num_integration_steps", "inverse_mass_matrix", "magnetic_field"),
-    "options": ("divergence_threshold", "momentum_persistence", "persistent", "integrator"),
-    "defaults": {},
-    "target_acceptance_rate": 0.8,
-}
+ADAPTATION = Tunable(
+    "window",
+    target_acceptance_rate=0.8,
+    adapted=("step_size", "inverse_mass_matrix", "num_integration_steps"),
+    accepts=("num_integration_steps", "inverse_mass_matrix", "magnetic_field"),
+    options=("divergence_threshold", "momentum_persistence", "persistent", "integrator"),
+)
 """How :func:`liesample.window_adaptation` tunes geometric HMC (``sampling_api(adaptation=)``)."""
 
 
@@ -225,6 +225,19 @@ def as_top_level_api(
     scheme = hamiltonian_scheme(integrator)
     move = make_move(logdensity_fn, space, step_size, inverse_mass_matrix, magnetic_field, scheme)
 
+    if not isinstance(jitter, bool):
+        raise TypeError(f"jitter must be a bool, got {jitter!r}")
+    settings = _settings(
+        space, step_size, num_integration_steps, divergence_threshold, magnetic_field,
+        momentum_persistence, persistent, integrator, jitter,
+    )  # fmt: skip
+    step_fn = functools.partial(_step, move, num_integration_steps, jitter, options)
+    return space_sampler(logdensity_fn, space, step_fn, settings)
+
+
+def _settings(space, step_size, num_integration_steps, divergence_threshold, magnetic_field,
+              momentum_persistence, persistent, integrator, jitter) -> dict:  # fmt: skip
+    """What :func:`as_top_level_api` records in the run's attributes."""
     settings = space_settings(
         "geometric_hmc",
         space,
@@ -238,20 +251,19 @@ def as_top_level_api(
         settings["momentum_persistence"] = setting(momentum_persistence)
         settings["persistent"] = persistent
     settings.update(scheme_setting(integrator))
-    if not isinstance(jitter, bool):
-        raise TypeError(f"jitter must be a bool, got {jitter!r}")
     if jitter:
         settings["jitter"] = True
+    return settings
 
-    def step_fn(rng_key, state):
-        steps = num_integration_steps
-        if jitter:
-            key_length, rng_key = jax.random.split(rng_key)
-            u = jax.random.uniform(key_length, (), state.logdensity.dtype)
-            steps = jnp.clip(jnp.ceil(u * steps), 1, steps).astype(int)
-        return transition(rng_key, state, move, steps, *options)
 
-    return space_sampler(logdensity_fn, space, step_fn, settings)
+def _step(move, num_integration_steps, jitter, options, rng_key, state):
+    """One transition: ``L`` steps, or ``ceil(u L)`` with ``u`` uniform when ``jitter``."""
+    steps = num_integration_steps
+    if jitter:
+        key_length, rng_key = jax.random.split(rng_key)
+        u = jax.random.uniform(key_length, (), state.logdensity.dtype)
+        steps = jnp.clip(jnp.ceil(u * steps), 1, steps).astype(int)
+    return transition(rng_key, state, move, steps, *options)
 
 
 geometric_hmc = sampling_api(

@@ -34,7 +34,7 @@ import jax.numpy as jnp
 
 from liesample.foundation.validation import concrete_array, finite_float
 from liesample.geometry.cotangent import check_scheme
-from liesample.samplers.contract import Sampler, sampling_api, setting
+from liesample.samplers.contract import Sampler, Tunable, sampling_api, setting
 from liesample.samplers.cotangent._core import (
     GeometricInfo,
     GeometricState,
@@ -56,14 +56,14 @@ from liesample.samplers.cotangent._core import (
 
 __all__ = ["ADAPTATION", "as_top_level_api", "build_kernel", "geometric_langevin", "init"]
 
-ADAPTATION = {
-    "schedule": "window",
-    "adapted": ("step_size", "inverse_mass_matrix"),
-    "parameters": ("friction", "inverse_mass_matrix", "magnetic_field"),
-    "options": ("adjusted", "divergence_threshold", "integrator"),
-    "defaults": {"friction": 1.0},
-    "target_acceptance_rate": 0.9,
-}
+ADAPTATION = Tunable(
+    "window",
+    target_acceptance_rate=0.9,
+    adapted=("step_size", "inverse_mass_matrix"),
+    accepts=("friction", "inverse_mass_matrix", "magnetic_field"),
+    options=("adjusted", "divergence_threshold", "integrator"),
+    defaults={"friction": 1.0},
+)
 """How :func:`liesample.window_adaptation` tunes geometric Langevin (``adaptation=``)."""
 
 

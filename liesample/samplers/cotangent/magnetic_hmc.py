@@ -37,7 +37,7 @@ import jax
 import jax.numpy as jnp
 
 from liesample.geometry.cotangent import LEAPFROG, PhasePoint, compose, drift, kick
-from liesample.samplers.contract import Sampler, sampling_api, setting
+from liesample.samplers.contract import Sampler, Tunable, sampling_api, setting
 from liesample.samplers.cotangent._core import hamiltonian_scheme, ravelled, scheme_setting
 from liesample.samplers.cotangent._euclidean import (
     MagneticFlow,
@@ -61,14 +61,13 @@ __all__ = [
     "magnetic_leapfrog",
 ]
 
-ADAPTATION = {
-    "schedule": "chees",
-    "adapted": ("step_size", "inverse_mass_matrix", "num_integration_steps", "magnetic_field"),
-    "parameters": (),
-    "options": ("divergence_threshold", "integrator"),
-    "defaults": {},
-    "target_acceptance_rate": 0.651,
-}
+ADAPTATION = Tunable(
+    "chees",
+    target_acceptance_rate=0.651,
+    adapted=("step_size", "inverse_mass_matrix", "num_integration_steps", "magnetic_field"),
+    accepts=(),
+    options=("divergence_threshold", "integrator"),
+)
 """How window adaptation tunes magnetic HMC: several chains together, the trajectory length by ChEES
 (:func:`liesample.tuning.adaptation.magnetic_window_adaptation`)."""
 

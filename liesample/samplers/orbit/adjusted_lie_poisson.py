@@ -48,7 +48,7 @@ chain, which :func:`liesample.sample` reports). Without ``step_size`` the step i
 :mod:`liesample.integrators.stability`; ``m`` noise directions), MALA's optimal scaling for a
 near-Gaussian target: on the orbit of the system's default position when the sampler is built,
 on the orbit of the first start in :func:`liesample.sample`. The sampler declares its step
-tunable by dual averaging (``tuning``, :class:`liesample.samplers.contract.StepSizeTuning`):
+tunable by dual averaging (``adaptation``, :class:`liesample.samplers.contract.Tunable`):
 under ``liesample.sample(..., num_warmup=N)`` the warm-up of :mod:`liesample.tuning` tunes it
 (Hoffman & Gelman 2014, as in ``blackjax.window_adaptation``) so that the mean acceptance rate
 over the chains reaches ``target_acceptance_rate`` (default 0.574, MALA's optimal rate, Roberts
@@ -57,6 +57,7 @@ over the chains reaches ``target_acceptance_rate`` (default 0.574, MALA's optima
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
 import jax
@@ -68,7 +69,7 @@ from liesample.dynamics.system import LiePoissonSystem, checked_beta
 from liesample.foundation.validation import concrete_array, finite_float
 from liesample.integrators.chain_loop import DEFAULT_NOISE_BLOCK_SIZE, NoiseBlocks, check_block_size
 from liesample.integrators.stability import check_precision, stiffness
-from liesample.samplers.contract import Sampler, StepSizeTuning, rebuilt, sampling_api
+from liesample.samplers.contract import Sampler, Tunable, rebuilt, sampling_api
 from liesample.samplers.orbit._starts import (
     check_orbit_starts,
     check_start_energy,
@@ -347,7 +348,7 @@ def as_top_level_api(
     liesample.samplers.contract.Sampler
         ``init(position)`` and ``step(rng_key, state) -> (state, info)`` (``info``: the Info
         contract plus ``is_accepted`` and ``casimir_error``); ``rng_key`` may be
-        ``jax.random.key`` or ``jax.random.PRNGKey``. It declares ``tuning`` (dual averaging)
+        ``jax.random.key`` or ``jax.random.PRNGKey``. It declares ``adaptation`` (dual averaging)
         and ``noise_blocks``.
     """
     if not isinstance(system, LiePoissonSystem):
@@ -359,77 +360,89 @@ def as_top_level_api(
         step_size = finite_float("step_size", step_size, positive=True)
     target = finite_float("target_acceptance_rate", target_acceptance_rate, rate=True)
     noise_block_size = check_block_size(noise_block_size)
-    noise_kernel = build_noise_kernel(system)
+    return _sampler(system, beta, sigma, step_size, target, noise_block_size)
+
+
+_STUCK_ADVICE = (
+    "Give a smaller step_size, or leave it unset with num_warmup > 0 (liesample.sample's "
+    "warm-up then tunes it by dual averaging), or pass adapt=True with num_warmup > 0 to tune "
+    "a given one."
+)
+
+
+def _choose(system, beta, sigma, positions, rng_key=None):
+    """The rule's step on the orbit of the first start (no pilot run, so no key)."""
+    del rng_key
+    first = np.asarray(positions, dtype=jnp.result_type(float))[0]
+    return _default_step_size(system, beta, sigma, first), _DEFAULT_SOURCE
+
+
+def _check_orbits(system, beta, sigma, positions, representatives):
+    for chain in representatives:
+        position = positions[chain]
+        check_precision(system, beta, 0.5 * beta * sigma**2, position, position.dtype)
+
+
+def _check_positions(system, check_orbits, positions, *, step_size_checks=True):
+    positions = np.asarray(positions, dtype=jnp.result_type(float))
+    casimirs = check_orbit_starts(system, positions)
+    if step_size_checks:
+        check_orbits(positions, distinct_orbits(casimirs))
+
+
+def _at(system, noise_kernel, noise_block_size, init_fn, check_positions, value, sigma, beta,
+        settings=None, adaptation=None) -> Sampler:  # fmt: skip
+    """The sampler with step ``value`` (floats, or traced in the warm-up)."""
     kernel = _keyed(system, noise_kernel)
-    settings = orbit_settings(
-        "adjusted_lie_poisson",
-        system,
-        beta,
-        sigma=sigma,
-        step_size=step_size,
-        step_size_source="given",
-        target_acceptance_rate=target,
-        noise_block_size=noise_block_size,
+
+    def step_fn(rng_key, state):
+        return kernel(rng_key, state, value, sigma, beta)
+
+    def block_step(noise, state):
+        return noise_kernel(noise, state, value, sigma, beta)
+
+    def draw_block(rng_key, state):
+        return _draw_noise(system, rng_key, (noise_block_size,), state.position.dtype)
+
+    return Sampler(
+        init_fn,
+        step_fn,
+        settings=settings,
+        check_positions=check_positions,
+        adaptation=adaptation,
+        noise_blocks=NoiseBlocks(noise_block_size, draw_block, block_step),
+        law_groups=orbit_groups(system),
+        stuck_advice=_STUCK_ADVICE,
     )
+
+
+def _sampler(system, beta, sigma, step_size, target, noise_block_size) -> Sampler:
+    """The sampler of the checked arguments: its settings, and the step size it declares
+    tunable by dual averaging (:class:`liesample.samplers.contract.Tunable`)."""
+    settings = orbit_settings(
+        "adjusted_lie_poisson", system, beta, sigma=sigma, step_size=step_size,
+        step_size_source="given", target_acceptance_rate=target,
+        noise_block_size=noise_block_size,
+    )  # fmt: skip
     given = step_size is not None
     if not given:
         step_size = _default_step_size(system, beta, sigma, system.default_position)
         settings.update(step_size=step_size, step_size_source=_DEFAULT_SOURCE + _ON_DEFAULT)
-
-    def choose(positions, rng_key=None):
-        del rng_key  # the rule needs no pilot run
-        first = np.asarray(positions, dtype=jnp.result_type(float))[0]
-        return _default_step_size(system, beta, sigma, first), _DEFAULT_SOURCE
 
     def rebuild(value, source):
         options = {"target_acceptance_rate": target, "noise_block_size": noise_block_size}
         return rebuilt(as_top_level_api, source, system, beta=beta, sigma=sigma, step_size=value,
                        **options)  # fmt: skip
 
-    def check_orbits(positions, representatives):
-        for chain in representatives:
-            position = positions[chain]
-            check_precision(system, beta, 0.5 * beta * sigma**2, position, position.dtype)
-
+    check_orbits = functools.partial(_check_orbits, system, beta, sigma)
     init_fn = orbit_init_fn(init, system, check_orbits)
-
-    def check_positions(positions, *, step_size_checks=True):
-        positions = np.asarray(positions, dtype=jnp.result_type(float))
-        casimirs = check_orbit_starts(system, positions)
-        if step_size_checks:
-            check_orbits(positions, distinct_orbits(casimirs))
-
-    def at(value, sigma=sigma, beta=beta, settings=None, tuning=None):
-        """The sampler with step ``value`` (floats, or traced in the warm-up)."""
-
-        def step_fn(rng_key, state):
-            return kernel(rng_key, state, value, sigma, beta)
-
-        def block_step(noise, state):
-            return noise_kernel(noise, state, value, sigma, beta)
-
-        def draw_block(rng_key, state):
-            return _draw_noise(system, rng_key, (noise_block_size,), state.position.dtype)
-
-        return Sampler(
-            init_fn,
-            step_fn,
-            settings=settings,
-            check_positions=check_positions,
-            tuning=tuning,
-            noise_blocks=NoiseBlocks(noise_block_size, draw_block, block_step),
-            law_groups=orbit_groups(system),
-            stuck_advice=(
-                "Give a smaller step_size, or leave it unset with num_warmup > 0 "
-                "(liesample.sample's warm-up then tunes it by dual averaging), or pass "
-                "adapt=True with num_warmup > 0 to tune a given one."
-            ),
-        )
-
-    tuning = StepSizeTuning(
+    check_positions = functools.partial(_check_positions, system, check_orbits)
+    noise_kernel = build_noise_kernel(system)
+    at = functools.partial(_at, system, noise_kernel, noise_block_size, init_fn, check_positions)
+    tunable = Tunable(
         "dual_averaging",
         given,
-        choose,
+        functools.partial(_choose, system, beta, sigma),
         rebuild,
         at=at,
         parameters={"sigma": sigma, "beta": beta},
@@ -438,7 +451,7 @@ def as_top_level_api(
         # proposal is accepted and dual averaging would grow the step without bound
         max_step_size=MAX_STEP_FACTOR * step_size,
     )
-    return at(step_size, settings=settings, tuning=tuning)
+    return at(step_size, sigma, beta, settings=settings, adaptation=tunable)
 
 
 adjusted_lie_poisson = sampling_api(

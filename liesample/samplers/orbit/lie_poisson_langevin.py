@@ -9,8 +9,8 @@ Safe defaults: a step size beyond the measured stability bound
 (:mod:`liesample.integrators.stability`) is refused, and without a step size the sampler picks
 one below the bound whose predicted bias is at most :data:`DEFAULT_BIAS_TOLERANCE` posterior
 standard deviations (:func:`liesample.integrators.accuracy.default_step_size`). The sampler
-declares that choice as its ``tuning`` (method ``"rule"``,
-:class:`liesample.samplers.contract.StepSizeTuning`), which :func:`liesample.sample` runs on the
+declares that choice as its ``adaptation`` (method ``"rule"``,
+:class:`liesample.samplers.contract.Tunable`), which :func:`liesample.sample` runs on the
 run's starts (:mod:`liesample.tuning.warmup`); ``step`` never changes the step size.
 
 The Brownian increments of a run are drawn in blocks of ``noise_block_size`` steps
@@ -40,7 +40,7 @@ from liesample.integrators.stability import (
     check_step_size,
     stiffness_on_orbits,
 )
-from liesample.samplers.contract import Sampler, StepSizeTuning, rebuilt, sampling_api
+from liesample.samplers.contract import Sampler, Tunable, rebuilt, sampling_api
 from liesample.samplers.orbit import _starts
 
 __all__ = [
@@ -233,8 +233,8 @@ def as_top_level_api(
         What happens when ``step_size`` is beyond the integrator's stable bound on the orbit of
         a start, ``κ = step_size·θ·max_i |h''_i| > 2`` (:mod:`liesample.integrators.stability`;
         rigid body: ``θ·step_size·r²(1/I_min − 1/I_max) ≤ 2``): ``"raise"`` (default) a
-        ``ValueError`` naming the largest allowed step; ``"warn"`` a ``UserWarning`` (the chain then samples a
-        wrong law); ``"off"`` no check. The mode is recorded in the run's attributes.
+        ``ValueError`` naming the largest allowed step; ``"warn"`` a ``UserWarning`` (the chain
+        then samples a wrong law); ``"off"`` no check. The mode is recorded in the run's attributes.
     bias_tolerance : float
         Relative bias tolerance of the automatic step size, and of a given step's
         ``linear_sd_bias`` (default :data:`DEFAULT_BIAS_TOLERANCE` = 0.05 posterior sd).
@@ -251,6 +251,31 @@ def as_top_level_api(
         contract, plus ``casimir_error``); ``rng_key`` may be ``jax.random.key`` or
         ``jax.random.PRNGKey``.
     """
+    plan = _plan(system, beta, sigma, step_size, integrator, theta, hamiltonian, stability,
+                 bias_tolerance, noise_block_size)  # fmt: skip
+    return _sampler(plan, _automatic_step(plan))
+
+
+class _Plan(NamedTuple):
+    """The checked arguments of :func:`as_top_level_api` (``options``: what ``rebuild`` passes
+    back to it)."""
+
+    system: LiePoissonSystem
+    integrator: object
+    scene: Scene
+    beta: object
+    sigma: float
+    theta: float
+    stability: str
+    bias_tolerance: float
+    noise_block_size: int
+    step_size: float | None  # given, or None (the bias model's)
+    options: dict
+
+
+def _plan(system, beta, sigma, step_size, integrator, theta, hamiltonian, stability,
+          bias_tolerance, noise_block_size) -> _Plan:  # fmt: skip
+    """:func:`as_top_level_api`'s arguments checked, each error naming its parameter."""
     if not isinstance(system, LiePoissonSystem):
         raise TypeError(f"system must be a LiePoissonSystem, got {type(system).__name__}")
     if step_size is not None:
@@ -268,8 +293,6 @@ def as_top_level_api(
     if stability not in STABILITY_MODES:
         raise ValueError(f"stability must be one of {STABILITY_MODES}, got {stability!r}")
     integrator = get_integrator(integrator)
-    kernel = build_kernel(system, integrator, scene)
-    noise_kernel = build_noise_kernel(system, integrator, scene)
     options = {
         "beta": beta,
         "sigma": sigma,
@@ -280,79 +303,93 @@ def as_top_level_api(
         "bias_tolerance": bias_tolerance,
         "noise_block_size": noise_block_size,
     }
-    given = step_size is not None
-    settings = _starts.orbit_settings(
-        "lie_poisson_langevin",
-        system,
-        beta,
-        sigma=sigma,
-        theta=theta,
-        integrator=integrator.name,
-        stability=stability,
-        step_size=step_size,
-        step_size_source="given" if given else _UNCHOSEN,
-        noise_block_size=noise_block_size,
+    return _Plan(system, integrator, scene, beta, sigma, theta, stability, bias_tolerance,
+                 noise_block_size, step_size, options)  # fmt: skip
+
+
+def _choose(plan: _Plan, positions, rng_key=None):
+    """The bias model's step for the starts ``positions``: without a key (no warm-up) on one
+    start per distinct orbit with ``key(0)``, with a key (warm-up) on all of them."""
+    positions = np.asarray(positions)
+    if rng_key is None:
+        positions = positions.astype(jnp.result_type(float))
+        orbits = _starts.distinct_orbits(_starts.check_orbit_starts(plan.system, positions))
+        positions = positions[np.asarray(orbits)]
+    choice = accuracy.default_step_size(
+        plan.system,
+        plan.beta,
+        sigma=plan.sigma,
+        integrator=plan.integrator,
+        initial_positions=positions,
+        rng_key=rng_key,  # None: key(0)
+        relative_tolerance=plan.bias_tolerance,
     )
+    return choice.step_size, "bias model: " + _source(choice)
 
-    def choose(positions, rng_key=None):
-        """The bias model's step for the starts ``positions``: without a key (no warm-up) on
-        one start per distinct orbit with ``key(0)``, with a key (warm-up) on all of them."""
-        positions = np.asarray(positions)
-        if rng_key is None:
-            positions = positions.astype(jnp.result_type(float))
-            orbits = _starts.distinct_orbits(_starts.check_orbit_starts(system, positions))
-            positions = positions[np.asarray(orbits)]
-        choice = accuracy.default_step_size(
-            system,
-            beta,
-            sigma=sigma,
-            integrator=integrator,
-            initial_positions=positions,
-            rng_key=rng_key,  # None: key(0)
-            relative_tolerance=bias_tolerance,
+
+def _automatic_step(plan: _Plan):
+    """``() -> step``: the given step, or the one used directly without ``liesample.sample``
+    (the bias model on the orbit of the system's default position, a function of the
+    construction arguments only, computed when first needed)."""
+    if plan.step_size is not None:
+        return lambda: plan.step_size
+    default = np.asarray(plan.system.default_position)[None]
+    return functools.cache(lambda: _choose(plan, default)[0])
+
+
+def _check_orbits(plan: _Plan, current_step, settings, positions, representatives,
+                  prefix=False):  # fmt: skip
+    """Stability (one vectorised stiffness call for all orbits) and precision checks; records
+    the stability number and the step's linear sd bias in ``settings``."""
+    system, integrator, theta = plan.system, plan.integrator, plan.theta
+    representatives = np.asarray(representatives)
+    dt = current_step()
+    limit = integrator.stability_limit
+    if plan.stability != "off" and limit is not None and theta != 0.0 and system.curvature_bound:
+        kappas = dt * stiffness_on_orbits(system, theta, positions[representatives])
+        beyond = np.flatnonzero(kappas > limit)
+        if beyond.size:  # the first such chain: its message (raise or warn) from the check
+            chain = int(representatives[beyond[0]])
+            try:
+                check_step_size(system, integrator, dt, theta, positions[chain], plan.stability)
+            except ValueError as error:
+                if not prefix:
+                    raise
+                raise ValueError(f"initial_positions[{chain}]: {error}") from None
+        kappa = float(np.max(kappas))
+        settings["stability_number"] = kappa
+        settings["stability_limit"] = limit
+        # a given step's bias, from the linear model at κ (no pilot run)
+        settings["linear_sd_bias"] = (
+            accuracy.warn_given_step(integrator, dt, kappa, plan.bias_tolerance)
+            if settings["step_size_source"] == "given"
+            else accuracy.linear_sd_bias(integrator, kappa)
         )
-        return choice.step_size, "bias model: " + _source(choice)
+    for chain in representatives:
+        check_precision(system, plan.beta, theta, positions[chain], positions.dtype)
 
-    def rebuild(value, source):
-        return rebuilt(as_top_level_api, source, system, **options, step_size=value)
 
-    @functools.cache
-    def automatic():
-        """The step used directly without ``liesample.sample``: the bias model on the orbit of
-        the system's default position, a function of the construction arguments only."""
-        return choose(np.asarray(system.default_position)[None])[0]
+def _check_positions(plan: _Plan, check_orbits, positions, *, step_size_checks=True):
+    positions = np.asarray(positions)
+    casimirs = _starts.check_orbit_starts(plan.system, positions)
+    if step_size_checks:
+        dtype = jnp.result_type(float)
+        check_orbits(np.asarray(positions, dtype), _starts.distinct_orbits(casimirs), prefix=True)
 
-    def current_step():
-        return step_size if given else automatic()
 
-    def check_orbits(positions, representatives, prefix=False):
-        """Stability (one vectorised stiffness call for all orbits) and precision checks."""
-        representatives = np.asarray(representatives)
-        dt = current_step()
-        limit = integrator.stability_limit
-        if stability != "off" and limit is not None and theta != 0.0 and system.curvature_bound:
-            kappas = dt * stiffness_on_orbits(system, theta, positions[representatives])
-            beyond = np.flatnonzero(kappas > limit)
-            if beyond.size:  # the first such chain: its message (raise or warn) from the check
-                chain = int(representatives[beyond[0]])
-                try:
-                    check_step_size(system, integrator, dt, theta, positions[chain], stability)
-                except ValueError as error:
-                    if not prefix:
-                        raise
-                    raise ValueError(f"initial_positions[{chain}]: {error}") from None
-            settings["stability_number"] = float(np.max(kappas))
-            settings["stability_limit"] = limit
-            # a given step's bias, from the linear model at κ (no pilot run)
-            settings["linear_sd_bias"] = (
-                accuracy.warn_given_step(integrator, dt, float(np.max(kappas)), bias_tolerance)
-                if settings["step_size_source"] == "given"
-                else accuracy.linear_sd_bias(integrator, float(np.max(kappas)))
-            )
-        for chain in representatives:
-            check_precision(system, beta, theta, positions[chain], positions.dtype)
-
-    init_fn = _starts.orbit_init_fn(init, system, check_orbits)
+def _sampler(plan: _Plan, current_step) -> Sampler:
+    """The sampler of ``plan`` stepping with ``current_step()``: its kernels, start checks,
+    settings and declarations."""
+    system, scene, sigma, theta = plan.system, plan.scene, plan.sigma, plan.theta
+    kernel = build_kernel(system, plan.integrator, scene)
+    noise_kernel = build_noise_kernel(system, plan.integrator, scene)
+    given = plan.step_size is not None
+    settings = _starts.orbit_settings(
+        "lie_poisson_langevin", system, plan.beta, sigma=sigma, theta=theta,
+        integrator=plan.integrator.name, stability=plan.stability, step_size=plan.step_size,
+        step_size_source="given" if given else _UNCHOSEN, noise_block_size=plan.noise_block_size,
+    )  # fmt: skip
+    check_orbits = functools.partial(_check_orbits, plan, current_step, settings)
 
     def step_fn(rng_key, state):
         return kernel(rng_key, state, current_step(), sigma, theta)
@@ -361,25 +398,20 @@ def as_top_level_api(
         return noise_kernel(noise, state, current_step(), sigma, theta)
 
     def draw_block(rng_key, state):
-        return _draw_noise(system, scene, rng_key, (noise_block_size,), state.position.dtype)
+        return _draw_noise(system, scene, rng_key, (plan.noise_block_size,), state.position.dtype)
 
-    def check_positions(positions, *, step_size_checks=True):
-        positions = np.asarray(positions)
-        casimirs = _starts.check_orbit_starts(system, positions)
-        if step_size_checks:
-            dtype = jnp.result_type(float)
-            check_orbits(
-                np.asarray(positions, dtype), _starts.distinct_orbits(casimirs), prefix=True
-            )
+    def rebuild(value, source):
+        return rebuilt(as_top_level_api, source, system, **plan.options, step_size=value)
 
+    blocks = NoiseBlocks(plan.noise_block_size, draw_block, block_step)
     return Sampler(
-        init_fn,
+        _starts.orbit_init_fn(init, system, check_orbits),
         step_fn,
         settings=settings,
-        check_positions=check_positions,
-        tuning=StepSizeTuning("rule", given, choose, rebuild),
+        check_positions=functools.partial(_check_positions, plan, check_orbits),
+        adaptation=Tunable("rule", given, functools.partial(_choose, plan), rebuild),
         # Without noise nothing is drawn: the per-step loop is already lean.
-        noise_blocks=NoiseBlocks(noise_block_size, draw_block, block_step) if scene.noise else None,
+        noise_blocks=blocks if scene.noise else None,
         law_groups=_starts.orbit_groups(system),
         stuck_advice="Give a smaller step_size, or leave it unset: liesample.sample then "
         "chooses it from the starts by the bias model.",

@@ -28,6 +28,7 @@ A proposal that lands on another vortex (``Δh`` not finite) is rejected.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import NamedTuple
 
@@ -37,7 +38,7 @@ import numpy as np
 
 from liesample.dynamics.system import checked_beta
 from liesample.foundation.validation import finite_float
-from liesample.samplers.contract import BasicInfo, Sampler, StepSizeTuning, rebuilt, sampling_api
+from liesample.samplers.contract import BasicInfo, Sampler, Tunable, rebuilt, sampling_api
 from liesample.samplers.orbit._starts import orbit_settings
 from liesample.systems.point_vortices import PointVortexSystem
 
@@ -186,7 +187,7 @@ def as_top_level_api(
     liesample.samplers.contract.Sampler
         ``init(position) -> VortexState`` and ``step(rng_key, state) -> (state, VortexInfo)``,
         one step being one sweep over the vortices; jit- and vmap-able, usable with
-        ``liesample.sample``. It declares ``tuning`` (dual averaging of ``proposal_scale``).
+        ``liesample.sample``. It declares ``adaptation`` (dual averaging of ``proposal_scale``).
     """
     _check_system(system)
     beta = checked_beta(system, beta)
@@ -196,7 +197,6 @@ def as_top_level_api(
     if given:
         proposal_scale = finite_float("proposal_scale", proposal_scale, positive=True)
     target = finite_float("target_acceptance_rate", target_acceptance_rate, rate=True)
-    kernel = build_kernel(system, proposal)
     settings = orbit_settings(
         "vortex_metropolis",
         system,
@@ -206,45 +206,50 @@ def as_top_level_api(
         step_size_source="given" if given else _SOURCE_DEFAULT,
         target_acceptance_rate=target,
     )
+    options = {"proposal": proposal, "target_acceptance_rate": target}
+    at = functools.partial(_at, system, build_kernel(system, proposal))
+    # dual averaging of the proposal scale at ``target``, up to MAX_PROPOSAL_SCALE
+    tunable = Tunable(
+        "dual_averaging", given, _choose, functools.partial(_rebuild, system, beta, options), at,
+        {"beta": beta}, target, MAX_PROPOSAL_SCALE,
+    )  # fmt: skip
+    return at(settings["step_size"], beta, settings=settings, adaptation=tunable)
+
+
+def _check_positions(system, positions, *, step_size_checks=True):
+    del step_size_checks  # any proposal scale is exact
+    positions = np.asarray(positions, dtype=float)
+    if positions.ndim != 1 + len(system.event_shape):
+        system.check_position(positions, "initial_positions")
+    for chain, position in enumerate(positions):
+        system.check_position(position, f"initial_positions[{chain}]")
+        energy = float(system.hamiltonian(jnp.asarray(position)))
+        if not math.isfinite(energy):
+            raise ValueError(f"initial_positions[{chain}]: h is not finite there")
+
+
+def _choose(positions, rng_key=None):
+    del positions, rng_key
+    return DEFAULT_PROPOSAL_SCALE, _SOURCE_DEFAULT
+
+
+def _rebuild(system, beta, options, value, source):
+    value = min(float(value), MAX_PROPOSAL_SCALE)
+    return rebuilt(as_top_level_api, source, system, beta=beta, proposal_scale=value, **options)
+
+
+def _at(system, kernel, value, beta, settings=None, adaptation=None) -> Sampler:
+    """The sampler with proposal scale ``value`` (a float, or traced in the warm-up)."""
 
     def init_fn(position, rng_key=None):
         return init(position, system, rng_key)
 
-    def check_positions(positions, *, step_size_checks=True):
-        del step_size_checks  # any proposal scale is exact
-        positions = np.asarray(positions, dtype=float)
-        if positions.ndim != 1 + len(system.event_shape):
-            system.check_position(positions, "initial_positions")
-        for chain, position in enumerate(positions):
-            system.check_position(position, f"initial_positions[{chain}]")
-            energy = float(system.hamiltonian(jnp.asarray(position)))
-            if not math.isfinite(energy):
-                raise ValueError(f"initial_positions[{chain}]: h is not finite there")
+    def step_fn(rng_key, state):
+        return kernel(rng_key, state, beta, value)
 
-    def choose(positions, rng_key=None):
-        del positions, rng_key
-        return DEFAULT_PROPOSAL_SCALE, _SOURCE_DEFAULT
-
-    def rebuild(value, source):
-        value = min(float(value), MAX_PROPOSAL_SCALE)
-        options = {"proposal": proposal, "target_acceptance_rate": target}
-        return rebuilt(as_top_level_api, source, system, beta=beta, proposal_scale=value, **options)
-
-    def at(value, beta=beta, settings=None, tuning=None):
-        """The sampler with proposal scale ``value`` (a float, or traced in the warm-up)."""
-
-        def step_fn(rng_key, state):
-            return kernel(rng_key, state, beta, value)
-
-        return Sampler(
-            init_fn, step_fn, settings=settings, check_positions=check_positions, tuning=tuning
-        )
-
-    # dual averaging of the proposal scale at ``target``, up to MAX_PROPOSAL_SCALE
-    tuning = StepSizeTuning(
-        "dual_averaging", given, choose, rebuild, at, {"beta": beta}, target, MAX_PROPOSAL_SCALE
-    )
-    return at(settings["step_size"], settings=settings, tuning=tuning)
+    checks = {"check_positions": functools.partial(_check_positions, system),
+              "adaptation": adaptation}  # fmt: skip
+    return Sampler(init_fn, step_fn, settings=settings, **checks)
 
 
 vortex_metropolis = sampling_api(

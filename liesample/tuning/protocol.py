@@ -1,0 +1,264 @@
+"""The one adaptation protocol of liesample and the one driver that runs it.
+
+An :class:`Adaptation` is BlackJAX's ``(init, update, final)`` plus ``current``, over a batch
+of chains that adapt together (the chains' axis first everywhere):
+
+- ``init(states, parameters) -> adaptation state``: from the chains' initial states and the
+  sampler's starting parameters (a dict: ``step_size``, ``inverse_mass_matrix``, …);
+- ``current(adaptation state, row) -> parameters``: what transition ``row.index`` of every
+  chain uses (the shared step size, mass, number of integration steps, field, …);
+- ``update(adaptation state, row, parameters, before, after, infos) -> adaptation state``:
+  after that transition, from every chain's state before and after it and its info;
+  ``None`` for an adaptation that learns nothing from transitions (a rule computed from the
+  starts, :func:`fixed`: its ``final(init(…))`` is all there is, and the warm-up's transitions
+  are ordinary steps of the sampler at those parameters);
+- ``final(adaptation state) -> parameters``: the tuned parameters.
+
+``row`` is one row of Stan's window schedule (:func:`schedule`): the transition's index, its
+stage (0 fast, 1 slow window), whether a slow window ends there and whether it is among the
+transitions averaged for the tuned trajectory length.
+
+**The driver.** :func:`run_adaptation` runs an adaptation on a sampler built at the current
+parameters (``sampler_at(**parameters)``): every chain runs the chain loop of
+:func:`liesample.integrators.chain_loop.run_steps` (the key scheme and noise blocks of the
+sampling that follows), vmapped over the chains; after each transition the chains' states and
+infos are gathered (a collective over the vmapped axis, so the adaptation state is computed
+once and shared by every chain) and ``update`` runs on them. It is traceable (one compiled
+loop; it can itself be vmapped, over temperatures say). The warm-up of :func:`liesample.sample`
+(:mod:`liesample.tuning.warmup`), :func:`liesample.window_adaptation`,
+:func:`liesample.magnetic_window_adaptation` all call it; the NumPyro kernel, whose loop NumPyro
+drives, calls the same ``current`` and ``update`` once per transition
+(:mod:`liesample.interop.numpyro_kernel`).
+
+The pieces adaptations are made of are here too: :func:`pooled_rate` and
+:func:`step_size_adaptation` (dual averaging of one step shared by the chains); the mass and
+the trajectory length are in :mod:`liesample.tuning.adaptation` and
+:mod:`liesample.tuning.trajectory`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from blackjax.adaptation.step_size import dual_averaging_adaptation
+from blackjax.adaptation.window_adaptation import build_schedule
+
+from liesample.integrators.chain_loop import NoiseBlocks, declared_noise_blocks, run_steps
+from liesample.samplers.contract import Sampler
+
+__all__ = [
+    "RATE_SMOOTHING",
+    "Adaptation",
+    "Row",
+    "StepSizeState",
+    "fixed",
+    "pooled_rate",
+    "run_adaptation",
+    "schedule",
+    "step_size_adaptation",
+]
+
+_CHAINS = "chains"
+
+
+class Row(NamedTuple):
+    """One transition of the warm-up: its index, stage (0: fast window, 1: slow window),
+    whether a slow window ends there, and whether its trajectory length enters the tuned one."""
+
+    index: object
+    stage: object
+    window_end: object
+    average: object
+
+
+class Adaptation(NamedTuple):
+    """``init``, ``current``, ``update`` (or ``None``), ``final`` (module docstring)."""
+
+    init: Callable
+    current: Callable
+    update: Callable | None
+    final: Callable
+
+
+def schedule(num_steps: int) -> Row:
+    """Stan's windows for ``num_steps`` transitions, one :class:`Row` of numpy arrays
+    (``blackjax.adaptation.window_adaptation.build_schedule``; constants, also under ``jit``).
+    ``average`` marks the transitions from the start of the last slow window to the end (the
+    second half without a slow window)."""
+    with jax.ensure_compile_time_eval():
+        table = np.asarray(build_schedule(int(num_steps)))
+    stages = table[:, 0].astype(np.int32)
+    ends = table[:, 1].astype(bool)
+    slow = np.flatnonzero(stages == 1)
+    if not slow.size:
+        start = num_steps // 2
+    else:
+        earlier = np.flatnonzero(ends[: slow[-1]])  # window ends before the last window's
+        start = int(earlier[-1]) + 1 if earlier.size else 0
+    index = np.arange(num_steps)
+    return Row(index, stages, ends, index >= start)
+
+
+def row_at(rows: Row, index) -> Row:
+    """Row ``index`` of a :func:`schedule` (``index`` may be traced; clipped to the last)."""
+    index = jnp.minimum(index, len(rows.index) - 1)
+    return Row(*(jnp.asarray(column)[index] for column in rows))
+
+
+RATE_SMOOTHING = 0.9
+"""Weight of the past in each chain's running rate (about ten transitions)."""
+
+
+def pooled_rate(rates, smoothed):
+    """``(rate, smoothed)``: the rate dual averaging reads from a batch of chains, and their
+    updated running rates. The rate is the chains' mean rate times the ratio of the harmonic
+    to the arithmetic mean of their running rates: near 1 for chains that accept alike (the
+    step then meets the target), near 0 while one chain stays stuck (the step is lowered until
+    it moves). (The harmonic mean of the per-transition rates would also free a stuck chain,
+    but per-transition rates are noisy and it ends well above the target.) A non-finite rate
+    counts as 0."""
+    own = jnp.where(jnp.isfinite(rates), rates, 0.0)
+    smoothed = RATE_SMOOTHING * smoothed + (1.0 - RATE_SMOOTHING) * own
+    harmonic = 1.0 / jnp.mean(1.0 / jnp.maximum(smoothed, 1e-30))
+    arithmetic = jnp.mean(smoothed)
+    ratio = jnp.where(arithmetic > 0, harmonic / jnp.maximum(arithmetic, 1e-30), 1.0)
+    return jnp.mean(own) * ratio, smoothed
+
+
+class StepSizeState(NamedTuple):
+    """Dual averaging's state (``blackjax``'s), the step the next transition uses (the given
+    one at first, then ``exp`` of dual averaging's iterate) and each chain's running rate."""
+
+    da: object
+    step_size: jax.Array
+    smoothed: jax.Array
+
+
+def step_size_adaptation(target: float, rate_field: str = "acceptance_rate",
+                         max_step_size: float = math.inf) -> Adaptation:  # fmt: skip
+    """Dual averaging of one step size shared by the chains towards ``target`` of their
+    :func:`pooled_rate` of ``info.<rate_field>`` (Hoffman & Gelman 2014, as
+    ``blackjax.window_adaptation``; ``blackjax.adaptation.step_size.dual_averaging_adaptation``);
+    steps above ``max_step_size`` are not used nor returned. ``init`` reads
+    ``parameters["step_size"]``; ``final`` gives ``{"step_size": …}``, dual averaging's
+    average. Also the step-size piece of the window adaptations (:meth:`restart` at a window's
+    end)."""
+    da_init, da_update, da_final = dual_averaging_adaptation(target)
+
+    def init(states, parameters):
+        step = jnp.asarray(parameters["step_size"])
+        num_chains = jax.tree.leaves(states)[0].shape[0]
+        return StepSizeState(da_init(step), step, jnp.full(num_chains, target, step.dtype))
+
+    def current(state, row=None):
+        return {"step_size": jnp.minimum(state.step_size, max_step_size)}
+
+    def update(state, row, parameters, before, after, infos):
+        rate, smoothed = pooled_rate(getattr(infos, rate_field), state.smoothed)
+        da = da_update(state.da, rate)
+        return StepSizeState(da, jnp.exp(da.log_step_size), smoothed)
+
+    def final(state):
+        # before any update dual averaging's average is not yet defined: the current step
+        averaged = jnp.where(state.da.step > 1, da_final(state.da), state.step_size)
+        return {"step_size": jnp.minimum(averaged, max_step_size)}
+
+    return Adaptation(init, current, update, final)
+
+
+def restart_step_size(state: StepSizeState, target: float, step_size=None) -> StepSizeState:
+    """Dual averaging restarted (at a window's end) from ``step_size``, by default its own
+    average."""
+    da_init, _, da_final = dual_averaging_adaptation(target)
+    start = da_final(state.da) if step_size is None else step_size
+    da = da_init(start)
+    return state._replace(da=da, step_size=jnp.exp(da.log_step_size))
+
+
+def fixed(parameters: dict) -> Adaptation:
+    """The adaptation that learns nothing: ``parameters`` throughout (a rule computed from the
+    starts, e.g. the unadjusted orbit sampler's bias model)."""
+    return Adaptation(lambda states, start: None, lambda state, row=None: dict(parameters), None,
+                      lambda state: dict(parameters))  # fmt: skip
+
+
+class _Carry(NamedTuple):
+    chain: object  # this chain's sampler state
+    adaptation: object  # the adaptation state, the same in every chain
+    index: jax.Array  # the transition's index
+
+
+def _adaptive(adaptation: Adaptation, sampler_at, rows: Row, reference: Sampler):
+    """The warm-up as a sampler on :class:`_Carry` (chains vmapped with axis ``"chains"``): the
+    sampler at the current parameters, then ``update`` with every chain's states and infos.
+    Its info is ``(parameters, info)`` of this chain."""
+
+    def move(advance, carry):
+        row = row_at(rows, carry.index)
+        parameters = adaptation.current(carry.adaptation, row)
+        chain, info = advance(sampler_at(**parameters), carry.chain)
+        gather = lambda tree: jax.lax.all_gather(tree, _CHAINS)
+        state = adaptation.update(
+            carry.adaptation, row, parameters, gather(carry.chain), gather(chain), gather(info)
+        )
+        return _Carry(chain, state, carry.index + 1), (parameters, info)
+
+    blocks = declared_noise_blocks(reference)
+    noise_blocks = None
+    if blocks is not None:
+        noise_blocks = NoiseBlocks(
+            blocks.size,
+            lambda key, carry: blocks.draw(key, carry.chain),
+            lambda row, carry: move(lambda s, chain: s.noise_blocks.step(row, chain), carry),
+        )
+    return Sampler(
+        lambda position, rng_key=None: reference.init(position, rng_key),
+        lambda key, carry: move(lambda s, chain: s.step(key, chain), carry),
+        noise_blocks=noise_blocks,
+    )
+
+
+def run_adaptation(adaptation: Adaptation, sampler_at: Callable, chain_keys, states,
+                   parameters: dict, num_steps: int, record: Callable | None = None):  # fmt: skip
+    """Run ``adaptation`` for ``num_steps`` transitions of every chain (module docstring).
+
+    ``sampler_at(**parameters) -> Sampler`` (its arguments may be traced); ``chain_keys``
+    ``(chains,)`` and ``states`` (chains first) as for sampling; ``parameters`` the starting
+    ones (for ``init``). ``record(parameters, state, info)``, if given, is kept per chain and
+    transition (leading axes: chains, transitions). Returns ``(states, tuned parameters,
+    records)`` (``records`` ``None`` without ``record``). Traceable: wrap it in
+    :func:`liesample.jit`.
+    """
+    if adaptation.update is None:
+        raise ValueError("this adaptation learns nothing from transitions: use its final(init(…))")
+    rows = schedule(num_steps)
+    start = adaptation.init(states, parameters)
+    first = adaptation.current(start, row_at(rows, 0))
+    reference = sampler_at(**first)
+    warmup = _adaptive(adaptation, sampler_at, rows, reference)
+    buffers = None
+    if record is not None:
+        one = jax.tree.map(lambda leaf: leaf[0], states)
+        shapes = jax.eval_shape(
+            lambda key, s: record(first, *reference.step(key, s)), chain_keys[0], one
+        )
+        buffers = jax.tree.map(lambda x: jnp.zeros((num_steps, *x.shape), x.dtype), shapes)
+
+    def keep(step, carry, info, kept):
+        if record is None:
+            return kept
+        values = record(info[0], carry.chain, info[1])
+        return jax.tree.map(lambda buffer, value: buffer.at[step].set(value), kept, values)
+
+    def chain(key, state):
+        carry = _Carry(state, start, jnp.asarray(0))
+        return run_steps(warmup, key, carry, 0, num_steps, keep, buffers)
+
+    end, records = jax.vmap(chain, axis_name=_CHAINS)(chain_keys, states)
+    tuned = adaptation.final(jax.tree.map(lambda leaf: leaf[0], end.adaptation))
+    return end.chain, tuned, records

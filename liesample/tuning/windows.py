@@ -1,0 +1,261 @@
+"""Stan's window adaptation as an instance of the adaptation protocol: step size, mass,
+trajectory length and field, tuned together on one batch of chains.
+
+:func:`windows_adaptation` composes the pieces into one
+:class:`liesample.tuning.protocol.Adaptation` from what a sampler is read by
+(:class:`Windows`):
+
+- the step size: dual averaging of the chains' pooled rate
+  (:func:`liesample.tuning.protocol.step_size_adaptation`), restarted from its average at the
+  end of each slow window when the mass is adapted;
+- the mass: Welford moments of a statistic of the chains' states (pooled over the chains) in
+  the slow windows, turned into the inverse mass at each window's end (``mass_from``);
+  optionally dense blocks (:class:`DenseBlocks`: the pooled Welford covariance of some
+  ``Euclidean`` blocks, shrunk as Stan does);
+- the trajectory length of HMC (:mod:`liesample.tuning.trajectory`): each transition integrates
+  ``L = ceil(u T / ε)`` steps, ``u`` the base-2 Halton point of its index, and ``T`` is learnt by
+  the ChEES-type rule (or fixed); or a fixed ``L``;
+- a magnetic field derived from the current mass and step (``extra``).
+
+:func:`liesample.window_adaptation`, :func:`liesample.magnetic_window_adaptation` (both through
+:func:`liesample.tuning.protocol.run_adaptation`) and the NumPyro kernel
+(:class:`liesample.interop.numpyro_kernel.GeometricHMC`, one ``update`` per NumPyro iteration)
+all tune with it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from liesample.geometry import spaces
+from liesample.tuning.protocol import (
+    Adaptation,
+    StepSizeState,
+    restart_step_size,
+    step_size_adaptation,
+)
+from liesample.tuning.trajectory import MAX_NUM_INTEGRATION_STEPS, halton, jittered_steps
+
+__all__ = [
+    "DenseBlocks",
+    "WindowState",
+    "Windows",
+    "inverse_mass",
+    "regularised_variance",
+    "statistic",
+    "welford_batch",
+    "windows_adaptation",
+]
+
+
+def statistic(space, state):
+    """Flat vector whose Welford moments give the mass: positions of Euclidean blocks, the
+    trivialised gradient of the others (one chain's state)."""
+    leaves = spaces._map(
+        lambda s, x, g: jnp.ravel(x if not s.compact else g),
+        space,
+        state.position,
+        state.logdensity_grad,
+    )
+    return jnp.concatenate(jax.tree.leaves(leaves))
+
+
+def regularised_variance(variance, count):
+    """Stan's diagonal inverse mass from ``count`` draws: shrunk towards ``1e-3``."""
+    return (count / (count + 5.0)) * variance + 1e-3 * (5.0 / (count + 5.0))
+
+
+def inverse_mass(space, mean, m2, count):
+    """Inverse mass (pytree like ``space``) from Welford moments of :func:`statistic`:
+    Euclidean blocks the regularised variance of the position, compact ones
+    ``1 / (E[(X_k log π)²] + 1)`` (:mod:`liesample.tuning.adaptation`)."""
+    variance = m2 / jnp.maximum(count - 1, 1)
+    n = count.astype(mean.dtype)
+    out, offset = [], 0
+    for s in spaces._spaces(space):
+        size = math.prod(s.momentum_array_shape)
+        var = variance[offset : offset + size].reshape(s.momentum_array_shape)
+        mu = mean[offset : offset + size].reshape(s.momentum_array_shape)
+        offset += size
+        if not s.compact:
+            out.append(regularised_variance(var, n))
+            continue
+        squared = var + mu**2
+        if s.mass_shape == (1,):
+            squared = jnp.sum(squared, -1, keepdims=True) / s.copy_dimension
+        out.append(1.0 / (squared + 1.0))
+    structure = jax.tree.structure(space, is_leaf=spaces.is_space)
+    return structure.unflatten(out)
+
+
+def welford_batch(welford, x):
+    """Chan et al.'s update of ``(mean, m2, count)`` with a batch ``x`` of shape ``(n, d)``;
+    ``m2`` a vector (diagonal) or a matrix (dense: the batch's outer products)."""
+    mean, m2, count = welford
+    n = x.shape[0]
+    batch_mean = jnp.mean(x, 0)
+    centred = x - batch_mean
+    total = count + n
+    delta = batch_mean - mean
+    new_mean = mean + delta * (n / total)
+    if jnp.ndim(m2) == 2:
+        batch_m2 = centred.T @ centred
+        spread = jnp.outer(delta, delta)
+    else:
+        batch_m2 = jnp.sum(centred**2, 0)
+        spread = delta**2
+    return new_mean, m2 + batch_m2 + spread * (count * n / total), total
+
+
+class DenseBlocks(NamedTuple):
+    """Dense inverse masses: ``keys`` of the blocks of the sampler's (dict) position whose
+    ``M⁻¹`` is a matrix (``Euclidean`` vectors), adapted to their pooled Welford covariance."""
+
+    keys: tuple
+
+
+class Windows(NamedTuple):
+    """What :func:`windows_adaptation` reads from its sampler.
+
+    target, rate_field : dual averaging's target and the info field it reads
+        (``metropolis_rate`` for the T*G samplers, ``acceptance_rate`` for magnetic HMC).
+    statistic : ``states (chains first) -> (chains, k)``, whose moments give the mass.
+    mass_from : ``(mean, m2, count) -> inverse mass`` (the diagonal part).
+    adapt_mass : whether the mass is adapted.
+    lengths : a :class:`liesample.tuning.trajectory.TrajectoryAdaptation` (HMC with ``L``
+        jittered), or ``None`` (a fixed ``L``, or not HMC).
+    move : ``(before, after, infos, inverse_mass) -> ChainMove`` for ``lengths``.
+    dimension : the coordinates ``lengths`` reads.
+    fixed_steps : ``L`` when fixed (HMC), else ``None``.
+    max_steps : the cap on ``L``.
+    extra : ``(row, step_size, inverse_mass) -> dict`` of further parameters (the field), or
+        ``None``.
+    dense : :class:`DenseBlocks` or ``None``.
+    jitter : ``L = ceil(u T / ε)`` with ``u`` the Halton point (default), else ``u = 1``.
+    step_size : a step size kept fixed (not adapted), or ``None``.
+    """
+
+    target: float
+    rate_field: str
+    statistic: Callable
+    mass_from: Callable
+    adapt_mass: bool = True
+    lengths: object | None = None
+    move: Callable | None = None
+    dimension: int = 0
+    fixed_steps: int | None = None
+    max_steps: int = MAX_NUM_INTEGRATION_STEPS
+    extra: Callable | None = None
+    dense: DenseBlocks | None = None
+    jitter: bool = True
+    step_size: float | None = None
+
+
+class WindowState(NamedTuple):
+    """The adaptation state: the step's, the current inverse mass, the window's Welford moments
+    ``(mean, m2, count)`` (and each dense block's), the trajectory rule's state (or ``None``)."""
+
+    step: StepSizeState
+    inverse_mass: object
+    welford: tuple
+    dense: dict
+    length: object
+
+
+def _zeroed(welford):
+    mean, m2, count = welford
+    return jnp.zeros_like(mean), jnp.zeros_like(m2), 0 * count
+
+
+def _shrunk(mean, m2, count):
+    """Stan's dense inverse mass: the Welford covariance shrunk towards ``1e-3 I``."""
+    n = count.astype(mean.dtype)
+    covariance = m2 / jnp.maximum(n - 1.0, 1.0)
+    covariance = 0.5 * (covariance + covariance.T)
+    eye = jnp.eye(mean.shape[-1], dtype=mean.dtype)
+    return (n / (n + 5.0)) * covariance + 1e-3 * (5.0 / (n + 5.0)) * eye
+
+
+def windows_adaptation(w: Windows) -> Adaptation:
+    """The window adaptation of ``w`` (module docstring) in the protocol's shape. ``init``
+    reads ``parameters["step_size"]`` and ``parameters["inverse_mass_matrix"]`` (dense blocks:
+    matrices); ``current`` gives ``step_size``, ``inverse_mass_matrix``,
+    ``num_integration_steps`` (HMC), ``integration_time`` (the ``T`` jittered, with
+    ``lengths``) and ``extra``'s; ``final`` gives ``step_size``,
+    ``inverse_mass_matrix`` and ``integration_time`` (with ``lengths``)."""
+    step = step_size_adaptation(w.target, w.rate_field)
+    dense_keys = () if w.dense is None else w.dense.keys
+
+    def init(states, parameters):
+        x = w.statistic(states)
+        zero = jnp.zeros(x.shape[-1], x.dtype)
+        dense = {}
+        for key in dense_keys:
+            y = states.position[key]
+            dense[key] = (y[0] * 0, jnp.zeros((y.shape[-1],) * 2, y.dtype), jnp.asarray(0))
+        length = None if w.lengths is None else w.lengths.init(w.dimension, x.dtype)
+        mass = parameters["inverse_mass_matrix"]
+        welford = (zero, zero, jnp.asarray(0))
+        return WindowState(step.init(states, parameters), mass, welford, dense, length)
+
+    def step_size_of(parameters):
+        if w.step_size is not None:
+            return jnp.asarray(w.step_size, parameters["step_size"].dtype)
+        return parameters["step_size"]
+
+    def current(state, row):
+        step_size = step_size_of(step.current(state.step))
+        out = {"step_size": step_size, "inverse_mass_matrix": state.inverse_mass}
+        if w.fixed_steps is not None:
+            out["num_integration_steps"] = jnp.asarray(w.fixed_steps)
+        elif w.lengths is not None:
+            time = jnp.exp(state.length.log_time)
+            out["integration_time"] = time
+            u = halton(row.index) if w.jitter else 1.0
+            out["num_integration_steps"] = jittered_steps(u, time, step_size, w.max_steps)
+        if w.extra is not None:
+            out.update(w.extra(row, step_size, state.inverse_mass))
+        return out
+
+    def update(state, row, parameters, before, after, infos):
+        new_step = step.update(state.step, row, parameters, before, after, infos)
+        length = state.length
+        if w.lengths is not None:
+            move = w.move(before, after, infos, parameters["inverse_mass_matrix"])
+            length = w.lengths.update(
+                length, move, parameters["step_size"], parameters["num_integration_steps"],
+                row.average,
+            )  # fmt: skip
+        slow = (row.stage == 1) & w.adapt_mass
+        keep = lambda new, old: jax.tree.map(lambda a, b: jnp.where(slow, a, b), new, old)
+        welford = keep(welford_batch(state.welford, w.statistic(after)), state.welford)
+        dense = {
+            key: keep(welford_batch(moments, after.position[key]), moments)
+            for key, moments in state.dense.items()
+        }
+        state = WindowState(new_step, state.inverse_mass, welford, dense, length)
+        if not w.adapt_mass:
+            return state
+        return jax.lax.cond(row.window_end, close, lambda state: state, state)
+
+    def close(state):
+        mass = dict(w.mass_from(*state.welford)) if dense_keys else w.mass_from(*state.welford)
+        for key, moments in state.dense.items():
+            mass[key] = _shrunk(*moments)
+        dense = {key: _zeroed(moments) for key, moments in state.dense.items()}
+        restarted = restart_step_size(state.step, w.target)
+        return WindowState(restarted, mass, _zeroed(state.welford), dense, state.length)
+
+    def final(state):
+        out = {"step_size": step_size_of(step.final(state.step)),
+               "inverse_mass_matrix": state.inverse_mass}  # fmt: skip
+        if w.lengths is not None:
+            out["integration_time"] = w.lengths.final(state.length)
+        return out
+
+    return Adaptation(init, current, update, final)
