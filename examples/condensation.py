@@ -21,12 +21,12 @@ that point.
 
 The whole sweep is compiled once: the adjusted kernel takes ``β`` and the step as traced
 arguments, so the warm-up (dual averaging of one step per ``β``, shared by that ``β``'s chains,
-to the sampler's target acceptance rate;
-``liesample.tuning.protocol.step_size_adaptation``) and the sampling are each one ``vmap`` over ``β`` and the chains, instead of one ``liesample.sample`` call per
-``β`` (each compiles its own warm-up and sampling loops). Dual averaging starts from
-``dt = 1``. At ``β = 0`` every move is accepted, so there is no acceptance signal to tune on:
-that row keeps the step tuned at the smallest ``|β|``, and needs no warm-up (its starts are
-already exact draws).
+to the sampler's target acceptance rate; ``liesample.tuning.protocol.step_size_adaptation``)
+and the sampling are each one ``vmap`` over ``β`` and the chains, instead of one
+``liesample.sample`` call per ``β`` (each compiles its own warm-up and sampling loops). Dual
+averaging starts from ``dt = 1``. At ``β = 0`` every move is accepted, so there is no
+acceptance signal to tune on: that row keeps the step tuned at the smallest ``|β|``, and needs
+no warm-up (its starts are already exact draws).
 
 Prints a table (``b``, ``β``, ``E[h] ± MCSE``, the ``ℓ = 1`` share of the energy
 ``E[ε₁]/E[h] ± MCSE``, R-hat, acceptance, step) and writes into ``--output`` (default

@@ -12,8 +12,8 @@ run in one piece. Only the block size changes the draws; the law of the chain is
 draw per step, which on the rigid body is most of the cost of a step.
 
 :func:`run_steps` is the loop every chain runner uses
-(:func:`liesample.integrators.accuracy.ergodic_averages`, the dual-averaging warm-up of
-the warm-up of :mod:`liesample.tuning.protocol`, the runner): ``num_steps`` steps from ``first_step``, with
+(:func:`liesample.integrators.accuracy.ergodic_averages`, the warm-up of
+:mod:`liesample.tuning.protocol`, the runner): ``num_steps`` steps from ``first_step``, with
 an optional ``update`` of the caller's accumulators after each step; :func:`run_draws` keeps
 every ``thinning``-th state and the info reduced over each thinning window (what
 :func:`liesample.sample` stores). For the blocked scheme it
