@@ -202,7 +202,7 @@ def _report_averages(args: argparse.Namespace, system, target, tree) -> bool:
     exact = {f"E[{n}²]": exact_moments[i, i] for i, n in enumerate(system.component_names)}
     exact["E[μ₁μ₂]"] = 0.0
     if len(set(args.inertia)) > 1:  # an isotropic body's h is constant on the orbit
-        draws["E[h]"], exact["E[h]"] = stats["energy"].values, float(target.mean_energy())
+        draws["E[h]"], exact["E[h]"] = stats["hamiltonian"].values, float(target.mean_energy())
     table = expectation_table(draws, exact, wall_time=wall_time)
     print(f"\nErgodic averages vs the exact Gibbs law ({wall_time:.2f} s of sampling):")
     print(format_table(table))

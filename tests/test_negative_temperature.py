@@ -75,7 +75,7 @@ def test_heat_bath_spin_chain_at_negative_beta():
         sampler, jax.random.key(5), starts, 400, event_dims=("site", "component"),
         progress_bar=False,
     )  # fmt: skip
-    energy = tree.sample_stats["energy"].values[..., None]
+    energy = tree.sample_stats["hamiltonian"].values[..., None]
     z = _z(tree, energy, reference.energy_mean())
     assert abs(float(z[0])) < 4.5, z
 
@@ -91,7 +91,7 @@ def test_zeitlin_n3_at_negative_beta_by_the_default_path():
     sampler = liesample.adjusted_lie_poisson(system, beta=beta)
     tree = liesample.sample(sampler, jax.random.key(6), starts, 1500, progress_bar=False)
     assert np.isfinite(tree.attrs["step_size"])
-    energy = tree.sample_stats["energy"].values
+    energy = tree.sample_stats["hamiltonian"].values
     exact, exact_error, _ = law.expectations(
         lambda x: np.asarray(system.hamiltonian(jnp.asarray(x)))[:, None], num_samples=100_000
     )
@@ -126,7 +126,7 @@ def test_adjusted_zeitlin_at_beta_zero_keeps_a_bounded_step_and_the_uniform_law(
     starts = law.orbit_samples(np.random.default_rng(1), 8)
     tree = liesample.sample(sampler, jax.random.key(7), starts, 300, progress_bar=False)
     assert tree.attrs["step_size"] <= MAX_STEP_FACTOR * sampler.settings["step_size"] * (1 + 1e-12)
-    energy = tree.sample_stats["energy"].values
+    energy = tree.sample_stats["hamiltonian"].values
     assert np.all(np.isfinite(energy))
     exact, exact_error, _ = law.expectations(
         lambda x: np.asarray(system.hamiltonian(jnp.asarray(x)))[:, None], num_samples=100_000

@@ -224,3 +224,32 @@ def test_an_adapted_run_resumes_to_the_same_draws(tmp_path):
     resumed = sample_chains(algorithm, key, STARTS, 12, output=path, resume=True, **kwargs)
     assert resumed.settings["step_size"] == whole.settings["step_size"]
     np.testing.assert_array_equal(resumed.positions, whole.positions)
+
+
+@pytest.mark.slow  # three compilations; the new name is checked by default in test_run_file
+def test_a_file_that_names_h_energy_resumes_under_that_name(tmp_path, uninterrupted):
+    """A run file written when ``h`` of an orbit sampler was ``sample_stats/energy`` (here: the
+    same sampler declaring that name) resumes with the name it has; a new file names it
+    ``hamiltonian``, and ArviZ's HMC ``energy`` is absent."""
+    from liesample.samplers.contract import HOOKS, Sampler
+
+    hooks = {name: getattr(ALGORITHM, name) for name in HOOKS} | {"energy_name": "energy"}
+    old = Sampler(ALGORITHM.init, ALGORITHM.step, **hooks)
+    path = tmp_path / "old.nc"
+    kwargs = {"output": path, "progress_bar": False, **RUN}
+    sample_chains(old, jax.random.key(KEY_SEED), STARTS, 8, **kwargs)
+    resumed = liesample.sample(
+        ALGORITHM, jax.random.key(KEY_SEED), STARTS, NUM_DRAWS, resume=True, **kwargs
+    )
+    assert "hamiltonian" not in resumed.sample_stats
+    np.testing.assert_array_equal(
+        np.asarray(resumed.sample_stats["energy"]), uninterrupted.info["energy"]
+    )
+    assert "energy" in load_chains(path).sample_stats
+    new = liesample.sample(
+        ALGORITHM, jax.random.key(KEY_SEED), STARTS, 8, progress_bar=False, **RUN
+    )
+    assert "energy" not in new.sample_stats
+    np.testing.assert_array_equal(
+        np.asarray(new.sample_stats["hamiltonian"]), uninterrupted.info["energy"][:, :8]
+    )

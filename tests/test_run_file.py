@@ -220,6 +220,8 @@ def test_the_file_is_the_tree_that_sample_returns(tmp_path):
         for key, value in strip(theirs.attrs).items():
             np.testing.assert_equal(np.asarray(mine.attrs[key]), np.asarray(value), err_msg=key)
     assert saved.attrs["seed"] == 5 and saved.posterior["mu"].dims == ("chain", "draw", "component")
+    # h of an orbit sampler (no momentum) is not ArviZ's HMC energy.
+    assert "hamiltonian" in saved.sample_stats and "energy" not in saved.sample_stats
 
 
 TWO_WRITERS = textwrap.dedent(

@@ -147,6 +147,8 @@ def test_magnetic_divergences_reach_sample_stats_and_are_reduced_with_any():
         tree.sample_stats["acceptance_rate"].values,
         steps.info["acceptance_rate"].reshape(2, 20, 5).mean(axis=-1),
     )
+    # H(q, p) of a state with a momentum: ArviZ's HMC energy, for its BFMI and energy plot.
+    assert "energy" in tree.sample_stats and "hamiltonian" not in tree.sample_stats
 
 
 def test_stuck_chains_are_named():

@@ -35,6 +35,7 @@ from liesample.samplers.contract import (
     SAMPLE_STATS_NAMES,
     Sampler,
     as_sampler,
+    energy_name,
     reduce_over_thinning,
 )
 from liesample.tuning.warmup import choose_from_starts, warm_up
@@ -90,20 +91,27 @@ class TreeSpec:
     event_dims: object = None
     coords: Mapping | None = None
     attrs: Mapping | None = None
+    energy_name: str | None = None
 
     def named_for(self, sampler: Sampler, positions, keep_positions) -> TreeSpec:
-        """The sampler's declared name and dims for single-array positions, unless given."""
+        """The sampler's declared name and dims for single-array positions, unless given; and
+        the ``sample_stats`` name of its ``info.energy`` (:func:`energy_name`), unless adopted
+        from a saved run."""
+        spec = self
+        if spec.energy_name is None:
+            first = jax.tree.map(lambda leaf: leaf[0], positions)
+            spec = dataclasses.replace(spec, energy_name=energy_name(sampler, first))
         names = sampler.draw_names
         if (
             keep_positions
-            and self.var_name is None
-            and self.event_dims is None
+            and spec.var_name is None
+            and spec.event_dims is None
             and names is not None
             and is_single_array(positions)
             and np.ndim(positions) - 1 == len(names.event_dims)
         ):
-            return dataclasses.replace(self, var_name=names.var_name, event_dims=names.event_dims)
-        return self
+            return dataclasses.replace(spec, var_name=names.var_name, event_dims=names.event_dims)
+        return spec
 
     def build(
         self, positions, info, observables, settings, *, thinning, attrs, log_likelihood=None
@@ -122,6 +130,7 @@ class TreeSpec:
             thinning=thinning,
             step_size=settings.get("step_size"),
             attrs={**attrs, **(self.attrs or {})},
+            energy_name=self.energy_name or "energy",
         )
         if log_likelihood is not None:
             from arviz_base import from_dict
@@ -481,9 +490,9 @@ class _Run:
                 attrs=attrs,
                 log_likelihood=draws["log_likelihood"],
             )
+        stats_names = {**SAMPLE_STATS_NAMES, "energy": self.spec.energy_name or "energy"}
         names = {
-            SAMPLE_STATS_NAMES.get(k, k): [k, np.asarray(v).dtype.str]
-            for k, v in draws["info"].items()
+            stats_names.get(k, k): [k, np.asarray(v).dtype.str] for k, v in draws["info"].items()
         }
         self.store.append(first, tree, names, to_host(states), self.fingerprint)
 

@@ -215,8 +215,10 @@ def sample(
     """Run chains with :func:`sample_chains` and return an ArviZ ``DataTree``.
 
     The tree has ``posterior/<var_name>`` with dims ``(chain, draw, *event_dims)`` and
-    ``sample_stats`` under ArviZ's names (``diverging``, ``acceptance_rate``, ``energy``, and
-    the sampler's own fields such as ``casimir_error``); its attributes record ArviZ's
+    ``sample_stats`` under ArviZ's names (``diverging``, ``acceptance_rate``, ``energy`` where
+    it is HMC's total energy, ``hamiltonian`` where it is ``h`` of a state without a momentum
+    (:func:`liesample.samplers.contract.energy_name`), and the sampler's own fields such as
+    ``casimir_error``); its attributes record ArviZ's
     ``sampling_time``, ``inference_library`` and its version, the number of steps, the
     sampler's settings (``sampler``, ``step_size`` and how it was chosen, ``stability``, …),
     whether the warm-up adapted, and ``attrs``.

@@ -305,14 +305,18 @@ class RunFile:
 
     def names(self, spec):
         """``spec`` (a :class:`liesample.run.runner.TreeSpec`) with the saved run's
-        ``var_name`` and ``event_dims`` where ``spec`` leaves them unset, so that a resume writes
-        the variables the file has (a given name that differs is refused by :meth:`check`)."""
+        ``var_name``, ``event_dims`` and name of ``info.energy`` where ``spec`` leaves them
+        unset, so that a resume writes the variables the file has (a given name that differs is
+        refused by :meth:`check`)."""
         import dataclasses
 
         if not self.exists:
             return spec
         with _open(self.path) as f:
-            saved = _json_attr(_run_group(f, self.path), "fingerprint", self.path)
+            group = _run_group(f, self.path)
+            saved = _json_attr(group, "fingerprint", self.path)
+            info_names = _json_attr(group, "info_names", self.path)
+        energy = [name for name, (key, _) in info_names.items() if key == "energy"]
         var_name, event_dims = json.loads(saved.get("names", "[null, null]"))
         if isinstance(event_dims, list):
             event_dims = tuple(event_dims)
@@ -322,6 +326,7 @@ class RunFile:
             spec,
             var_name=spec.var_name if spec.var_name is not None else var_name,
             event_dims=spec.event_dims if spec.event_dims is not None else event_dims,
+            energy_name=spec.energy_name or (energy[0] if energy else None),
         )
 
     def check(self, fingerprint: dict, required=()):
