@@ -225,7 +225,7 @@ def test_settings_and_explicit_stability_modes_are_recorded():
     assert attrs["stability"] == "warn" and attrs["step_size"] == 10.0
     assert attrs["step_size_source"] == "given" and attrs["stability_number"] > 2.0
     assert attrs["sampler"] == "lie_poisson_langevin" and attrs["adapted"] == 0
-    assert set(tree.sample_stats.data_vars) >= {"diverging", "acceptance_rate", "energy"}
+    assert set(tree.sample_stats.data_vars) >= {"diverging", "acceptance_rate", "hamiltonian"}
 
 
 def test_float32_warning_rule():

@@ -100,7 +100,11 @@ class TreeSpec:
         spec = self
         if spec.energy_name is None:
             first = jax.tree.map(lambda leaf: leaf[0], positions)
-            spec = dataclasses.replace(spec, energy_name=energy_name(sampler, first))
+            try:  # the first use of a start: its errors name it, as the checks of all do
+                name = energy_name(sampler, first)
+            except (ValueError, TypeError) as error:
+                raise type(error)(f"initial_positions[0]: {error}") from None
+            spec = dataclasses.replace(spec, energy_name=name)
         names = sampler.draw_names
         if (
             keep_positions
