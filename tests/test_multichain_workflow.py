@@ -137,8 +137,9 @@ def test_a_given_step_is_kept_and_an_unset_one_needs_a_warm_up():
     cannot be sampled without a warm-up, and says so."""
     x0 = jnp.zeros((2, 2))
     given = liesample.geometric_hmc(scaled_logdensity, Euclidean((2,)), 5e-4, 3)
-    tree = liesample.sample(given, jax.random.key(1), x0, 5, num_warmup=0, exact_starts=True,
-                            progress_bar=False)  # fmt: skip
+    with pytest.warns(UserWarning, match="convergence checks"):  # 5 draws
+        tree = liesample.sample(given, jax.random.key(1), x0, 5, num_warmup=0,
+                                exact_starts=True, progress_bar=False)  # fmt: skip
     attrs = tree.posterior.attrs
     assert attrs["step_size"] == 5e-4 and attrs["step_size_source"] == "given"
     assert attrs["adapted"] == 0 and "adapted_parameters" not in attrs
