@@ -47,9 +47,9 @@ __all__ = [
     "DenseBlocks",
     "WindowState",
     "Windows",
+    "far_adapted",
     "inverse_mass",
     "regularised_variance",
-    "far_adapted",
     "statistic",
     "welford_batch",
     "windows_adaptation",
@@ -294,7 +294,9 @@ def far_adapted(step_sizes, inverse_masses, factor: float = FAR_APART) -> list[t
             step_off = np.abs(np.log(steps[chain] / step_median))
             mass_off = np.abs(np.log(masses[chain] / mass_median))
         if not step_off <= bound:
-            parts.append(f"step_size {steps[chain]:.3g} against the others' median {step_median:.3g}")
+            parts.append(
+                f"step_size {steps[chain]:.3g} against the others' median {step_median:.3g}"
+            )
         bad = np.flatnonzero(~(mass_off <= bound))
         if bad.size:
             k = int(bad[np.argmax(np.nan_to_num(mass_off[bad], nan=np.inf))])
