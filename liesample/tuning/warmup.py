@@ -14,7 +14,10 @@ A sampler declares what its warm-up tunes (``Sampler.adaptation``, a
 - ``"window"`` (the T*G samplers, :func:`window_warm_up`): Stan's windows of
   :func:`liesample.window_adaptation` (:func:`liesample.tuning.windows.windows_adaptation` run
   by :func:`liesample.tuning.protocol.run_adaptation`), all chains together: one step size,
-  the mass pooled over the chains and, for HMC, one integration time.
+  the mass pooled over the chains and, for HMC, one integration time;
+- ``"chees"`` (``magnetic_hmc(logdensity_fn)``, :func:`window_warm_up`):
+  :func:`liesample.magnetic_window_adaptation` on every chain together, then
+  :func:`liesample.samplers.cotangent.magnetic_hmc.jittered_magnetic_hmc`.
 
 :func:`choose_from_starts` is the same declaration without a warm-up (the step size left unset):
 the sampler's own automatic step for the run's starts (``choose(positions, None)``).
@@ -33,12 +36,12 @@ import numpy as np
 
 from liesample.foundation.compile import jit
 from liesample.samplers.contract import Sampler
-from liesample.tuning.adaptation import window_adaptation
+from liesample.tuning.adaptation import magnetic_window_adaptation, window_adaptation
 from liesample.tuning.protocol import fixed, run_adaptation, step_size_adaptation
 
 __all__ = ["WARM_UP_METHODS", "adaptation_of", "choose_from_starts", "warm_up", "window_warm_up"]
 
-WARM_UP_METHODS = ("dual_averaging", "rule", "window")
+WARM_UP_METHODS = ("dual_averaging", "rule", "window", "chees")
 """The values of ``Tunable.method`` that :func:`adaptation_of` builds."""
 
 
@@ -103,7 +106,7 @@ def warm_up(sampler: Sampler, rng_key, chain_keys, states, initial_positions, nu
     these alone, so a resumed run derives the same step.
     """
     tunable = _declared(sampler)
-    if tunable.method == "window":
+    if tunable.method in ("window", "chees"):
         return window_warm_up(sampler, rng_key, initial_positions, num_warmup)
     adaptation, initial, source = adaptation_of(sampler, initial_positions, rng_key)
     if adaptation.update is None:
@@ -161,19 +164,24 @@ def window_warm_up(sampler: Sampler, rng_key, initial_positions, num_warmup: int
     kept = {k: v for k, v in factory.keywords.items() if v is not None and k != "jitter"}
     initial = sampler.settings["step_size"] if tunable.given else INITIAL_STEP_SIZE
     adapt_mass = "inverse_mass_matrix" not in kept
-    warm = window_adaptation(
-        factory.func, *factory.args, initial_step_size=initial, adapt_mass=adapt_mass, **kept
-    )
+    if tunable.method == "chees":  # magnetic HMC: every parameter, then the jittered sampler
+        options = {k: kept[k] for k in tunable.options if k in kept}
+        warm = magnetic_window_adaptation(*factory.args, initial_step_size=initial, **options)
+        adapted = list(tunable.adapted)
+    else:
+        warm = window_adaptation(
+            factory.func, *factory.args, initial_step_size=initial, adapt_mass=adapt_mass, **kept
+        )
+        adapted = ["step_size"] + ["inverse_mass_matrix"] * adapt_mass
     (states, parameters), _ = warm.run(rng_key, initial_positions, int(num_warmup))
     tuned = factory(**parameters)
-    adapted = ["step_size"] + ["inverse_mass_matrix"] * adapt_mass
     if parameters.get("jitter"):
         adapted.append("num_integration_steps")
     target = tunable.target_acceptance_rate
     tuned.settings.update(
         step_size_source=(
-            f"warm-up window adaptation (all chains together) to Metropolis rate {target:g}, "
-            f"from {initial:.4g}"
+            f"warm-up {tunable.method} adaptation (all chains together) to target rate "
+            f"{target:g}, from {initial:.4g}"
         ),
         adapted_parameters=", ".join(adapted),
         inverse_mass_matrix=_as_json(parameters["inverse_mass_matrix"]),

@@ -319,7 +319,7 @@ UNSET = "unset: tuned by the warm-up of liesample.sample"
 """The ``step_size_source`` of a T*G sampler built without a step."""
 
 
-def unset_step(sampler: str) -> Callable:
+def unset_step(sampler: str, arguments: str = "logdensity_fn, space") -> Callable:
     """The ``step`` of a T*G sampler built without ``step_size``: it refuses to run, saying
     what tunes it."""
 
@@ -328,7 +328,7 @@ def unset_step(sampler: str) -> Callable:
             f"{sampler} was built without step_size, so it cannot step: run it through "
             "liesample.sample with num_warmup > 0 (the warm-up tunes the step size, mass and, "
             "for HMC, the trajectory length), or give step_size (e.g. from "
-            f"liesample.window_adaptation(liesample.{sampler}, logdensity_fn, space))"
+            f"liesample.window_adaptation(liesample.{sampler}, {arguments}))"
         )
 
     return step
