@@ -1,6 +1,8 @@
 """The multi-chain workflow of the README: warm up every chain together, then sample; and
 ``liesample.sample`` warms up by default, so fresh starts cannot pass for posterior draws."""
 
+import json
+
 import arviz as az
 import jax
 import jax.numpy as jnp
@@ -102,3 +104,72 @@ def test_draw_names_come_from_the_space_and_are_checked_before_sampling():
         liesample.sample(counting, jax.random.key(0), rotations, 4, event_dims=("c",),
                          progress_bar=False)  # fmt: skip
     assert not calls
+
+
+SDS = np.array([1e-3, 10.0])
+
+
+def scaled_logdensity(x):
+    """N(0, diag(SDS²)) on R²: scales 1e4 apart, which unit mass and one step cannot sample."""
+    return -0.5 * jnp.sum((x / SDS) ** 2)
+
+
+def test_sample_tunes_a_geometric_hmc_built_without_a_step():
+    """``liesample.sample(geometric_hmc(logdensity, space), …)`` with the default warm-up runs
+    the window adaptation (chains together) and samples with what it tuned: both sds exact
+    within 4.5 MCSE, and the run records what was adapted."""
+    x0 = jnp.array([[0.01, 1.0], [-0.01, -3.0], [0.002, 5.0], [0.0, 0.5]])
+    sampler = liesample.geometric_hmc(scaled_logdensity, Euclidean((2,)))
+    tree = liesample.sample(sampler, jax.random.key(0), x0, 300, progress_bar=False)
+    draws = tree.posterior["mu"].values.reshape(-1, 2)
+    mcse_sd = az.mcse(tree, var_names=["mu"], method="sd")["mu"].values
+    np.testing.assert_array_less(np.abs(draws.std(axis=0) - SDS), 4.5 * mcse_sd)
+    attrs = tree.posterior.attrs
+    assert attrs["adapted"] == 1 and attrs["num_warmup"] == 300
+    assert attrs["step_size_source"].startswith("warm-up window adaptation (all chains")
+    assert attrs["adapted_parameters"] == "step_size, inverse_mass_matrix, num_integration_steps"
+    mass = np.asarray(json.loads(attrs["inverse_mass_matrix"])[""])
+    assert mass[1] / mass[0] > 1e3  # the pooled variances, 1e8 apart (the small one shrunk)
+
+
+def test_a_given_step_is_kept_and_an_unset_one_needs_a_warm_up():
+    """A step given to the factory is kept (no warm-up: exactly as given); one left unset
+    cannot be sampled without a warm-up, and says so."""
+    x0 = jnp.zeros((2, 2))
+    given = liesample.geometric_hmc(scaled_logdensity, Euclidean((2,)), 5e-4, 3)
+    with pytest.warns(UserWarning, match="convergence checks"):  # 5 draws
+        tree = liesample.sample(given, jax.random.key(1), x0, 5, num_warmup=0,
+                                exact_starts=True, progress_bar=False)  # fmt: skip
+    attrs = tree.posterior.attrs
+    assert attrs["step_size"] == 5e-4 and attrs["step_size_source"] == "given"
+    assert attrs["adapted"] == 0 and "adapted_parameters" not in attrs
+    unset = liesample.geometric_hmc(scaled_logdensity, Euclidean((2,)))
+    with pytest.raises(ValueError, match="without step_size and num_warmup=0"):
+        liesample.sample(unset, jax.random.key(1), x0, 5, num_warmup=0, exact_starts=True)
+    with pytest.raises(ValueError, match="built without step_size, so it cannot step"):
+        unset.step(jax.random.key(0), unset.init(x0[0]))
+    with pytest.raises(ValueError, match="num_integration_steps is unset"):
+        liesample.geometric_hmc(scaled_logdensity, Euclidean((2,)), 0.1)
+
+
+@pytest.mark.slow  # a second warm-up compilation; the default sibling is the geometric_hmc one
+def test_sample_tunes_a_magnetic_hmc_built_without_parameters():
+    """``magnetic_hmc(logdensity_fn)``: the warm-up runs the magnetic window adaptation (ChEES)
+    on the chains together and samples with ``jittered_magnetic_hmc``; both sds exact."""
+    x0 = jnp.array([[0.01, 1.0], [-0.01, -3.0], [0.002, 5.0], [0.0, 0.5]])
+    tree = liesample.sample(liesample.magnetic_hmc(scaled_logdensity), jax.random.key(0), x0,
+                            300, progress_bar=False)  # fmt: skip
+    draws = tree.posterior["mu"].values.reshape(-1, 2)
+    mcse_sd = az.mcse(tree, var_names=["mu"], method="sd")["mu"].values
+    np.testing.assert_array_less(np.abs(draws.std(axis=0) - SDS), 4.5 * mcse_sd)
+    assert tree.attrs["sampler"] == "jittered_magnetic_hmc" and tree.attrs["adapted"] == 1
+    assert tree.attrs["step_size_source"].startswith("warm-up chees adaptation (all chains")
+
+
+def test_an_unset_magnetic_hmc_needs_a_warm_up_and_all_four_parameters_or_none():
+    unset = liesample.magnetic_hmc(scaled_logdensity)
+    x0 = jnp.zeros((2, 2))
+    with pytest.raises(ValueError, match="without step_size and num_warmup=0"):
+        liesample.sample(unset, jax.random.key(1), x0, 5, num_warmup=0, exact_starts=True)
+    with pytest.raises(ValueError, match="or none of them"):
+        liesample.magnetic_hmc(scaled_logdensity, 0.1)

@@ -8,6 +8,7 @@ Fisher prior on SO(3): exact E[R]; (c) a Bingham prior on S²: exact E[x xᵀ]. 
 """
 
 import importlib.util
+import warnings
 from pathlib import Path
 
 import arviz_stats
@@ -25,6 +26,7 @@ from liesample.geometry.spaces import SO
 from liesample.interop.numpyro_distributions import Bingham, MatrixFisher, VonMisesFisher
 from liesample.interop.numpyro_kernel import GeometricHMC
 from liesample.targets.groups import MatrixFisherLaw
+from liesample.tuning.windows import far_adapted
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "numpyro_directional.py"
 
@@ -222,3 +224,35 @@ def test_a_parameter_with_a_small_sd_is_not_frozen_by_a_resonance():
     for leaf in jax.tree.leaves(adapted):
         leaf = np.asarray(leaf)
         assert np.all(leaf == leaf[:1]), leaf
+
+
+def test_chains_adapted_alone_far_apart_are_named():
+    """Issue 28: a chain adapted alone whose step or mass ends > 10x from the others' median
+    is named (synthetic adaptations: the escape of ``low_dim_gauss_mix``, a step 300x below)."""
+    steps = [0.6, 0.55, 0.002, 0.62]
+    masses = np.ones((4, 3))
+    assert [chain for chain, _ in far_adapted(steps, masses)] == [2]
+    ((_, message),) = far_adapted(steps, masses)
+    assert "chain 2: step_size 0.002 against the others' median 0.6" in message
+    masses[0, 1] = 50.0  # one coordinate of chain 0's inverse mass
+    found = dict(far_adapted(steps, masses))
+    assert set(found) == {0, 2} and "inverse mass 50 at coordinate 1" in found[0]
+    assert far_adapted([0.6, 0.1, 0.3], np.ones((3, 2))) == []  # 6x apart: within 10x
+    assert [c for c, _ in far_adapted([0.6, np.nan, 0.5], np.ones((3, 1)))] == [1]
+    assert [c for c, _ in far_adapted([0.6, 0.001], np.ones((2, 1)))] == [1]  # two: the second
+
+
+def test_sequential_chains_record_their_adaptations_and_stay_quiet_when_close():
+    def model():
+        numpyro.sample("x", dist.Normal(0.0, 2.0))
+
+    kernel = GeometricHMC(model)
+    mcmc = MCMC(kernel, num_warmup=60, num_samples=5, num_chains=2, chain_method="sequential",
+                progress_bar=False)  # fmt: skip
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)  # nothing to report
+        mcmc.run(jax.random.key(0))
+    recorded = kernel.chain_adaptations
+    assert len(recorded) == 2 and all(mass.shape == (1,) for _, mass in recorded)
+    final = np.asarray(mcmc.last_state.adapt_state.step_size)
+    np.testing.assert_allclose([step for step, _ in recorded], final)

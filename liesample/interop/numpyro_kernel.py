@@ -46,7 +46,10 @@ with ``T`` learnt by the ChEES-type rule, unless ``num_integration_steps`` or
 ``integration_time`` is given. Vectorized chains
 (``chain_method="vectorized"``) adapt together: one step size (their pooled rate,
 :func:`liesample.tuning.protocol.pooled_rate`), one mass (pooled moments) and one ``T``;
-sequential chains adapt alone. After the warm-up the adaptation's ``final`` parameters are used
+sequential chains adapt alone: at the end of each one's warm-up the kernel records its step size
+and diagonal inverse mass (``chain_adaptations``) and warns when a chain's ends more than 10
+times from the median of the other chains' (:func:`liesample.tuning.windows.far_adapted`).
+After the warm-up the adaptation's ``final`` parameters are used
 (dual averaging's average step, the rule's ``T``); nothing changes any more. ``num_warmup=0``
 with anything left to adapt warns.
 
@@ -112,6 +115,7 @@ from liesample.tuning.windows import (
     DenseBlocks,
     Windows,
     WindowState,
+    far_adapted,
     inverse_mass,
     statistic,
     windows_adaptation,
@@ -532,6 +536,8 @@ class GeometricHMC(MCMCKernel):
         self._sample_fn = None
         self._num_warmup = 0
         self._array_params = False
+        self._chain_adaptations = []  # (step size, flat inverse mass) of each chain adapted alone
+        self._reported = set()
 
     # ------------------------------------------------------------------ the sites
     def _setup(self, rng_key, model_args, model_kwargs):
@@ -968,7 +974,47 @@ class GeometricHMC(MCMCKernel):
     def _sample_one(self, state, model_args, model_kwargs):
         """One chain's transition: :meth:`_sample_batch` on a batch of one."""
         batch = jax.tree.map(lambda x: jnp.asarray(x)[None], state)
-        return jax.tree.map(lambda x: x[0], self._sample_batch(batch, model_args, model_kwargs))
+        new = jax.tree.map(lambda x: x[0], self._sample_batch(batch, model_args, model_kwargs))
+        if self._num_warmup > 0 and (self._adapt_step_size or self._adapt_mass):
+            adapted = new.adapt_state  # after the last warm-up transition: the final ones
+            leaves = jax.tree.leaves(adapted.inverse_mass_matrix)
+            diagonal = [jnp.ravel(jnp.diagonal(m) if m.ndim == 2 else m) for m in leaves]
+            jax.lax.cond(
+                state.i == self._num_warmup - 1,
+                lambda: jax.debug.callback(
+                    self._record_chain, adapted.step_size, jnp.concatenate(diagonal)
+                ),
+                lambda: None,
+            )
+        return new
+
+    def _record_chain(self, step_size, inverse_mass):
+        """Keep what a chain adapted alone ended with; warn for each chain far from the others
+        (:func:`liesample.tuning.windows.far_adapted`), once per chain."""
+        self._chain_adaptations.append((float(step_size), np.asarray(inverse_mass)))
+        steps, masses = zip(*self._chain_adaptations, strict=True)
+        if len({m.shape for m in masses}) != 1:
+            return
+        for chain, message in far_adapted(steps, np.stack(masses)):
+            if chain in self._reported:
+                continue
+            self._reported.add(chain)
+            warnings.warn(
+                f"GeometricHMC: chains adapted alone (chain_method='sequential', or 'parallel' "
+                f"on one device) ended far apart: {message} (chain = the order in which this "
+                "kernel warmed chains up). That chain costs many more gradients per draw, or "
+                "adapted to a different region, and its draws may be wrong. Use "
+                "chain_method='vectorized' (the chains then adapt together: one step size, "
+                "pooled mass), a longer num_warmup, or init_params near the posterior.",
+                UserWarning,
+                stacklevel=2,
+            )
+
+    @property
+    def chain_adaptations(self) -> list:
+        """``(step_size, inverse mass diagonal, flattened)`` of each chain this kernel warmed
+        up alone (sequential chains), in order."""
+        return list(self._chain_adaptations)
 
     def _sample_batch(self, state, model_args, model_kwargs):
         """One transition of every chain (a leading chain axis). The chains share the warm-up:

@@ -133,8 +133,9 @@ def wants_adaptation(sampler: Sampler, adapt, num_warmup, name: str) -> bool:
     if adapt is True and sampler.adaptation is None:
         raise ValueError(
             f"adapt=True: {name} has no warm-up adaptation; the orbit "
-            "samplers (liesample.lie_poisson_langevin, liesample.adjusted_lie_poisson) have one, "
-            "the magnetic samplers are tuned with blackjax.window_adaptation"
+            "samplers (liesample.lie_poisson_langevin, liesample.adjusted_lie_poisson) and "
+            "liesample.geometric_hmc / geometric_langevin have one, the magnetic samplers are "
+            "tuned with liesample.window_adaptation"
         )
     if adapt is None:
         return sampler.adaptation is not None and num_warmup > 0 and not sampler.adaptation.given

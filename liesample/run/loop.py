@@ -334,8 +334,6 @@ class _Run:
             self.observable_shapes,
             self.log_likelihood_shapes,
         )
-        # after the names are checked: tracing the step is the first work on the sampler
-        self.sampler = scalar_info(self.sampler, arguments.take_chain(self.positions, 0))
         if self.store is not None:
             self.fingerprint = self._fingerprint()
             self.store.check(self.fingerprint)
@@ -370,8 +368,10 @@ class _Run:
             arguments.check_starts(sampler, self.positions, self.num_chains)
             if adapted is not None:
                 self.run_warmup = False
-                states = adapted
-        self.sampler, self.states = sampler, states
+                states = shard_chains(adapted, self.sharding)
+        # after the names are checked and the step is set: tracing the step
+        self.sampler = scalar_info(sampler, arguments.take_chain(self.positions, 0))
+        self.states = states
         self.settings = dict(sampler.settings, num_warmup=o.num_warmup, adapted=adapting)
 
     def _fingerprint(self):

@@ -132,11 +132,14 @@ def sample_chains(
         ``0`` here: this loop runs exactly the steps asked for. :func:`sample` means the same
         by ``num_warmup`` but defaults to a warm-up as long as the run and warns at ``0``.
     adapt : None, True or False
-        Warm-up adaptation of the step size, as the sampler declares it
-        (:func:`liesample.tuning.warmup.warm_up`). ``None`` (default): adapt a sampler built
-        without ``step_size`` when ``num_warmup > 0``; ``True``: adapt even a given step size;
-        ``False``: never. A step size left unset and not adapted is the sampler's own choice
-        for the run's starts (:func:`liesample.tuning.warmup.choose_from_starts`).
+        Warm-up adaptation of what the sampler declares (:func:`liesample.tuning.warmup.warm_up`):
+        the step size of an orbit sampler; the step size, mass and trajectory length of
+        ``geometric_hmc`` / ``geometric_langevin``, all chains together (a given mass or
+        ``num_integration_steps`` is kept). ``None`` (default): adapt a sampler built
+        without ``step_size`` when ``num_warmup > 0``; ``True``: adapt even a given step size
+        (from it); ``False``: never. A step size left unset and not adapted is the sampler's
+        own choice for the run's starts (:func:`liesample.tuning.warmup.choose_from_starts`;
+        the T*G samplers have none and refuse).
     progress_bar : bool
         Show a progress bar (tqdm) from the start of the run: its phase (checking the starts,
         warm-up, compiling, sampling), then the draws and their rate (on a resumed run from the

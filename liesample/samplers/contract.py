@@ -154,7 +154,9 @@ class Tunable(NamedTuple):
     ``Sampler.adaptation`` (:mod:`liesample.tuning.warmup` reads it, for
     :func:`liesample.sample`'s warm-up); a T*G sampler's API object as
     ``sampling_api(adaptation=…)`` (:func:`liesample.window_adaptation` and the NumPyro kernel
-    read it; the fields ``given`` to ``max_step_size`` are then unused).
+    read it; the fields ``given`` to ``max_step_size`` are then unused), and the sampler it
+    builds as ``Sampler.adaptation`` with ``given`` and ``rebuild`` set (read by
+    :func:`liesample.sample`'s warm-up).
 
     method : str
         ``"dual_averaging"`` (the shared step of all chains tuned to a target of their pooled
@@ -172,8 +174,13 @@ class Tunable(NamedTuple):
         starts ``positions`` (chains first) and a description of how it was chosen.
         ``rng_key=None`` is the choice without warm-up; a key, the warm-up's choice.
     rebuild : callable
-        ``(step_size, source) -> Sampler``: the same sampler with this step (a float),
-        ``source`` recorded as its ``settings["step_size_source"]``.
+        Orbit samplers: ``(step_size, source) -> Sampler``, the same sampler with this step (a
+        float), ``source`` recorded as its ``settings["step_size_source"]``. T*G samplers
+        (``"window"``): ``(**parameters) -> Sampler``, a ``functools.partial`` of the sampler's
+        API object with ``logdensity_fn``, ``space`` and every other argument it was built
+        with (its ``keywords`` are what the warm-up keeps: a given mass, a fixed
+        ``num_integration_steps``, the options), called with the tuned parameters
+        (:func:`liesample.tuning.warmup.window_warm_up`).
     at : callable or None
         ``(step_size, **parameters) -> Sampler`` whose step uses ``step_size`` and the values
         of ``parameters``, all of which may be traced (the warm-up of ``"dual_averaging"``);

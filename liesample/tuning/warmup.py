@@ -10,7 +10,14 @@ A sampler declares what its warm-up tunes (``Sampler.adaptation``, a
   by the chains tuned to a target of their pooled acceptance rate;
 - ``"rule"``: :func:`liesample.tuning.protocol.fixed`, the step computed from the starts with a
   key of the run (``choose(positions, fold_in(rng_key, 1))``), nothing learnt from the
-  transitions (the unadjusted sampler's bias model).
+  transitions (the unadjusted sampler's bias model);
+- ``"window"`` (the T*G samplers, :func:`window_warm_up`): Stan's windows of
+  :func:`liesample.window_adaptation` (:func:`liesample.tuning.windows.windows_adaptation` run
+  by :func:`liesample.tuning.protocol.run_adaptation`), all chains together: one step size,
+  the mass pooled over the chains and, for HMC, one integration time;
+- ``"chees"`` (``magnetic_hmc(logdensity_fn)``, :func:`window_warm_up`):
+  :func:`liesample.magnetic_window_adaptation` on every chain together, then
+  :func:`liesample.samplers.cotangent.magnetic_hmc.jittered_magnetic_hmc`.
 
 :func:`choose_from_starts` is the same declaration without a warm-up (the step size left unset):
 the sampler's own automatic step for the run's starts (``choose(positions, None)``).
@@ -21,17 +28,20 @@ Either returns a new sampler built by ``rebuild`` (the chosen step and how it wa
 
 from __future__ import annotations
 
+import json
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from liesample.foundation.compile import jit
 from liesample.samplers.contract import Sampler
+from liesample.tuning.adaptation import magnetic_window_adaptation, window_adaptation
 from liesample.tuning.protocol import fixed, run_adaptation, step_size_adaptation
 
-__all__ = ["WARM_UP_METHODS", "adaptation_of", "choose_from_starts", "warm_up"]
+__all__ = ["WARM_UP_METHODS", "adaptation_of", "choose_from_starts", "warm_up", "window_warm_up"]
 
-WARM_UP_METHODS = ("dual_averaging", "rule")
+WARM_UP_METHODS = ("dual_averaging", "rule", "window", "chees")
 """The values of ``Tunable.method`` that :func:`adaptation_of` builds."""
 
 
@@ -54,6 +64,13 @@ def _host(positions):
 def choose_from_starts(sampler: Sampler, initial_positions) -> Sampler:
     """The sampler with its automatic step for these starts (chains first), without warm-up."""
     tunable = _declared(sampler)
+    if tunable.choose is None:
+        name = sampler.settings.get("sampler", "this sampler")
+        raise ValueError(
+            f"{name} was built without step_size and num_warmup=0 (or adapt=False): nothing "
+            "sets its step. Pass num_warmup > 0 (the warm-up tunes it, with the mass) or "
+            "build it with step_size"
+        )
     return tunable.rebuild(*tunable.choose(_host(initial_positions), None))
 
 
@@ -89,6 +106,8 @@ def warm_up(sampler: Sampler, rng_key, chain_keys, states, initial_positions, nu
     these alone, so a resumed run derives the same step.
     """
     tunable = _declared(sampler)
+    if tunable.method in ("window", "chees"):
+        return window_warm_up(sampler, rng_key, initial_positions, num_warmup)
     adaptation, initial, source = adaptation_of(sampler, initial_positions, rng_key)
     if adaptation.update is None:
         step_size = adaptation.final(adaptation.init(states, {}))["step_size"]
@@ -116,3 +135,63 @@ def warm_up(sampler: Sampler, rng_key, chain_keys, states, initial_positions, nu
         f"{float(np.mean(kept)):.3f}"
     )
     return tunable.rebuild(step_size, source), moved
+
+
+INITIAL_STEP_SIZE = 0.1
+"""Where dual averaging starts for a T*G sampler built without a step
+(:func:`liesample.window_adaptation`'s ``initial_step_size``)."""
+
+
+def window_warm_up(sampler: Sampler, rng_key, initial_positions, num_warmup: int):
+    """The warm-up of a T*G sampler (``Tunable.method == "window"``): ``(tuned, states)``.
+
+    :func:`liesample.window_adaptation` of the sampler's API object with the arguments it was
+    built with (``Tunable.rebuild``'s keywords), on every chain together (chain ``c`` with key
+    ``split(rng_key, chains)[c]``, as the sampling that follows). It tunes the step size (from
+    a given one with ``adapt=True``, else from :data:`INITIAL_STEP_SIZE`), the inverse mass
+    unless one was given, and for HMC the integration time unless ``num_integration_steps``
+    was given. ``tuned`` is ``rebuild(**tuned parameters)``; its settings record what was
+    adapted (``adapted_parameters``, ``inverse_mass_matrix`` as JSON, ``step_size_source``).
+    """
+    if isinstance(num_warmup, bool) or int(num_warmup) != num_warmup or num_warmup < 20:
+        raise ValueError(
+            f"num_warmup={num_warmup!r}: the window adaptation of "
+            f"{sampler.settings.get('sampler')} needs num_warmup >= 20 (Stan's windows; a few "
+            "hundred is typical), or give step_size and adapt=False"
+        )
+    tunable = sampler.adaptation
+    factory = tunable.rebuild
+    kept = {k: v for k, v in factory.keywords.items() if v is not None and k != "jitter"}
+    initial = sampler.settings["step_size"] if tunable.given else INITIAL_STEP_SIZE
+    adapt_mass = "inverse_mass_matrix" not in kept
+    if tunable.method == "chees":  # magnetic HMC: every parameter, then the jittered sampler
+        options = {k: kept[k] for k in tunable.options if k in kept}
+        warm = magnetic_window_adaptation(*factory.args, initial_step_size=initial, **options)
+        adapted = list(tunable.adapted)
+    else:
+        warm = window_adaptation(
+            factory.func, *factory.args, initial_step_size=initial, adapt_mass=adapt_mass, **kept
+        )
+        adapted = ["step_size"] + ["inverse_mass_matrix"] * adapt_mass
+    (states, parameters), _ = warm.run(rng_key, initial_positions, int(num_warmup))
+    tuned = factory(**parameters)
+    if parameters.get("jitter"):
+        adapted.append("num_integration_steps")
+    target = tunable.target_acceptance_rate
+    tuned.settings.update(
+        step_size_source=(
+            f"warm-up {tunable.method} adaptation (all chains together) to target rate "
+            f"{target:g}, from {initial:.4g}"
+        ),
+        adapted_parameters=", ".join(adapted),
+        inverse_mass_matrix=_as_json(parameters["inverse_mass_matrix"]),
+    )
+    return tuned, states
+
+
+def _as_json(tree) -> str:
+    """A pytree of arrays as JSON text (a NetCDF attribute): ``{"path": values}``."""
+    leaves = jax.tree_util.tree_flatten_with_path(tree)[0]
+    return json.dumps(
+        {jax.tree_util.keystr(path) or "": np.asarray(leaf).tolist() for path, leaf in leaves}
+    )

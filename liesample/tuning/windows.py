@@ -31,6 +31,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from liesample.geometry import spaces
 from liesample.tuning.protocol import (
@@ -42,9 +43,11 @@ from liesample.tuning.protocol import (
 from liesample.tuning.trajectory import MAX_NUM_INTEGRATION_STEPS, halton, jittered_steps
 
 __all__ = [
+    "FAR_APART",
     "DenseBlocks",
     "WindowState",
     "Windows",
+    "far_adapted",
     "inverse_mass",
     "regularised_variance",
     "statistic",
@@ -259,3 +262,58 @@ def windows_adaptation(w: Windows) -> Adaptation:
         return out
 
     return Adaptation(init, current, update, final)
+
+
+FAR_APART = 10.0
+"""How far (a factor) a chain adapted alone may end from the others before it is reported."""
+
+
+def far_adapted(step_sizes, inverse_masses, factor: float = FAR_APART) -> list[tuple[int, str]]:
+    """Chains adapted alone whose step size, or an inverse mass coordinate, ended more than
+    ``factor`` times (either way) from the median of the other chains' (their finite values):
+    ``(chain, message)`` for each, the message naming the value and that median. A non-finite
+    value counts as far.
+
+    ``step_sizes`` ``(chains,)``; ``inverse_masses`` ``(chains, k)``, each chain's diagonal
+    inverse mass flattened. Chains adapted together share their parameters and are never far;
+    this is for those a warm-up tunes one at a time (NumPyro's ``chain_method="sequential"``).
+    With two chains neither can be told apart from the other: the second is reported.
+    """
+    steps = np.asarray(step_sizes, dtype=float)
+    masses = np.asarray(inverse_masses, dtype=float).reshape(len(steps), -1)
+    bound = math.log(factor)
+    out = []
+    for chain in range(1 if len(steps) == 2 else 0, len(steps)):
+        others = np.delete(np.arange(len(steps)), chain)
+        if not others.size:
+            continue
+        step_median = _finite_median(steps[others, None])[0]
+        mass_median = _finite_median(masses[others])
+        parts = []
+        with np.errstate(divide="ignore", invalid="ignore"):
+            step_off = np.abs(np.log(steps[chain] / step_median))
+            mass_off = np.abs(np.log(masses[chain] / mass_median))
+        if not step_off <= bound:
+            parts.append(
+                f"step_size {steps[chain]:.3g} against the others' median {step_median:.3g}"
+            )
+        bad = np.flatnonzero(~(mass_off <= bound))
+        if bad.size:
+            k = int(bad[np.argmax(np.nan_to_num(mass_off[bad], nan=np.inf))])
+            parts.append(
+                f"inverse mass {masses[chain, k]:.3g} at coordinate {k} against the others' "
+                f"median {mass_median[k]:.3g}"
+            )
+        if parts:
+            out.append((chain, f"chain {chain}: " + " and ".join(parts)))
+    return out
+
+
+def _finite_median(values):
+    """The median of each column over its finite entries (``nan`` where there is none)."""
+    finite = np.where(np.isfinite(values), values, np.nan)
+    with np.errstate(invalid="ignore"):
+        out = np.full(values.shape[1], np.nan)
+        some = np.any(np.isfinite(values), axis=0)
+        out[some] = np.nanmedian(finite[:, some], axis=0)
+    return out

@@ -305,19 +305,40 @@ def kernel_move(state: GeometricState, logdensity_fn, space, step_size, inverse_
 
 def space_settings(sampler: str, space, step_size, **parameters) -> dict:
     """The :attr:`~liesample.samplers.contract.Sampler.settings` that every sampler on ``space``
-    records (its name, the space, the given step), then ``parameters`` in order."""
+    records (its name, the space, the given step or ``None``), then ``parameters`` in order."""
     return {
         "sampler": sampler,
         "space": repr(space),
         "step_size": setting(step_size),
-        "step_size_source": "given",
+        "step_size_source": "given" if step_size is not None else UNSET,
         **parameters,
     }
 
 
-def space_sampler(logdensity_fn, space, step_fn: Callable, settings: dict) -> Sampler:
+UNSET = "unset: tuned by the warm-up of liesample.sample"
+"""The ``step_size_source`` of a T*G sampler built without a step."""
+
+
+def unset_step(sampler: str, arguments: str = "logdensity_fn, space") -> Callable:
+    """The ``step`` of a T*G sampler built without ``step_size``: it refuses to run, saying
+    what tunes it."""
+
+    def step(rng_key, state):
+        raise ValueError(
+            f"{sampler} was built without step_size, so it cannot step: run it through "
+            "liesample.sample with num_warmup > 0 (the warm-up tunes the step size, mass and, "
+            "for HMC, the trajectory length), or give step_size (e.g. from "
+            f"liesample.window_adaptation(liesample.{sampler}, {arguments}))"
+        )
+
+    return step
+
+
+def space_sampler(logdensity_fn, space, step_fn: Callable, settings: dict,
+                  adaptation=None) -> Sampler:  # fmt: skip
     """The :class:`~liesample.samplers.contract.Sampler` of ``step_fn`` on ``space``: keyless
-    :func:`init` and :func:`check_starts`."""
+    :func:`init` and :func:`check_starts`; ``adaptation`` its
+    :class:`~liesample.samplers.contract.Tunable`."""
 
     def init_fn(position, rng_key=None):
         del rng_key
@@ -332,6 +353,7 @@ def space_sampler(logdensity_fn, space, step_fn: Callable, settings: dict) -> Sa
         settings=settings,
         check_positions=check_starts(space),
         draw_names=names,
+        adaptation=adaptation,
         stuck_advice=window_advice(settings["sampler"], "logdensity_fn, space"),
     )
 
@@ -339,7 +361,9 @@ def space_sampler(logdensity_fn, space, step_fn: Callable, settings: dict) -> Sa
 def window_advice(sampler: str, arguments: str) -> str:
     """The stuck-chain advice of a sampler that :func:`liesample.window_adaptation` tunes."""
     return (
-        f"Give a smaller step_size, or tune it: (state, parameters), _ = "
+        f"Leave step_size unset, liesample.{sampler}({arguments}), and pass num_warmup > 0 "
+        "to liesample.sample (its warm-up tunes the step size and mass), or tune it "
+        "separately: (state, parameters), _ = "
         f"liesample.window_adaptation(liesample.{sampler}, {arguments}).run(rng_key, "
         f"initial_positions, 1000), then liesample.{sampler}({arguments}, **parameters) "
         "started from state.position with num_warmup=0, exact_starts=True."

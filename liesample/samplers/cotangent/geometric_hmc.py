@@ -50,6 +50,7 @@ from liesample.samplers.cotangent._core import (
     space_sampler,
     space_settings,
     trajectory_cost,
+    unset_step,
 )
 
 __all__ = ["ADAPTATION", "as_top_level_api", "build_kernel", "geometric_hmc", "init"]
@@ -162,8 +163,8 @@ def build_kernel(
 def as_top_level_api(
     logdensity_fn: Callable,
     space,
-    step_size,
-    num_integration_steps: int,
+    step_size=None,
+    num_integration_steps: int | None = None,
     inverse_mass_matrix=None,
     magnetic_field=None,
     *,
@@ -185,12 +186,18 @@ def as_top_level_api(
         ``g (I + εX)``, which has the velocity of ``g exp(εX)``.
     space : Space or pytree of spaces
         From :mod:`liesample.geometry.spaces` (``Euclidean``, ``Sphere``, ``SO``, ``SU``, ``U1``).
-    step_size : float
-        Step ``ε > 0`` of the integration scheme.
-    num_integration_steps : int
-        Steps of the scheme per transition.
+    step_size : float or None
+        Step ``ε > 0`` of the integration scheme. ``None`` (default): tuned by the warm-up of
+        :func:`liesample.sample` (``num_warmup > 0``), with the mass and the trajectory length,
+        all chains together (Stan's windows, :func:`liesample.window_adaptation`); such a
+        sampler cannot step on its own. A given step is kept unless ``sample(adapt=True)``.
+    num_integration_steps : int or None
+        Steps of the scheme per transition; required with a given ``step_size``. Left unset,
+        the warm-up learns the integration time ``T`` (a ChEES-type rule) and the sampler
+        integrates a jittered ``ceil(u T / ε)`` steps; given, the warm-up keeps it.
     inverse_mass_matrix : None, float or pytree
-        ``M⁻¹``: unit by default; a positive scalar; or a pytree like ``space`` with one value
+        ``M⁻¹``: unit by default (the warm-up then adapts it; a given one it keeps); a
+        positive scalar; or a pytree like ``space`` with one value
         per copy of a group or sphere and one per coordinate of ``Euclidean`` and ``U1``
         (what :func:`liesample.window_adaptation` returns). A ``Euclidean`` block of ``n``
         coordinates may take a dense symmetric positive definite ``(n, n)`` matrix instead.
@@ -219,20 +226,35 @@ def as_top_level_api(
         ``T`` its ChEES rule learnt): a fixed length can sit at a resonance of the target (a
         direction whose half period is ``L ε`` barely moves). ``False`` (default): ``L`` steps.
     """
-    check_positive_step_size(step_size)
-    check_integer("num_integration_steps", num_integration_steps)
     options = check_options(momentum_persistence, divergence_threshold, persistent)
     scheme = hamiltonian_scheme(integrator)
-    move = make_move(logdensity_fn, space, step_size, inverse_mass_matrix, magnetic_field, scheme)
-
     if not isinstance(jitter, bool):
         raise TypeError(f"jitter must be a bool, got {jitter!r}")
+    if num_integration_steps is not None:
+        check_integer("num_integration_steps", num_integration_steps)
+    elif step_size is not None:
+        raise ValueError(
+            "num_integration_steps is unset but step_size is given: give both, or leave both "
+            "unset for liesample.sample's warm-up to tune them"
+        )
     settings = _settings(
         space, step_size, num_integration_steps, divergence_threshold, magnetic_field,
         momentum_persistence, persistent, integrator, jitter,
     )  # fmt: skip
+    # what the warm-up rebuilds the sampler with: every argument but the tuned step size
+    rebuild = functools.partial(
+        geometric_hmc, logdensity_fn, space, num_integration_steps=num_integration_steps,
+        inverse_mass_matrix=inverse_mass_matrix, magnetic_field=magnetic_field,
+        divergence_threshold=divergence_threshold, momentum_persistence=momentum_persistence,
+        persistent=persistent, integrator=integrator, jitter=jitter,
+    )  # fmt: skip
+    tunable = ADAPTATION._replace(given=step_size is not None, rebuild=rebuild)
+    if step_size is None:
+        return space_sampler(logdensity_fn, space, unset_step("geometric_hmc"), settings, tunable)
+    check_positive_step_size(step_size)
+    move = make_move(logdensity_fn, space, step_size, inverse_mass_matrix, magnetic_field, scheme)
     step_fn = functools.partial(_step, move, num_integration_steps, jitter, options)
-    return space_sampler(logdensity_fn, space, step_fn, settings)
+    return space_sampler(logdensity_fn, space, step_fn, settings, tunable)
 
 
 def _settings(space, step_size, num_integration_steps, divergence_threshold, magnetic_field,

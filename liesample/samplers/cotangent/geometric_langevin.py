@@ -27,6 +27,7 @@ A non-finite step is rejected (state kept) and flagged ``is_divergent`` in both 
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 
 import jax
@@ -52,6 +53,7 @@ from liesample.samplers.cotangent._core import (
     space_settings,
     trajectory_cost,
     unadjusted_transition,
+    unset_step,
 )
 
 __all__ = ["ADAPTATION", "as_top_level_api", "build_kernel", "geometric_langevin", "init"]
@@ -194,8 +196,8 @@ def build_kernel(
 def as_top_level_api(
     logdensity_fn: Callable,
     space,
-    step_size,
-    friction,
+    step_size=None,
+    friction=1.0,
     inverse_mass_matrix=None,
     magnetic_field=None,
     *,
@@ -210,10 +212,14 @@ def as_top_level_api(
     logdensity_fn, space, inverse_mass_matrix, magnetic_field
         As for :func:`liesample.geometric_hmc` (``log π`` with respect to Haar / uniform /
         Lebesgue measure; the field acts on the Euclidean coordinates).
-    step_size : float
-        ``h > 0``, the time step of the OU step and of the leapfrog step.
+    step_size : float or None
+        ``h > 0``, the time step of the OU step and of the leapfrog step. ``None`` (default):
+        tuned with the mass by the warm-up of :func:`liesample.sample` (``num_warmup > 0``),
+        all chains together (:func:`liesample.window_adaptation`, to a Metropolis rate of 0.9
+        the step would have); such a sampler cannot step on its own. A given step is kept
+        unless ``sample(adapt=True)``; a given ``inverse_mass_matrix`` is kept.
     friction : float
-        ``γ > 0``; the momentum keeps a fraction ``e^{−γm⁻¹h}`` per step.
+        ``γ > 0`` (default 1); the momentum keeps a fraction ``e^{−γm⁻¹h}`` per step.
     adjusted : bool
         Metropolis-adjust each step (exact law) instead of taking it unadjusted.
     divergence_threshold : float
@@ -224,11 +230,8 @@ def as_top_level_api(
         of each summing to 1 (:mod:`liesample.geometry.cotangent`). With ``adjusted=True`` the
         ``O`` steps must stand at the ends, around a palindromic ``B``/``A`` core.
     """
-    check_positive_step_size(step_size)
     check_friction(friction)
     scheme = check_options(adjusted, divergence_threshold, integrator)
-    move = make_move(logdensity_fn, space, step_size, inverse_mass_matrix, magnetic_field, scheme)
-
     settings = space_settings(
         "geometric_langevin",
         space,
@@ -240,11 +243,23 @@ def as_top_level_api(
     if magnetic_field is not None:
         settings["magnetic"] = True
     settings.update(scheme_setting(integrator, "obab"))
+    # what the warm-up rebuilds the sampler with: every argument but the tuned step size
+    rebuild = functools.partial(
+        geometric_langevin, logdensity_fn, space, friction=friction,
+        inverse_mass_matrix=inverse_mass_matrix, magnetic_field=magnetic_field,
+        adjusted=adjusted, divergence_threshold=divergence_threshold, integrator=integrator,
+    )  # fmt: skip
+    tunable = ADAPTATION._replace(given=step_size is not None, rebuild=rebuild)
+    if step_size is None:
+        step_fn = unset_step("geometric_langevin")
+        return space_sampler(logdensity_fn, space, step_fn, settings, tunable)
+    check_positive_step_size(step_size)
+    move = make_move(logdensity_fn, space, step_size, inverse_mass_matrix, magnetic_field, scheme)
 
     def step_fn(rng_key, state):
         return transition(rng_key, state, move, friction, adjusted, divergence_threshold)
 
-    return space_sampler(logdensity_fn, space, step_fn, settings)
+    return space_sampler(logdensity_fn, space, step_fn, settings, tunable)
 
 
 geometric_langevin = sampling_api(

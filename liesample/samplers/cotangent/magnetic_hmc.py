@@ -29,6 +29,7 @@ Non-finite energies are rejected and flagged ``is_divergent``; the state is then
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from typing import NamedTuple
 
@@ -38,7 +39,13 @@ import jax.numpy as jnp
 
 from liesample.geometry.cotangent import LEAPFROG, PhasePoint, compose, drift, kick
 from liesample.samplers.contract import Sampler, Tunable, sampling_api, setting
-from liesample.samplers.cotangent._core import hamiltonian_scheme, ravelled, scheme_setting
+from liesample.samplers.cotangent._core import (
+    UNSET,
+    hamiltonian_scheme,
+    ravelled,
+    scheme_setting,
+    unset_step,
+)
 from liesample.samplers.cotangent._euclidean import (
     MagneticFlow,
     check_parameters,
@@ -227,10 +234,10 @@ def _scheme(integrator) -> tuple:
 
 def as_top_level_api(
     logdensity_fn: Callable,
-    step_size,
-    inverse_mass_matrix,
-    num_integration_steps: int,
-    magnetic_field,
+    step_size=None,
+    inverse_mass_matrix=None,
+    num_integration_steps: int | None = None,
+    magnetic_field=None,
     *,
     divergence_threshold: float = 1000.0,
     integrator="leapfrog",
@@ -244,8 +251,12 @@ def as_top_level_api(
     ----------
     logdensity_fn : callable
         ``log π`` of a pytree position (flattened internally with ``ravel_pytree``).
-    step_size : float
-        Step ``ε > 0`` of the integration scheme.
+    step_size : float or None
+        Step ``ε > 0`` of the integration scheme. ``None``, with the next three unset too
+        (``magnetic_hmc(logdensity_fn)``): all four are tuned by the warm-up of
+        :func:`liesample.sample` (``num_warmup > 0``, ``>= 2`` chains) with
+        :func:`liesample.magnetic_window_adaptation`, which then samples with
+        :func:`jittered_magnetic_hmc`; such a sampler cannot step on its own.
     inverse_mass_matrix : array, (d,) or (d, d)
         Diagonal (> 0) or dense (symmetric positive definite) ``M⁻¹``.
     num_integration_steps : int
@@ -272,10 +283,20 @@ def as_top_level_api(
         flows ``e^{±εGM⁻¹}`` are computed once here, not per step. Tune ``step_size`` and
         ``inverse_mass_matrix`` with ``blackjax.window_adaptation(liesample.magnetic_hmc, …)``.
     """
-    d = check_parameters(step_size, inverse_mass_matrix, magnetic_field)
-    check_integer("num_integration_steps", num_integration_steps)
     options = check_options(momentum_persistence, divergence_threshold, persistent)
     scheme = _scheme(integrator)
+    tuned = (step_size, inverse_mass_matrix, num_integration_steps, magnetic_field)
+    if all(value is None for value in tuned):
+        return _unset(logdensity_fn, divergence_threshold, integrator, momentum_persistence,
+                      persistent)  # fmt: skip
+    if any(value is None for value in tuned):
+        raise ValueError(
+            "magnetic_hmc takes step_size, inverse_mass_matrix, num_integration_steps and "
+            "magnetic_field together, or none of them (liesample.sample's warm-up then tunes "
+            "all four on >= 2 chains)"
+        )
+    d = check_parameters(step_size, inverse_mass_matrix, magnetic_field)
+    check_integer("num_integration_steps", num_integration_steps)
     move = euclidean_move(step_size, inverse_mass_matrix, magnetic_field, scheme)
 
     def init_fn(position, rng_key=None):
@@ -303,6 +324,26 @@ def as_top_level_api(
         step_fn,
         settings=settings,
         check_positions=check_positions,
+        stuck_advice=STUCK_ADVICE,
+    )
+
+
+def _unset(logdensity_fn, divergence_threshold, integrator, momentum_persistence,
+           persistent) -> Sampler:  # fmt: skip
+    """``magnetic_hmc(logdensity_fn)``: a sampler that cannot step, declaring how
+    :func:`liesample.sample`'s warm-up tunes it (``"chees"``) and rebuilds it
+    (:func:`jittered_magnetic_hmc` with the other arguments)."""
+    rebuild = functools.partial(
+        jittered_magnetic_hmc, logdensity_fn, divergence_threshold=divergence_threshold,
+        integrator=integrator, momentum_persistence=momentum_persistence, persistent=persistent,
+    )  # fmt: skip
+    settings = {"sampler": "magnetic_hmc", "step_size": None, "step_size_source": UNSET}
+    return Sampler(
+        lambda position, rng_key=None: init(position, logdensity_fn, rng_key),
+        unset_step("magnetic_hmc", "logdensity_fn"),
+        settings=settings,
+        check_positions=check_starts(logdensity_fn),
+        adaptation=ADAPTATION._replace(rebuild=rebuild),
         stuck_advice=STUCK_ADVICE,
     )
 
