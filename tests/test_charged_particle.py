@@ -432,6 +432,7 @@ def test_stationary_law_is_gibbs_whatever_the_field(strong_field):
     assert np.all(mcse < 0.05 * np.max(np.abs(exact)))  # the test has power
 
 
+@pytest.mark.slow  # Gibbs law in a uniform field runs by default
 def test_stationary_law_is_gibbs_in_a_position_dependent_field():
     """The magnetic bottle (implicit-midpoint ``A`` steps) with ``V = ½ Σ k_i q_i²``, ``β = 1``,
     ``m = 1``: ``E q_i² = 1/k_i`` and ``E p_i² = 1`` within 4.5 MCSE of 128 independent chains

@@ -5,10 +5,13 @@ uniform law on the orbit."""
 import json
 
 import numpy as np
+import pytest
 
 from liesample.targets.zeitlin import uniform_orbit_energy_spectrum
 
 
+# a sweep of statistical runs; negative β by the default path: tests/test_negative_temperature.py
+@pytest.mark.slow
 def test_condensation_example(tmp_path, capsys, run_example):
     assert run_example("condensation", ["--output", str(tmp_path)]) == 0
     for name in ("spectra", "fraction", "vorticity"):

@@ -22,6 +22,8 @@ def load_example():
     return module
 
 
+# the example's law by statistics; its system inference and refusals run by default
+@pytest.mark.slow
 def test_example_samples_the_exact_law():
     example = load_example()
     estimate, se, radius_drift = example.run(num_chains=64, num_draws=300, progress=False)

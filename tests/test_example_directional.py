@@ -5,10 +5,14 @@ from pathlib import Path
 
 import arviz_stats
 import numpy as np
+import pytest
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "directional_statistics.py"
 
 
+# statistical; the same model (window adaptation, geometric HMC on S² × R) runs by default in
+# the README's example and tests/test_geometric_samplers.py
+@pytest.mark.slow
 def test_directional_statistics_example_matches_the_exact_posterior(capsys):
     spec = importlib.util.spec_from_file_location("directional_statistics", EXAMPLE)
     module = importlib.util.module_from_spec(spec)

@@ -227,6 +227,8 @@ def assert_matches_fisher(averages):
     assert np.all(np.abs(estimate - wrong) > 10 * se), (estimate, wrong, se)
 
 
+# the Metropolis chain against Fisher's law and the heat bath's exact chain run by default
+@pytest.mark.slow
 def test_langevin_chain_correlations_match_fisher():
     """Open chain, N = 16, βJ = 2, σ = 1, default (splitting) integrator at dt = 0.05.
 

@@ -197,6 +197,7 @@ def test_blocked_heavy_top_runs_and_keeps_its_casimirs():
     assert float(system.casimir_error(whole.position, whole.reference_casimirs)) < 1e-12
 
 
+@pytest.mark.slow  # blocked draws independent of the split run by default
 def test_the_runner_draws_the_blocked_chain_whatever_the_chunks():
     """``sample_chains`` with thinning keeps the states of :func:`run_steps` (chain ``c`` with
     key ``split(key)[c]``) at steps ``k(d + 1) − 1``, in any chunking, and reduces the info

@@ -80,6 +80,7 @@ LAM = np.array([0.0, 2.0, 6.0])
 ORIENTATION = np.asarray(SO(3).uniform(jax.random.key(8)))
 
 
+@pytest.mark.slow  # the kernel's law on S² runs by default (the vMF posterior)
 def test_prior_only_matrix_fisher_and_bingham_match_exact_moments():
     mcmc = MCMC(
         GeometricHMC(rotation_and_axis_model),
@@ -242,6 +243,7 @@ def test_chains_adapted_alone_far_apart_are_named():
     assert [c for c, _ in far_adapted([0.6, 0.001], np.ones((2, 1)))] == [1]  # two: the second
 
 
+@pytest.mark.slow  # the far-off check itself runs by default (test above)
 def test_sequential_chains_record_their_adaptations_and_stay_quiet_when_close():
     def model():
         numpyro.sample("x", dist.Normal(0.0, 2.0))
