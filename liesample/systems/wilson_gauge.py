@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable, Sequence
 
 import jax
 import jax.numpy as jnp
@@ -102,7 +103,7 @@ class WilsonGauge:
         return self.n == 1
 
     @property
-    def space(self):
+    def space(self) -> spaces.Space:
         """The links as a space: ``U1((d, *shape))`` or ``SU(N, (d, *shape))``."""
         links = (self.dim, *self.shape)
         return spaces.U1(links) if self.abelian else spaces.SU(self.n, links)
@@ -116,7 +117,7 @@ class WilsonGauge:
     def planes(self) -> tuple[tuple[int, int], ...]:
         return tuple((mu, nu) for mu in range(self.dim) for nu in range(mu + 1, self.dim))
 
-    def plaquette_mask(self, mu, nu) -> np.ndarray:
+    def plaquette_mask(self, mu: int, nu: int) -> np.ndarray:
         """Which sites ``x`` carry a plaquette in the plane ``(μ, ν)`` (all on the torus)."""
         mask = np.ones(self.shape, bool)
         if self.boundary == "open":
@@ -127,27 +128,27 @@ class WilsonGauge:
         return mask
 
     # ------------------------------------------------------------------ lattice algebra
-    def shift(self, field, axis, step=1):
+    def shift(self, field: jax.Array, axis: int, step: int = 1) -> jax.Array:
         """``f(x + step·ê_axis)`` of a site field (periodic indexing)."""
         return jnp.roll(field, -step, axis=axis)
 
-    def multiply(self, *factors):
+    def multiply(self, *factors: jax.Array) -> jax.Array:
         """The product of link fields (sum of angles for U(1))."""
         out = factors[0]
         for f in factors[1:]:
             out = out + f if self.abelian else out @ f
         return out
 
-    def inverse(self, u):
+    def inverse(self, u: jax.Array) -> jax.Array:
         return -u if self.abelian else _dagger(u)
 
-    def retrace(self, u):
+    def retrace(self, u: jax.Array) -> jax.Array:
         """``Re tr U / N`` (``cos θ`` for U(1))."""
         if self.abelian:
             return jnp.cos(u)
         return jnp.real(jnp.trace(u, axis1=-2, axis2=-1)) / self.n
 
-    def plaquette(self, links, mu, nu):
+    def plaquette(self, links: jax.Array, mu: int, nu: int) -> jax.Array:
         """``U_μν(x)`` at every site (angles for U(1))."""
         u_mu, u_nu = links[mu], links[nu]
         return self.multiply(
@@ -157,7 +158,7 @@ class WilsonGauge:
             self.inverse(u_nu),
         )
 
-    def staples(self, links, mu):
+    def staples(self, links: jax.Array, mu: int) -> jax.Array:
         """``A_μ(x)``: the sum of staples, ``Σ_P∋U_μ(x) Re tr(U_P)/N = Re tr(U_μ(x) A_μ(x))/N``.
 
         For U(1) a complex number ``Σ e^{iα}`` (the action of the link is ``−Re(e^{iθ} A)``)."""
@@ -186,7 +187,7 @@ class WilsonGauge:
         return jnp.where(mask[..., None, None], u, 0.0)
 
     # ------------------------------------------------------------------ action
-    def action(self, links):
+    def action(self, links: jax.Array) -> jax.Array:
         """``S/β = Σ_P (1 − Re tr U_P / N)``."""
         total = 0.0
         for mu, nu in self.planes:
@@ -195,17 +196,17 @@ class WilsonGauge:
             total = total + jnp.sum(jnp.where(mask, deficit, 0.0))
         return total
 
-    def logdensity(self, beta):
+    def logdensity(self, beta: float) -> Callable[[jax.Array], jax.Array]:
         """``links ↦ −β S/β``: the ``log π`` (Haar measure) of a ``T*G`` sampler."""
         beta = float(beta)
         return lambda links: -beta * self.action(links)
 
     # ------------------------------------------------------------------ starts
-    def hot_start(self, rng_key, dtype=None):
+    def hot_start(self, rng_key: jax.Array, dtype=None) -> jax.Array:
         """Haar-random links (pure JAX: vmaps over keys)."""
         return self.space.uniform(rng_key, dtype)
 
-    def cold_start(self, dtype=None):
+    def cold_start(self, dtype=None) -> jax.Array:
         """Every link the identity."""
         dtype = jnp.dtype(dtype or jnp.zeros(()).dtype)
         if self.abelian:
@@ -214,11 +215,11 @@ class WilsonGauge:
         return jnp.broadcast_to(eye, (self.dim, *self.shape, self.n, self.n))
 
     # ------------------------------------------------------------------ observables
-    def mean_plaquette(self, links):
+    def mean_plaquette(self, links: jax.Array) -> jax.Array:
         """Mean over the action's plaquettes of ``Re tr U_P / N`` (``cos θ_P`` for U(1))."""
         return 1.0 - self.action(links) / self.num_plaquettes
 
-    def topological_charge(self, links):
+    def topological_charge(self, links: jax.Array) -> jax.Array:
         """2-D U(1): the geometric charge ``Σ_P arg(U_P) / 2π`` (an integer on the torus).
 
         Other groups and dimensions: the clover charge of :func:`clover_charge` (flow first,
@@ -233,7 +234,9 @@ class WilsonGauge:
             f"got group {self.group!r} in {self.dim} dimensions"
         )
 
-    def wilson_loop(self, links, r, t, mu=0, nu=None):
+    def wilson_loop(
+        self, links: jax.Array, r: int, t: int, mu: int = 0, nu: int | None = None
+    ) -> jax.Array:
         """Mean of ``Re tr W / N`` over the ``r × t`` rectangles in the plane ``(μ, ν)``
         (``ν`` the last axis by default: time), over every site (periodic indexing)."""
         nu = self.dim - 1 if nu is None else nu
@@ -251,7 +254,7 @@ class WilsonGauge:
             out = self.multiply(out, self.shift(link, axis, k))
         return out
 
-    def polyakov_loop(self, links, axis=None):
+    def polyakov_loop(self, links: jax.Array, axis: int | None = None) -> jax.Array:
         """Mean over the spatial sites of ``tr Π_t U_t(x, t) / N`` (complex), ``axis`` the time
         direction (the last by default); needs a periodic lattice."""
         axis = self.dim - 1 if axis is None else axis
@@ -259,13 +262,13 @@ class WilsonGauge:
         value = jnp.exp(1j * line) if self.abelian else jnp.trace(line, axis1=-2, axis2=-1) / self.n
         return jnp.mean(jnp.take(value, 0, axis=axis))
 
-    def energy_density(self, links):
+    def energy_density(self, links: jax.Array) -> jax.Array:
         """``E = 2 Σ_{μ<ν} Re tr(1 − U_μν) / V`` per site in Lüscher's normalisation
         (``t² E`` defines ``t₀``: ``t₀² ⟨E(t₀)⟩ = 0.3``); for SU(N) only."""
         return 2.0 * self.n * self.action(links) / math.prod(self.shape)
 
 
-def clover_charge(system: WilsonGauge, links):
+def clover_charge(system: WilsonGauge, links: jax.Array) -> jax.Array:
     """The clover topological charge ``Q = (1/32π²) Σ_x ε_μνρσ tr(F_μν F_ρσ)`` of a 4-D SU(N)
     field, ``F_μν`` the anti-Hermitian traceless part of the four-leaf clover over 4 (a plain
     observable: integer-valued only after smoothing, e.g. the Wilson flow)."""
@@ -307,7 +310,7 @@ def _leaf(system, links, mu, nu, s_mu, s_nu):
     return loop if s_mu * s_nu > 0 else _dagger(loop)
 
 
-def wilson_gauge(group: str, shape, boundary: str = "periodic") -> WilsonGauge:
+def wilson_gauge(group: str, shape: Sequence[int], boundary: str = "periodic") -> WilsonGauge:
     """The Wilson gauge action ``S = β Σ_P (1 − Re tr U_P / N)`` on a lattice.
 
     Parameters
