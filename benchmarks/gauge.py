@@ -310,7 +310,7 @@ def _u1_lines(data):
         z = (r["q2"] - r["q2_exact"]) / r["q2_mcse"] if r["q2_mcse"] > 0 else math.nan
         lines.append(
             f"| {r['beta']} | {r['updates']} | {_g(r['tau_int_Q'])} | {r['q2']:.3f} ± "
-            f"{_g(r['q2_mcse'])} | {r['q2_exact']:.3f} | {z:+.1f} |".replace("-", "−")
+            f"{r['q2_mcse']:.3f} | {r['q2_exact']:.3f} | {z:+.1f} |".replace("-", "−")
         )
     return lines
 
