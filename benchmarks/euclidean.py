@@ -46,6 +46,7 @@ import numpy as np
 import liesample
 from benchmarks import common, suites
 from liesample.targets import correlated_gaussian
+from liesample.tuning import adaptation
 
 SUITE = {"order": 40, "title": "adapted magnetic HMC vs BlackJAX NUTS and HMC (Euclidean targets)"}
 
@@ -53,7 +54,7 @@ NUM_CHAINS = 4
 NUM_STEPS = 10  # leapfrog steps of BlackJAX HMC
 # The field's strength as the angle (rad) it turns the whitened velocity per leapfrog step:
 # the adaptation's default, and the other angle measured beside it.
-ANGLE = liesample.tuning.adaptation.DEFAULT_ANGLE
+ANGLE = adaptation.DEFAULT_ANGLE
 ANGLES = tuple(sorted({ANGLE, 0.0, 0.25}))
 GOALS = {"blackjax nuts": 1.0, "blackjax hmc": 1.5}  # ESS/gradient ratios (HMC: Gaussians)
 
