@@ -11,6 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from spin_runs import per_chain_averages as time_averages
 
 import liesample
 from liesample.samplers.spins._lattice import local_energy_change
@@ -198,22 +199,8 @@ def per_chain_averages(
     algorithm, num_chains, num_warmup, num_steps, seed, shape=CHAIN, observe=chain_correlations
 ):
     """Time averages of ``observe(s)`` (default: the chain correlations), one row per chain."""
-
-    def chain(key, position):
-        def body(carry, step):
-            state, total = carry
-            state, _ = algorithm.step(jax.random.fold_in(key, step), state)
-            return (state, total + observe(state.position)), None
-
-        state = algorithm.init(position)
-        zero = jnp.zeros(3)
-        (state, _), _ = jax.lax.scan(body, (state, zero), jnp.arange(num_warmup))
-        (_, total), _ = jax.lax.scan(body, (state, zero), num_warmup + jnp.arange(num_steps))
-        return total / num_steps
-
-    keys = jax.random.split(jax.random.key(seed), num_chains)
-    starts = jnp.asarray(random_spins(shape, seed, chains=num_chains))
-    return np.asarray(liesample.jit(jax.vmap(chain))(keys, starts))
+    starts = random_spins(shape, seed, chains=num_chains)
+    return time_averages(algorithm, starts, num_warmup, num_steps, seed, observe)
 
 
 def assert_matches_fisher(averages):

@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from spin_runs import per_chain_averages
 
 import liesample
 from liesample.samplers.contract import check_info
@@ -234,21 +235,6 @@ def test_heat_bath_in_a_field_is_the_exact_von_mises_fisher_law():
 # ---------------------------------------------------------------------------------------------
 
 
-def per_chain_averages(algorithm, starts, num_warmup, num_steps, seed, observe):
-    def chain(key, position):
-        def body(carry, step):
-            state, total = carry
-            state, _ = algorithm.step(jax.random.fold_in(key, step), state)
-            return (state, total + observe(state.position)), None
-
-        state = algorithm.init(position)
-        zero = jnp.zeros(len(LAGS))
-        (state, _), _ = jax.lax.scan(body, (state, zero), jnp.arange(num_warmup))
-        (_, total), _ = jax.lax.scan(body, (state, zero), num_warmup + jnp.arange(num_steps))
-        return total / num_steps
-
-    keys = jax.random.split(jax.random.key(seed), starts.shape[0])
-    return np.asarray(liesample.jit(jax.vmap(chain))(keys, jnp.asarray(starts)))
 
 
 def ring_correlations(s):
