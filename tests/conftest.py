@@ -20,16 +20,21 @@ import pytest
 jax.config.update("jax_enable_x64", True)
 
 
+def load_example(name):
+    """``examples/<name>.py`` as a module (the examples are scripts, not a package)."""
+    path = Path(__file__).resolve().parents[1] / "examples" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(f"example_{name}", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 @pytest.fixture
 def run_example():
     """``run_example(name, argv) -> exit status``: ``examples/<name>.py``'s ``main(argv)``, run in
     this process (as its command line would run it, without paying for a new interpreter)."""
 
     def run(name, argv):
-        path = Path(__file__).resolve().parents[1] / "examples" / f"{name}.py"
-        spec = importlib.util.spec_from_file_location(f"example_{name}", path)
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-        return module.main(argv)
+        return load_example(name).main(argv)
 
     return run

@@ -1,19 +1,14 @@
 """``examples/binder_3d.py``: the crossing of two fitted lines, and the example end to end with
 tiny settings (two small lattices, two temperatures)."""
 
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import load_example
 
 
 def example():
-    path = Path(__file__).resolve().parents[1] / "examples" / "binder_3d.py"
-    spec = importlib.util.spec_from_file_location("example_binder_3d", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_example('binder_3d')
 
 
 def test_crossing_of_two_exact_lines():

@@ -1,12 +1,10 @@
 """A user-defined system needs only an algebra, h and noise: ``examples/custom_system.py``
 (a pendulum on se(2)*, a non-compact orbit) samples its exact Gibbs law."""
 
-import importlib.util
-from pathlib import Path
-
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import load_example
 
 import liesample
 from liesample.dynamics.system import LiePoissonSystem, checked_beta, coordinate_noise
@@ -14,18 +12,10 @@ from liesample.geometry.algebras import so3
 from liesample.systems import lie_poisson_system
 
 
-def load_example():
-    path = Path(__file__).parents[1] / "examples" / "custom_system.py"
-    spec = importlib.util.spec_from_file_location("custom_system", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 # the example's law by statistics; its system inference and refusals run by default
 @pytest.mark.slow
 def test_example_samples_the_exact_law():
-    example = load_example()
+    example = load_example("custom_system")
     estimate, se, radius_drift = example.run(num_chains=64, num_draws=300, progress=False)
     z = (estimate - example.exact()) / se
     assert np.all(np.abs(z) < 4.0), (estimate, example.exact(), se)
@@ -35,7 +25,7 @@ def test_example_samples_the_exact_law():
 
 
 def test_system_is_inferred_from_the_functions():
-    system = load_example().pendulum()
+    system = load_example("custom_system").pendulum()
     assert system.num_noises == 3
     assert system.event_shape == (3,)
     assert system.noise_group_labels.tolist() == [0, 1, 2]

@@ -2,20 +2,15 @@
 torus laws, and the whole ``--quick`` run (both ``slow``: ``liesample.sample`` compiles for tens
 of seconds on two shared cores)."""
 
-import importlib.util
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import load_example
 
 
 def load():
-    path = Path(__file__).resolve().parents[1] / "examples" / "lattice_gauge.py"
-    spec = importlib.util.spec_from_file_location("example_lattice_gauge", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_example('lattice_gauge')
 
 
 @pytest.mark.slow
