@@ -226,6 +226,13 @@ class _ScalarInfoStep:
         return state, collections.namedtuple("ScalarInfo", self.kept)(*values)
 
 
+@functools.partial(jit, static_argnames=("sampler",))
+def _init_states(positions, *, sampler):
+    """Every chain's initial state, in one compiled call (an eager ``vmap`` would compile each
+    of ``init``'s operations on its own)."""
+    return jax.vmap(sampler.init)(positions)
+
+
 @functools.partial(jit, static_argnames=("sampler", "num_steps"))
 def _run_warmup(states, keys, first_step, *, sampler, num_steps):
     """``num_steps`` steps of every chain from ``first_step``, discarded (the warm-up)."""
@@ -354,7 +361,7 @@ class _Run:
         if choosing:
             sampler = choose_from_starts(sampler, self.positions)
             arguments.check_starts(sampler, self.positions, self.num_chains)
-        states = jax.vmap(sampler.init)(self.positions)
+        states = _init_states(self.positions, sampler=sampler)
         chain_keys = jax.random.split(self.rng_key, self.num_chains)
         states, self.chain_keys = shard_chains((states, chain_keys), self.sharding)
         self.run_warmup = o.num_warmup > 0

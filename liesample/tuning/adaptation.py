@@ -290,9 +290,9 @@ def _window_run(plan, algorithm, logdensity_fn, space, initial_step_size, adapt_
     init = lambda x: algorithm.init(x, logdensity_fn, space)
     if batched:
         check_starts(space)(initial_position)
-        states = jax.vmap(init)(initial_position)
+        states = jit(jax.vmap(init))(initial_position)  # one compilation, not one per operation
     else:
-        states = jax.tree.map(lambda leaf: leaf[None], init(initial_position))
+        states = jax.tree.map(lambda leaf: leaf[None], jit(init)(initial_position))
     dtype = jnp.asarray(states.logdensity).dtype
     start = {
         "step_size": jnp.asarray(initial_step_size, dtype),
