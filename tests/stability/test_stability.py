@@ -308,13 +308,19 @@ def test_hard_case_is_stable_and_gibbs_exact(case, dtype):
     assert np.all(z < 5.0), f"{case} {dtype}: estimate {estimate}, exact {exact}, z {z}"
 
 
+# Costly to compile, and checked by default through their own vmapped statistical tests.
+_SLOW_BATCHED_SYSTEMS = ("zeitlin_euler", "point_vortices")
+
+
 def _batched_cases():
-    """The default integrator on every system, and every integrator on the rigid body and the
-    heavy top (the configuration that once miscompiled, module notes); the rest in
-    ``make test-slow``."""
+    """By default the default integrator on every system but the two in
+    ``_SLOW_BATCHED_SYSTEMS``, and every integrator on the heavy top (the configuration that
+    once miscompiled, module notes); the rest in ``make test-slow``. ``tests/test_registry.py``
+    guards the runner's compile path for every sampler."""
     for integrator in sorted(INTEGRATORS):
         for system_name in cases.SYSTEM_NAMES:
-            quick = integrator == DEFAULT_INTEGRATOR or system_name in ("rigid_body", "heavy_top")
+            default = integrator == DEFAULT_INTEGRATOR and system_name not in _SLOW_BATCHED_SYSTEMS
+            quick = default or system_name == "heavy_top"
             yield pytest.param(
                 integrator,
                 system_name,
