@@ -1,6 +1,5 @@
 import importlib.util
 import os
-import shutil
 from pathlib import Path
 
 # The suite is compile-bound: thousands of small programs, each run briefly. XLA's LLVM back end
@@ -19,32 +18,6 @@ import pytest
 
 # Tests run in float64 (ARCHITECTURE.md, "Habits"); float32 has its own stability tests.
 jax.config.update("jax_enable_x64", True)
-
-# The xdist workers of one run share one compilation cache: a program that both compile (the same
-# operation on the same shapes, mostly) is compiled once. It lives in the run's pytest base
-# temporary directory and is removed at the run's end, so no test reads a program compiled by
-# another run. LIESAMPLE_TEST_SHARED_CACHE=0 turns it off.
-SHARED_CACHE = os.environ.get("LIESAMPLE_TEST_SHARED_CACHE", "1") == "1"
-
-
-def _shared_cache_dir(config) -> Path:
-    base = config._tmp_path_factory.getbasetemp()
-    return (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "jax-cache"
-
-
-@pytest.fixture(scope="session", autouse=True)
-def shared_compilation_cache(request):
-    if SHARED_CACHE and os.environ.get("PYTEST_XDIST_WORKER"):
-        jax.config.update("jax_compilation_cache_dir", str(_shared_cache_dir(request.config)))
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0)
-        jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-
-
-def pytest_sessionfinish(session):
-    """The controller removes the run's shared cache once every worker is done."""
-    if SHARED_CACHE and not os.environ.get("PYTEST_XDIST_WORKER"):
-        shutil.rmtree(_shared_cache_dir(session.config), ignore_errors=True)
-
 
 def load_example(name):
     """``examples/<name>.py`` as a module (the examples are scripts, not a package)."""

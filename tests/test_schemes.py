@@ -115,24 +115,28 @@ SAMPLERS = {
     ),
 }
 ON_PRODUCT = {"geometric_hmc", "geometric_langevin", "geometric_langevin_adjusted"}
+SLOW = pytest.mark.slow
 CASES = [
-    # The scheme written here, through every sampler (the magnetic ones with a field).
-    ("geometric_hmc", DRIFT_FIRST),
-    ("geometric_langevin_adjusted", UNEVEN_REFRESH),
-    ("geometric_langevin", ABOBA),
-    ("magnetic_hmc", DRIFT_FIRST),
-    ("jittered_magnetic_hmc", DRIFT_FIRST),
-    ("magnetic_langevin", ABOBA),
+    # The scheme written here, through every sampler (the magnetic ones with a field); by
+    # default through one HMC and one Langevin sampler of each family, the rest in test-slow.
+    pytest.param("geometric_hmc", DRIFT_FIRST),
+    pytest.param("geometric_langevin_adjusted", UNEVEN_REFRESH),
+    pytest.param("geometric_langevin", ABOBA, marks=SLOW),
+    pytest.param("magnetic_hmc", DRIFT_FIRST, marks=SLOW),
+    pytest.param("jittered_magnetic_hmc", DRIFT_FIRST, marks=SLOW),
+    pytest.param("magnetic_langevin", ABOBA),
     # Every named scheme (the magnetic samplers are geometric ones on R^d; the leapfrog, every
-    # HMC sampler's default, is checked by their own tests).
-    ("magnetic_hmc", "minimal_norm"),
-    ("magnetic_langevin", "baoab"),
-    ("magnetic_langevin", "obabo"),
-    ("magnetic_langevin", "obab"),
+    # HMC sampler's default, is checked by their own tests, BAOAB by magnetic Langevin's).
+    pytest.param("magnetic_hmc", "minimal_norm"),
+    pytest.param("magnetic_langevin", "baoab", marks=SLOW),
+    pytest.param("magnetic_langevin", "obabo"),
+    pytest.param("magnetic_langevin", "obab", marks=SLOW),
 ]
 
 
-@pytest.mark.parametrize(("sampler", "scheme"), CASES, ids=[f"{n}-{s}"[:40] for n, s in CASES])
+@pytest.mark.parametrize(
+    ("sampler", "scheme"), CASES, ids=[f"{c.values[0]}-{c.values[1]}"[:40] for c in CASES]
+)
 def test_scheme_keeps_the_exact_law_and_counts_its_gradients(sampler, scheme):
     built, steps = SAMPLERS[sampler](scheme)
     if sampler in ON_PRODUCT:
