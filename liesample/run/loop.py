@@ -19,6 +19,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 from tqdm.auto import tqdm
 
@@ -226,17 +227,36 @@ class _ScalarInfoStep:
         return state, collections.namedtuple("ScalarInfo", self.kept)(*values)
 
 
+def program(sampler: Sampler, positions):
+    """``(sampler, values)`` for the compiled programs of a run: a sampler that declares a
+    :class:`liesample.samplers.contract.Structure` gives its ``build`` and its ``values`` as
+    arrays of the positions' dtype (traced: one program for every value); any other sampler
+    itself and ``None``."""
+    structure = sampler.structure
+    dtype = jnp.result_type(*jax.tree.leaves(positions))
+    if structure is None or not jnp.issubdtype(dtype, jnp.floating):
+        return sampler, None
+    return structure.build, {k: jnp.asarray(v, dtype) for k, v in structure.values.items()}
+
+
+def _stepper(sampler, values):
+    """The sampler a compiled program steps: ``sampler``, or ``sampler(**values)`` when
+    ``sampler`` is a structure's ``build`` (:func:`program`)."""
+    return sampler if values is None else sampler(**values)
+
+
 @functools.partial(jit, static_argnames=("sampler",))
-def _init_states(positions, *, sampler):
+def _init_states(positions, values, *, sampler):
     """Every chain's initial state, in one compiled call (an eager ``vmap`` would compile each
     of ``init``'s operations on its own)."""
-    return jax.vmap(sampler.init)(positions)
+    return jax.vmap(_stepper(sampler, values).init)(positions)
 
 
 @functools.partial(jit, static_argnames=("sampler", "num_steps"))
-def _run_warmup(states, keys, first_step, *, sampler, num_steps):
+def _run_warmup(states, keys, first_step, values, *, sampler, num_steps):
     """``num_steps`` steps of every chain from ``first_step``, discarded (the warm-up)."""
-    return jax.vmap(lambda s, k: run_steps(sampler, k, s, first_step, num_steps)[0])(states, keys)
+    stepper = _stepper(sampler, values)
+    return jax.vmap(lambda s, k: run_steps(stepper, k, s, first_step, num_steps)[0])(states, keys)
 
 
 DRAWS = ("positions", "observables", "log_likelihood")
@@ -269,15 +289,16 @@ def _recorder(observables, log_likelihood, keep_positions):
     ),
 )  # fmt: skip
 def _run_chunk(
-    states, keys, first_step, *, sampler, count, thinning, observables, log_likelihood,
+    states, keys, first_step, values, *, sampler, count, thinning, observables, log_likelihood,
     keep_positions,
 ):  # fmt: skip
     """``count`` draws of every chain, ``thinning`` steps apart, from ``first_step``: what
     :func:`_recorder` records, and the per-draw info."""
     record = _recorder(observables, log_likelihood, keep_positions)
+    stepper = _stepper(sampler, values)
     return jax.vmap(
         lambda s, k: run_draws(
-            sampler, k, s, first_step, count, thinning, reduce_over_thinning, record
+            stepper, k, s, first_step, count, thinning, reduce_over_thinning, record
         )
     )(states, keys)
 
@@ -361,7 +382,8 @@ class _Run:
         if choosing:
             sampler = choose_from_starts(sampler, self.positions)
             arguments.check_starts(sampler, self.positions, self.num_chains)
-        states = _init_states(self.positions, sampler=sampler)
+        static, values = program(sampler, self.positions)
+        states = _init_states(self.positions, values, sampler=static)
         chain_keys = jax.random.split(self.rng_key, self.num_chains)
         states, self.chain_keys = shard_chains((states, chain_keys), self.sharding)
         self.run_warmup = o.num_warmup > 0
@@ -378,6 +400,8 @@ class _Run:
                 states = shard_chains(adapted, self.sharding)
         # after the names are checked and the step is set: tracing the step
         self.sampler = scalar_info(sampler, arguments.take_chain(self.positions, 0))
+        # the compiled programs' static sampler and traced values
+        self.program = program(self.sampler, self.positions)
         self.states = states
         self.settings = dict(sampler.settings, num_warmup=o.num_warmup, adapted=adapting)
 
@@ -426,18 +450,17 @@ class _Run:
         o = self.options
         self.phase("compiling")
         self.chunk = o.chunk_draws or max(1, math.ceil(self.num_draws / 20))
-        args = (self.states, self.chain_keys, 0)
+        static, values = self.program
+        args = (self.states, self.chain_keys, 0, values)
         if self.run_warmup:
-            self.warmup = _run_warmup.lower(
-                *args, sampler=self.sampler, num_steps=o.num_warmup
-            ).compile()
+            self.warmup = _run_warmup.lower(*args, sampler=static, num_steps=o.num_warmup).compile()
         remaining = self.num_draws - done
         self.executables = {}
         if remaining:
             for count in {min(self.chunk, remaining), remaining % self.chunk or self.chunk}:
                 self.executables[count] = _run_chunk.lower(
                     *args,
-                    sampler=self.sampler,
+                    sampler=static,
                     count=count,
                     thinning=o.thinning,
                     observables=self.observables_key,
@@ -458,9 +481,10 @@ class _Run:
         chunks = [] if previous is None else [previous]
         start = time.perf_counter()
         states, bar = self.states, self.bar
+        values = self.program[1]
         if self.run_warmup:
             self.phase("warm-up")
-            states = jax.block_until_ready(self.warmup(states, self.chain_keys, 0))
+            states = jax.block_until_ready(self.warmup(states, self.chain_keys, 0, values))
         self.phase("sampling")
         if done:
             bar.update(done)  # the draws already saved
@@ -468,7 +492,9 @@ class _Run:
         while done < self.num_draws:
             count = min(self.chunk, self.num_draws - done)
             first_step = o.num_warmup + done * o.thinning
-            states, recorded = self.executables[count](states, self.chain_keys, first_step)
+            states, recorded = self.executables[count](
+                states, self.chain_keys, first_step, values
+            )
             chunks.append(self._split(*to_host(recorded)))
             wall_time = time.perf_counter() - start
             done += count

@@ -68,6 +68,7 @@ __all__ = [
     "DrawNames",
     "Sampler",
     "SamplerInfo",
+    "Structure",
     "Tunable",
     "as_sampler",
     "check_info",
@@ -225,6 +226,21 @@ class DrawNames(NamedTuple):
     event_dims: tuple[str, ...]
 
 
+class Structure(NamedTuple):
+    """A sampler split into what decides its compiled program and what may be traced.
+
+    build : callable
+        ``build(**values) -> Sampler`` whose ``init``, ``step`` and ``noise_blocks`` are those
+        of the sampler declaring it, for traced ``values``; hashable, and equal for two samplers
+        that differ only in ``values`` (a frozen dataclass of the system, the integrator, …).
+    values : dict
+        The sampler's numeric parameters (name -> float): ``β``, ``σ``, the step size.
+    """
+
+    build: Callable
+    values: Mapping
+
+
 class Sampler(blackjax.base.SamplingAlgorithm, DeclaresNoiseBlocks):
     """``SamplingAlgorithm(init, step)`` plus what the runner and the step loop read.
 
@@ -261,6 +277,10 @@ class Sampler(blackjax.base.SamplingAlgorithm, DeclaresNoiseBlocks):
         The ``sample_stats`` name of ``info.energy`` (:func:`energy_name`): ``"energy"`` for
         HMC's total energy ``H(q, p)``, ``"hamiltonian"`` for ``h`` of a state. ``None``
         (default): decided by whether the state carries a ``momentum``.
+    structure : Structure or None
+        The sampler as a structure and numeric values (:class:`Structure`), so that the runner
+        compiles one program for every sampler of the same structure (a sweep over ``β``, a
+        step size chosen per run). ``None`` (default): the runner compiles for this object.
     """
 
     settings: Mapping = MappingProxyType({})
@@ -270,6 +290,7 @@ class Sampler(blackjax.base.SamplingAlgorithm, DeclaresNoiseBlocks):
     law_groups: Callable | None = None
     stuck_advice: str | None = None
     energy_name: str | None = None
+    structure: Structure | None = None
 
     def __new__(cls, init, step, **hooks):
         unknown = sorted(set(hooks) - set(HOOKS))
@@ -291,6 +312,7 @@ HOOKS = {
     "law_groups": None,
     "stuck_advice": None,
     "energy_name": None,
+    "structure": None,
 }
 """The hooks a :class:`Sampler` declares, each with the factory of its default (``None``:
 the default is ``None``); keyword arguments of ``Sampler(init, step, **hooks)``."""

@@ -22,6 +22,7 @@ proposal, for the divergence test).
 from __future__ import annotations
 
 import functools
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import jax
@@ -40,7 +41,7 @@ from liesample.integrators.stability import (
     check_step_size,
     stiffness_on_orbits,
 )
-from liesample.samplers.contract import Sampler, Tunable, rebuilt, sampling_api
+from liesample.samplers.contract import Sampler, Structure, Tunable, rebuilt, sampling_api
 from liesample.samplers.orbit import _starts
 
 __all__ = [
@@ -377,12 +378,53 @@ def _check_positions(plan: _Plan, check_orbits, positions, *, step_size_checks=T
         check_orbits(np.asarray(positions, dtype), _starts.distinct_orbits(casimirs), prefix=True)
 
 
+def _init_on(system, position, rng_key=None):
+    return init(position, system, rng_key)
+
+
+@dataclass(frozen=True)
+class _Stepper:
+    """What decides the compiled step of a sampler (its :class:`Structure`'s ``build``): called
+    with ``step_size`` (a value, possibly traced, or a function giving it when first needed),
+    ``sigma`` and ``theta``, the sampler with ``hooks``."""
+
+    system: LiePoissonSystem
+    integrator: object
+    scene: Scene
+    noise_block_size: int
+
+    def __call__(self, step_size, sigma, theta, init_fn=None, **hooks) -> Sampler:
+        system, integrator, scene = self.system, self.integrator, self.scene
+        dt = step_size if callable(step_size) else (lambda: step_size)
+        kernel = build_kernel(system, integrator, scene)
+        noise_kernel = build_noise_kernel(system, integrator, scene)
+
+        def step_fn(rng_key, state):
+            return kernel(rng_key, state, dt(), sigma, theta)
+
+        def block_step(noise, state):
+            return noise_kernel(noise, state, dt(), sigma, theta)
+
+        size = self.noise_block_size
+
+        def draw_block(rng_key, state):
+            return _draw_noise(system, scene, rng_key, (size,), state.position.dtype)
+
+        blocks = NoiseBlocks(size, draw_block, block_step)
+        return Sampler(
+            init_fn or functools.partial(_init_on, system),
+            step_fn,
+            # Without noise nothing is drawn: the per-step loop is already lean.
+            noise_blocks=blocks if scene.noise else None,
+            **hooks,
+        )
+
+
 def _sampler(plan: _Plan, current_step) -> Sampler:
     """The sampler of ``plan`` stepping with ``current_step()``: its kernels, start checks,
-    settings and declarations."""
-    system, scene, sigma, theta = plan.system, plan.scene, plan.sigma, plan.theta
-    kernel = build_kernel(system, plan.integrator, scene)
-    noise_kernel = build_noise_kernel(system, plan.integrator, scene)
+    settings and declarations; a given step makes it a :class:`Structure` (one compiled program
+    for every ``β``, ``σ`` and step)."""
+    system, sigma, theta = plan.system, plan.sigma, plan.theta
     given = plan.step_size is not None
     settings = _starts.orbit_settings(
         "lie_poisson_langevin", system, plan.beta, sigma=sigma, theta=theta,
@@ -391,30 +433,23 @@ def _sampler(plan: _Plan, current_step) -> Sampler:
     )  # fmt: skip
     check_orbits = functools.partial(_check_orbits, plan, current_step, settings)
 
-    def step_fn(rng_key, state):
-        return kernel(rng_key, state, current_step(), sigma, theta)
-
-    def block_step(noise, state):
-        return noise_kernel(noise, state, current_step(), sigma, theta)
-
-    def draw_block(rng_key, state):
-        return _draw_noise(system, scene, rng_key, (plan.noise_block_size,), state.position.dtype)
-
     def rebuild(value, source):
         return rebuilt(as_top_level_api, source, system, **plan.options, step_size=value)
 
-    blocks = NoiseBlocks(plan.noise_block_size, draw_block, block_step)
-    return Sampler(
-        _starts.orbit_init_fn(init, system, check_orbits),
-        step_fn,
+    stepper = _Stepper(system, plan.integrator, plan.scene, plan.noise_block_size)
+    values = {"step_size": plan.step_size, "sigma": sigma, "theta": theta}
+    return stepper(
+        current_step,
+        sigma,
+        theta,
+        init_fn=_starts.orbit_init_fn(init, system, check_orbits),
         settings=settings,
         check_positions=functools.partial(_check_positions, plan, check_orbits),
         adaptation=Tunable("rule", given, functools.partial(_choose, plan), rebuild),
-        # Without noise nothing is drawn: the per-step loop is already lean.
-        noise_blocks=blocks if scene.noise else None,
         law_groups=_starts.orbit_groups(system),
         stuck_advice="Give a smaller step_size, or leave it unset: liesample.sample then "
         "chooses it from the starts by the bias model.",
+        structure=Structure(stepper, values) if given else None,
     )
 
 
