@@ -382,10 +382,12 @@ class _Run:
         if choosing:
             sampler = choose_from_starts(sampler, self.positions)
             arguments.check_starts(sampler, self.positions, self.num_chains)
-        static, values = program(sampler, self.positions)
-        states = _init_states(self.positions, values, sampler=static)
-        chain_keys = jax.random.split(self.rng_key, self.num_chains)
-        states, self.chain_keys = shard_chains((states, chain_keys), self.sharding)
+        self.chain_keys = shard_chains(
+            jax.random.split(self.rng_key, self.num_chains), self.sharding
+        )
+        # A rule's warm-up reads the starts only: the states are those of the sampler it builds.
+        rule = adapting and sampler.adaptation.method == "rule"
+        states = None if rule else self._init_states(sampler)
         self.run_warmup = o.num_warmup > 0
         if adapting:
             self.phase("warm-up (adapting)")
@@ -398,12 +400,19 @@ class _Run:
             if adapted is not None:
                 self.run_warmup = False
                 states = shard_chains(adapted, self.sharding)
+        if states is None:
+            states = self._init_states(sampler)
         # after the names are checked and the step is set: tracing the step
         self.sampler = scalar_info(sampler, arguments.take_chain(self.positions, 0))
         # the compiled programs' static sampler and traced values
         self.program = program(self.sampler, self.positions)
         self.states = states
         self.settings = dict(sampler.settings, num_warmup=o.num_warmup, adapted=adapting)
+
+    def _init_states(self, sampler):
+        """Every chain's initial state, sharded as the chains are."""
+        static, values = program(sampler, self.positions)
+        return shard_chains(_init_states(self.positions, values, sampler=static), self.sharding)
 
     def _fingerprint(self):
         tree = self.example[0]

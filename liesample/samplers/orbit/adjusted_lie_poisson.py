@@ -58,6 +58,7 @@ over the chains reaches ``target_acceptance_rate`` (default 0.574, MALA's optima
 from __future__ import annotations
 
 import functools
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import jax
@@ -69,7 +70,7 @@ from liesample.dynamics.system import LiePoissonSystem, checked_beta
 from liesample.foundation.validation import concrete_array, finite_float
 from liesample.integrators.chain_loop import DEFAULT_NOISE_BLOCK_SIZE, NoiseBlocks, check_block_size
 from liesample.integrators.stability import check_precision, stiffness
-from liesample.samplers.contract import Sampler, Tunable, rebuilt, sampling_api
+from liesample.samplers.contract import Sampler, Structure, Tunable, rebuilt, sampling_api
 from liesample.samplers.orbit._starts import (
     check_orbit_starts,
     check_start_energy,
@@ -390,30 +391,41 @@ def _check_positions(system, check_orbits, positions, *, step_size_checks=True):
         check_orbits(positions, distinct_orbits(casimirs))
 
 
-def _at(system, noise_kernel, noise_block_size, init_fn, check_positions, value, sigma, beta,
-        settings=None, adaptation=None) -> Sampler:  # fmt: skip
-    """The sampler with step ``value`` (floats, or traced in the warm-up)."""
-    kernel = _keyed(system, noise_kernel)
+def _init_on(system, position, rng_key=None):
+    return init(position, system, rng_key)
 
-    def step_fn(rng_key, state):
-        return kernel(rng_key, state, value, sigma, beta)
 
-    def block_step(noise, state):
-        return noise_kernel(noise, state, value, sigma, beta)
+@dataclass(frozen=True)
+class _Stepper:
+    """What decides the compiled step (the :class:`Structure`'s ``build``, and the warm-up's
+    ``at``): called with the step ``value``, ``sigma`` and ``beta`` (floats, or traced), the
+    sampler with ``hooks``."""
 
-    def draw_block(rng_key, state):
-        return _draw_noise(system, rng_key, (noise_block_size,), state.position.dtype)
+    system: LiePoissonSystem
+    noise_block_size: int
 
-    return Sampler(
-        init_fn,
-        step_fn,
-        settings=settings,
-        check_positions=check_positions,
-        adaptation=adaptation,
-        noise_blocks=NoiseBlocks(noise_block_size, draw_block, block_step),
-        law_groups=orbit_groups(system),
-        stuck_advice=_STUCK_ADVICE,
-    )
+    def __call__(self, value, sigma, beta, init_fn=None, **hooks) -> Sampler:
+        system, size = self.system, self.noise_block_size
+        noise_kernel = build_noise_kernel(system)
+        kernel = _keyed(system, noise_kernel)
+
+        def step_fn(rng_key, state):
+            return kernel(rng_key, state, value, sigma, beta)
+
+        def block_step(noise, state):
+            return noise_kernel(noise, state, value, sigma, beta)
+
+        def draw_block(rng_key, state):
+            return _draw_noise(system, rng_key, (size,), state.position.dtype)
+
+        return Sampler(
+            init_fn or functools.partial(_init_on, system),
+            step_fn,
+            noise_blocks=NoiseBlocks(size, draw_block, block_step),
+            law_groups=orbit_groups(system),
+            stuck_advice=_STUCK_ADVICE,
+            **hooks,
+        )
 
 
 def _sampler(system, beta, sigma, step_size, target, noise_block_size) -> Sampler:
@@ -435,10 +447,7 @@ def _sampler(system, beta, sigma, step_size, target, noise_block_size) -> Sample
                        **options)  # fmt: skip
 
     check_orbits = functools.partial(_check_orbits, system, beta, sigma)
-    init_fn = orbit_init_fn(init, system, check_orbits)
-    check_positions = functools.partial(_check_positions, system, check_orbits)
-    noise_kernel = build_noise_kernel(system)
-    at = functools.partial(_at, system, noise_kernel, noise_block_size, init_fn, check_positions)
+    at = _Stepper(system, noise_block_size)
     tunable = Tunable(
         "dual_averaging",
         given,
@@ -451,7 +460,16 @@ def _sampler(system, beta, sigma, step_size, target, noise_block_size) -> Sample
         # proposal is accepted and dual averaging would grow the step without bound
         max_step_size=MAX_STEP_FACTOR * step_size,
     )
-    return at(step_size, sigma, beta, settings=settings, adaptation=tunable)
+    return at(
+        step_size,
+        sigma,
+        beta,
+        init_fn=orbit_init_fn(init, system, check_orbits),
+        settings=settings,
+        check_positions=functools.partial(_check_positions, system, check_orbits),
+        adaptation=tunable,
+        structure=Structure(at, {"value": step_size, "sigma": sigma, "beta": beta}),
+    )
 
 
 adjusted_lie_poisson = sampling_api(

@@ -1,0 +1,119 @@
+"""Compile once per structure: what a sweep over ``β`` costs against one point.
+
+A user's sweep builds a new sampler at every ``β`` and calls ``liesample.sample`` on it. A
+sampler that declares a structure (``Sampler.structure``) is compiled at the first point only:
+the later points reuse its programs with the new values traced. Each configuration runs in a
+fresh interpreter (so the first point pays for compilation, as in a user's script): the wall
+time of one point, then of a sweep of ``num_points`` values of ``β``, with the same draws and
+warm-up per point; the ratio is the sweep over one point.
+
+Run alone: ``python benchmarks/sweep.py [--quick]``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+SUITE = {"order": 6, "title": "Compile once per structure: a β sweep"}
+
+ROOT = Path(__file__).resolve().parents[1]
+CASES = ("lie_poisson_langevin",)
+
+
+def _measure(sampler_name: str, num_points: int, quick: bool) -> dict:
+    """Wall seconds of each point of a sweep (called in a fresh interpreter)."""
+    import time
+    import warnings
+
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    import numpy as np
+
+    import liesample
+
+    system = liesample.systems.rigid_body((1.0, 2.0, 4.0))
+    starts = np.tile(np.array([0.9, 1.2, 0.0]), (4, 1))
+    draws, warmup = (200, 100) if quick else (2000, 500)
+    build = getattr(liesample, sampler_name)
+    seconds = []
+    for beta in np.linspace(0.5, 5.0, num_points):
+        begin = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # short runs: the convergence checks speak
+            liesample.sample(
+                build(system, beta=float(beta)), jax.random.key(0), starts, draws,
+                num_warmup=warmup, progress_bar=False,
+            )  # fmt: skip
+        seconds.append(time.perf_counter() - begin)
+    return {"sampler": sampler_name, "num_points": num_points, "seconds": seconds,
+            "draws": draws, "num_warmup": warmup, "chains": len(starts)}  # fmt: skip
+
+
+def _in_fresh_interpreter(sampler_name: str, num_points: int, quick: bool) -> dict:
+    argv = [sys.executable, __file__, "--worker", sampler_name, str(num_points)]
+    output = subprocess.run(
+        argv + (["--quick"] if quick else []), check=True, capture_output=True, text=True,
+        cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
+    ).stdout  # fmt: skip
+    return json.loads(output.strip().splitlines()[-1])
+
+
+def run(out_dir: Path, quick: bool, log) -> None:
+    from benchmarks import common
+
+    rows = []
+    for name in CASES:
+        log(f"sweep: {name}, one point and ten points, each in a fresh interpreter")
+        one = _in_fresh_interpreter(name, 1, quick)
+        ten = _in_fresh_interpreter(name, 10, quick)
+        rows.append({"sampler": name, "one_point": one, "ten_points": ten})
+    common.write_json(
+        out_dir / "sweep.json", {"machine": common.machine_info(), "quick": quick, "rows": rows}
+    )
+
+
+def report(out_dir: Path, md_dir: Path) -> str:
+    path = out_dir / "sweep.json"
+    if not path.exists():
+        return ""
+    data = json.loads(path.read_text())
+    machine = data["machine"]
+    lines = [
+        f"## {SUITE['title']}",
+        "",
+        "A sweep over β builds a new sampler at every point and calls `liesample.sample` on it "
+        "(rigid body, 4 chains, the sampler's own warm-up); a sampler that declares a structure "
+        "is compiled at the first point only. Wall seconds, each configuration in a fresh "
+        "interpreter (`benchmarks/sweep.py`).",
+        "",
+        f"Machine: {machine['cpu_model']}, {machine['usable_cpus']} CPUs, jax {machine['jax']}"
+        f"{' (quick mode)' if data.get('quick') else ''}.",
+        "",
+        "| sampler | draws × chains | one point (s) | ten points (s) | first point of ten (s) "
+        "| each later point (s, mean) | ten over one |",
+        "|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    for row in data["rows"]:
+        one, ten = row["one_point"], row["ten_points"]
+        total = sum(ten["seconds"])
+        later = ten["seconds"][1:]
+        lines.append(
+            f"| `{row['sampler']}` | {ten['draws']} × {ten['chains']} | {one['seconds'][0]:.2f} "
+            f"| {total:.2f} | {ten['seconds'][0]:.2f} | {sum(later) / len(later):.3f} "
+            f"| {total / one['seconds'][0]:.2f} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    if len(sys.argv) > 1 and sys.argv[1] == "--worker":
+        print(json.dumps(_measure(sys.argv[2], int(sys.argv[3]), "--quick" in sys.argv)))
+    else:
+        from benchmarks import suites
+
+        sys.exit(suites.standalone(__file__))

@@ -1,0 +1,88 @@
+"""Compile once per structure: a sampler that declares a ``Structure`` (``Sampler.structure``)
+is compiled by ``liesample.sample`` once for every value of its numeric parameters, so a sweep
+over ``β`` (or ``σ``, or the step size) compiles at its first point only, and gives the draws of
+a sampler compiled for one value (``tests/test_draws_unchanged.py`` holds them bit for bit)."""
+
+import jax
+import numpy as np
+import pytest
+
+import liesample
+from liesample.samplers.contract import Structure
+
+SYSTEM = liesample.systems.rigid_body((1.0, 2.0, 4.0))
+STARTS = np.tile(np.array([0.9, 1.2, 0.0]), (4, 1))
+
+
+class _Compiles:
+    """Counts XLA backend compilations while active."""
+
+    def __init__(self):
+        self.count = 0
+
+    def __call__(self, event, duration, **kwargs):
+        if event == "/jax/core/compile/backend_compile_duration":
+            self.count += 1
+
+
+def _sample(sampler):
+    return liesample.sample(
+        sampler, jax.random.key(0), STARTS, 40, num_warmup=20, progress_bar=False
+    )
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")  # 40 draws: the convergence checks speak
+def test_a_beta_sweep_compiles_at_its_first_point_only():
+    first = _sample(liesample.lie_poisson_langevin(SYSTEM, beta=1.0))
+    compiles = _Compiles()
+    jax.monitoring.register_event_duration_secs_listener(compiles)
+    try:
+        second = _sample(liesample.lie_poisson_langevin(SYSTEM, beta=3.0))
+    finally:
+        jax.monitoring.unregister_event_duration_listener(compiles)
+    assert compiles.count == 0
+    assert first.attrs["beta"] == 1.0 and second.attrs["beta"] == 3.0
+    # the second point ran at its own β: the law concentrates on the largest axis
+    assert np.mean(second.posterior["mu"].values[..., 2] ** 2) > np.mean(
+        first.posterior["mu"].values[..., 2] ** 2
+    )
+
+
+def test_the_structure_rebuilds_the_sampler_it_declares():
+    sampler = liesample.lie_poisson_langevin(SYSTEM, beta=2.0, sigma=0.7, step_size=0.05)
+    structure = sampler.structure
+    assert isinstance(structure, Structure)
+    assert structure.values == {"step_size": 0.05, "sigma": 0.7, "theta": 0.5 * 2.0 * 0.7**2}
+    other = liesample.lie_poisson_langevin(SYSTEM, beta=5.0, sigma=0.7, step_size=0.02)
+    assert other.structure.build == structure.build  # one program for both
+    rebuilt = structure.build(**structure.values)
+    state = sampler.init(STARTS[0])
+    key = jax.random.key(1)
+    np.testing.assert_array_equal(
+        rebuilt.step(key, state)[0].position, sampler.step(key, state)[0].position
+    )
+    # another system or integrator is another structure
+    assert liesample.lie_poisson_langevin(
+        liesample.systems.rigid_body((1.0, 2.0, 4.0)), beta=2.0, step_size=0.05
+    ).structure.build != structure.build
+    assert liesample.lie_poisson_langevin(
+        SYSTEM, beta=2.0, step_size=0.05, integrator="lie_euler"
+    ).structure.build != structure.build
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_an_adjusted_sweep_samples_without_compiling_its_chunks_again():
+    """The adjusted sampler's chunks are one program for every β (its warm-up's dual averaging
+    is compiled per run)."""
+    given = {"step_size": 0.2, "num_warmup": 0}
+    first = liesample.adjusted_lie_poisson(SYSTEM, beta=1.0, step_size=given["step_size"])
+    liesample.sample(first, jax.random.key(0), STARTS, 20, num_warmup=0, progress_bar=False)
+    compiles = _Compiles()
+    jax.monitoring.register_event_duration_secs_listener(compiles)
+    try:
+        second = liesample.adjusted_lie_poisson(SYSTEM, beta=4.0, step_size=given["step_size"])
+        liesample.sample(second, jax.random.key(0), STARTS, 20, num_warmup=0, progress_bar=False)
+    finally:
+        jax.monitoring.unregister_event_duration_listener(compiles)
+    assert compiles.count == 0
+    assert second.structure.values["beta"] == 4.0
