@@ -7,7 +7,7 @@ fresh interpreter (so the first point pays for compilation, as in a user's scrip
 time of one point, then of a sweep of ``num_points`` values of ``β``, with the same draws and
 warm-up per point; the ratio is the sweep over one point.
 
-Run alone: ``python benchmarks/sweep.py [--quick]``.
+Run alone: ``python -m benchmarks.sweep [--quick]`` (from the repository root).
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from pathlib import Path
 SUITE = {"order": 6, "title": "Compile once per structure: a β sweep"}
 
 ROOT = Path(__file__).resolve().parents[1]
-CASES = ("lie_poisson_langevin",)
+CASES = ("lie_poisson_langevin", "adjusted_lie_poisson")
 
 
 def _measure(sampler_name: str, num_points: int, quick: bool) -> dict:
@@ -116,4 +116,4 @@ if __name__ == "__main__":
     else:
         from benchmarks import suites
 
-        sys.exit(suites.standalone(__file__))
+        raise SystemExit(suites.standalone(__file__))

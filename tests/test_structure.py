@@ -71,9 +71,7 @@ def test_the_structure_rebuilds_the_sampler_it_declares():
 
 
 @pytest.mark.filterwarnings("ignore::UserWarning")
-def test_an_adjusted_sweep_samples_without_compiling_its_chunks_again():
-    """The adjusted sampler's chunks are one program for every β (its warm-up's dual averaging
-    is compiled per run)."""
+def test_an_adjusted_sweep_with_a_given_step_compiles_at_its_first_point_only():
     given = {"step_size": 0.2, "num_warmup": 0}
     first = liesample.adjusted_lie_poisson(SYSTEM, beta=1.0, step_size=given["step_size"])
     liesample.sample(first, jax.random.key(0), STARTS, 20, num_warmup=0, progress_bar=False)
@@ -86,3 +84,18 @@ def test_an_adjusted_sweep_samples_without_compiling_its_chunks_again():
         jax.monitoring.unregister_event_duration_listener(compiles)
     assert compiles.count == 0
     assert second.structure.values["beta"] == 4.0
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_an_adjusted_sweep_with_its_warm_up_compiles_at_its_first_point_only():
+    first = liesample.adjusted_lie_poisson(SYSTEM, beta=1.0)
+    _sample(first)
+    compiles = _Compiles()
+    jax.monitoring.register_event_duration_secs_listener(compiles)
+    try:
+        tree = _sample(liesample.adjusted_lie_poisson(SYSTEM, beta=4.0))
+    finally:
+        jax.monitoring.unregister_event_duration_listener(compiles)
+    assert compiles.count == 0
+    assert tree.attrs["beta"] == 4.0
+    assert tree.attrs["step_size_source"].startswith("warm-up dual averaging")

@@ -28,6 +28,7 @@ Either returns a new sampler built by ``rebuild`` (the chosen step and how it wa
 
 from __future__ import annotations
 
+import functools
 import json
 
 import jax
@@ -86,9 +87,25 @@ def adaptation_of(sampler: Sampler, initial_positions, rng_key):
         initial = sampler.settings["step_size"]
     else:
         initial, _ = tunable.choose(positions, None)
-    cap = np.inf if tunable.max_step_size is None else float(tunable.max_step_size)
-    adaptation = step_size_adaptation(tunable.target_acceptance_rate, "acceptance_rate", cap)
+    adaptation = step_size_adaptation(
+        tunable.target_acceptance_rate, "acceptance_rate", _step_cap(tunable)
+    )
     return adaptation, initial, None
+
+
+def _step_cap(tunable) -> float:
+    return np.inf if tunable.max_step_size is None else float(tunable.max_step_size)
+
+
+@functools.partial(jit, static_argnames=("at", "target", "num_warmup"))
+def _dual_averaging(chain_keys, states, initial, others, cap, *, at, target, num_warmup):
+    """The warm-up of ``"dual_averaging"``: one program for every value of the step, of the
+    sampler's ``others`` and of the ``cap`` (traced), for a structure's ``at`` (hashable)."""
+    adaptation = step_size_adaptation(target, "acceptance_rate", cap)
+    return run_adaptation(
+        adaptation, lambda step_size: at(step_size, **others), chain_keys, states,
+        {"step_size": initial}, num_warmup, _acceptance,
+    )  # fmt: skip
 
 
 def _acceptance(parameters, state, info):
@@ -114,18 +131,11 @@ def warm_up(sampler: Sampler, rng_key, chain_keys, states, initial_positions, nu
         return tunable.rebuild(float(step_size), source), None
     dtype = jax.tree.leaves(states.position)[0].dtype
     others = {name: jnp.asarray(v, dtype) for name, v in (tunable.parameters or {}).items()}
-
-    @jit
-    def run(chain_keys, states, initial, others):
-        def sampler_at(step_size):
-            return tunable.at(step_size, **others)
-
-        start = {"step_size": initial}
-        return run_adaptation(
-            adaptation, sampler_at, chain_keys, states, start, num_warmup, _acceptance
-        )
-
-    moved, parameters, rates = run(chain_keys, states, jnp.asarray(initial, dtype), others)
+    moved, parameters, rates = _dual_averaging(
+        chain_keys, states, jnp.asarray(initial, dtype), others,
+        jnp.asarray(_step_cap(tunable), dtype), at=tunable.at,
+        target=tunable.target_acceptance_rate, num_warmup=num_warmup,
+    )  # fmt: skip
     step_size = float(parameters["step_size"])
     target = tunable.target_acceptance_rate
     kept = np.asarray(rates)[:, num_warmup // 2 :]
