@@ -99,3 +99,25 @@ def test_an_adjusted_sweep_with_its_warm_up_compiles_at_its_first_point_only():
     assert compiles.count == 0
     assert tree.attrs["beta"] == 4.0
     assert tree.attrs["step_size_source"].startswith("warm-up dual averaging")
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_a_vortex_sweep_with_its_warm_up_compiles_at_its_first_point_only():
+    system = liesample.systems.point_vortices([1.0, 1.0, -1.0, -1.0])
+    starts = np.stack([system.default_position] * 4)
+
+    def run(beta):
+        sampler = liesample.vortex_metropolis(system, beta=beta)
+        return liesample.sample(
+            sampler, jax.random.key(0), starts, 20, num_warmup=20, progress_bar=False
+        )
+
+    run(-1.0)
+    compiles = _Compiles()
+    jax.monitoring.register_event_duration_secs_listener(compiles)
+    try:
+        tree = run(2.0)
+    finally:
+        jax.monitoring.unregister_event_duration_listener(compiles)
+    assert compiles.count == 0
+    assert tree.attrs["beta"] == 2.0

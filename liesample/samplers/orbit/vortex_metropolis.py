@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import functools
 import math
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import jax
@@ -38,7 +39,14 @@ import numpy as np
 
 from liesample.dynamics.system import checked_beta
 from liesample.foundation.validation import finite_float
-from liesample.samplers.contract import BasicInfo, Sampler, Tunable, rebuilt, sampling_api
+from liesample.samplers.contract import (
+    BasicInfo,
+    Sampler,
+    Structure,
+    Tunable,
+    rebuilt,
+    sampling_api,
+)
 from liesample.samplers.orbit._starts import orbit_settings
 from liesample.systems.point_vortices import PointVortexSystem
 
@@ -207,13 +215,20 @@ def as_top_level_api(
         target_acceptance_rate=target,
     )
     options = {"proposal": proposal, "target_acceptance_rate": target}
-    at = functools.partial(_at, system, build_kernel(system, proposal))
+    at = _Stepper(system, proposal)
     # dual averaging of the proposal scale at ``target``, up to MAX_PROPOSAL_SCALE
     tunable = Tunable(
         "dual_averaging", given, _choose, functools.partial(_rebuild, system, beta, options), at,
         {"beta": beta}, target, MAX_PROPOSAL_SCALE,
     )  # fmt: skip
-    return at(settings["step_size"], beta, settings=settings, adaptation=tunable)
+    return at(
+        settings["step_size"],
+        beta,
+        settings=settings,
+        check_positions=functools.partial(_check_positions, system),
+        adaptation=tunable,
+        structure=Structure(at, {"value": settings["step_size"], "beta": beta}),
+    )
 
 
 def _check_positions(system, positions, *, step_size_checks=True):
@@ -238,18 +253,26 @@ def _rebuild(system, beta, options, value, source):
     return rebuilt(as_top_level_api, source, system, beta=beta, proposal_scale=value, **options)
 
 
-def _at(system, kernel, value, beta, settings=None, adaptation=None) -> Sampler:
-    """The sampler with proposal scale ``value`` (a float, or traced in the warm-up)."""
+def _init_on(system, position, rng_key=None):
+    return init(position, system, rng_key)
 
-    def init_fn(position, rng_key=None):
-        return init(position, system, rng_key)
 
-    def step_fn(rng_key, state):
-        return kernel(rng_key, state, beta, value)
+@dataclass(frozen=True)
+class _Stepper:
+    """What decides the compiled step (the :class:`Structure`'s ``build`` and the warm-up's
+    ``at``): called with the proposal scale ``value`` and ``beta`` (floats, or traced), the
+    sampler with ``hooks``."""
 
-    checks = {"check_positions": functools.partial(_check_positions, system),
-              "adaptation": adaptation}  # fmt: skip
-    return Sampler(init_fn, step_fn, settings=settings, **checks)
+    system: PointVortexSystem
+    proposal: str
+
+    def __call__(self, value, beta, **hooks) -> Sampler:
+        kernel = build_kernel(self.system, self.proposal)
+
+        def step_fn(rng_key, state):
+            return kernel(rng_key, state, beta, value)
+
+        return Sampler(functools.partial(_init_on, self.system), step_fn, **hooks)
 
 
 vortex_metropolis = sampling_api(
