@@ -19,6 +19,7 @@ import pytest
 # Tests run in float64 (ARCHITECTURE.md, "Habits"); float32 has its own stability tests.
 jax.config.update("jax_enable_x64", True)
 
+
 def load_example(name):
     """``examples/<name>.py`` as a module (the examples are scripts, not a package)."""
     path = Path(__file__).resolve().parents[1] / "examples" / f"{name}.py"

@@ -3,6 +3,8 @@ is compiled by ``liesample.sample`` once for every value of its numeric paramete
 over ``β`` (or ``σ``, or the step size) compiles at its first point only, and gives the draws of
 a sampler compiled for one value (``tests/test_draws_unchanged.py`` holds them bit for bit)."""
 
+import contextlib
+
 import jax
 import numpy as np
 import pytest
@@ -25,21 +27,28 @@ class _Compiles:
             self.count += 1
 
 
-def _sample(sampler):
+@contextlib.contextmanager
+def counted_compiles():
+    """``with counted_compiles() as compiles:`` counts the compilations of the block."""
+    compiles = _Compiles()
+    jax.monitoring.register_event_duration_secs_listener(compiles)
+    try:
+        yield compiles
+    finally:
+        jax.monitoring.unregister_event_duration_listener(compiles)
+
+
+def _sample(sampler, starts=STARTS, num_draws=40, num_warmup=20):
     return liesample.sample(
-        sampler, jax.random.key(0), STARTS, 40, num_warmup=20, progress_bar=False
+        sampler, jax.random.key(0), starts, num_draws, num_warmup=num_warmup, progress_bar=False
     )
 
 
 @pytest.mark.filterwarnings("ignore::UserWarning")  # 40 draws: the convergence checks speak
 def test_a_beta_sweep_compiles_at_its_first_point_only():
     first = _sample(liesample.lie_poisson_langevin(SYSTEM, beta=1.0))
-    compiles = _Compiles()
-    jax.monitoring.register_event_duration_secs_listener(compiles)
-    try:
+    with counted_compiles() as compiles:
         second = _sample(liesample.lie_poisson_langevin(SYSTEM, beta=3.0))
-    finally:
-        jax.monitoring.unregister_event_duration_listener(compiles)
     assert compiles.count == 0
     assert first.attrs["beta"] == 1.0 and second.attrs["beta"] == 3.0
     # the second point ran at its own β: the law concentrates on the largest axis
@@ -72,16 +81,11 @@ def test_the_structure_rebuilds_the_sampler_it_declares():
 
 @pytest.mark.filterwarnings("ignore::UserWarning")
 def test_an_adjusted_sweep_with_a_given_step_compiles_at_its_first_point_only():
-    given = {"step_size": 0.2, "num_warmup": 0}
-    first = liesample.adjusted_lie_poisson(SYSTEM, beta=1.0, step_size=given["step_size"])
-    liesample.sample(first, jax.random.key(0), STARTS, 20, num_warmup=0, progress_bar=False)
-    compiles = _Compiles()
-    jax.monitoring.register_event_duration_secs_listener(compiles)
-    try:
-        second = liesample.adjusted_lie_poisson(SYSTEM, beta=4.0, step_size=given["step_size"])
-        liesample.sample(second, jax.random.key(0), STARTS, 20, num_warmup=0, progress_bar=False)
-    finally:
-        jax.monitoring.unregister_event_duration_listener(compiles)
+    first = liesample.adjusted_lie_poisson(SYSTEM, beta=1.0, step_size=0.2)
+    _sample(first, num_draws=20, num_warmup=0)
+    with counted_compiles() as compiles:
+        second = liesample.adjusted_lie_poisson(SYSTEM, beta=4.0, step_size=0.2)
+        _sample(second, num_draws=20, num_warmup=0)
     assert compiles.count == 0
     assert second.structure.values["beta"] == 4.0
 
@@ -90,12 +94,8 @@ def test_an_adjusted_sweep_with_a_given_step_compiles_at_its_first_point_only():
 def test_an_adjusted_sweep_with_its_warm_up_compiles_at_its_first_point_only():
     first = liesample.adjusted_lie_poisson(SYSTEM, beta=1.0)
     _sample(first)
-    compiles = _Compiles()
-    jax.monitoring.register_event_duration_secs_listener(compiles)
-    try:
+    with counted_compiles() as compiles:
         tree = _sample(liesample.adjusted_lie_poisson(SYSTEM, beta=4.0))
-    finally:
-        jax.monitoring.unregister_event_duration_listener(compiles)
     assert compiles.count == 0
     assert tree.attrs["beta"] == 4.0
     assert tree.attrs["step_size_source"].startswith("warm-up dual averaging")
@@ -106,18 +106,8 @@ def test_a_vortex_sweep_with_its_warm_up_compiles_at_its_first_point_only():
     system = liesample.systems.point_vortices([1.0, 1.0, -1.0, -1.0])
     starts = np.stack([system.default_position] * 4)
 
-    def run(beta):
-        sampler = liesample.vortex_metropolis(system, beta=beta)
-        return liesample.sample(
-            sampler, jax.random.key(0), starts, 20, num_warmup=20, progress_bar=False
-        )
-
-    run(-1.0)
-    compiles = _Compiles()
-    jax.monitoring.register_event_duration_secs_listener(compiles)
-    try:
-        tree = run(2.0)
-    finally:
-        jax.monitoring.unregister_event_duration_listener(compiles)
+    _sample(liesample.vortex_metropolis(system, beta=-1.0), starts, num_draws=20)
+    with counted_compiles() as compiles:
+        tree = _sample(liesample.vortex_metropolis(system, beta=2.0), starts, num_draws=20)
     assert compiles.count == 0
     assert tree.attrs["beta"] == 2.0

@@ -233,8 +233,10 @@ def program(sampler: Sampler, positions):
     arrays of the positions' dtype (traced: one program for every value); any other sampler
     itself and ``None``."""
     structure = sampler.structure
+    if structure is None:
+        return sampler, None
     dtype = jnp.result_type(*jax.tree.leaves(positions))
-    if structure is None or not jnp.issubdtype(dtype, jnp.floating):
+    if not jnp.issubdtype(dtype, jnp.floating):
         return sampler, None
     return structure.build, {k: jnp.asarray(v, dtype) for k, v in structure.values.items()}
 

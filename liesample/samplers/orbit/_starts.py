@@ -9,6 +9,8 @@ that the error is the system's own message, prefixed by ``initial_positions[c]``
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -24,6 +26,7 @@ __all__ = [
     "distinct_orbits",
     "orbit_init_fn",
     "orbit_settings",
+    "plain_init_fn",
 ]
 
 
@@ -31,6 +34,16 @@ def orbit_settings(name: str, system: LiePoissonSystem, beta, **settings) -> dic
     """What every orbit sampler reports first in ``settings``: its name, the system and ``β``;
     then ``settings`` in order."""
     return {"sampler": name, "system": system.name, "beta": beta, **settings}
+
+
+def _init_on(init, system, position, rng_key=None):
+    return init(position, system, rng_key)
+
+
+def plain_init_fn(init, system):
+    """``init_fn(position, rng_key=None)``: ``init(position, system, rng_key)`` with no check of
+    a concrete start (the runner checks every start before it compiles)."""
+    return functools.partial(_init_on, init, system)
 
 
 def orbit_init_fn(init, system: LiePoissonSystem, check_orbits):

@@ -78,6 +78,7 @@ from liesample.samplers.orbit._starts import (
     orbit_groups,
     orbit_init_fn,
     orbit_settings,
+    plain_init_fn,
 )
 
 __all__ = [
@@ -391,10 +392,6 @@ def _check_positions(system, check_orbits, positions, *, step_size_checks=True):
         check_orbits(positions, distinct_orbits(casimirs))
 
 
-def _init_on(system, position, rng_key=None):
-    return init(position, system, rng_key)
-
-
 @dataclass(frozen=True)
 class _Stepper:
     """What decides the compiled step (the :class:`Structure`'s ``build``, and the warm-up's
@@ -419,7 +416,7 @@ class _Stepper:
             return _draw_noise(system, rng_key, (size,), state.position.dtype)
 
         return Sampler(
-            init_fn or functools.partial(_init_on, system),
+            init_fn or plain_init_fn(init, system),
             step_fn,
             noise_blocks=NoiseBlocks(size, draw_block, block_step),
             law_groups=orbit_groups(system),

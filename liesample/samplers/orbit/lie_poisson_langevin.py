@@ -378,10 +378,6 @@ def _check_positions(plan: _Plan, check_orbits, positions, *, step_size_checks=T
         check_orbits(np.asarray(positions, dtype), _starts.distinct_orbits(casimirs), prefix=True)
 
 
-def _init_on(system, position, rng_key=None):
-    return init(position, system, rng_key)
-
-
 @dataclass(frozen=True)
 class _Stepper:
     """What decides the compiled step of a sampler (its :class:`Structure`'s ``build``): called
@@ -412,7 +408,7 @@ class _Stepper:
 
         blocks = NoiseBlocks(size, draw_block, block_step)
         return Sampler(
-            init_fn or functools.partial(_init_on, system),
+            init_fn or _starts.plain_init_fn(init, system),
             step_fn,
             # Without noise nothing is drawn: the per-step loop is already lean.
             noise_blocks=blocks if scene.noise else None,

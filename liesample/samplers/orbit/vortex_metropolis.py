@@ -47,7 +47,7 @@ from liesample.samplers.contract import (
     rebuilt,
     sampling_api,
 )
-from liesample.samplers.orbit._starts import orbit_settings
+from liesample.samplers.orbit._starts import orbit_settings, plain_init_fn
 from liesample.systems.point_vortices import PointVortexSystem
 
 __all__ = [
@@ -253,10 +253,6 @@ def _rebuild(system, beta, options, value, source):
     return rebuilt(as_top_level_api, source, system, beta=beta, proposal_scale=value, **options)
 
 
-def _init_on(system, position, rng_key=None):
-    return init(position, system, rng_key)
-
-
 @dataclass(frozen=True)
 class _Stepper:
     """What decides the compiled step (the :class:`Structure`'s ``build`` and the warm-up's
@@ -272,7 +268,7 @@ class _Stepper:
         def step_fn(rng_key, state):
             return kernel(rng_key, state, beta, value)
 
-        return Sampler(functools.partial(_init_on, self.system), step_fn, **hooks)
+        return Sampler(plain_init_fn(init, self.system), step_fn, **hooks)
 
 
 vortex_metropolis = sampling_api(
