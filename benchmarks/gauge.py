@@ -84,8 +84,9 @@ def make_run(step, observable):
     return run
 
 
-def _chain(run, state, key, num_updates):
-    """``num_updates`` (rounded up to chunks) steps; the first chunk compiles and is not timed."""
+def _chain(run, state, key, num_updates, max_seconds=math.inf):
+    """``num_updates`` (rounded up to chunks) steps, fewer if ``max_seconds`` of timed chunks
+    pass first; the first chunk compiles and is not timed."""
     chunks = jax.random.split(key, -(-num_updates // CHUNK) + 1)
     jax.block_until_ready(run(state, jax.random.split(chunks[0], CHUNK)))  # compile
     values, rates = [], []
@@ -94,6 +95,8 @@ def _chain(run, state, key, num_updates):
         state, (v, r) = jax.block_until_ready(run(state, jax.random.split(key, CHUNK)))
         values.append(np.asarray(v))
         rates.append(np.asarray(r))
+        if time.perf_counter() - start > max_seconds:
+            break
     seconds = time.perf_counter() - start
     return state, np.concatenate(values), float(np.mean(np.concatenate(rates))), seconds
 
@@ -149,9 +152,9 @@ class PlainInfo(NamedTuple):
 # --------------------------------------------------------------------------- rows
 
 
-def su3_rows(size, counts, thermalisation, log, seed=0):
+def su3_rows(size, counts, thermalisation, log, seed=0, max_seconds=math.inf):
     """The 4-D SU(3) rows at β = 6.0 (one chain each, from one thermalised configuration) and
-    that configuration's plaquette."""
+    that configuration's plaquette; each chain stops early once ``max_seconds`` are timed."""
     system = wilson_gauge("SU3", (size,) * 4)
     links = system.hot_start(jax.random.key(seed))
     heat_bath = liesample.wilson_heat_bath(system, beta=BETA, overrelaxation=4)
@@ -176,7 +179,7 @@ def su3_rows(size, counts, thermalisation, log, seed=0):
     for name, (sampler, run, step_size, steps, sweeps, updates) in samplers.items():
         run = run or make_run(sampler.step, system.mean_plaquette)
         _, values, rate, seconds = _chain(run, sampler.init(links), jax.random.key(seed + 2),
-                                          updates)  # fmt: skip
+                                          updates, max_seconds)  # fmt: skip
         row = {"sampler": name, "step_size": step_size, "steps": steps,
                "updates": int(values.size), **_statistics(values, rate, seconds),
                "link_updates_per_s": values.size * sweeps * num_links / seconds}  # fmt: skip

@@ -35,7 +35,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np
 
 import liesample
-from benchmarks import common, scaling
+from benchmarks import common, gauge, scaling
 
 SUITE = {"order": 65, "title": "one GPU: rigid-body throughput and the adjusted Zeitlin step"}
 
@@ -43,6 +43,9 @@ ZEITLIN_BETA = 1.0
 ZEITLIN_STEP = 0.1
 # The stored run (jax 0.11.2) predates recording the CUDA major version; it used CUDA 13.
 STORED_CUDA = "13"
+# SU(3) on the GPU: the updates each chain is allowed, and a cap on its timed seconds
+GAUGE_COUNTS = {"heat_bath": 400, "hmc": 200, "smd": 2000}
+GAUGE_THERMALISATION = 30
 
 # Prose of the section, from the stored H200 run (the tables are rebuilt from the JSON).
 RIGID_NOTE = """\
@@ -98,6 +101,38 @@ def zeitlin_rows(sizes, chains_list, num_steps: int):
     return rows
 
 
+def gauge_measurement(sizes, max_seconds: float, log=print) -> dict:
+    """4-D SU(3) at β = 6.0 on each ``L⁴`` in ``sizes``: the rows of ``benchmarks/gauge.py``
+    (every chain stops once ``max_seconds`` are timed), as ``gpu_gauge.json``."""
+    rows, start_plaquettes = [], {}
+    for size in sizes:
+        log(f"  SU(3) {size}⁴")
+        su3, start_plaquettes[size] = gauge.su3_rows(
+            size, GAUGE_COUNTS, GAUGE_THERMALISATION, log, max_seconds=max_seconds
+        )
+        rows += [{"size": size, **row} for row in su3]
+    return {
+        **_device_fields(),
+        "machine": common.machine_info(),
+        "beta": gauge.BETA,
+        "thermalisation": GAUGE_THERMALISATION,
+        "max_seconds": max_seconds,
+        "start_plaquette": start_plaquettes,
+        "published": gauge.PUBLISHED,
+        "su3": rows,
+    }
+
+
+def _device_fields() -> dict:
+    device = jax.devices()[0]
+    return {
+        "device": device.device_kind,
+        "backend": jax.default_backend(),
+        "jax": jax.__version__,
+        "cuda": _cuda_major(),
+    }
+
+
 def _cuda_major():
     """The CUDA major version of the installed jax CUDA plugin, or ``None``."""
     from importlib import metadata
@@ -122,10 +157,7 @@ def measure(quick: bool) -> dict:
         rigid = scaling.measure((100, 10_000, 100_000, 1_000_000))
         zeitlin = zeitlin_rows((32, 64, 128), (1, 64, 256), 40)
     return {
-        "device": device.device_kind,
-        "backend": jax.default_backend(),
-        "jax": jax.__version__,
-        "cuda": _cuda_major(),
+        **_device_fields(),
         "mode": "quick" if quick else "full",
         "zeitlin_beta": ZEITLIN_BETA,
         "zeitlin_step_size": ZEITLIN_STEP,
@@ -228,8 +260,19 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, required=True, help="JSON file to write")
     parser.add_argument("--quick", action="store_true", help="small sizes (smoke run)")
+    parser.add_argument(
+        "--gauge",
+        type=int,
+        nargs="+",
+        metavar="L",
+        help="only 4-D SU(3) on these L⁴ (the rows of benchmarks/gauge.py), as gpu_gauge.json",
+    )
+    parser.add_argument("--gauge-seconds", type=float, default=25.0, help="timed seconds a chain")
     args = parser.parse_args(argv)
-    data = measure(args.quick)
+    if args.gauge:
+        data = gauge_measurement(args.gauge, args.gauge_seconds, lambda m: print(m, flush=True))
+    else:
+        data = measure(args.quick)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(data, indent=2))
     print(f"wrote {args.out}")
