@@ -187,10 +187,52 @@ def _spaced(number: int) -> str:
 
 
 def report(out_dir: Path, md_dir: Path) -> str:
-    """Section from ``gpu.json`` (with the CPU column from ``zeitlin_adjusted.json``), if any."""
-    if not (out_dir / "gpu.json").exists():
-        return ""
-    return section(common.read_json(out_dir / "gpu.json"), out_dir)
+    """Section from ``gpu.json`` (with the CPU column from ``zeitlin_adjusted.json``) and
+    ``gpu_gauge.json`` (with the CPU column from ``gauge.json``), where they exist."""
+    del md_dir
+    parts = []
+    if (out_dir / "gpu.json").exists():
+        parts.append(section(common.read_json(out_dir / "gpu.json"), out_dir))
+    if (out_dir / "gpu_gauge.json").exists():
+        parts.append(gauge_section(common.read_json(out_dir / "gpu_gauge.json"), out_dir))
+    return "\n".join(parts)
+
+
+def gauge_section(data: dict, out_dir: Path) -> str:
+    """The SU(3) rows measured on the device, beside the CPU rows of ``gauge.json``."""
+    cpu_path = out_dir / "gauge.json"
+    cpu = common.read_json(cpu_path) if cpu_path.exists() else {"su3": [], "size": None}
+    cpu_rate = {r["sampler"]: r["link_updates_per_s"] for r in cpu["su3"]}
+    short = data["device"].removeprefix("NVIDIA ").split()[0]
+    lines = [
+        f"### Lattice gauge theory on the {data['device']}",
+        "",
+        (
+            f"`benchmarks/gpu.py --gauge L` ({data['machine']['date_utc']}, jax {data['jax']}, "
+            "float64): the SU(3) rows of the lattice-gauge suite at β = "
+            f"{data['beta']:g}, each chain run until its updates are done or "
+            f"{data['max_seconds']:g} timed seconds have passed, from a configuration "
+            f"thermalised by {data['thermalisation']} heat-bath updates. Compilation is "
+            "excluded. The CPU column is the lattice-gauge suite's own run (on the CPU VM, "
+            f"{cpu['size']}⁴), another machine and another time."
+        ),
+        "",
+        f"| L⁴ | sampler | updates | plaquette ± MCSE | acceptance | ESS | ESS/s ({short}) | "
+        f"link updates/s ({short}) | link updates/s (CPU VM) | {short} / CPU |",
+        "|---|---|---:|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    for r in data["su3"]:
+        on_cpu = cpu_rate.get(r["sampler"]) if r["size"] == cpu["size"] else None
+        ratio = f"{r['link_updates_per_s'] / on_cpu:.0f}×" if on_cpu else "–"
+        lines.append(
+            f"| {r['size']}⁴ | {r['sampler']} | {r['updates']} | {r['plaquette']:.5f} ± "
+            f"{r['mcse']:.5f} | {r['acceptance']:.2f} | {common.format_g(r['ess'])} | "
+            f"{common.format_g(r['ess_per_s'])} | {common.format_rate(r['link_updates_per_s'])} | "
+            f"{common.format_rate(on_cpu)} | {ratio} |"
+        )
+    for miss in data.get("not_finished", []):
+        lines += ["", f"{miss['size']}⁴ (limit {miss['limit_seconds']} s): {miss['what']}."]
+    return "\n".join(lines + [""])
 
 
 def section(data: dict, out_dir: Path) -> str:

@@ -75,11 +75,10 @@ def _parity(system: WilsonGauge) -> np.ndarray:
     return np.indices(system.shape).sum(0) % 2
 
 
-def _embed(system, s, idx):
-    """``s ∈ SU(2)`` (…, 2, 2) placed in rows/columns ``idx = (i, j)`` of the ``N × N``
-    identity."""
-    g = jnp.broadcast_to(jnp.eye(system.n, dtype=s.dtype), (*s.shape[:-2], system.n, system.n))
-    return g.at[..., idx[:, None], idx[None, :]].set(s)
+def _left_multiply(s, idx, u):
+    """``E(s) u``, with ``E(s)`` the ``N × N`` identity holding ``s ∈ SU(2)`` (…, 2, 2) in
+    rows/columns ``idx = (i, j)``: only rows ``i`` and ``j`` of ``u`` change."""
+    return u.at[..., idx, :].set(s @ u[..., idx, :])
 
 
 def _update_u1(system, key, theta, staple, beta, heat):
@@ -104,7 +103,7 @@ def _update_sun(system, key, u, staple, beta, heat):
             s = su2_from_a0(k2, a0, u.dtype) @ v_dag
         else:
             s = v_dag @ v_dag
-        return _embed(system, s, idx) @ u, None
+        return _left_multiply(s, idx, u), None
 
     keys = jax.random.split(key, len(subgroups))
     return jax.lax.scan(one, u, (jnp.asarray(subgroups), keys))[0]
