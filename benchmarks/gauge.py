@@ -152,27 +152,45 @@ class PlainInfo(NamedTuple):
 # --------------------------------------------------------------------------- rows
 
 
-def su3_rows(size, counts, thermalisation, log, seed=0, max_seconds=math.inf):
-    """The 4-D SU(3) rows at β = 6.0 (one chain each, from one thermalised configuration) and
-    that configuration's plaquette; each chain stops early once ``max_seconds`` are timed."""
+def _thermalised(size, thermalisation, seed):
+    """The heat bath on ``L⁴`` and a configuration it thermalised from a hot start."""
     system = wilson_gauge("SU3", (size,) * 4)
-    links = system.hot_start(jax.random.key(seed))
     heat_bath = liesample.wilson_heat_bath(system, beta=BETA, overrelaxation=4)
-    heat_bath_run = make_run(heat_bath.step, system.mean_plaquette)
-    state, _, _, _ = _chain(heat_bath_run, heat_bath.init(links), jax.random.key(seed + 1),
-                            thermalisation)  # fmt: skip
-    links = state.position
-    smd = gauge_hmc(system, beta=BETA, step_size=SMD_STEP, num_integration_steps=1,
-                    momentum_persistence=math.exp(-SMD_STEP))  # fmt: skip
-    plain = SimpleNamespace(init=heat_bath.init, step=plain_hmc(system, BETA, HMC_STEP, HMC_STEPS))
+    run = make_run(heat_bath.step, system.mean_plaquette)
+    start = heat_bath.init(system.hot_start(jax.random.key(seed)))
+    state, _, _, _ = _chain(run, start, jax.random.key(seed + 1), thermalisation)
+    return state.position, heat_bath, run
+
+
+def su3_rows(size, counts, thermalisation, log, seed=0, max_seconds=math.inf, tile=1):
+    """The 4-D SU(3) rows at β = 6.0 (one chain each, from one thermalised configuration) and
+    that configuration's plaquette; each chain stops early once ``max_seconds`` are timed.
+
+    ``tile > 1``: the configuration is thermalised on ``(L/tile)⁴`` and repeated ``tile`` times
+    along each axis (a configuration of the larger torus with the same plaquettes, which the
+    untimed first chunk of every chain then moves on), and there is no heat-bath row."""
+    links, heat_bath, heat_bath_run = _thermalised(size // tile, thermalisation, seed)
+    system = wilson_gauge("SU3", (size,) * 4)
+    if tile > 1:
+        links = jnp.tile(links, (1, tile, tile, tile, tile, 1, 1))
+        heat_bath = liesample.wilson_heat_bath(system, beta=BETA, overrelaxation=4)  # its init
+    # the energy error of a trajectory grows as V·ε⁴: above 8⁴ the steps shrink as 8/L (the
+    # acceptance of 8⁴), HMC keeping its trajectory length
+    scale = min(1.0, 8 / size)
+    hmc_step, hmc_steps, smd_step = HMC_STEP * scale, round(HMC_STEPS / scale), SMD_STEP * scale
+    smd = gauge_hmc(system, beta=BETA, step_size=smd_step, num_integration_steps=1,
+                    momentum_persistence=math.exp(-smd_step))  # fmt: skip
+    plain = SimpleNamespace(init=heat_bath.init, step=plain_hmc(system, BETA, hmc_step, hmc_steps))
     # sampler -> (algorithm, compiled run or None, step size, steps per update, sweeps per update,
     # updates)
-    samplers = {
+    samplers = {} if tile > 1 else {
         "heat bath + OR": (heat_bath, heat_bath_run, None, None, 5, counts["heat_bath"]),
-        "HMC": (gauge_hmc(system, beta=BETA, step_size=HMC_STEP, num_integration_steps=HMC_STEPS),
-                None, HMC_STEP, HMC_STEPS, HMC_STEPS, counts["hmc"]),
-        "SMD": (smd, None, SMD_STEP, 1, 1, counts["smd"]),
-        "plain HMC": (plain, None, HMC_STEP, HMC_STEPS, HMC_STEPS, counts["hmc"]),
+    }  # fmt: skip
+    samplers |= {
+        "HMC": (gauge_hmc(system, beta=BETA, step_size=hmc_step, num_integration_steps=hmc_steps),
+                None, hmc_step, hmc_steps, hmc_steps, counts["hmc"]),
+        "SMD": (smd, None, smd_step, 1, 1, counts["smd"]),
+        "plain HMC": (plain, None, hmc_step, hmc_steps, hmc_steps, counts["hmc"]),
     }  # fmt: skip
     rows = []
     num_links = system.dim * size**4

@@ -101,16 +101,17 @@ def zeitlin_rows(sizes, chains_list, num_steps: int):
     return rows
 
 
-def gauge_measurement(sizes, max_seconds: float, log=print) -> dict:
+def gauge_measurement(sizes, max_seconds: float, tile: int = 1, log=print) -> dict:
     """4-D SU(3) at β = 6.0 on each ``L⁴`` in ``sizes``: the rows of ``benchmarks/gauge.py``
-    (every chain stops once ``max_seconds`` are timed), as ``gpu_gauge.json``."""
+    (every chain stops once ``max_seconds`` are timed; ``tile``: see ``gauge.su3_rows``), as
+    ``gpu_gauge.json``."""
     rows, start_plaquettes = [], {}
     for size in sizes:
         log(f"  SU(3) {size}⁴")
         su3, start_plaquettes[size] = gauge.su3_rows(
-            size, GAUGE_COUNTS, GAUGE_THERMALISATION, log, max_seconds=max_seconds
+            size, GAUGE_COUNTS, GAUGE_THERMALISATION, log, max_seconds=max_seconds, tile=tile
         )
-        rows += [{"size": size, **row} for row in su3]
+        rows += [{"size": size, "tile": tile, **row} for row in su3]
     return {
         **_device_fields(),
         "machine": common.machine_info(),
@@ -310,9 +311,14 @@ def main(argv=None):
         help="only 4-D SU(3) on these L⁴ (the rows of benchmarks/gauge.py), as gpu_gauge.json",
     )
     parser.add_argument("--gauge-seconds", type=float, default=25.0, help="timed seconds a chain")
+    parser.add_argument(
+        "--gauge-tile", type=int, default=1, help="thermalise on (L/K)⁴ and tile (no heat bath)"
+    )
     args = parser.parse_args(argv)
     if args.gauge:
-        data = gauge_measurement(args.gauge, args.gauge_seconds, lambda m: print(m, flush=True))
+        data = gauge_measurement(
+            args.gauge, args.gauge_seconds, args.gauge_tile, lambda m: print(m, flush=True)
+        )
     else:
         data = measure(args.quick)
     args.out.parent.mkdir(parents=True, exist_ok=True)
