@@ -205,34 +205,58 @@ def gauge_section(data: dict, out_dir: Path) -> str:
     cpu = common.read_json(cpu_path) if cpu_path.exists() else {"su3": [], "size": None}
     cpu_rate = {r["sampler"]: r["link_updates_per_s"] for r in cpu["su3"]}
     short = data["device"].removeprefix("NVIDIA ").split()[0]
+    runs = data.get("runs", [{"sizes": sorted({r["size"] for r in data["su3"]}), "tile": 1}])
     lines = [
         f"### Lattice gauge theory on the {data['device']}",
         "",
         (
-            f"`benchmarks/gpu.py --gauge L` ({data['machine']['date_utc']}, jax {data['jax']}, "
-            "float64): the SU(3) rows of the lattice-gauge suite at β = "
-            f"{data['beta']:g}, each chain run until its updates are done or "
-            f"{data['max_seconds']:g} timed seconds have passed, from a configuration "
-            f"thermalised by {data['thermalisation']} heat-bath updates. Compilation is "
-            "excluded. The CPU column is the lattice-gauge suite's own run (on the CPU VM, "
-            f"{cpu['size']}⁴), another machine and another time."
+            f"`benchmarks/gpu.py --gauge L` (jax {data['jax']}, float64): the SU(3) rows of the "
+            f"lattice-gauge suite at β = {data['beta']:g}, each chain run until its updates are "
+            "done or its cap of timed seconds has passed (compilation excluded), from a "
+            f"configuration thermalised by {data['thermalisation']} heat-bath updates. "
+            "Above 8⁴ the steps shrink as 8/L (HMC keeps its trajectory length). The CPU "
+            f"column is the lattice-gauge suite's own run on the CPU VM ({cpu['size']}⁴), "
+            "another machine and another time."
         ),
         "",
-        f"| L⁴ | sampler | updates | plaquette ± MCSE | acceptance | ESS | ESS/s ({short}) | "
-        f"link updates/s ({short}) | link updates/s (CPU VM) | {short} / CPU |",
-        "|---|---|---:|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    for run in runs:
+        sizes = ", ".join(f"{size}⁴" for size in run["sizes"])
+        how = (
+            "thermalised on its own lattice"
+            if run["tile"] == 1
+            else f"from a configuration thermalised on the {run['tile']}-times smaller torus and "
+            f"repeated {run['tile']} times along each axis; no heat-bath row"
+        )
+        when = run.get("date_utc", data["machine"]["date_utc"])
+        lines.append(f"- {sizes} ({when}, cap {run.get('max_seconds', data['max_seconds']):g} s): "
+                     f"{how}.")  # fmt: skip
+    lines += [
+        "",
+        f"| L⁴ | sampler | ε × steps | updates | plaquette ± MCSE | acceptance | ESS | ESS/s "
+        f"({short}) | link updates/s ({short}) | link updates/s (CPU VM) | {short} / CPU |",
+        "|---|---|---|---:|---|---:|---:|---:|---:|---:|---:|",
     ]
     for r in data["su3"]:
         on_cpu = cpu_rate.get(r["sampler"]) if r["size"] == cpu["size"] else None
         ratio = f"{r['link_updates_per_s'] / on_cpu:.0f}×" if on_cpu else "–"
+        step = "–" if r["step_size"] is None else f"{r['step_size']:g} × {r['steps']}"
         lines.append(
-            f"| {r['size']}⁴ | {r['sampler']} | {r['updates']} | {r['plaquette']:.5f} ± "
+            f"| {r['size']}⁴ | {r['sampler']} | {step} | {r['updates']} | {r['plaquette']:.5f} ± "
             f"{r['mcse']:.5f} | {r['acceptance']:.2f} | {common.format_g(r['ess'])} | "
             f"{common.format_g(r['ess_per_s'])} | {common.format_rate(r['link_updates_per_s'])} | "
             f"{common.format_rate(on_cpu)} | {ratio} |"
         )
-    for miss in data.get("not_finished", []):
-        lines += ["", f"{miss['size']}⁴ (limit {miss['limit_seconds']} s): {miss['what']}."]
+    lines += [
+        "",
+        "Where the ESS is a few, the plaquette and its MCSE are not estimates to rely on; the "
+        "link updates per second are.",
+    ]
+    probe = data.get("heat_bath_compile_probe")
+    if probe:
+        done = ", ".join(f"{size}⁴: {sec:g} s" for size, sec in probe["seconds"].items())
+        missing = "; ".join(f"{size}⁴: {why}" for size, why in probe["not_finished"].items())
+        lines += ["", f"Heat bath on the device, {probe['what']}: {done}; {missing}."]
     return "\n".join(lines + [""])
 
 
