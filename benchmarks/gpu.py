@@ -6,6 +6,8 @@ GPU: on a CPU-only machine ``run`` says so and keeps the stored ``gpu.json``. Al
 
     .venv/bin/python benchmarks/gpu.py --out benchmarks/results/gpu.json          # any device
     .venv/bin/python benchmarks/gpu.py --quick --out /tmp/gpu.json                # smoke run
+    .venv/bin/python benchmarks/gpu.py --gauge 8 --out gauge8.json                # SU(3) rows
+    .venv/bin/python benchmarks/gpu.py --gauge 16 --gauge-tile 2 --out gauge16.json
 
 Two measurements, compilation excluded (each is run once to compile, then timed, best of two):
 
@@ -13,6 +15,11 @@ Two measurements, compilation excluded (each is run once to compile, then timed,
   ``liesample.sample_chains`` for 10² … 10⁶ chains (the rows of ``benchmarks/scaling.py``);
 - **Zeitlin**: ``liesample.adjusted_lie_poisson`` on ``zeitlin_euler(N, noise_degree=2)`` at a
   given step, N = 32, 64, 128, for several numbers of chains: seconds per chain-step.
+
+With ``--gauge L …`` it measures only the 4-D SU(3) rows of ``benchmarks/gauge.py`` on ``L⁴``
+(``gauge.su3_rows``: each chain capped at ``--gauge-seconds`` timed seconds; ``--gauge-tile K``
+starts from a configuration thermalised on ``(L/K)⁴`` and tiled, without the heat-bath row);
+``benchmarks/results/gpu_gauge.json`` holds such runs, merged by hand with a ``runs`` list.
 
 The device kind and the jax version are recorded with the rows; the section (``report``) quotes
 them next to the CPU numbers of the scale-out and Zeitlin suites.
