@@ -280,15 +280,6 @@ def targets():
 # =========================================================================== measurement
 
 
-def _timed(fn, *args):
-    """``(result, wall seconds, CPU seconds of this process)`` of one call, waited for. On a
-    shared machine the CPU time is the steadier measure: it does not count other processes'
-    turns on the cores (XLA:CPU may use several threads, so it can also exceed the wall)."""
-    wall, cpu = time.perf_counter(), time.process_time()
-    out = common.block(fn(*args))
-    return out, time.perf_counter() - wall, time.process_time() - cpu
-
-
 def _row(target, key, kind, observations, wall, gradients, cpu=math.nan, **extra):
     """Summary row from observations ``(chains, draws, statistics)``."""
     observations = np.asarray(observations, float)
@@ -338,8 +329,8 @@ def _row(target, key, kind, observations, wall, gradients, cpu=math.nan, **extra
 def run_iid(target, cfg, log):
     n = cfg["iid_draws"][target.name]
     fn = liesample.jit(lambda key: target.iid(key, n))
-    _, first, _ = _timed(fn, jax.random.key(SEED))  # compilation included
-    draws, seconds, cpu = _timed(fn, jax.random.key(SEED + 1))
+    _, first, _ = common.timed(fn, jax.random.key(SEED), cpu=True)  # compilation included
+    draws, seconds, cpu = common.timed(fn, jax.random.key(SEED + 1), cpu=True)
     row = _row(
         target,
         "iid",
@@ -352,7 +343,10 @@ def run_iid(target, cfg, log):
         compile_seconds=max(first - seconds, 0.0),
         warmup_seconds=0.0,
     )
-    row.update(_timer=lambda: _timed(fn, jax.random.key(SEED + 1))[1:], _times=[(seconds, cpu)])
+    row.update(
+        _timer=lambda: common.timed(fn, jax.random.key(SEED + 1), cpu=True)[1:],
+        _times=[(seconds, cpu)],
+    )
     row.update(_share=1.0, _adaptation=0.0)
     log(f"    i.i.d.: {row['ess_per_second']:.3g} ESS/s, max|z| {row['max_abs_z']:.2f}")
     return row
@@ -400,7 +394,7 @@ def _chains(sampler, observe, keys, starts, burn_in, draws):
     begin = time.perf_counter()
     compiled = liesample.jit(jax.vmap(run)).lower(keys, starts).compile()
     compile_seconds = time.perf_counter() - begin
-    out, seconds, cpu = _timed(compiled, keys, starts)
+    out, seconds, cpu = common.timed(compiled, keys, starts, cpu=True)
     obs, steps, acceptance, divergent = (np.asarray(x)[:, burn_in:] for x in out)
     share = draws / (burn_in + draws)
     return {
@@ -413,7 +407,7 @@ def _chains(sampler, observe, keys, starts, burn_in, draws):
         "compile_seconds": compile_seconds,
         "burn_seconds": seconds * (1.0 - share),
         "timing": {
-            "_timer": lambda: _timed(compiled, keys, starts)[1:],
+            "_timer": lambda: common.timed(compiled, keys, starts, cpu=True)[1:],
             "_times": [(seconds, cpu)],
             "_share": share,
         },

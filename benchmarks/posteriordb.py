@@ -136,12 +136,6 @@ def compiled(fn, *args):
     return executable, time.perf_counter() - start
 
 
-def timed(executable, *args):
-    start = time.perf_counter()
-    out = jax.block_until_ready(executable(*args))
-    return out, time.perf_counter() - start
-
-
 # --------------------------------------------------------------------------- samplers
 
 
@@ -278,7 +272,7 @@ def run_flat_chains(sampler_for, params, states, setup, key, num_draws):
 
     keys = jax.random.split(key, NUM_CHAINS)
     executable, compile_seconds = compiled(jax.vmap(chain), params, states, keys)
-    (positions, steps, divergent), seconds = timed(executable, params, states, keys)
+    (positions, steps, divergent), seconds = common.timed(executable, params, states, keys)
     return positions, int(np.sum(steps)), int(np.sum(divergent)), seconds, compile_seconds
 
 
@@ -292,7 +286,7 @@ def run_blackjax_nuts(setup, key, num_warmup, num_draws):
 
     keys = jax.random.split(key_warmup, NUM_CHAINS)
     executable, warm_compile = compiled(jax.vmap(adapt), keys, setup.starts)
-    (states, params, warm_steps), warm_seconds = timed(executable, keys, setup.starts)
+    (states, params, warm_steps), warm_seconds = common.timed(executable, keys, setup.starts)
     positions, gradients, divergences, seconds, draw_compile = run_flat_chains(
         lambda p: blackjax.nuts(setup.logdensity, **p), params, states, setup, key_draw, num_draws
     )

@@ -330,14 +330,6 @@ def _chain_runner(system, num_chains):
     return liesample.jit(run, static_argnums=3)
 
 
-def _best_time(fn, *args, repeats=3):
-    best = math.inf
-    for _ in range(repeats):
-        out, seconds = common.timed(fn, *args)
-        best = min(best, seconds)
-    return out, best
-
-
 def _floor_seconds(system, states, step_size, key):
     """Seconds (best of three) of the matrix work one step needs, batched over the same chains:
     the exponential of the proposal's generator and its two conjugation products
@@ -355,7 +347,7 @@ def _floor_seconds(system, states, step_size, key):
         return moved, w @ g - g @ w
 
     compiled = liesample.jit(matrix_work).lower(zetas, states.position, gradients).compile()
-    _, seconds = _best_time(compiled, zetas, states.position, gradients)
+    _, seconds = common.timed(compiled, zetas, states.position, gradients, repeats=3)
     return seconds
 
 
@@ -365,7 +357,7 @@ def _step_seconds(system, states, step_size, num_steps, repeats=3):
     run = _chain_runner(system, num_chains)
     key = jax.random.key(5)
     run(states, key, step_size, num_steps)  # compile
-    (_, (_, _, accepted)), seconds = _best_time(
+    (_, (_, _, accepted)), seconds = common.timed(
         lambda: run(states, key, step_size, num_steps), repeats=repeats
     )
     return seconds / (num_chains * num_steps), float(jnp.mean(accepted))
