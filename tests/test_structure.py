@@ -111,3 +111,21 @@ def test_a_vortex_sweep_with_its_warm_up_compiles_at_its_first_point_only():
         tree = _sample(liesample.vortex_metropolis(system, beta=2.0), starts, num_draws=20)
     assert compiles.count == 0
     assert tree.attrs["beta"] == 2.0
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")  # 40 draws: the convergence checks speak
+def test_a_spin_sweep_compiles_at_its_first_point_only():
+    """Every spin sampler declares its structure (``samplers/spins/_lattice.spin_sampler``):
+    the heat bath (the recommended one) at a second β compiles nothing."""
+    chain = liesample.systems.heisenberg((16,), coupling=1.0)
+    starts = np.tile(chain.default_position, (2, 1, 1))
+    first = _sample(liesample.heisenberg_heat_bath(chain, beta=0.5), starts, num_warmup=0)
+    with counted_compiles() as compiles:
+        second = _sample(liesample.heisenberg_heat_bath(chain, beta=4.0), starts, num_warmup=0)
+    assert compiles.count == 0
+    # the second point ran at its own β: neighbours align more when it is colder
+    energies = [float(np.mean(t.sample_stats["hamiltonian"].values)) for t in (first, second)]
+    assert energies[1] < energies[0]
+    assert liesample.heisenberg_metropolis(chain, beta=1.0).structure.build == (
+        liesample.heisenberg_metropolis(chain, beta=2.0, proposal_scale=0.3).structure.build
+    )

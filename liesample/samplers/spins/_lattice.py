@@ -27,6 +27,8 @@ acceptance; 1 for rejection-free moves) and ``energy`` (``h`` after the step).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import jax
@@ -35,7 +37,7 @@ import numpy as np
 
 from liesample.foundation.validation import finite_float
 from liesample.geometry.algebras import so3
-from liesample.samplers.contract import BasicInfo, Sampler
+from liesample.samplers.contract import BasicInfo, Sampler, Structure
 from liesample.samplers.orbit._starts import orbit_groups, orbit_settings
 from liesample.systems.heisenberg import (
     SpinLatticeSystem,
@@ -104,19 +106,47 @@ def init(position, system: SpinLatticeSystem, rng_key=None) -> SpinState:
     return SpinState(jnp.asarray(position, dtype=jnp.result_type(float)))
 
 
-def spin_sampler(name: str, kernel, system: SpinLatticeSystem, beta, *parameters, **settings):
+def spin_sampler(
+    name: str, build_kernel, structural: tuple, system: SpinLatticeSystem, beta, *parameters,
+    **settings,
+):  # fmt: skip
     """The :class:`~liesample.samplers.contract.Sampler` of ``kernel(rng_key, state, beta,
-    *parameters)`` on ``system`` (keyless :func:`init`); its settings are ``name``, the system,
-    ``beta``, then ``settings`` in order."""
+    *parameters)``, ``kernel = build_kernel(system, *structural)``, on ``system`` (keyless
+    :func:`init`); its settings are ``name``, the system, ``beta``, then ``settings`` in order.
+    It declares its :class:`~liesample.samplers.contract.Structure`: ``β`` and the numeric
+    ``parameters`` are traced, so a sweep over them compiles once."""
+    at = _SpinStepper(build_kernel, system, tuple(structural))
+    values = {"beta": beta} | {f"parameter_{i}": value for i, value in enumerate(parameters)}
+    return at(
+        **values,
+        settings=orbit_settings(name, system, beta, **settings),
+        law_groups=orbit_groups(system),
+        structure=Structure(at, values),
+    )
 
-    def init_fn(position, rng_key=None):
-        return init(position, system, rng_key)
 
-    def step_fn(rng_key, state):
-        return kernel(rng_key, state, beta, *parameters)
+@dataclass(frozen=True)
+class _SpinStepper:
+    """What decides a spin sampler's compiled step: its ``build_kernel``, the system and the
+    structural arguments; called with ``beta`` and ``parameter_<i>`` (floats, or traced)."""
 
-    settings = orbit_settings(name, system, beta, **settings)
-    return Sampler(init_fn, step_fn, settings=settings, law_groups=orbit_groups(system))
+    build_kernel: Callable
+    system: SpinLatticeSystem
+    structural: tuple
+
+    def __call__(self, beta, **values) -> Sampler:
+        hooks = {name: values.pop(name) for name in list(values) if not name.startswith("param")}
+        parameters = [values[f"parameter_{i}"] for i in range(len(values))]
+        kernel = self.build_kernel(self.system, *self.structural)
+        system = self.system
+
+        def init_fn(position, rng_key=None):
+            return init(position, system, rng_key)
+
+        def step_fn(rng_key, state):
+            return kernel(rng_key, state, beta, *parameters)
+
+        return Sampler(init_fn, step_fn, **hooks)
 
 
 class Sublattice(NamedTuple):

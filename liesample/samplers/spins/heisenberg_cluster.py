@@ -283,8 +283,9 @@ def as_top_level_api(system: SpinLatticeSystem, *, beta, clusters: str = "all") 
         )
     check_cluster_system(system, "heisenberg_cluster")
     beta = check_cluster_beta(beta, "heisenberg_cluster")
-    kernel = build_kernel(system, clusters)
-    return spin_sampler("heisenberg_cluster", kernel, system, beta, clusters=clusters)
+    return spin_sampler(
+        "heisenberg_cluster", build_kernel, (clusters,), system, beta, clusters=clusters
+    )
 
 
 heisenberg_cluster = sampling_api(

@@ -108,18 +108,27 @@ def as_top_level_api(
     overrelaxation = check_sweeps("overrelaxation", overrelaxation)
     if heat_bath_sweeps + overrelaxation == 0:
         raise ValueError("heat_bath_sweeps + overrelaxation must be >= 1 (a step must move)")
-    kernel = build_kernel(system, heat_bath_sweeps, overrelaxation)
-
     return spin_sampler(
         "heisenberg_heat_bath",
-        kernel,
+        _kernel_at_angle,
+        (heat_bath_sweeps, overrelaxation, precession_angle),
         system,
         beta,
-        precession_angle,
         heat_bath_sweeps=heat_bath_sweeps,
         overrelaxation=overrelaxation,
         precession_angle=precession_angle,
     )
+
+
+def _kernel_at_angle(system, heat_bath_sweeps, overrelaxation, precession_angle):
+    """The kernel of :func:`build_kernel` with the precession angle fixed (a constant of the
+    compiled step, as the draws were made; ``β`` stays traced)."""
+    kernel = build_kernel(system, heat_bath_sweeps, overrelaxation)
+
+    def at_angle(rng_key, state, beta):
+        return kernel(rng_key, state, beta, precession_angle)
+
+    return at_angle
 
 
 heisenberg_heat_bath = sampling_api(

@@ -113,11 +113,10 @@ def as_top_level_api(
     if proposal not in PROPOSALS:
         raise ValueError(f"proposal must be one of {PROPOSALS}, got {proposal!r}")
     proposal_scale = finite_float("proposal_scale", proposal_scale, positive=True)
-    kernel = build_kernel(system, proposal)
-
     return spin_sampler(
         "heisenberg_metropolis",
-        kernel,
+        build_kernel,
+        (proposal,),
         system,
         beta,
         proposal_scale,

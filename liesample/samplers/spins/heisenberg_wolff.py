@@ -55,7 +55,7 @@ def as_top_level_api(system: SpinLatticeSystem, *, beta) -> Sampler:
     """
     check_cluster_system(system, "heisenberg_wolff")
     beta = check_cluster_beta(beta, "heisenberg_wolff")
-    return spin_sampler("heisenberg_wolff", build_kernel(system), system, beta)
+    return spin_sampler("heisenberg_wolff", build_kernel, (), system, beta)
 
 
 heisenberg_wolff = sampling_api(as_top_level_api, init, build_kernel, "heisenberg_wolff", __name__)
