@@ -129,3 +129,22 @@ def test_a_spin_sweep_compiles_at_its_first_point_only():
     assert liesample.heisenberg_metropolis(chain, beta=1.0).structure.build == (
         liesample.heisenberg_metropolis(chain, beta=2.0, proposal_scale=0.3).structure.build
     )
+
+
+def test_a_gauge_sweep_compiles_at_its_first_point_only():
+    """``wilson_heat_bath`` declares its structure, and a lattice is a value: the same lattice
+    built again at another β compiles nothing."""
+    lattice = liesample.systems.wilson_gauge("U1", (4, 4))
+    starts = np.stack([lattice.cold_start()] * 2)
+    first = _sample(liesample.wilson_heat_bath(lattice, beta=0.5), starts, num_warmup=0)
+    again = liesample.systems.wilson_gauge("U1", (4, 4))
+    with counted_compiles() as compiles:
+        second = _sample(liesample.wilson_heat_bath(again, beta=4.0), starts, num_warmup=0)
+    assert compiles.count == 0
+    # each point ran at its own β: the plaquettes order more when it is larger
+    name = next(iter(first.posterior.data_vars))
+    plaquettes = [
+        float(jax.vmap(lattice.mean_plaquette)(t.posterior[name].values[:, -1]).mean())
+        for t in (first, second)
+    ]
+    assert plaquettes[1] > plaquettes[0]

@@ -20,6 +20,7 @@ there is no step size and no discretisation bias.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import jax
@@ -27,7 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from liesample.foundation.validation import finite_float
-from liesample.samplers.contract import BasicInfo, DrawNames, Sampler, sampling_api
+from liesample.samplers.contract import BasicInfo, DrawNames, Sampler, Structure, sampling_api
 from liesample.samplers.gauge._local import (
     quaternion_part,
     su2_from_a0,
@@ -191,13 +192,7 @@ def as_top_level_api(
     overrelaxation = _count("overrelaxation", overrelaxation)
     if heat_bath_sweeps + overrelaxation == 0:
         raise ValueError("heat_bath_sweeps + overrelaxation must be >= 1 (a step must move)")
-    kernel = build_kernel(system, heat_bath_sweeps, overrelaxation)
-
-    def init_fn(position, rng_key=None):
-        return init(position, system, rng_key)
-
-    def step_fn(rng_key, state):
-        return kernel(rng_key, state, beta)
+    at = _Stepper(system, heat_bath_sweeps, overrelaxation)
 
     def check_positions(positions, **_):
         for c in range(np.shape(positions)[0]):
@@ -211,9 +206,36 @@ def as_top_level_api(
         "overrelaxation": overrelaxation,
     }
     names = DrawNames(system.space.draw_name, system.space.draw_dims())
-    return Sampler(
-        init_fn, step_fn, settings=settings, check_positions=check_positions, draw_names=names
+    return at(
+        beta,
+        settings=settings,
+        check_positions=check_positions,
+        draw_names=names,
+        structure=Structure(at, {"beta": beta}),
     )
+
+
+@dataclass(frozen=True)
+class _Stepper:
+    """What decides the compiled step (the :class:`Structure`'s ``build``): the system (a value:
+    equal lattices are one structure) and the sweep counts; called with ``beta`` (a float, or
+    traced), the sampler with ``hooks``."""
+
+    system: WilsonGauge
+    heat_bath_sweeps: int
+    overrelaxation: int
+
+    def __call__(self, beta, **hooks) -> Sampler:
+        system = self.system
+        kernel = build_kernel(system, self.heat_bath_sweeps, self.overrelaxation)
+
+        def init_fn(position, rng_key=None):
+            return init(position, system, rng_key)
+
+        def step_fn(rng_key, state):
+            return kernel(rng_key, state, beta)
+
+        return Sampler(init_fn, step_fn, **hooks)
 
 
 wilson_heat_bath = sampling_api(as_top_level_api, init, build_kernel, "wilson_heat_bath", __name__)
