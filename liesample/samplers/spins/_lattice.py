@@ -115,7 +115,7 @@ def spin_sampler(
     :func:`init`); its settings are ``name``, the system, ``beta``, then ``settings`` in order.
     It declares its :class:`~liesample.samplers.contract.Structure`: ``β`` and the numeric
     ``parameters`` are traced, so a sweep over them compiles once."""
-    at = _SpinStepper(build_kernel, system, tuple(structural))
+    at = _SpinStepper(build_kernel, system, tuple(structural), len(parameters))
     values = {"beta": beta} | {f"parameter_{i}": value for i, value in enumerate(parameters)}
     return at(
         **values,
@@ -127,16 +127,19 @@ def spin_sampler(
 
 @dataclass(frozen=True)
 class _SpinStepper:
-    """What decides a spin sampler's compiled step: its ``build_kernel``, the system and the
-    structural arguments; called with ``beta`` and ``parameter_<i>`` (floats, or traced)."""
+    """What decides a spin sampler's compiled step: its ``build_kernel``, the system, the
+    structural arguments and how many numeric parameters the kernel takes after ``beta``;
+    called with ``beta`` and ``parameter_0 …`` (floats, or traced), the sampler with
+    ``hooks``."""
 
     build_kernel: Callable
     system: SpinLatticeSystem
     structural: tuple
+    num_parameters: int
 
     def __call__(self, beta, **values) -> Sampler:
-        hooks = {name: values.pop(name) for name in list(values) if not name.startswith("param")}
-        parameters = [values[f"parameter_{i}"] for i in range(len(values))]
+        parameters = [values.pop(f"parameter_{i}") for i in range(self.num_parameters)]
+        hooks = values
         kernel = self.build_kernel(self.system, *self.structural)
         system = self.system
 
