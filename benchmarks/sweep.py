@@ -21,7 +21,25 @@ from pathlib import Path
 SUITE = {"order": 6, "title": "Compile once per structure: a β sweep"}
 
 ROOT = Path(__file__).resolve().parents[1]
-CASES = ("lie_poisson_langevin", "adjusted_lie_poisson")
+# sampler -> the model it sweeps: the rigid body, or a periodic Heisenberg chain of 32 spins
+CASES = {
+    "lie_poisson_langevin": "rigid body",
+    "adjusted_lie_poisson": "rigid body",
+    "heisenberg_heat_bath": "spin chain",
+}
+
+
+def _model(name: str):
+    """``(system, starts of 4 chains)`` of a model of :data:`CASES`."""
+    import numpy as np
+
+    import liesample
+
+    if name == "spin chain":
+        system = liesample.systems.heisenberg((32,), coupling=1.0, periodic=True)
+        return system, np.tile(system.default_position, (4, 1, 1))
+    system = liesample.systems.rigid_body((1.0, 2.0, 4.0))
+    return system, np.tile(np.array([0.9, 1.2, 0.0]), (4, 1))
 
 
 def _measure(sampler_name: str, num_points: int, quick: bool) -> dict:
@@ -36,8 +54,7 @@ def _measure(sampler_name: str, num_points: int, quick: bool) -> dict:
 
     import liesample
 
-    system = liesample.systems.rigid_body((1.0, 2.0, 4.0))
-    starts = np.tile(np.array([0.9, 1.2, 0.0]), (4, 1))
+    system, starts = _model(CASES[sampler_name])
     draws, warmup = (200, 100) if quick else (2000, 500)
     build = getattr(liesample, sampler_name)
     seconds = []
@@ -50,7 +67,8 @@ def _measure(sampler_name: str, num_points: int, quick: bool) -> dict:
                 num_warmup=warmup, progress_bar=False,
             )  # fmt: skip
         seconds.append(time.perf_counter() - begin)
-    return {"sampler": sampler_name, "num_points": num_points, "seconds": seconds,
+    return {"sampler": sampler_name, "model": CASES[sampler_name], "num_points": num_points,
+            "seconds": seconds,
             "draws": draws, "num_warmup": warmup, "chains": len(starts)}  # fmt: skip
 
 
@@ -87,23 +105,24 @@ def report(out_dir: Path, md_dir: Path) -> str:
         f"## {SUITE['title']}",
         "",
         "A sweep over β builds a new sampler at every point and calls `liesample.sample` on it "
-        "(rigid body, 4 chains, the sampler's own warm-up); a sampler that declares a structure "
+        "(4 chains, the sampler's own warm-up); a sampler that declares a structure "
         "is compiled at the first point only. Wall seconds, each configuration in a fresh "
         "interpreter (`benchmarks/sweep.py`).",
         "",
         f"Machine: {machine['cpu_model']}, {machine['usable_cpus']} CPUs, jax {machine['jax']}"
         f"{' (quick mode)' if data.get('quick') else ''}.",
         "",
-        "| sampler | draws × chains | one point (s) | ten points (s) | first point of ten (s) "
-        "| each later point (s, mean) | ten over one |",
-        "|---|---:|---:|---:|---:|---:|---:|",
+        "| sampler | model | draws × chains | one point (s) | ten points (s) | first point of "
+        "ten (s) | each later point (s, mean) | ten over one |",
+        "|---|---|---:|---:|---:|---:|---:|---:|",
     ]
     for row in data["rows"]:
         one, ten = row["one_point"], row["ten_points"]
         total = sum(ten["seconds"])
         later = ten["seconds"][1:]
         lines.append(
-            f"| `{row['sampler']}` | {ten['draws']} × {ten['chains']} | {one['seconds'][0]:.2f} "
+            f"| `{row['sampler']}` | {ten.get('model', 'rigid body')} | {ten['draws']} × "
+            f"{ten['chains']} | {one['seconds'][0]:.2f} "
             f"| {total:.2f} | {ten['seconds'][0]:.2f} | {sum(later) / len(later):.3f} "
             f"| {total / one['seconds'][0]:.2f} |"
         )
