@@ -3,6 +3,15 @@
 One module per family of laws; everything public is re-exported here.
 """
 
+from liesample.targets.gauge import (
+    single_plaquette_mean,
+    su2_torus_plaquette_mean,
+    su3_torus_plaquette_mean,
+    sun_character_coefficients,
+    sun_torus_plaquette_mean,
+    u1_torus_charge_law,
+    u1_torus_plaquette_mean,
+)
 from liesample.targets.gaussian import (
     Gaussian,
     correlated_gaussian,
@@ -10,6 +19,15 @@ from liesample.targets.gaussian import (
     ou_cross_covariance,
     ou_drift,
     ou_stationary_covariance,
+)
+from liesample.targets.groups import (
+    MatrixFisherLaw,
+    VonMisesFisherLaw,
+    VonMisesFisherPosterior,
+    quaternion_to_rotation,
+    su2_plaquette_mean,
+    u1_plaquette_mean,
+    vmf_mean_resultant_length,
 )
 from liesample.targets.orbits import (
     HeavyTopGibbs,
@@ -31,12 +49,22 @@ from liesample.targets.vortices import (
     check_vortex_beta,
     gibbs_expectation,
 )
+from liesample.targets.zeitlin import (
+    UnitaryOrbitLaw,
+    dipole_gibbs_moments,
+    haar_unitaries,
+    uniform_orbit_energy_spectrum,
+)
 
 __all__ = [
     "Gaussian",
     "HeavyTopGibbs",
     "HeisenbergChainReference",
+    "MatrixFisherLaw",
     "RestrictedGaussian",
+    "UnitaryOrbitLaw",
+    "VonMisesFisherLaw",
+    "VonMisesFisherPosterior",
     "VortexPairLaw",
     "beta_bounds",
     "bingham_log_normalizer",
@@ -44,7 +72,9 @@ __all__ = [
     "bingham_second_moments",
     "check_vortex_beta",
     "correlated_gaussian",
+    "dipole_gibbs_moments",
     "gibbs_expectation",
+    "haar_unitaries",
     "heisenberg_chain_correlation",
     "isotropic_autocorrelation",
     "langevin_function",
@@ -52,5 +82,17 @@ __all__ = [
     "ou_cross_covariance",
     "ou_drift",
     "ou_stationary_covariance",
+    "quaternion_to_rotation",
     "sample_bingham",
+    "single_plaquette_mean",
+    "su2_plaquette_mean",
+    "su2_torus_plaquette_mean",
+    "su3_torus_plaquette_mean",
+    "sun_character_coefficients",
+    "sun_torus_plaquette_mean",
+    "u1_plaquette_mean",
+    "u1_torus_charge_law",
+    "u1_torus_plaquette_mean",
+    "uniform_orbit_energy_spectrum",
+    "vmf_mean_resultant_length",
 ]
