@@ -35,6 +35,7 @@ from liesample.samplers.gauge._local import (
     su2_heat_bath_a0,
     von_mises,
 )
+from liesample.samplers.orbit._starts import plain_init_fn
 from liesample.systems.wilson_gauge import WilsonGauge
 
 __all__ = ["GaugeState", "as_top_level_api", "build_kernel", "init", "wilson_heat_bath"]
@@ -226,16 +227,12 @@ class _Stepper:
     overrelaxation: int
 
     def __call__(self, beta, **hooks) -> Sampler:
-        system = self.system
-        kernel = build_kernel(system, self.heat_bath_sweeps, self.overrelaxation)
-
-        def init_fn(position, rng_key=None):
-            return init(position, system, rng_key)
+        kernel = build_kernel(self.system, self.heat_bath_sweeps, self.overrelaxation)
 
         def step_fn(rng_key, state):
             return kernel(rng_key, state, beta)
 
-        return Sampler(init_fn, step_fn, **hooks)
+        return Sampler(plain_init_fn(init, self.system), step_fn, **hooks)
 
 
 wilson_heat_bath = sampling_api(as_top_level_api, init, build_kernel, "wilson_heat_bath", __name__)

@@ -38,7 +38,7 @@ import numpy as np
 from liesample.foundation.validation import finite_float
 from liesample.geometry.algebras import so3
 from liesample.samplers.contract import BasicInfo, Sampler, Structure
-from liesample.samplers.orbit._starts import orbit_groups, orbit_settings
+from liesample.samplers.orbit._starts import orbit_groups, orbit_settings, plain_init_fn
 from liesample.systems.heisenberg import (
     SpinLatticeSystem,
     colouring,
@@ -137,19 +137,14 @@ class _SpinStepper:
     structural: tuple
     num_parameters: int
 
-    def __call__(self, beta, **values) -> Sampler:
-        parameters = [values.pop(f"parameter_{i}") for i in range(self.num_parameters)]
-        hooks = values
+    def __call__(self, beta, **hooks) -> Sampler:
+        parameters = [hooks.pop(f"parameter_{i}") for i in range(self.num_parameters)]
         kernel = self.build_kernel(self.system, *self.structural)
-        system = self.system
-
-        def init_fn(position, rng_key=None):
-            return init(position, system, rng_key)
 
         def step_fn(rng_key, state):
             return kernel(rng_key, state, beta, *parameters)
 
-        return Sampler(init_fn, step_fn, **hooks)
+        return Sampler(plain_init_fn(init, self.system), step_fn, **hooks)
 
 
 class Sublattice(NamedTuple):
