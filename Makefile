@@ -12,8 +12,10 @@ check-python:
 	@test -n "$(PYTHON)" || { echo "error: Python >= 3.12 not found (tried: $(PY_CANDIDATES))"; exit 1; }
 
 # uv (from PyPI, into the venv) installs the dependencies: many times faster than pip on a
-# fresh machine, where downloads dominate.
-INSTALL := $(BIN)/uv pip install -q --python $(BIN)/python
+# fresh machine, where downloads dominate. It compiles their bytecode at install time, so that a
+# machine that never writes it (PYTHONDONTWRITEBYTECODE) does not recompile jax, scipy and
+# ArviZ from source in every process (each test worker and subprocess: seconds each).
+INSTALL := $(BIN)/uv pip install -q --compile-bytecode --python $(BIN)/python
 
 $(BIN)/uv: | check-python
 	$(PYTHON) -m venv $(VENV)
@@ -48,7 +50,7 @@ $(VENV_OLDEST)/bin/.installed-test: pyproject.toml | check-python
 	rm -rf $(VENV_OLDEST)  # afresh: a kept newer version would hide a floor
 	$(PYTHON) -m venv $(VENV_OLDEST)
 	$(VENV_OLDEST)/bin/pip install -q --disable-pip-version-check uv
-	$(VENV_OLDEST)/bin/uv pip install -q --python $(VENV_OLDEST)/bin/python \
+	$(VENV_OLDEST)/bin/uv pip install -q --compile-bytecode --python $(VENV_OLDEST)/bin/python \
 		--resolution lowest-direct -e '.[test]'
 	touch $@
 

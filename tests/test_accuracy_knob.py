@@ -108,7 +108,10 @@ def test_coupled_levels_share_one_brownian_path():
 
 
 def test_parameter_checks():
-    starts = np.asarray(RestrictedGaussian(INERTIA, BETA, RADIUS).sample(jax.random.key(0), 4))
+    # Four exact draws; drawn as test_coupled_levels_share_one_brownian_path draws its 64, so
+    # the sampler (compiled per number of draws) is compiled once for both.
+    draws = RestrictedGaussian(INERTIA, BETA, RADIUS).sample(jax.random.key(0), 64)
+    starts = np.asarray(draws)[:4]
     common = {"observables": squares, "initial_positions": starts, "rng_key": jax.random.key(0)}
     with pytest.raises(ValueError, match="tolerance must be > 0"):
         accuracy.choose_step_size(BODY, BETA, 0.0, **common)

@@ -73,8 +73,12 @@ def test_blackjax_shape():
     "system, position",
     [
         (RIGID, MU0),
-        (TOP, HT_MU0),
-        (heisenberg((5,)), np.tile(np.array([0.0, 0.6, 0.8]), (5, 1))),
+        # The involution is one code path for every LiePoissonSystem: the rigid body runs by
+        # default, the heavy top (se(3)*) and a spin chain (a product of so(3)*) in test-slow.
+        pytest.param(TOP, HT_MU0, marks=pytest.mark.slow),
+        pytest.param(
+            heisenberg((5,)), np.tile(np.array([0.0, 0.6, 0.8]), (5, 1)), marks=pytest.mark.slow
+        ),
     ],
     ids=["rigid body", "heavy top", "spin chain"],
 )

@@ -132,28 +132,53 @@ def product_target(names):
     return space, logdensity, observables, np.concatenate([BLOCKS[k][2]() for k in names])
 
 
-def _dispersed_starts(space, key):
-    batched = {k: type(v)(v.n, shape=(NUM_CHAINS,)) for k, v in space.items() if k != "x"}
-    starts = S.uniform(batched, key)
+def _haar(space, rng):
+    """``NUM_CHAINS`` Haar draws on a sphere, SO(n) or SU(n), by the QR algorithm of
+    ``S.uniform``, in NumPy: run eagerly in JAX, the QR draws of SO(3), SO(4) and SU(3) cost
+    ~3.5 s of CPU in compiles of their small programs, more than the chains they start."""
+    n = space.n
+    if isinstance(space, S.Sphere):
+        z = rng.standard_normal((NUM_CHAINS, n + 1))
+        return z / np.linalg.norm(z, axis=-1, keepdims=True)
+    z = rng.standard_normal((NUM_CHAINS, n, n))
+    if isinstance(space, S.SU):
+        z = z + 1j * rng.standard_normal((NUM_CHAINS, n, n))
+    q, r = np.linalg.qr(z)
+    d = np.diagonal(r, axis1=-2, axis2=-1)
+    q = q * (d / np.abs(d))[..., None, :]  # Haar on O(n) or U(n)
+    det = np.linalg.det(q)
+    if isinstance(space, S.SU):
+        return q / (det ** (1.0 / n))[..., None, None]  # Haar on SU(n)
+    return np.where((det < 0)[..., None, None], q * np.r_[-1.0, np.ones(n - 1)], q)  # SO(n)
+
+
+def _dispersed_starts(space, seed):
+    rng = np.random.default_rng(seed)
+    starts = {k: jnp.asarray(_haar(v, rng)) for k, v in space.items() if k != "x"}
     starts["x"] = jnp.zeros((NUM_CHAINS, 2))
+    S.check_position({k: type(v)(v.n, shape=(NUM_CHAINS,)) for k, v in space.items()
+                      if k != "x"}, {k: v for k, v in starts.items() if k != "x"})  # fmt: skip
     return starts
 
 
 def test_hmc_on_spheres_rotations_and_r2_matches_exact_moments():
     space, logdensity, observables, exact = product_target(list(PRODUCT))
     sampler = liesample.geometric_hmc(logdensity, space, step_size=0.25, num_integration_steps=6)
-    starts = _dispersed_starts(space, jax.random.key(1))
+    starts = _dispersed_starts(space, 1)
     means, acceptance = chain_means(sampler, jax.random.key(0), starts, 1000, observables)
     assert 0.6 < acceptance.mean() < 1.0
     assert_within_mcse(means, exact)
 
 
+@pytest.mark.slow  # default sibling: the "adjusted langevin" case of
+# test_a_magnetic_field_and_a_dense_mass_on_the_euclidean_block_keep_the_exact_law (the adjusted
+# chain's exact law on S² × R²; the SO(3) blocks' flow by test_hmc_on_spheres_rotations_and_r2_...)
 def test_adjusted_langevin_matches_exact_moments():
     space, logdensity, observables, exact = product_target(["s2", "fisher", "x"])
     sampler = liesample.geometric_langevin(
         logdensity, space, step_size=0.25, friction=1.0, adjusted=True
     )
-    starts = _dispersed_starts(space, jax.random.key(3))
+    starts = _dispersed_starts(space, 3)
     means, acceptance = chain_means(sampler, jax.random.key(2), starts, 3000, observables)
     assert 0.8 < acceptance.mean() < 1.0
     assert_within_mcse(means, exact)
@@ -165,7 +190,16 @@ FIELD_X = np.array([[0.0, 2.0], [-2.0, 0.0]])  # on the two coordinates of "x"
 DENSE_X = np.array([[0.25, 0.3], [0.3, 4.0]])
 
 
-@pytest.mark.parametrize("which", ["hmc", "adjusted langevin"])
+@pytest.mark.parametrize(
+    "which",
+    [
+        # default siblings of "hmc": test_magnetic_hmc_is_geometric_hmc_on_a_euclidean_space
+        # (the field and a dense mass, key for key magnetic_hmc) with test_magnetic.py's exact
+        # moments of magnetic_hmc under a strong field and a dense mass
+        pytest.param("hmc", marks=pytest.mark.slow),
+        "adjusted langevin",
+    ],
+)
 def test_a_magnetic_field_and_a_dense_mass_on_the_euclidean_block_keep_the_exact_law(which):
     """``G`` on R² (next to S²) changes the dynamics, not the law: exact moments within 5 MCSE."""
     space, logdensity, observables, exact = product_target(["s2", "x"])
@@ -176,7 +210,7 @@ def test_a_magnetic_field_and_a_dense_mass_on_the_euclidean_block_keep_the_exact
         sampler = liesample.geometric_langevin(
             logdensity, space, 0.3, 1.0, mass, FIELD_X, adjusted=True
         )
-    starts = _dispersed_starts(space, jax.random.key(13))
+    starts = _dispersed_starts(space, 13)
     means, acceptance = chain_means(sampler, jax.random.key(14), starts, 1500, observables)
     assert 0.6 < acceptance.mean() < 1.0
     assert_within_mcse(means, exact)
@@ -275,8 +309,9 @@ def lattice_logdensity(p):
 
 @pytest.mark.slow  # a long statistical run
 def test_hmc_on_2d_u1_and_su2_lattice_gauge_theories_matches_bessel_ratios():
-    sampler = liesample.geometric_hmc(lattice_logdensity, LATTICE, step_size=0.2,
-                                      num_integration_steps=8)
+    sampler = liesample.geometric_hmc(
+        lattice_logdensity, LATTICE, step_size=0.2, num_integration_steps=8
+    )
     batched = jax.tree.map(
         lambda s: type(s)(*([s.n] if hasattr(s, "n") else []), shape=(NUM_CHAINS, *s.shape)),
         LATTICE,
@@ -297,6 +332,9 @@ def test_hmc_on_2d_u1_and_su2_lattice_gauge_theories_matches_bessel_ratios():
 # --------------------------------------------------------------------------- a posterior
 
 
+@pytest.mark.slow  # default sibling: test_multichain_workflow.py's
+# test_window_adaptation_adapts_a_batch_of_starts_and_hands_them_on (window adaptation of
+# geometric HMC on S² × R², then the tuned sampler's exact law)
 def test_window_adaptation_then_hmc_on_a_vmf_posterior_over_direction_and_log_concentration():
     data = vonmises_fisher(MU2, 5.0).rvs(20, random_state=np.random.default_rng(1))
     posterior = VonMisesFisherPosterior(data, prior_mean=1.0, prior_sd=1.0)
@@ -329,11 +367,16 @@ def test_blackjax_driver_info_contract_and_divergences_are_rejected():
 
     sampler = liesample.geometric_hmc(logdensity, space, step_size=0.7, num_integration_steps=5)
     _, (positions, infos) = blackjax.util.run_inference_algorithm(
-        jax.random.key(8), sampler, num_steps=300, initial_position=jnp.array([0.0, 0.0, 1.0]),
+        jax.random.key(8),
+        sampler,
+        num_steps=300,
+        initial_position=jnp.array([0.0, 0.0, 1.0]),
         transform=lambda state, info: (state.position, info),
     )
     assert set(liesample.samplers.cotangent._core.GeometricInfo._fields) >= {
-        "acceptance_rate", "is_divergent", "energy"
+        "acceptance_rate",
+        "is_divergent",
+        "energy",
     }
     assert np.all(np.isfinite(positions)) and np.all(positions[:, 2] > -0.2)
     divergent = np.asarray(infos.is_divergent)
@@ -343,7 +386,10 @@ def test_blackjax_driver_info_contract_and_divergences_are_rejected():
     # Unadjusted Langevin: acceptance_rate is 1 for a step taken, 0 for a rejected one.
     langevin = liesample.geometric_langevin(logdensity, space, step_size=0.7, friction=0.2)
     _, infos = blackjax.util.run_inference_algorithm(
-        jax.random.key(9), langevin, num_steps=300, initial_position=jnp.array([0.0, 0.0, 1.0]),
+        jax.random.key(9),
+        langevin,
+        num_steps=300,
+        initial_position=jnp.array([0.0, 0.0, 1.0]),
         transform=lambda state, info: info,
     )
     rate = np.asarray(infos.acceptance_rate)
@@ -371,8 +417,12 @@ def test_unadjusted_langevin_bias_is_second_order_in_the_step():
     for h in steps:
         sampler = liesample.geometric_langevin(logdensity, space, step_size=h, friction=1.0)
         means, _ = chain_means(
-            sampler, jax.random.key(11), starts, round(16000 / h),
-            lambda x: jnp.dot(MU2, x)[None], burn_in=500,
+            sampler,
+            jax.random.key(11),
+            starts,
+            round(16000 / h),
+            lambda x: jnp.dot(MU2, x)[None],
+            burn_in=500,
         )
         errors.append(means[:, 0] - exact)
     errors = np.stack(errors)
@@ -418,8 +468,13 @@ def test_window_adaptation_refuses_bad_parameters():
     with pytest.raises(TypeError, match="initial_step_size"):
         window_adaptation(liesample.geometric_hmc, logdensity, space, step_size=0.1)
     with pytest.raises(ValueError, match="not both"):
-        window_adaptation(liesample.geometric_hmc, logdensity, space, num_integration_steps=3,
-                          integration_time=1.0)
+        window_adaptation(
+            liesample.geometric_hmc,
+            logdensity,
+            space,
+            num_integration_steps=3,
+            integration_time=1.0,
+        )
     with pytest.raises(ValueError, match="HMC parameters"):
         window_adaptation(liesample.geometric_langevin, logdensity, space, integration_time=1.0)
     with pytest.raises(TypeError, match="unknown parameters"):

@@ -171,7 +171,11 @@ def run_chains(algorithm, position, num_chains, num_draws, seed, num_warmup=200)
     "label, strength, options, dense",
     [
         ("G = 0", 0.0, {}, False),
-        ("strong G", 3.0, {}, False),
+        # default siblings: the two other strong-G cases here (persistent sign with a partial
+        # refresh and a dense M; a full refresh with sign flips on acceptance) and, for this
+        # persistent full-refresh chain, test_schemes.py's magnetic_hmc-minimal_norm case and
+        # test_adaptation_magnetic.py's exact moments of the adapted jittered sampler
+        pytest.param("strong G", 3.0, {}, False, marks=pytest.mark.slow),
         ("strong G, partial refresh, dense M", 3.0, {"momentum_persistence": 0.6}, True),
         ("strong G, sign flips on acceptance", 3.0, {"persistent": False}, False),
     ],

@@ -59,33 +59,32 @@ def test_window_adaptation_adapts_a_batch_of_starts_and_hands_them_on():
     check_exact(tree)
 
 
-def test_one_start_keeps_the_single_chain_warm_up():
-    """One start still gives one chain's state (the BlackJAX shape)."""
+@pytest.fixture(scope="module")
+def one_chain_warm_up():
+    """``window_adaptation(...).run`` from one start (no chain axis), 400 steps: compiled once
+    for the two tests below."""
     warmup = liesample.window_adaptation(liesample.geometric_hmc, logdensity, SPACE)
     one = jax.tree.map(lambda leaf: leaf[0], starts(1))
-    (state, _), info = warmup.run(jax.random.key(1), one, 100)
+    return warmup.run(jax.random.key(1), one, 400)
+
+
+def test_one_start_keeps_the_single_chain_warm_up(one_chain_warm_up):
+    """One start still gives one chain's state (the BlackJAX shape)."""
+    (state, _), info = one_chain_warm_up
     assert state.position["x"].shape == (2,)
-    assert info.info.acceptance_rate.shape == (100,)
+    assert state.position["mu"].shape == (3,)
+    assert info.info.acceptance_rate.shape == (400,)
 
 
-def test_adapt_on_one_chain_then_sample_fresh_chains_by_default():
+def test_adapt_on_one_chain_then_sample_fresh_chains_by_default(one_chain_warm_up):
     """The trap: tune on one chain, then sample 4 fresh chains from arbitrary starts. The
     default warm-up of ``liesample.sample`` forgets the starts, and the sd is exact."""
-    warmup = liesample.window_adaptation(liesample.geometric_hmc, logdensity, SPACE)
-    one = jax.tree.map(lambda leaf: leaf[0], starts(1))
-    (_, parameters), _ = warmup.run(jax.random.key(1), one, 400)
+    (_, parameters), _ = one_chain_warm_up
     sampler = liesample.geometric_hmc(logdensity, SPACE, **parameters)
     tree = liesample.sample(sampler, jax.random.key(3), starts(4, seed=7), 1000,
                             progress_bar=False)  # fmt: skip
     assert tree.attrs["num_warmup"] == 1000
     check_exact(tree)
-
-
-def test_no_warm_up_from_arbitrary_starts_warns():
-    """``num_warmup=0`` keeps the starts in the draws: it warns unless the starts are exact."""
-    sampler = liesample.geometric_hmc(logdensity, SPACE, 0.01, 3)
-    with pytest.warns(UserWarning, match="num_warmup=0"):
-        liesample.sample(sampler, jax.random.key(3), starts(2), 5, num_warmup=0, progress_bar=False)
 
 
 def test_draw_names_come_from_the_space_and_are_checked_before_sampling():
@@ -94,7 +93,9 @@ def test_draw_names_come_from_the_space_and_are_checked_before_sampling():
     space = liesample.spaces.SO(3)
     sampler = liesample.geometric_hmc(lambda r: 3.0 * jnp.trace(r), space, 0.2, 3)
     rotations = jnp.stack([jnp.eye(3)] * 2)
-    tree = liesample.sample(sampler, jax.random.key(0), rotations, 4, progress_bar=False)
+    with pytest.warns(UserWarning, match="num_warmup=0"):  # no warm-up program: names only
+        tree = liesample.sample(sampler, jax.random.key(0), rotations, 4, num_warmup=0,
+                                progress_bar=False)  # fmt: skip
     assert tree.posterior["R"].dims == ("chain", "draw", "row", "col")
     calls = []
     counting = liesample.samplers.contract.Sampler(
@@ -132,14 +133,27 @@ def test_sample_tunes_a_geometric_hmc_built_without_a_step():
     assert mass[1] / mass[0] > 1e3  # the pooled variances, 1e8 apart (the small one shrunk)
 
 
+# One sampler with a given step for the two tests below (its programs compiled once).
+GIVEN = liesample.geometric_hmc(scaled_logdensity, Euclidean((2,)), 5e-4, 3)
+
+
+def test_no_warm_up_from_arbitrary_starts_warns():
+    """``num_warmup=0`` keeps the starts in the draws: it warns unless the starts are exact."""
+    arbitrary = jnp.array([[0.5, -3.0], [-0.2, 4.0]])
+    with pytest.warns(UserWarning, match="num_warmup=0"):
+        liesample.sample(GIVEN, jax.random.key(3), arbitrary, 5, num_warmup=0, progress_bar=False)
+
+
 def test_a_given_step_is_kept_and_an_unset_one_needs_a_warm_up():
     """A step given to the factory is kept (no warm-up: exactly as given); one left unset
     cannot be sampled without a warm-up, and says so."""
     x0 = jnp.zeros((2, 2))
-    given = liesample.geometric_hmc(scaled_logdensity, Euclidean((2,)), 5e-4, 3)
-    with pytest.warns(UserWarning, match="convergence checks"):  # 5 draws
+    given = GIVEN
+    with pytest.warns(UserWarning, match="convergence checks") as caught:  # 5 draws
         tree = liesample.sample(given, jax.random.key(1), x0, 5, num_warmup=0,
                                 exact_starts=True, progress_bar=False)  # fmt: skip
+    # exact starts: no warning that the starts are kept (test_no_warm_up_from_arbitrary_starts)
+    assert not [w for w in caught if "num_warmup=0" in str(w.message)]
     attrs = tree.posterior.attrs
     assert attrs["step_size"] == 5e-4 and attrs["step_size_source"] == "given"
     assert attrs["adapted"] == 0 and "adapted_parameters" not in attrs

@@ -312,8 +312,29 @@ def test_dense_mass_on_a_manifold_site_is_refused_by_name_in_init():
         init(dense_mass=[("a", "c")])
     with pytest.raises(ValueError, match="dense_mass names the site 'a' in two groups"):
         init(dense_mass=[("a",), ("a", "b")])
-    with pytest.raises(TypeError, match="dense_mass must be a bool or a list of tuples"):
+    with pytest.raises(TypeError, match="dense_mass must be 'auto', a bool or a list of tuples"):
         GeometricHMC(correlated_sites_model, dense_mass="a")
+
+
+def test_auto_dense_mass_joins_the_euclidean_sites_when_the_warm_up_can_estimate_it():
+    """The default ``dense_mass="auto"``: one dense block over the ``Euclidean`` sites (the
+    sphere site keeps its own) when the warm-up has ``AUTO_DENSE_WARMUP_PER_DIMENSION``
+    iterations per coordinate; diagonal with a shorter warm-up or a given mass."""
+    from liesample.interop.numpyro_kernel import AUTO_DENSE_WARMUP_PER_DIMENSION
+
+    def masses(num_warmup, **kwargs):
+        kernel = GeometricHMC(correlated_sites_model, **kwargs)
+        state = kernel.init(jax.random.key(0), num_warmup, None, (), {})
+        return state.adapt_state.inverse_mass_matrix
+
+    enough = 2 * AUTO_DENSE_WARMUP_PER_DIMENSION
+    dense = masses(enough)
+    assert set(dense) == {("a", "b"), ("mu",)}
+    assert np.shape(dense[("a", "b")]) == (2, 2)
+    assert set(masses(enough - 1)) == {("a",), ("b",), ("mu",)}
+    assert set(masses(enough, dense_mass=False)) == {("a",), ("b",), ("mu",)}
+    given = {"a": 1.0, "b": 1.0, "mu": 1.0}
+    assert set(masses(enough, inverse_mass_matrix=given)) == {("a",), ("b",), ("mu",)}
 
 
 def test_numpyro_keywords_out_of_reach_are_refused_naming_what_is_allowed():

@@ -111,19 +111,26 @@ def test_closed_form_dissipation_is_minus_the_off_diagonal_all_modes_kernel():
     def kernel(a, b):
         return -jnp.log(1.0 - a @ b / (jnp.linalg.norm(a) * jnp.linalg.norm(b))) / (4 * jnp.pi)
 
-    mixed = jax.jacfwd(jax.grad(kernel, argnums=1), argnums=0)  # [m, l] = ∂_{b_m} ∂_{a_l}
+    # [m, l] = ∂_{b_m} ∂_{a_l}, for every pair (i, k) in one compiled call (not op by op)
+    mixed = liesample.jit(
+        jax.vmap(jax.vmap(jax.jacfwd(jax.grad(kernel, argnums=1), argnums=0), (None, 0)), (0, None))
+    )(x, x)
     u = np.asarray(vortex_velocity(x, gamma))
     derived = np.zeros_like(x)
     for i in range(4):
         for k in range(4):
             if k != i:
-                derived[i] -= gamma[k] * np.cross(x[i], np.asarray(mixed(x[i], x[k])).T @ u[k])
+                derived[i] -= gamma[k] * np.cross(x[i], np.asarray(mixed[i, k]).T @ u[k])
     np.testing.assert_allclose(all_modes_dissipation(x, gamma), -derived, atol=1e-14)
     # it lowers h at random configurations, as the paper's figure shows
     system = point_vortices(gamma, max_degree=2)
-    for seed in range(5):
-        y = uniform_sphere_points(jax.random.key(10 + seed), (4,))
-        assert float(jnp.sum(jax.grad(system.hamiltonian)(y) * all_modes_dissipation(y, gamma))) < 0
+    ys = jnp.stack([uniform_sphere_points(jax.random.key(10 + seed), (4,)) for seed in range(5)])
+    rates = liesample.jit(
+        jax.vmap(
+            lambda y: jnp.sum(jax.grad(system.hamiltonian)(y) * all_modes_dissipation(y, gamma))
+        )
+    )(ys)
+    assert np.all(np.asarray(rates) < 0), rates
 
 
 # --------------------------------------------------------------------------- exact references
@@ -470,8 +477,13 @@ def test_one_transport_mode_equals_its_column_with_its_gradient(max_degree, dtyp
         ]
     ).astype(dtype)
     weights = jnp.linspace(-1.0, 2.0, x.shape[0], dtype=dtype)
-    columns = transport_modes(x, max_degree)
-    every = liesample.jit(jax.jacrev(lambda y: weights @ transport_modes(y, max_degree)))(x)
+    # all columns and their gradients in one compiled call (not op by op)
+    columns, every = liesample.jit(
+        lambda y: (
+            transport_modes(y, max_degree),
+            jax.jacrev(lambda z: weights @ transport_modes(z, max_degree))(y),
+        )
+    )(x)
 
     @liesample.jit
     def one(index):

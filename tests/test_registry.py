@@ -5,9 +5,10 @@ For each sampler row (a new sampler is one new row there):
 - the Info contract: the ``info`` of each of a few steps passes ``check_info``, one scalar per
   field and step, ``is_divergent`` a bool (false from a good start), ``acceptance_rate`` in
   [0, 1], ``energy`` finite;
-- the batched-step guard: steps vmapped over the chains and compiled by ``liesample.jit`` give
-  each chain its single-chain steps to round-off (the runner and every statistical test rely on
-  it; an XLA:CPU miscompile once broke it, ``tests/stability/test_stability.py``);
+- the batched-step guard: steps vmapped over the chains and compiled by ``liesample.jit`` (the
+  runner's own chunk program, whose draws the other tests also read) give each chain its
+  single-chain steps to round-off (the runner and every statistical test rely on it; an XLA:CPU
+  miscompile once broke it, ``tests/stability/test_stability.py``);
 - array and pytree positions through ``liesample.sample``: one posterior variable per leaf with
   dims ``(chain, draw, …)`` (complex leaves split into ``.real`` and ``.imag``), holding the
   draws of ``sample_chains``, and the contract's fields in ``sample_stats``;
@@ -22,12 +23,12 @@ import numpy as np
 import pytest
 
 import liesample
+from liesample.integrators.chain_loop import run_steps
 from liesample.samplers.contract import CONTRACT_FIELDS, check_info, energy_name
 
 KEY = jax.random.key(17)
-NUM_DRAWS = 6
-CHUNK_DRAWS = 2
-GUARD_STEPS = 10
+NUM_DRAWS = 10  # also the steps of the batched-step guard
+CHUNK_DRAWS = 5  # one chunk length: the run, the saved run and its resume share one program
 
 SAMPLERS = {case.name: case for case in cases.SAMPLERS}
 
@@ -79,54 +80,59 @@ def test_the_registry_lists_every_public_sampler_and_system_once():
 # --------------------------------------------------------------------------- steps
 
 
-def _steps(sampler):
-    """``GUARD_STEPS`` steps of one chain, step ``k`` keyed ``fold_in(key, k)``: the final
-    position and every step's info."""
-
-    def steps(key, state):
-        def one(state, index):
-            return sampler.step(jax.random.fold_in(key, index), state)
-
-        state, infos = jax.lax.scan(one, state, jnp.arange(GUARD_STEPS))
-        return state.position, infos
-
-    return steps
-
-
-GUARD_KEYS = jax.random.split(jax.random.key(1), cases.NUM_CHAINS)
-
-
 @pytest.fixture(scope="module")
 def single_chains(case, sampler):
-    """Each chain's steps, compiled alone by ``liesample.jit``."""
-    steps = liesample.jit(_steps(sampler))
+    """Each chain of the runner's loop compiled alone by ``liesample.jit`` (no ``vmap``): the
+    ``NUM_DRAWS`` steps of ``run_steps`` from step 0 with the runner's chain key
+    (``split(KEY)[c]``, noise blocks included), every step's position and info."""
+    start = _chain(case.starts(), 0)
+    state = jax.eval_shape(sampler.init, start)
+    _, info = jax.eval_shape(sampler.step, jax.random.key(0), state)
+    empty = jax.tree.map(
+        lambda v: jnp.zeros((NUM_DRAWS, *v.shape), v.dtype), (state.position, info)
+    )
+
+    @liesample.jit
+    def steps(key, position):
+        def update(step, state, info, carry):
+            return jax.tree.map(
+                lambda out, leaf: out.at[step].set(leaf), carry, (state.position, info)
+            )
+
+        return run_steps(sampler, key, sampler.init(position), 0, NUM_DRAWS, update, empty)[1]
+
+    keys = jax.random.split(KEY, cases.NUM_CHAINS)
     starts = case.starts()
-    return [
-        steps(GUARD_KEYS[chain], sampler.init(_chain(starts, chain)))
-        for chain in range(cases.NUM_CHAINS)
-    ]
+    return [steps(keys[chain], _chain(starts, chain)) for chain in range(cases.NUM_CHAINS)]
 
 
-def test_every_step_meets_the_info_contract(single_chains):
+def test_every_step_meets_the_info_contract(case, sampler, single_chains):
+    """Each step the runner takes (``run_steps``: through noise blocks where the sampler has
+    them) meets the contract; ``sampler.step`` itself returns the same fields, one scalar each."""
+    state = jax.eval_shape(sampler.init, _chain(case.starts(), 0))
+    _, info = jax.eval_shape(sampler.step, jax.random.key(0), state)
+    check_info(info)
+    assert info._fields == single_chains[0][1]._fields
+    for field in CONTRACT_FIELDS:
+        assert getattr(info, field).shape == (), field
+    assert info.is_divergent.dtype == jnp.bool_
     for _, infos in single_chains:
         check_info(infos)
         assert set(CONTRACT_FIELDS) <= set(infos._fields)
         for field in CONTRACT_FIELDS:  # one scalar per step
-            assert jnp.shape(getattr(infos, field)) == (GUARD_STEPS,), field
+            assert jnp.shape(getattr(infos, field)) == (NUM_DRAWS,), field
         assert infos.is_divergent.dtype == jnp.bool_ and not np.any(infos.is_divergent)
         rates = np.asarray(infos.acceptance_rate)
         assert np.all((rates >= 0.0) & (rates <= 1.0))
         assert np.all(np.isfinite(np.asarray(infos.energy)))
 
 
-def test_batched_steps_equal_the_single_chain_steps(case, sampler, single_chains):
-    """The steps vmapped over both chains (``liesample.jit``, the runner's compile path) equal
-    each chain's own steps to round-off."""
-    states = jax.vmap(sampler.init)(jax.tree.map(jnp.asarray, case.starts()))
-    batched, batched_infos = liesample.jit(jax.vmap(_steps(sampler)))(GUARD_KEYS, states)
+def test_batched_steps_equal_the_single_chain_steps(uninterrupted, single_chains):
+    """The runner's steps, vmapped over both chains and compiled by ``liesample.jit`` (its
+    chunk program), equal each chain's own steps compiled alone, to round-off."""
     for chain, (single, infos) in enumerate(single_chains):
-        _assert_trees_equal(_chain(batched, chain), single, rtol=0, atol=1e-12)
-        np.testing.assert_array_equal(_chain(batched_infos, chain).is_divergent, infos.is_divergent)
+        _assert_trees_equal(_chain(uninterrupted.positions, chain), single, rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(uninterrupted.info["is_divergent"][chain], infos.is_divergent)
 
 
 # --------------------------------------------------------------------------- positions, resume

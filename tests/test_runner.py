@@ -52,8 +52,11 @@ def test_shapes(plain):
 
 def test_chains_are_independent_streams(plain):
     """Chains started at the same point with the runner's per-chain keys still differ."""
-    same_start = sample_chains(ALGORITHM, KEY, np.stack([POSITIONS[0]] * 2), 5, progress_bar=False)
-    assert not np.allclose(same_start.positions[0], same_start.positions[1])
+    # Three chains of 5 draws in chunks of 1: the program of test_draws_do_not_depend_on_chunking
+    # (chunk_draws=None), compiled once.
+    same_start = sample_chains(ALGORITHM, KEY, np.stack([POSITIONS[0]] * 3), 5, progress_bar=False)
+    for a, b in ((0, 1), (0, 2), (1, 2)):
+        assert not np.allclose(same_start.positions[a], same_start.positions[b]), (a, b)
 
 
 @pytest.mark.parametrize("chunk_draws", [None, 5, NUM_DRAWS, 50])
@@ -115,8 +118,13 @@ def test_warmup_is_the_start_of_the_same_run(plain):
 
 
 def test_warmup_with_thinning(plain):
-    result = run(num_draws=7, num_warmup=4, thinning=8)
-    np.testing.assert_allclose(result.positions, plain.positions[:, 4 + 7 :: 8], rtol=0, atol=1e-14)
+    # The warm-up of test_warmup_is_the_start_of_the_same_run and the chunks of
+    # test_thinning_keeps_every_kth_state[3]: programs compiled once.
+    result = run(num_draws=8, num_warmup=25, thinning=3, chunk_draws=4)
+    assert result.num_steps == 49
+    np.testing.assert_allclose(
+        result.positions, plain.positions[:, 25 + 2 : 49 : 3], rtol=0, atol=1e-14
+    )
 
 
 @pytest.mark.parametrize(
@@ -210,12 +218,17 @@ def test_a_plain_blackjax_algorithm_runs_as_a_sampler_with_the_defaults(plain):
         sample_chains(bare, KEY, POSITIONS, 2, num_warmup=2, adapt=True, progress_bar=False)
 
 
+# The Langevin sampler with the integrator of ALGORITHM (compiles fastest; its warm-up takes the
+# same path, the bias model, with that integrator's order).
+TUNED_OPTIONS = {"adjusted_lie_poisson": {}, "lie_poisson_langevin": {"integrator": "lie_euler"}}
+
+
 @pytest.mark.parametrize("name", ["adjusted_lie_poisson", "lie_poisson_langevin"])
 def test_the_warm_up_tunes_a_new_sampler_and_leaves_the_given_one(name):
     """The step size the sampler declares tunable is chosen by the tuning layer into a new
     sampler (recorded in its settings); the sampler passed in is not changed, and its step
     never changes its settings."""
-    sampler = getattr(liesample, name)(SYSTEM, beta=3.0)
+    sampler = getattr(liesample, name)(SYSTEM, beta=3.0, **TUNED_OPTIONS[name])
     assert sampler.adaptation is not None and not sampler.adaptation.given
     before = dict(sampler.settings)
     result = sample_chains(sampler, KEY, POSITIONS, 4, num_warmup=20, progress_bar=False)

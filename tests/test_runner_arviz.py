@@ -67,9 +67,13 @@ def test_standard_arviz_attributes(nuts_tree):
 
 
 def test_progress_is_the_deprecated_name_of_progress_bar():
+    # The chunks of nuts_tree (50 draws, with its log-likelihood): compiled once.
+    run = {"chunk_draws": 50, "log_likelihood": {"y": pointwise}}
     with pytest.warns(DeprecationWarning, match="progress_bar="):
-        old = liesample.sample_chains(NUTS, KEY, STARTS, 4, progress=False)
+        old = liesample.sample_chains(NUTS, KEY, STARTS, 50, progress=False, **run)
     with pytest.warns(DeprecationWarning, match="progress_bar="):
-        liesample.sample(NUTS, KEY, STARTS, 4, num_warmup=0, exact_starts=True, progress=False)
-    new = liesample.sample_chains(NUTS, KEY, STARTS, 4, progress_bar=False)
+        liesample.sample(
+            NUTS, KEY, STARTS, 50, num_warmup=0, exact_starts=True, progress=False, **run
+        )
+    new = liesample.sample_chains(NUTS, KEY, STARTS, 50, progress_bar=False, **run)
     np.testing.assert_array_equal(old.positions, new.positions)

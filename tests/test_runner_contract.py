@@ -91,8 +91,10 @@ def test_both_key_styles_give_the_same_draws():
     typed, _ = sampler.step(jax.random.key(5), state)
     raw, _ = sampler.step(jax.random.PRNGKey(5), state)
     np.testing.assert_array_equal(typed.position, raw.position)
-    runs = [
-        liesample.sample_chains(sampler, key, STARTS, 5, progress_bar=False).positions
+    runs = [  # chunks of 100 draws: the program of the R-hat test below (a β, a step: values)
+        liesample.sample_chains(
+            sampler, key, STARTS, 100, chunk_draws=100, progress_bar=False
+        ).positions
         for key in (jax.random.key(9), jax.random.PRNGKey(9))
     ]
     np.testing.assert_array_equal(*runs)
@@ -154,11 +156,12 @@ def test_magnetic_divergences_reach_sample_stats_and_are_reduced_with_any():
 def test_stuck_chains_are_named():
     """The chains are named and the advice is the sampler's own (a call that works for it)."""
     sampler = liesample.adjusted_lie_poisson(VMF, beta=1.0, step_size=1.0)
-    starts = np.tile(MU_HAT, (3, 1))
+    starts = np.tile(MU_HAT, (4, 1))
     with pytest.warns(
-        RuntimeWarning, match=r"3 chain\(s\) are stuck.*chains 0, 1, 2.*smaller"
-    ) as caught:
-        liesample.sample_chains(sampler, jax.random.key(0), starts, 20, progress_bar=False)
+        RuntimeWarning, match=r"4 chain\(s\) are stuck.*chains 0, 1, 2, 3.*smaller"
+    ) as caught:  # 4 chains, thinning 2, chunks of 50: the vMF test's program (β, step: values)
+        liesample.sample_chains(sampler, jax.random.key(0), starts, 50, thinning=2,
+                                chunk_draws=50, progress_bar=False)  # fmt: skip
     assert any(sampler.stuck_advice in str(w.message) for w in caught)
 
 
@@ -288,8 +291,9 @@ def test_vmf_unadjusted_without_step_size_matches_the_exact_law():
 def test_vmf_adjusted_with_dual_averaging_matches_the_exact_law():
     sampler = liesample.adjusted_lie_poisson(VMF, beta=1.0)
     tree = liesample.sample(
-        sampler, jax.random.key(2), STARTS_S2, 1000, num_warmup=400, thinning=2, progress_bar=False
-    )
+        sampler, jax.random.key(2), STARTS_S2, 1000, num_warmup=400, thinning=2, chunk_draws=50,
+        progress_bar=False,
+    )  # fmt: skip
     assert tree.attrs["step_size_source"].startswith("warm-up dual averaging")
     rate = float(tree.sample_stats["acceptance_rate"].values.mean())
     assert abs(rate - 0.574) < 0.1, rate
@@ -299,16 +303,17 @@ def test_vmf_adjusted_with_dual_averaging_matches_the_exact_law():
 def test_chains_that_disagree_are_reported_as_not_converged():
     """Chains that stay where they started (a tiny step, no warm-up) disagree on the energy:
     the runner warns with the split R-hat; chains that mix do not warn."""
-    system = liesample.systems.rigid_body((1.0, 2.0, 4.0))
     starts = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.6, 0.8, 0.0]])
-    frozen = liesample.adjusted_lie_poisson(system, beta=3.0, step_size=1e-4)
+    # One compiled chunk (100 draws; the step size is a value) for both runs.
+    frozen = liesample.adjusted_lie_poisson(RIGID, beta=3.0, step_size=1e-4)
     with pytest.warns(RuntimeWarning, match="split R-hat of their energy"):
-        liesample.sample_chains(frozen, jax.random.key(0), starts, 200, progress_bar=False)
-    mixing = liesample.adjusted_lie_poisson(system, beta=3.0, step_size=0.5)
+        liesample.sample_chains(frozen, jax.random.key(0), starts, 200, chunk_draws=100,
+                                progress_bar=False)  # fmt: skip
+    mixing = liesample.adjusted_lie_poisson(RIGID, beta=3.0, step_size=0.5)
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
         liesample.sample_chains(mixing, jax.random.key(0), starts, 2000, num_warmup=500,
-                                progress_bar=False)  # fmt: skip
+                                chunk_draws=100, progress_bar=False)  # fmt: skip
 
 
 def test_an_energy_constant_on_the_orbit_raises_no_convergence_warning():

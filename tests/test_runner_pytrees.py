@@ -55,7 +55,10 @@ def test_one_leaf_dict_gives_the_draws_of_the_plain_array():
 
 @pytest.fixture(scope="module")
 def product_run():
-    return sample_chains(PRODUCT, KEY, product_starts(), 10, thinning=2, progress_bar=False)
+    """In chunks of 2 draws: the program of test_output_and_resume_with_pytree_positions."""
+    return sample_chains(
+        PRODUCT, KEY, product_starts(), 10, thinning=2, chunk_draws=2, progress_bar=False
+    )
 
 
 def test_pytree_draws_have_the_structure_of_the_starts(product_run):
@@ -67,9 +70,9 @@ def test_pytree_draws_have_the_structure_of_the_starts(product_run):
 
 
 def test_pytree_draws_do_not_depend_on_chunking_or_sharding(product_run):
-    # One chunk shape each (10 = 2 × 5 and 10 × 1 draws): one compilation per run.
+    # One chunk shape each (10 = 5 × 2 and 10 × 1 draws, the default chunks): one compilation.
     other = sample_chains(PRODUCT, KEY, product_starts(), 10, thinning=2, progress_bar=False,
-                          chunk_draws=5, devices=1)  # fmt: skip
+                          devices=1)  # fmt: skip
     for name in ("mu", "log_kappa"):
         np.testing.assert_array_equal(other.positions[name], product_run.positions[name])
 
@@ -135,12 +138,21 @@ def test_output_and_resume_with_pytree_positions(tmp_path, product_run):
         sample_chains(PRODUCT, KEY, other, 12, progress_bar=False, output=path, resume=True)
 
 
-def test_output_keeps_tuples_and_complex_leaves(tmp_path):
-    def logdensity(p):
-        return 2.0 * jnp.real(jnp.trace(p[0])) - 0.5 * p[1]["x"] ** 2
+def su2_logdensity(p):
+    return 2.0 * jnp.real(jnp.trace(p[0])) - 0.5 * p[1]["x"] ** 2
 
-    sampler = liesample.geometric_hmc(logdensity, (SU(2), {"x": Euclidean(())}), 0.3, 3)
-    starts = (np.tile(np.eye(2, dtype=complex), (2, 1, 1)), {"x": np.zeros(2)})
+
+# A tuple of a complex SU(2) leaf and a dict: one sampler (and chunks of 2 draws) for the two
+# tests below, so that their programs are compiled once.
+SU2 = liesample.geometric_hmc(su2_logdensity, (SU(2), {"x": Euclidean(())}), 0.3, 3)
+
+
+def su2_starts():
+    return (np.tile(np.eye(2, dtype=complex), (2, 1, 1)), {"x": np.zeros(2)})
+
+
+def test_output_keeps_tuples_and_complex_leaves(tmp_path):
+    sampler, starts = SU2, su2_starts()
     path = tmp_path / "su2.nc"
     run = sample_chains(sampler, KEY, starts, 4, progress_bar=False, output=path, chunk_draws=2)
     saved = load_chains(path).posterior
@@ -209,14 +221,13 @@ def test_tuple_positions_and_naming_errors():
 
 
 def test_sample_splits_complex_su2_leaves():
-    def logdensity(p):
-        return 2.0 * jnp.real(jnp.trace(p[0])) - 0.5 * p[1] ** 2
-
-    sampler = liesample.geometric_hmc(logdensity, (SU(2), Euclidean(())), 0.3, 3)
-    starts = (np.tile(np.eye(2, dtype=complex), (2, 1, 1)), np.zeros(2))
-    tree = liesample.sample(sampler, KEY, starts, 6, progress_bar=False)
+    # The sampler and chunks of test_output_keeps_tuples_and_complex_leaves, without warm-up
+    # (no third program): liesample.sample says the starts are kept.
+    with pytest.warns(UserWarning, match="num_warmup=0"):
+        tree = liesample.sample(SU2, KEY, su2_starts(), 6, num_warmup=0, chunk_draws=2,
+                                progress_bar=False)  # fmt: skip
     posterior = tree.posterior
-    assert set(posterior.data_vars) == {"x0.real", "x0.imag", "x1"}
+    assert set(posterior.data_vars) == {"x0.real", "x0.imag", "x1.x"}
     assert posterior["x0.real"].shape == (2, 6, 2, 2)
     u = np.asarray(posterior["x0.real"]) + 1j * np.asarray(posterior["x0.imag"])
     unitary = u @ np.conj(np.swapaxes(u, -1, -2))

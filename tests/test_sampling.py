@@ -4,6 +4,8 @@ Every test compares with an exact reference (MATH.md §2, §4) using Monte-Carlo
 computed from independent chains (so the SE is honest), with fixed keys.
 """
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -24,32 +26,62 @@ def start_points(num_chains, seed=123):
     return RADIUS * x / np.linalg.norm(x, axis=1, keepdims=True)
 
 
+BODY = rigid_body(INERTIA)  # one system: samplers on it share compiled programs (structure)
+# Keys per chain drawn by the shared program (at least): 10 + 200 time units at dt = 0.1. With
+# JAX's partitionable threefry, ``split(key, n)[i]`` does not depend on ``n``, so each run uses
+# the same keys as ``split(key, num_warmup + num_steps)`` would give it.
+KEYS_PER_CHAIN = 2100
+
+
+@functools.partial(liesample.jit, static_argnames=("build", "num_keys"))
+def _time_averages(keys, positions, values, num_warmup, num_steps, *, build, num_keys):
+    """Per-chain time averages of μ² after ``num_warmup`` steps (both traced): one compiled
+    program per sampler structure (the integrator), for every step size and run length."""
+    algorithm = build(**values)
+
+    def chain(key, position):
+        step_keys = jax.random.split(key, num_keys)
+
+        def step(k, carry):
+            state, total = carry
+            state, _ = algorithm.step(step_keys[k], state)
+            return state, total + state.position**2
+
+        state = algorithm.init(position)
+        state, _ = jax.lax.fori_loop(0, num_warmup, step, (state, jnp.zeros(3)))
+        _, total = jax.lax.fori_loop(
+            num_warmup, num_warmup + num_steps, step, (state, jnp.zeros(3))
+        )
+        return total / num_steps
+
+    return jax.vmap(chain)(keys, positions)
+
+
 def ergodic_second_moments(integrator, beta, step_size, num_chains, total_time, seed):
     """Per-chain time averages of μ_i² (after 10 time units of warm-up), accumulated on the fly.
 
     Returns an array (chains, 3); the chains are independent, so the spread across them gives an
-    honest standard error of the mean.
+    honest standard error of the mean. Chain ``c`` uses ``split(key(seed), chains)[c]``, step
+    ``s`` (warm-up included) ``split(key_c, num_warmup + num_steps)[s]``.
     """
     algorithm = liesample.lie_poisson_langevin(
-        rigid_body(INERTIA), beta=beta, sigma=1.0, step_size=step_size, integrator=integrator
+        BODY, beta=beta, sigma=1.0, step_size=step_size, integrator=integrator
     )
     num_warmup = round(10.0 / step_size)
     num_steps = round(total_time / step_size)
-
-    def chain(key, position):
-        def step(carry, k):
-            state, total = carry
-            state, _ = algorithm.step(k, state)
-            return (state, total + state.position**2), None
-
-        keys = jax.random.split(key, num_warmup + num_steps)
-        state = algorithm.init(position)
-        (state, _), _ = jax.lax.scan(step, (state, jnp.zeros(3)), keys[:num_warmup])
-        (_, total), _ = jax.lax.scan(step, (state, jnp.zeros(3)), keys[num_warmup:])
-        return total / num_steps
-
+    build, values = algorithm.structure
     keys = jax.random.split(jax.random.key(seed), num_chains)
-    return np.asarray(liesample.jit(jax.vmap(chain))(keys, jnp.asarray(start_points(num_chains))))
+    return np.asarray(
+        _time_averages(
+            keys,
+            jnp.asarray(start_points(num_chains)),
+            {name: jnp.asarray(value) for name, value in values.items()},
+            num_warmup,
+            num_steps,
+            build=build,
+            num_keys=max(KEYS_PER_CHAIN, num_warmup + num_steps),
+        )
+    )
 
 
 def exact_second_moments(beta):

@@ -37,6 +37,10 @@ LAGS = np.array([1, 2])
 Z_MAX = 4.5
 
 
+# The exact draws compiled once per shape (κ is an argument), not dispatched op by op.
+exact_von_mises_fisher = jax.jit(von_mises_fisher)
+
+
 def random_spins(shape, seed, chains=None):
     lead = () if chains is None else (chains,)
     x = np.random.default_rng(seed).normal(size=(*lead, *shape, 3))
@@ -71,7 +75,7 @@ def test_von_mises_fisher_moments(kappa):
     mean = np.array([0.48, -0.6, 0.64])
     mean = mean / np.linalg.norm(mean)
     draws = np.asarray(
-        von_mises_fisher(jax.random.key(7), jnp.tile(mean, (n, 1)), jnp.full(n, kappa))
+        exact_von_mises_fisher(jax.random.key(7), jnp.tile(mean, (n, 1)), jnp.full(n, kappa))
     )
     np.testing.assert_allclose(np.linalg.norm(draws, axis=-1), 1.0, atol=1e-15)
     w = draws @ mean
@@ -184,7 +188,7 @@ def test_precession_keeps_the_energy_to_round_off():
     """Over-relaxation and any precession angle keep h exactly, on a lattice with a field."""
     system = heisenberg((4, 5), periodic=True, coupling=0.7, field=(0.3, -0.2, 0.9))
     starts = jnp.asarray(random_spins((4, 5), 3, chains=8))
-    energies = np.asarray(jax.vmap(system.hamiltonian)(starts))
+    energies = np.asarray(jax.jit(jax.vmap(system.hamiltonian))(starts))  # one compile, not eager
     kernel = liesample.heisenberg_heat_bath.build_kernel(system, 0, 5)  # 5 precession sweeps
 
     @liesample.jit
@@ -204,7 +208,7 @@ def test_precession_keeps_the_energy_to_round_off():
         assert np.max(np.abs(np.asarray(final.position) - np.asarray(starts))) > 0.5
         np.testing.assert_array_equal(np.asarray(infos.acceptance_rate), 1.0)
     reflect = liesample.heisenberg_heat_bath(system, beta=1.0, heat_bath_sweeps=0)
-    _, info = reflect.step(jax.random.key(0), reflect.init(starts[0]))
+    _, info = liesample.jit(reflect.step)(jax.random.key(0), reflect.init(starts[0]))
     assert float(info.energy) == pytest.approx(float(energies[0]), abs=1e-12)
 
 
@@ -222,7 +226,9 @@ def test_heat_bath_in_a_field_is_the_exact_von_mises_fisher_law():
     )
     w = final[:, 0] @ b
     assert abs(w.mean() - exact) < Z_MAX * w.std() / math.sqrt(n), (w.mean(), exact)
-    exact_draws = von_mises_fisher(jax.random.key(3), jnp.tile(b, (n, 1)), jnp.full(n, 2 * beta))
+    exact_draws = exact_von_mises_fisher(
+        jax.random.key(3), jnp.tile(b, (n, 1)), jnp.full(n, 2 * beta)
+    )
     final, _ = apply_steps(
         liesample.heisenberg_metropolis(system, beta=beta), exact_draws[:, None], 5, seed=4
     )
@@ -233,8 +239,6 @@ def test_heat_bath_in_a_field_is_the_exact_von_mises_fisher_law():
 # ---------------------------------------------------------------------------------------------
 # Ergodic runs from random starts
 # ---------------------------------------------------------------------------------------------
-
-
 
 
 def ring_correlations(s):
@@ -334,25 +338,56 @@ def test_neighbour_table():
 @pytest.mark.parametrize(
     ("make", "error", "match"),
     [
-        (lambda: liesample.heisenberg_heat_bath(heisenberg((4,), anisotropy=0.5), beta=1.0),
-         ValueError, "anisotropy"),
+        (
+            lambda: liesample.heisenberg_heat_bath(heisenberg((4,), anisotropy=0.5), beta=1.0),
+            ValueError,
+            "anisotropy",
+        ),
         (lambda: liesample.heisenberg_heat_bath(rigid_body(), beta=1.0), TypeError, "system"),
-        (lambda: liesample.heisenberg_heat_bath(heisenberg((4,)), beta=math.inf),
-         ValueError, "beta"),
-        (lambda: liesample.heisenberg_heat_bath(heisenberg((4,)), beta=1.0, overrelaxation=-1),
-         ValueError, "overrelaxation"),
-        (lambda: liesample.heisenberg_heat_bath(heisenberg((4,)), beta=1.0, overrelaxation=1.5),
-         TypeError, "overrelaxation"),
-        (lambda: liesample.heisenberg_heat_bath(
-            heisenberg((4,)), beta=1.0, overrelaxation=0, heat_bath_sweeps=0), ValueError, "move"),
-        (lambda: liesample.heisenberg_heat_bath(
-            heisenberg((4,)), beta=1.0, precession_angle=math.nan), ValueError, "precession_angle"),
-        (lambda: liesample.heisenberg_wolff(heisenberg((4,), coupling=-1.0), beta=1.0),
-         ValueError, "coupling"),
-        (lambda: liesample.heisenberg_wolff(heisenberg((4,), field=(0.0, 0.0, 0.1)), beta=1.0),
-         ValueError, "field"),
-        (lambda: liesample.heisenberg_wolff(heisenberg((4,), anisotropy=0.1), beta=1.0),
-         ValueError, "anisotropy"),
+        (
+            lambda: liesample.heisenberg_heat_bath(heisenberg((4,)), beta=math.inf),
+            ValueError,
+            "beta",
+        ),
+        (
+            lambda: liesample.heisenberg_heat_bath(heisenberg((4,)), beta=1.0, overrelaxation=-1),
+            ValueError,
+            "overrelaxation",
+        ),
+        (
+            lambda: liesample.heisenberg_heat_bath(heisenberg((4,)), beta=1.0, overrelaxation=1.5),
+            TypeError,
+            "overrelaxation",
+        ),
+        (
+            lambda: liesample.heisenberg_heat_bath(
+                heisenberg((4,)), beta=1.0, overrelaxation=0, heat_bath_sweeps=0
+            ),
+            ValueError,
+            "move",
+        ),
+        (
+            lambda: liesample.heisenberg_heat_bath(
+                heisenberg((4,)), beta=1.0, precession_angle=math.nan
+            ),
+            ValueError,
+            "precession_angle",
+        ),
+        (
+            lambda: liesample.heisenberg_wolff(heisenberg((4,), coupling=-1.0), beta=1.0),
+            ValueError,
+            "coupling",
+        ),
+        (
+            lambda: liesample.heisenberg_wolff(heisenberg((4,), field=(0.0, 0.0, 0.1)), beta=1.0),
+            ValueError,
+            "field",
+        ),
+        (
+            lambda: liesample.heisenberg_wolff(heisenberg((4,), anisotropy=0.1), beta=1.0),
+            ValueError,
+            "anisotropy",
+        ),
         (lambda: liesample.heisenberg_wolff(heisenberg((4,)), beta=-1.0), ValueError, "beta"),
         (lambda: liesample.heisenberg_wolff(rigid_body(), beta=1.0), TypeError, "system"),
         (lambda: HeisenbergRingReference(2, 1.0, 1.0), ValueError, "length"),
@@ -366,7 +401,8 @@ def test_bad_arguments_are_refused(make, error, match):
 def test_ring_reference_tends_to_the_open_chain():
     ring = HeisenbergRingReference(200, 1.3, 0.8)
     np.testing.assert_allclose(
-        ring.correlation(np.arange(5)), heisenberg_chain_correlation(np.arange(5), 1.3, 0.8),
+        ring.correlation(np.arange(5)),
+        heisenberg_chain_correlation(np.arange(5), 1.3, 0.8),
         rtol=1e-12,
     )
     small = HeisenbergRingReference(5, 2.0, 1.0).correlation(np.arange(6))

@@ -124,15 +124,22 @@ def test_marginal_density_normalised_with_exact_second_moment(lam, axis):
     assert float(bingham_marginal_density(1.5, jnp.asarray(lam), axis)) == 0.0
 
 
+@pytest.fixture(scope="module")
+def sphere_points():
+    """200 000 uniform points on S² and the three axes: the same points for every λ (they were
+    drawn with the same key in each case; drawn once, they cost ~0.15 s of CPU less a case)."""
+    y = jax.random.normal(jax.random.key(11), (200_000, 3))
+    x = y / jnp.linalg.norm(y, axis=-1, keepdims=True)
+    return jnp.concatenate([x, jnp.eye(3)])
+
+
 @pytest.mark.parametrize("lam", LAMS + [(1e4, 0.0, 3.0), (-5e3, 2e3, 0.0), (0.0, 0.2, 0.1)])
-def test_acg_envelope_bounds_bingham(lam):
+def test_acg_envelope_bounds_bingham(lam, sphere_points):
     lam = jnp.asarray(lam)
     A, b, omega, log_M = _acg_envelope(lam)
     assert 0.0 < float(b) <= 3.0
     assert abs(float(jnp.sum(1.0 / (b + 2.0 * A))) - 1.0) < 1e-12
-    y = jax.random.normal(jax.random.key(11), (200_000, 3))
-    x = y / jnp.linalg.norm(y, axis=-1, keepdims=True)
-    x = jnp.concatenate([x, jnp.eye(3)])
+    x = sphere_points
     assert float(jnp.max(_log_acceptance_ratio(x, A, omega, log_M))) <= 1e-12
     # On S² the bound is attained where xᵀAx = (3−b)/2, when that level set is reachable.
     if 0.0 <= (3.0 - float(b)) / 2.0 <= float(jnp.max(A)):

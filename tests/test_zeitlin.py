@@ -8,6 +8,7 @@ O(N) products of O(1) numbers, so 1e-12 relative leaves a wide margin and is far
 sign or index slip.
 """
 
+import functools
 import math
 from dataclasses import replace
 
@@ -275,38 +276,60 @@ EULER_START = random_vorticity(EULER_N, seed=7, enstrophy=8.0)
 INTEGRATORS = ("splitting", "rkmk_heun", "lie_euler", isospectral_midpoint)
 
 
-def _trajectories(system, scene, runs, sigma=0.0, theta=0.0, seed=0):
-    """Final states and energies of ``runs = ((integrator, step_size, num_steps[, substeps]),
-    …)`` from ``EULER_START``, all in one compilation (one scan of ``num_steps``, equal for all;
-    each scan step makes ``substeps`` integrator steps)."""
-    dynamics = PoissonLangevin(system, sigma=sigma, theta=theta, scene=scene)
-    lengths = {run[2] for run in runs}
-    assert len(lengths) == 1
-    steps = [(get_integrator(run[0]), run[1], (run + (1,))[3]) for run in runs]
+@functools.cache
+def _euler_system():
+    """Zeitlin's su(4) model of the scene tests (built once: its construction is eager)."""
+    return zeitlin_euler(EULER_N, noise_degree=2)
 
-    def run(x, key):
-        def body(states, k):
+
+@functools.cache
+def _compiled_run(scene, integrators, num_steps):
+    """``run(x, key, dt, sigma, theta, snapshot)`` of :func:`_trajectories`, compiled once per
+    scene, integrators and number of steps (step size, σ, θ and the snapshot step are traced)."""
+    system = _euler_system()
+    steps = [get_integrator(i) for i in integrators]
+
+    def run(x, key, dt, sigma, theta, snapshot):
+        dynamics = PoissonLangevin(system, sigma=sigma, theta=theta, scene=scene)
+
+        def body(carry, inputs):
+            states, saved = carry
+            k, n = inputs
             new = []
-            keys = jax.random.split(k, len(steps))
-            for (step, dt, repeats), state, kk in zip(steps, states, keys):
-                for r in range(repeats):
-                    dw = dynamics.brownian_increments(jax.random.fold_in(kk, r), dt, x.dtype)
-                    state = step(dynamics, state, dt, dw)
-                new.append(state)
-            return tuple(new), jnp.stack([system.hamiltonian(s) for s in new])
+            for step, state, kk in zip(steps, states, jax.random.split(k, len(steps))):
+                dw = dynamics.brownian_increments(jax.random.fold_in(kk, 0), dt, x.dtype)
+                new.append(step(dynamics, state, dt, dw))
+            saved = tuple(jnp.where(n + 1 == snapshot, a, b) for a, b in zip(new, saved))
+            return (tuple(new), saved), jnp.stack([system.hamiltonian(s) for s in new])
 
-        keys = jax.random.split(key, lengths.pop())
-        return jax.lax.scan(body, (x,) * len(steps), keys)
+        keys = jax.random.split(key, num_steps)
+        start = (x,) * len(steps)
+        (finals, saved), energies = jax.lax.scan(
+            body, (start, start), (keys, jnp.arange(num_steps))
+        )
+        return finals, saved, energies
 
-    return liesample.jit(run)(jnp.asarray(EULER_START), jax.random.key(seed))
+    return liesample.jit(run)
+
+
+def _trajectories(
+    scene, integrators, step_size, num_steps, sigma=0.0, theta=0.0, seed=0, snapshot=0
+):
+    """Final states, states after ``snapshot`` steps and per-step energies of each of
+    ``integrators`` (each its own chain, all in one scan of ``num_steps`` steps of
+    ``step_size``) from ``EULER_START``. One compilation serves every step size, σ, θ and
+    snapshot (they are traced)."""
+    run = _compiled_run(scene, tuple(integrators), num_steps)
+    return run(jnp.asarray(EULER_START), jax.random.key(seed), step_size, sigma, theta, snapshot)
 
 
 def test_pure_euler_keeps_casimirs_and_energy_and_integrators_agree():
-    system = zeitlin_euler(EULER_N, noise_degree=2)
+    system = _euler_system()
     scene = Scene(hamiltonian=True, dissipation=False, noise=False)
     c0 = system.casimirs(jnp.asarray(EULER_START))
     h0 = float(system.hamiltonian(jnp.asarray(EULER_START)))
-    finals, energies = _trajectories(system, scene, [(i, 0.01, 1000) for i in INTEGRATORS])
+    # t = 10 at dt = 0.01, and the states at t = 1 (step 100) for the convergence check below
+    finals, at_one, energies = _trajectories(scene, INTEGRATORS, 0.01, 1000, snapshot=100)
     # (with noise as well: test_stochastic_runs_keep_the_spectrum_over_1e5_steps, slow)
     for name, final, energy in zip(INTEGRATORS, finals, np.asarray(energies).T):
         name = getattr(name, "name", name)
@@ -315,11 +338,14 @@ def test_pure_euler_keeps_casimirs_and_energy_and_integrators_agree():
             assert np.max(np.abs(energy - h0)) < 1e-4 * h0, (name, np.max(np.abs(energy - h0)))
         assert np.max(np.abs(final - EULER_START)) > 0.1  # the flow moved
     # Short time: the explicit schemes converge to the isospectral-midpoint trajectory at
-    # second order (the gap shrinks ~4× when dt halves).
-    pair = ("splitting", isospectral_midpoint)
-    runs = [(i, dt, 100, r) for dt, r in ((0.01, 1), (0.005, 2)) for i in pair]
-    finals, _ = _trajectories(system, scene, runs)
-    gaps = [float(np.max(np.abs(finals[k] - finals[k + 1]))) for k in (0, 2)]
+    # second order (the gap at t = 1 shrinks ~4× when dt halves). The same compiled run at
+    # dt = 0.005, its states after 200 steps (t = 1).
+    _, at_one_fine, _ = _trajectories(scene, INTEGRATORS, 0.005, 1000, snapshot=200)
+    splitting, midpoint = INTEGRATORS.index("splitting"), INTEGRATORS.index(isospectral_midpoint)
+    gaps = [
+        float(np.max(np.abs(states[splitting] - states[midpoint])))
+        for states in (at_one, at_one_fine)
+    ]
     assert gaps[1] < 1e-3 and 3.0 < gaps[0] / gaps[1] < 5.0, gaps
 
 
@@ -327,7 +353,7 @@ def test_isospectral_midpoint_is_modin_viviani():
     """One step against the formulas written out: ``W̃`` solves
     ``W_n = W̃ − h/2 [P̃, W̃] − h²/4 P̃W̃P̃`` and ``W_{n+1} = W̃ + h/2 [P̃, W̃] − h²/4 P̃W̃P̃``,
     ``P̃ = Δ⁻¹W̃``, with Zeitlin's ``Ẇ = [P, W]``; isospectral."""
-    system = zeitlin_euler(EULER_N, noise_degree=2)
+    system = _euler_system()
     basis = Compiled(EULER_N)
     algebra = system.algebra
     h = 0.05
@@ -357,13 +383,12 @@ def test_isospectral_midpoint_is_modin_viviani():
 
 
 def test_relaxation_decreases_energy_monotonically():
-    system = zeitlin_euler(EULER_N, noise_degree=2)
+    system = _euler_system()
     scene = Scene(hamiltonian=True, dissipation=True, noise=False)
     c0 = system.casimirs(jnp.asarray(EULER_START))
     h0 = float(system.hamiltonian(jnp.asarray(EULER_START)))
     integrators = ("splitting", isospectral_midpoint)
-    runs = [(i, 0.01, 400) for i in integrators]
-    finals, energies = _trajectories(system, scene, runs, theta=1.0)
+    finals, _, energies = _trajectories(scene, integrators, 0.01, 400, theta=1.0)
     for name, final, energy in zip(integrators, finals, np.asarray(energies).T):
         name = getattr(name, "name", name)
         assert np.all(np.diff(np.concatenate([[h0], energy])) < 0), name
@@ -373,10 +398,10 @@ def test_relaxation_decreases_energy_monotonically():
 
 def _spectrum_drift(num_steps):
     """Largest relative spectral drift of each integrator over a stochastic run (β = 1, σ = 1)."""
-    system = zeitlin_euler(EULER_N, noise_degree=2)
+    system = _euler_system()
     c0 = system.casimirs(jnp.asarray(EULER_START))
-    finals, _ = _trajectories(
-        system, Scene(), [(i, 0.02, num_steps) for i in INTEGRATORS], sigma=1.0, theta=0.5, seed=3
+    finals, _, _ = _trajectories(
+        Scene(), INTEGRATORS, 0.02, num_steps, sigma=1.0, theta=0.5, seed=3
     )
     return [float(system.casimir_error(final, c0)) for final in finals]
 
@@ -493,32 +518,57 @@ def test_noise_of_rigid_rotations_alone_is_refused():
     assert zeitlin_euler(2, noise_degree=1).num_noises == 3
 
 
+@functools.cache
+def _su6_exponential():
+    """Zeitlin's u(6) algebra, its ``group_element`` and the forward-mode derivative of it at
+    ``Z = 0``, compiled once for every scale below."""
+    algebra = zeitlin_euler(6).algebra
+
+    def tangent_at_zero(direction):
+        return jax.jvp(algebra.group_element, (jnp.zeros_like(direction),), (direction,))[1]
+
+    return algebra, liesample.jit(algebra.group_element), liesample.jit(tangent_at_zero)
+
+
 @pytest.mark.parametrize("scale", [0.0, 1e-3, 0.7, 5.0, 300.0])
 def test_skew_hermitian_exponential_is_expm_and_unitary(rng, scale):
     """``group_element`` (products only) equals SciPy's ``expm`` to round-off times ‖Z‖, is
     unitary to round-off at any ‖Z‖, and is differentiable in forward mode at Z = 0."""
     size = 6
-    algebra = zeitlin_euler(size).algebra
+    algebra, group_element, tangent_at_zero = _su6_exponential()
     zetas = jnp.asarray(rng.standard_normal((3, size, size)) * scale)
-    u = np.asarray(liesample.jit(algebra.group_element)(zetas))
+    u = np.asarray(group_element(zetas))
     for z, one in zip(np.asarray(algebra.to_matrix(zetas)), u):
         assert np.max(np.abs(one - scipy.linalg.expm(-z))) < 1e-14 * max(1.0, scale * size)
         assert np.max(np.abs(one @ one.conj().T - np.eye(size))) < 1e-14
     direction = jnp.asarray(rng.standard_normal((size, size)))
-    _, tangent = jax.jvp(algebra.group_element, (jnp.zeros((size, size)),), (direction,))
+    tangent = tangent_at_zero(direction)
     np.testing.assert_allclose(tangent, -algebra.to_matrix(direction), atol=1e-15)
+
+
+@functools.cache
+def _su5_system():
+    """su(5) with ℓ ≤ 2 noise, shared by the step-cost tests (its construction, noise-span and
+    stiffness checks are computed once and cached on the system)."""
+    return zeitlin_euler(5, noise_degree=2)
+
+
+def _primitives_and_step(algorithm, state):
+    """The compiled step's primitives (as text) and its result from one trace of the step."""
+    traced = liesample.jit(algorithm.step).trace(jax.random.key(1), state)
+    new_state, info = traced.lower().compile()(jax.random.key(1), state)
+    return str(traced.jaxpr), new_state, info
 
 
 def test_adjusted_zeitlin_step_solves_no_eigenproblem():
     """The compiled adjusted step on Zeitlin's model calls no eigensolver, LU or triangular
     solve (the per-step Casimir drift is ‖W‖²'s), and that drift is what the Info reports."""
-    system = zeitlin_euler(5, noise_degree=2)
+    system = _su5_system()
     algorithm = liesample.adjusted_lie_poisson(system, beta=1.0, step_size=0.5)
     state = algorithm.init(jnp.asarray(system.default_position))
-    primitives = str(jax.make_jaxpr(algorithm.step)(jax.random.key(0), state))
+    primitives, new_state, info = _primitives_and_step(algorithm, state)
     for name in ("eigh", "lu", "triangular_solve", "svd"):
         assert f"{name}[" not in primitives, name
-    new_state, info = liesample.jit(algorithm.step)(jax.random.key(1), state)
     norm_sq = float(jnp.sum(new_state.position**2))
     reference = float(state.reference_casimirs[-1])
     drift = abs(norm_sq - reference) / max(reference, norm_sq)
@@ -529,16 +579,17 @@ def test_adjusted_zeitlin_step_solves_no_eigenproblem():
 def test_unadjusted_zeitlin_step_on_the_orbit_solves_no_eigenproblem():
     """``lie_poisson_langevin`` with an orbit integrator reports the cheap ‖W‖² drift and calls
     no eigensolver; an integrator that leaves the orbit still reports the whole spectrum's."""
-    system = zeitlin_euler(5, noise_degree=2)
+    system = _su5_system()
     state = None
     for integrator, eigensolver in (("rkmk_heun", False), ("euler_heun", True)):
+        # stability="off": the step is the same; the start's step-size check (a compiled
+        # curvature scan of its own) is not what this test is about
         algorithm = liesample.lie_poisson_langevin(
-            system, beta=1.0, step_size=0.01, integrator=integrator
+            system, beta=1.0, step_size=0.01, integrator=integrator, stability="off"
         )
         state = algorithm.init(jnp.asarray(system.default_position))
-        primitives = str(jax.make_jaxpr(algorithm.step)(jax.random.key(0), state))
+        primitives, new_state, info = _primitives_and_step(algorithm, state)
         assert ("eigh[" in primitives) == eigensolver, integrator
-        new_state, info = liesample.jit(algorithm.step)(jax.random.key(1), state)
         expected = (system.casimir_error if eigensolver else system.step_casimir_error)(
             new_state.position, state.reference_casimirs
         )
@@ -560,7 +611,7 @@ def test_repeated_moves_along_one_noise_field_keep_the_spectrum():
     in the number of moves; the structured exponential's is random round-off, so the drift
     grows like √moves (a systematic error of a tenth of the unit round-off per move fails).
     """
-    system = zeitlin_euler(4, noise_degree=2)
+    system = _euler_system()
     start = jnp.asarray(EULER_START)
     c0 = system.casimirs(start)
     directions = jax.jacrev(system.noise_hamiltonians)(start)  # (m, N, N), constant (linear)

@@ -33,6 +33,15 @@ the nearest point of the manifold), ``dense_mass``, ``inverse_mass_matrix``, ``s
 on ``Euclidean`` sites only: the exact drift on a sphere or a group needs one inverse mass per
 copy (:mod:`liesample.samplers.cotangent.geometric_hmc`).
 
+**Mass by default.** ``dense_mass="auto"`` (the default, where NumPyro's is ``False``) adapts
+one dense inverse mass over the ``Euclidean`` sites together when they hold at most
+:data:`AUTO_DENSE_MAX_DIMENSION` unconstrained coordinates and the warm-up has at least
+:data:`AUTO_DENSE_WARMUP_PER_DIMENSION` iterations per coordinate (enough draws for Stan's last
+slow window to estimate a covariance), and a diagonal one otherwise, or when
+``inverse_mass_matrix`` is given or the mass is not adapted. Correlated, differently scaled
+parameters (a regression on an uncentred covariate) are then whitened as a whole; a dense
+block costs ``O(n²)`` per step, negligible beside a gradient at these sizes.
+
 **Warm-up.** During NumPyro's ``num_warmup`` iterations the kernel adapts by the one adaptation
 protocol (:mod:`liesample.tuning.protocol`) with the adaptation :func:`liesample.window_adaptation`
 runs (:func:`liesample.tuning.windows.windows_adaptation`): NumPyro drives the loop, so each
@@ -121,7 +130,18 @@ from liesample.tuning.windows import (
     windows_adaptation,
 )
 
-__all__ = ["AdaptState", "GeometricHMC", "GeometricHMCState"]
+__all__ = [
+    "AUTO_DENSE_MAX_DIMENSION",
+    "AUTO_DENSE_WARMUP_PER_DIMENSION",
+    "AdaptState",
+    "GeometricHMC",
+    "GeometricHMCState",
+]
+
+AUTO_DENSE_MAX_DIMENSION = 32
+"""``dense_mass="auto"``: the most unconstrained ``Euclidean`` coordinates adapted densely."""
+AUTO_DENSE_WARMUP_PER_DIMENSION = 25
+"""``dense_mass="auto"``: warm-up iterations needed per coordinate of a dense block."""
 
 MAX_INIT_ATTEMPTS = 100
 HEURISTIC_ACCEPT_PROB = 0.8  # NumPyro's find_reasonable_step_size aims one step at this rate
@@ -308,12 +328,13 @@ def _check_flag(name, value, allowed, why):
 
 
 def _dense_spec(dense_mass):
-    """``dense_mass`` as NumPyro takes it: a bool, or a list of site-name tuples."""
-    if isinstance(dense_mass, bool):
+    """``dense_mass`` as NumPyro takes it (a bool, or a list of site-name tuples), or
+    ``"auto"``."""
+    if isinstance(dense_mass, bool) or (isinstance(dense_mass, str) and dense_mass == "auto"):
         return dense_mass
     message = (
-        "dense_mass must be a bool or a list of tuples of site names (NumPyro's structured "
-        f"mass, e.g. [('a', 'b'), ('c',)]), got {dense_mass!r}"
+        "dense_mass must be 'auto', a bool or a list of tuples of site names (NumPyro's "
+        f"structured mass, e.g. [('a', 'b'), ('c',)]), got {dense_mass!r}"
     )
     if not isinstance(dense_mass, (list, tuple)):
         raise TypeError(message)
@@ -435,9 +456,11 @@ class GeometricHMC(MCMCKernel):
         one per coordinate of ``Euclidean`` and ``U1`` sites); a ``dense_mass`` group
         takes an ``(n, n)`` matrix (or ``(n,)`` diagonal) on its ``n`` unconstrained
         coordinates, in the group's order.
-    dense_mass : bool or list of tuples of str
-        As in NumPyro: ``True`` is one dense ``M⁻¹`` over every latent site (sorted by
-        name), ``[("a", "b"), ("c",)]`` one per group, ``False`` diagonal. Dense blocks
+    dense_mass : "auto", bool or list of tuples of str
+        ``"auto"`` (default): dense over the ``Euclidean`` sites together when they are few
+        enough for the warm-up to estimate it (see the module's "Mass by default"), else
+        diagonal. As in NumPyro: ``True`` is one dense ``M⁻¹`` over every latent site (sorted
+        by name), ``[("a", "b"), ("c",)]`` one per group, ``False`` diagonal. Dense blocks
         are possible on ``Euclidean`` sites only; a sphere, rotation or circle site named
         is refused, by name, when the kernel is initialised.
     adapt_step_size, adapt_mass_matrix : bool
@@ -489,7 +512,7 @@ class GeometricHMC(MCMCKernel):
         num_steps: int | None = None,
         trajectory_length: float | None = None,
         inverse_mass_matrix=None,
-        dense_mass=False,
+        dense_mass="auto",
         adapt_step_size: bool = True,
         adapt_mass_matrix: bool = True,
         target_accept_prob: float | None = None,
@@ -616,8 +639,19 @@ class GeometricHMC(MCMCKernel):
             step_size=None if self._adapt_step_size else self._step_size,
         )
 
+    def _auto_dense_groups(self):
+        """``dense_mass="auto"``: the ``Euclidean`` sites as one group, or none."""
+        if self._initial_mass is not None or not self._adapt_mass:
+            return []
+        euclidean = sorted(n for n, s in self._space.items() if isinstance(s, spaces.Euclidean))
+        size = sum(math.prod(self._space[n].shape) for n in euclidean)
+        enough = self._num_warmup >= AUTO_DENSE_WARMUP_PER_DIMENSION * size
+        return [tuple(euclidean)] if 2 <= size <= AUTO_DENSE_MAX_DIMENSION and enough else []
+
     def _dense_groups(self):
         spec = self._dense_mass
+        if spec == "auto":
+            return self._auto_dense_groups()
         if spec is False:
             return []
         groups = [tuple(sorted(self._sites))] if spec is True else spec
@@ -862,6 +896,7 @@ class GeometricHMC(MCMCKernel):
     def init(self, rng_key, num_warmup, init_params, model_args, model_kwargs):
         model_kwargs = model_kwargs or {}
         batched = not is_prng_key(rng_key)
+        self._num_warmup = int(num_warmup)  # before the sites: dense_mass="auto" reads it
         if self._potential_fn is not None:
             if init_params is None:
                 raise ValueError(
@@ -875,7 +910,6 @@ class GeometricHMC(MCMCKernel):
             self._setup(rng_key[0] if batched else rng_key, model_args, model_kwargs)
             if init_params is not None:
                 init_params = self._check_init_params(init_params, batched)
-        self._num_warmup = int(num_warmup)
         if self._num_warmup == 0:
             self._warn_unadapted()
         if self._num_warmup > 0:

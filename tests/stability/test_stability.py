@@ -52,6 +52,7 @@ The 10⁷-step runs (``lax.fori_loop``, nothing stored, moments accumulated on t
 ``@pytest.mark.slow`` (``make test-slow``).
 """
 
+import functools
 import math
 import warnings
 
@@ -157,9 +158,9 @@ def test_sampler_refuses_or_warns_beyond_the_bound():
     with pytest.raises(ValueError, match="stable bound"):
         liesample.lie_poisson_langevin(system, beta=beta, step_size=0.01).init(position)
     with pytest.warns(UserWarning, match="stable bound"):
-        liesample.lie_poisson_langevin(
-            system, beta=beta, step_size=0.01, stability="warn"
-        ).init(position)
+        liesample.lie_poisson_langevin(system, beta=beta, step_size=0.01, stability="warn").init(
+            position
+        )
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         liesample.lie_poisson_langevin(system, beta=beta, step_size=0.01, stability="off").init(
@@ -199,18 +200,28 @@ def test_overflow_is_flagged_and_reported():
 # --------------------------------------------------------------------------- hard cases
 
 
-def _rigid(inertia, beta, sigma, radius):
-    system = liesample.systems.rigid_body(inertia)
+# One rigid body per inertia for the float64 runs: the cases on it (low temperature, large
+# sigma) then share its stiffness cache and, through the sampler's structure, one compiled run.
+_shared_rigid_body = functools.cache(liesample.systems.rigid_body)
+
+
+def _squares(mu):
+    return mu * mu
+
+
+def _top_observables(mu):
+    return jnp.concatenate([mu[5:6], mu[:3] * mu[:3]])
+
+
+def _rigid(inertia, beta, sigma, radius, shared=True):
+    system = (_shared_rigid_body if shared else liesample.systems.rigid_body)(inertia)
     target = RestrictedGaussian(inertia=inertia, beta=beta, radius=radius)
     exact = np.diag(np.asarray(target.second_moments()))
-
-    def observables(mu):
-        return mu * mu
-
-    return system, target, exact, observables, beta, sigma
+    return system, target, exact, _squares, beta, sigma
 
 
-def _heavy_top(mgl, beta, sigma):
+def _heavy_top(mgl, beta, sigma, shared=True):
+    del shared  # one case on this system: nothing to share
     system = liesample.systems.heavy_top((1.0, 2.0, 4.0), mgl=mgl)
     position = system.default_position
     target = HeavyTopGibbs(
@@ -218,18 +229,14 @@ def _heavy_top(mgl, beta, sigma):
     )
     exact = np.concatenate([[target.mean_gamma_chi()], target.pi_second_moments()])
     del position
-
-    def observables(mu):
-        return jnp.concatenate([mu[5:6], mu[:3] * mu[:3]])
-
-    return system, target, exact, observables, beta, sigma
+    return system, target, exact, _top_observables, beta, sigma
 
 
 CASES = {
-    "low temperature beta=1e3": lambda: _rigid((1.0, 2.0, 4.0), 1e3, 1.0, 1.0),
-    "stiff inertia 1:1e4": lambda: _rigid((0.01, 1.0, 100.0), 2.0, 1.0, 1.0),
-    "large sigma=10": lambda: _rigid((1.0, 2.0, 4.0), 1.0, 10.0, 1.5),
-    "heavy top mgl=30": lambda: _heavy_top(30.0, 1.0, 1.0),
+    "low temperature beta=1e3": lambda **k: _rigid((1.0, 2.0, 4.0), 1e3, 1.0, 1.0, **k),
+    "stiff inertia 1:1e4": lambda **k: _rigid((0.01, 1.0, 100.0), 2.0, 1.0, 1.0, **k),
+    "large sigma=10": lambda **k: _rigid((1.0, 2.0, 4.0), 1.0, 10.0, 1.5, **k),
+    "heavy top mgl=30": lambda **k: _heavy_top(30.0, 1.0, 1.0, **k),
 }
 KAPPA = 0.1
 NUM_CHAINS = 96
@@ -239,9 +246,30 @@ NUM_STEPS = 2000
 def stationary_run(algorithm, starts, num_steps, observables, key, num_batches=1):
     """Per-chain means of ``observables`` over ``num_steps`` steps (nothing stored; with
     ``num_batches > 1``, means over consecutive batches, shape ``(chains, batches, k)``), the
-    largest Casimir drift, whether any step was non-finite, and the final states."""
+    largest Casimir drift, whether any step was non-finite, and the final states.
+
+    Compiled as the runner compiles a sampler: its structure's ``build`` static, its values
+    (β, σ, step) traced, so samplers on one system share the program."""
     states = jax.vmap(algorithm.init)(starts)
     keys = jax.random.split(key, starts.shape[0])
+    build, values = algorithm.structure
+    values = {name: jnp.asarray(value, starts.dtype) for name, value in values.items()}
+    return _stationary_run(
+        states,
+        keys,
+        values,
+        build=build,
+        observables=observables,
+        num_steps=num_steps,
+        num_batches=num_batches,
+    )
+
+
+@functools.partial(
+    liesample.jit, static_argnames=("build", "observables", "num_steps", "num_batches")
+)
+def _stationary_run(states, keys, values, *, build, observables, num_steps, num_batches):
+    algorithm = build(**values)
     batch_steps = num_steps // num_batches
 
     def chain(state, chain_key):
@@ -268,7 +296,7 @@ def stationary_run(algorithm, starts, num_steps, observables, key, num_batches=1
         (state, drift, bad), means = jax.lax.scan(batch, init, jnp.arange(num_batches))
         return (means[0] if num_batches == 1 else means), drift, bad, state.position
 
-    return liesample.jit(jax.vmap(chain))(states, keys)
+    return jax.vmap(chain)(states, keys)
 
 
 HARD_CASES = [
@@ -286,9 +314,9 @@ def test_hard_case_is_stable_and_gibbs_exact(case, dtype):
     theta = 0.5 * beta * sigma**2
     starts64 = np.asarray(target.sample(jax.random.key(7), NUM_CHAINS), dtype=float)
     step_size = KAPPA / stiffness(system, theta, starts64[0])
-    # A fresh system for the run: functions JAX traced in float64 (the stiffness above) are not
-    # reused inside the float32 context.
-    run_system = CASES[case]()[0]
+    # A fresh system for a float32 run: functions JAX traced in float64 (the stiffness above)
+    # are not reused inside the float32 context. A float64 run reuses the system.
+    run_system = system if dtype == "float64" else CASES[case](shared=False)[0]
     with jax.enable_x64(dtype == "float64"):
         algorithm = liesample.lie_poisson_langevin(
             run_system, beta=beta, sigma=sigma, step_size=step_size, stability="raise"
