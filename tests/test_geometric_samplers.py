@@ -132,39 +132,19 @@ def product_target(names):
     return space, logdensity, observables, np.concatenate([BLOCKS[k][2]() for k in names])
 
 
-def _haar(space, rng):
-    """``NUM_CHAINS`` Haar draws on a sphere, SO(n) or SU(n), by the QR algorithm of
-    ``S.uniform``, in NumPy: run eagerly in JAX, the QR draws of SO(3), SO(4) and SU(3) cost
-    ~3.5 s of CPU in compiles of their small programs, more than the chains they start."""
-    n = space.n
-    if isinstance(space, S.Sphere):
-        z = rng.standard_normal((NUM_CHAINS, n + 1))
-        return z / np.linalg.norm(z, axis=-1, keepdims=True)
-    z = rng.standard_normal((NUM_CHAINS, n, n))
-    if isinstance(space, S.SU):
-        z = z + 1j * rng.standard_normal((NUM_CHAINS, n, n))
-    q, r = np.linalg.qr(z)
-    d = np.diagonal(r, axis1=-2, axis2=-1)
-    q = q * (d / np.abs(d))[..., None, :]  # Haar on O(n) or U(n)
-    det = np.linalg.det(q)
-    if isinstance(space, S.SU):
-        return q / (det ** (1.0 / n))[..., None, None]  # Haar on SU(n)
-    return np.where((det < 0)[..., None, None], q * np.r_[-1.0, np.ones(n - 1)], q)  # SO(n)
-
-
-def _dispersed_starts(space, seed):
-    rng = np.random.default_rng(seed)
-    starts = {k: jnp.asarray(_haar(v, rng)) for k, v in space.items() if k != "x"}
+def _dispersed_starts(space, key):
+    """Haar starts on the manifold blocks, ``x = 0``: one compiled draw (run eagerly, the QR
+    draws of SO(n) and SU(n) compile each of their small operations on its own)."""
+    batched = {k: type(v)(v.n, shape=(NUM_CHAINS,)) for k, v in space.items() if k != "x"}
+    starts = dict(liesample.jit(lambda k: S.uniform(batched, k))(key))
     starts["x"] = jnp.zeros((NUM_CHAINS, 2))
-    S.check_position({k: type(v)(v.n, shape=(NUM_CHAINS,)) for k, v in space.items()
-                      if k != "x"}, {k: v for k, v in starts.items() if k != "x"})  # fmt: skip
     return starts
 
 
 def test_hmc_on_spheres_rotations_and_r2_matches_exact_moments():
     space, logdensity, observables, exact = product_target(list(PRODUCT))
     sampler = liesample.geometric_hmc(logdensity, space, step_size=0.25, num_integration_steps=6)
-    starts = _dispersed_starts(space, 1)
+    starts = _dispersed_starts(space, jax.random.key(1))
     means, acceptance = chain_means(sampler, jax.random.key(0), starts, 1000, observables)
     assert 0.6 < acceptance.mean() < 1.0
     assert_within_mcse(means, exact)
@@ -178,7 +158,7 @@ def test_adjusted_langevin_matches_exact_moments():
     sampler = liesample.geometric_langevin(
         logdensity, space, step_size=0.25, friction=1.0, adjusted=True
     )
-    starts = _dispersed_starts(space, 3)
+    starts = _dispersed_starts(space, jax.random.key(3))
     means, acceptance = chain_means(sampler, jax.random.key(2), starts, 3000, observables)
     assert 0.8 < acceptance.mean() < 1.0
     assert_within_mcse(means, exact)
@@ -210,7 +190,7 @@ def test_a_magnetic_field_and_a_dense_mass_on_the_euclidean_block_keep_the_exact
         sampler = liesample.geometric_langevin(
             logdensity, space, 0.3, 1.0, mass, FIELD_X, adjusted=True
         )
-    starts = _dispersed_starts(space, 13)
+    starts = _dispersed_starts(space, jax.random.key(13))
     means, acceptance = chain_means(sampler, jax.random.key(14), starts, 1500, observables)
     assert 0.6 < acceptance.mean() < 1.0
     assert_within_mcse(means, exact)

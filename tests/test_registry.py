@@ -80,14 +80,18 @@ def test_the_registry_lists_every_public_sampler_and_system_once():
 # --------------------------------------------------------------------------- steps
 
 
+def _abstract_step(case, sampler):
+    """The shapes and dtypes of one chain's state and of one step's info (nothing compiled)."""
+    state = jax.eval_shape(sampler.init, _chain(case.starts(), 0))
+    return state, jax.eval_shape(sampler.step, jax.random.key(0), state)[1]
+
+
 @pytest.fixture(scope="module")
 def single_chains(case, sampler):
     """Each chain of the runner's loop compiled alone by ``liesample.jit`` (no ``vmap``): the
     ``NUM_DRAWS`` steps of ``run_steps`` from step 0 with the runner's chain key
     (``split(KEY)[c]``, noise blocks included), every step's position and info."""
-    start = _chain(case.starts(), 0)
-    state = jax.eval_shape(sampler.init, start)
-    _, info = jax.eval_shape(sampler.step, jax.random.key(0), state)
+    state, info = _abstract_step(case, sampler)
     empty = jax.tree.map(
         lambda v: jnp.zeros((NUM_DRAWS, *v.shape), v.dtype), (state.position, info)
     )
@@ -109,8 +113,7 @@ def single_chains(case, sampler):
 def test_every_step_meets_the_info_contract(case, sampler, single_chains):
     """Each step the runner takes (``run_steps``: through noise blocks where the sampler has
     them) meets the contract; ``sampler.step`` itself returns the same fields, one scalar each."""
-    state = jax.eval_shape(sampler.init, _chain(case.starts(), 0))
-    _, info = jax.eval_shape(sampler.step, jax.random.key(0), state)
+    _, info = _abstract_step(case, sampler)
     check_info(info)
     assert info._fields == single_chains[0][1]._fields
     for field in CONTRACT_FIELDS:

@@ -639,11 +639,15 @@ class GeometricHMC(MCMCKernel):
             step_size=None if self._adapt_step_size else self._step_size,
         )
 
+    def _euclidean_sites(self):
+        """The names of the ``Euclidean`` sites, sorted."""
+        return sorted(n for n, s in self._space.items() if isinstance(s, spaces.Euclidean))
+
     def _auto_dense_groups(self):
         """``dense_mass="auto"``: the ``Euclidean`` sites as one group, or none."""
         if self._initial_mass is not None or not self._adapt_mass:
             return []
-        euclidean = sorted(n for n, s in self._space.items() if isinstance(s, spaces.Euclidean))
+        euclidean = self._euclidean_sites()
         size = sum(math.prod(self._space[n].shape) for n in euclidean)
         enough = self._num_warmup >= AUTO_DENSE_WARMUP_PER_DIMENSION * size
         return [tuple(euclidean)] if 2 <= size <= AUTO_DENSE_MAX_DIMENSION and enough else []
@@ -656,7 +660,7 @@ class GeometricHMC(MCMCKernel):
             return []
         groups = [tuple(sorted(self._sites))] if spec is True else spec
         seen = set()
-        euclidean = sorted(n for n, s in self._space.items() if isinstance(s, spaces.Euclidean))
+        euclidean = self._euclidean_sites()
         for group in groups:
             for name in group:
                 if name not in self._sites:
