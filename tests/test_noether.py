@@ -19,7 +19,6 @@ import numpy as np
 import pytest
 
 import liesample
-from liesample.dynamics.poisson_langevin import make_dynamics
 from liesample.integrators.drivers import DriftedBrownianMotion, TimeChangedBrownianMotion, simulate
 from liesample.systems import heavy_top
 
@@ -46,33 +45,32 @@ def lagrange_top(noise=invariant_noise, **changes):
 def pi3_drift_along_sampler(system, integrator="splitting", beta=2.0, sigma=1.0, dt=0.05):
     """max |Π₃(t) − Π₃(0)| over 4 Langevin chains (noise + derived dissipation + Hamiltonian).
 
-    The sampler is built as a user would (its checks run), and its step, the kernel of
-    ``lie_poisson_langevin.build_kernel`` at ``(dt, σ, θ = βσ²/2)``, is run with those traced:
-    one compilation per system and integrator serves every step size."""
+    The sampler is built as a user would (its checks run) and stepped through its structure, as
+    the runner does: ``dt``, ``σ`` and ``θ`` traced, so one compilation per system and
+    integrator serves every step size."""
     algorithm = liesample.lie_poisson_langevin(
         system, beta=beta, sigma=sigma, step_size=dt, integrator=integrator
     )
-    start = algorithm.init(START)  # the sampler's start checks run, as before
-    sigma, theta, scene = make_dynamics(system, beta=beta, sigma=sigma)
-    run = _compiled_chains(system, integrator, scene)
-    pi3 = run(start, jax.random.split(jax.random.key(11), 4), dt, sigma, theta)
+    build, values = algorithm.structure
+    values = {name: jnp.asarray(value) for name, value in values.items()}
+    keys = jax.random.split(jax.random.key(11), 4)
+    pi3 = _pi3_along_chains(algorithm.init(START), keys, values, build=build)
     return float(jnp.max(jnp.abs(pi3 - START[2])))
 
 
-@functools.cache
-def _compiled_chains(system, integrator, scene):
-    """``run(state, keys, dt, sigma, theta) -> Π₃`` along one chain per key (keys ``fold_in``
-    per step), compiled once per system, integrator and scene."""
-    kernel = liesample.lie_poisson_langevin.build_kernel(system, integrator, scene)
+@functools.partial(liesample.jit, static_argnames=("build",))
+def _pi3_along_chains(state, keys, values, *, build):
+    """Π₃ along one chain per key from ``state`` (step ``k`` keyed ``fold_in(key, k)``)."""
+    sampler = build(**values)
 
-    def chain(state, key, dt, sigma, theta):
+    def chain(key):
         def step(state, k):
-            state, _ = kernel(jax.random.fold_in(key, k), state, dt, sigma, theta)
+            state, _ = sampler.step(jax.random.fold_in(key, k), state)
             return state, state.position[2]
 
         return jax.lax.scan(step, state, jnp.arange(NUM_STEPS))[1]
 
-    return liesample.jit(jax.vmap(chain, in_axes=(None, 0, None, None, None)))
+    return jax.vmap(chain)(keys)
 
 
 def test_invariant_noise_keeps_pi3_to_round_off():
