@@ -33,9 +33,12 @@ demo: $(BIN)/.installed
 	$(BIN)/liesample demo
 
 # The lint first (a second or two), with the rule set of pyproject.toml [tool.ruff.lint].
+# Each test file runs on one worker (--dist loadfile): a file's module-scoped samplers and runs,
+# and the programs its tests share, are built and compiled once, not once per worker.
+TEST_DIST := --dist loadfile
 test: $(BIN)/.installed-test
 	$(BIN)/ruff check .
-	$(BIN)/python -m pytest -n $(JOBS) --dist worksteal -q
+	$(BIN)/python -m pytest -n $(JOBS) $(TEST_DIST) -q
 
 test-slow: $(BIN)/.installed-test
 	$(BIN)/python -m pytest -n $(JOBS) --dist worksteal -q -m slow
@@ -55,7 +58,7 @@ $(VENV_OLDEST)/bin/.installed-test: pyproject.toml | check-python
 	touch $@
 
 test-oldest: $(VENV_OLDEST)/bin/.installed-test
-	$(VENV_OLDEST)/bin/python -m pytest -n $(JOBS) --dist worksteal -q
+	$(VENV_OLDEST)/bin/python -m pytest -n $(JOBS) $(TEST_DIST) -q
 
 $(BIN)/.installed-bench: $(BIN)/.installed
 	$(INSTALL) -e '.[bench]'

@@ -1,5 +1,7 @@
 import importlib.util
 import os
+import shutil
+import tempfile
 from pathlib import Path
 
 # The suite is compile-bound: thousands of small programs, each run briefly. XLA's LLVM back end
@@ -13,11 +15,30 @@ USER_XLA_FLAGS = os.environ.setdefault("LIESAMPLE_USER_XLA_FLAGS", os.environ.ge
 if os.environ.get("LIESAMPLE_TEST_FULL_OPTIMIZATION") != "1":
     os.environ["XLA_FLAGS"] = f"{USER_XLA_FLAGS} {FAST_COMPILE_FLAGS}".strip()
 
+# The test workers (pytest-xdist) and the tests' subprocesses compile many of the same programs:
+# one session's persistent compilation cache, in a temporary folder the first process makes and
+# its children inherit, compiles each once. Its key holds the program, the XLA flags and the
+# versions, so a hit runs the very executable a compilation would have made. A cache the user set
+# is left as it is.
+if "JAX_COMPILATION_CACHE_DIR" not in os.environ:
+    SESSION_CACHE = tempfile.mkdtemp(prefix="liesample-test-xla-cache-")
+    os.environ["JAX_COMPILATION_CACHE_DIR"] = SESSION_CACHE
+    os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"
+    os.environ["JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES"] = "-1"
+else:
+    SESSION_CACHE = None
+
 import jax  # after XLA_FLAGS: the CPU back end reads them once
 import pytest
 
 # Tests run in float64 (ARCHITECTURE.md, "Habits"); float32 has its own stability tests.
 jax.config.update("jax_enable_x64", True)
+
+
+def pytest_unconfigure(config):
+    """The session's compilation cache goes with the process that made it."""
+    if SESSION_CACHE is not None:
+        shutil.rmtree(SESSION_CACHE, ignore_errors=True)
 
 
 def load_example(name):
