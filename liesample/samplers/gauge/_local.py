@@ -8,7 +8,10 @@
   radius ``√(1 − a₀²)``.
 
 Every sampler here loops until every site has accepted (``lax.while_loop``), each site drawing
-its own proposals, so the draws are exact whatever the acceptance rate.
+its own proposals, so the draws are exact whatever the acceptance rate. The sites are drawn as
+one flat axis: XLA compiles random draws of a many-axis shape inside such a loop into machine
+code whose size grows with the lattice (seconds to minutes of compilation); the flat draws are
+the same numbers in the same order (JAX's partitionable Threefry counts in row-major order).
 """
 
 from __future__ import annotations
@@ -19,6 +22,15 @@ import jax.numpy as jnp
 __all__ = ["quaternion_part", "su2_from_a0", "su2_heat_bath_a0", "von_mises"]
 
 CREUTZ_BELOW = 2.0  # α below which Creutz's sampler is used (KP's acceptance falls at small α)
+
+
+def _flat(draw):
+    """``draw(rng_key, parameter)`` on the parameter's sites as one flat axis, reshaped back."""
+
+    def flat_draw(rng_key, parameter):
+        return draw(rng_key, parameter.reshape(-1)).reshape(parameter.shape)
+
+    return flat_draw
 
 
 def _until_accepted(rng_key, shape, dtype, propose):
@@ -43,6 +55,7 @@ def _unit(key, shape, dtype):
     return 1.0 - jax.random.uniform(key, shape, dtype)
 
 
+@_flat
 def von_mises(rng_key, kappa):
     """Angles ``φ ∈ (−π, π]`` with density ``∝ exp(κ cos φ)`` (``κ ≥ 0``; ``κ = 0``: uniform)."""
     dtype = kappa.dtype
@@ -64,6 +77,7 @@ def von_mises(rng_key, kappa):
     return _until_accepted(rng_key, kappa.shape, dtype, propose)
 
 
+@_flat
 def su2_heat_bath_a0(rng_key, alpha):
     """``a₀ ∈ [−1, 1]`` with density ``∝ √(1 − a₀²) e^{α a₀}`` (``α ≥ 0``)."""
     dtype = alpha.dtype
@@ -86,7 +100,7 @@ def su2_heat_bath_a0(rng_key, alpha):
 
 def su2_from_a0(rng_key, a0, complex_dtype):
     """The SU(2) matrix ``a₀ I + i a⃗·σ⃗`` with ``|a⃗| = √(1 − a₀²)`` in a uniform direction."""
-    n = jax.random.normal(rng_key, (*a0.shape, 3), a0.dtype)
+    n = jax.random.normal(rng_key, (a0.size, 3), a0.dtype).reshape(*a0.shape, 3)  # flat: _flat
     n = n / jnp.linalg.norm(n, axis=-1, keepdims=True)
     a = jnp.sqrt(jnp.clip(1.0 - a0**2, 0.0, None))[..., None] * n
     return quaternion(a0, a[..., 0], a[..., 1], a[..., 2]).astype(complex_dtype)
