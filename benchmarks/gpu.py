@@ -108,11 +108,32 @@ def zeitlin_rows(sizes, chains_list, num_steps: int):
     return rows
 
 
+HEAT_BATH_PROBE = (
+    "compilation of one wilson_heat_bath step (1 heat-bath + 4 over-relaxation sweeps) on L⁴, "
+    "jax.jit(step).lower(...).compile(), in one process on the same device"
+)
+
+
+def heat_bath_compile_seconds(sizes) -> dict:
+    """Seconds to compile one SU(3) heat-bath step on each ``L⁴`` (a fresh program each)."""
+    seconds = {}
+    for size in sizes:
+        system = liesample.systems.wilson_gauge("SU3", (size,) * 4)
+        sampler = liesample.wilson_heat_bath(system, beta=gauge.BETA, overrelaxation=4)
+        state = sampler.init(system.cold_start())
+        start = time.perf_counter()
+        jax.jit(sampler.step).lower(jax.random.key(0), state).compile()
+        seconds[str(size)] = round(time.perf_counter() - start, 1)
+    return {"what": HEAT_BATH_PROBE, "seconds": seconds, "not_finished": {}}
+
+
 def gauge_measurement(sizes, max_seconds: float, tile: int = 1, log=print) -> dict:
     """4-D SU(3) at β = 6.0 on each ``L⁴`` in ``sizes``: the rows of ``benchmarks/gauge.py``
     (every chain stops once ``max_seconds`` are timed; ``tile``: see ``gauge.su3_rows``), as
     ``gpu_gauge.json``."""
     rows, start_plaquettes = [], {}
+    probe = heat_bath_compile_seconds(sorted({8, *sizes}))
+    log(f"  heat-bath step compilation: {probe['seconds']} s")
     for size in sizes:
         log(f"  SU(3) {size}⁴")
         su3, start_plaquettes[size] = gauge.su3_rows(
@@ -128,6 +149,7 @@ def gauge_measurement(sizes, max_seconds: float, tile: int = 1, log=print) -> di
         "start_plaquette": start_plaquettes,
         "published": gauge.PUBLISHED,
         "su3": rows,
+        "heat_bath_compile_probe": probe,
     }
 
 
@@ -262,8 +284,9 @@ def gauge_section(data: dict, out_dir: Path) -> str:
     probe = data.get("heat_bath_compile_probe")
     if probe:
         done = ", ".join(f"{size}⁴: {sec:g} s" for size, sec in probe["seconds"].items())
-        missing = "; ".join(f"{size}⁴: {why}" for size, why in probe["not_finished"].items())
-        lines += ["", f"Heat bath on the device, {probe['what']}: {done}; {missing}."]
+        missing = "".join(f"; {size}⁴: {why}" for size, why in probe["not_finished"].items())
+        when = f" ({probe['date_utc']})" if "date_utc" in probe else ""
+        lines += ["", f"Heat bath on the device{when}, {probe['what']}: {done}{missing}."]
     return "\n".join(lines + [""])
 
 
