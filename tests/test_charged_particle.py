@@ -406,7 +406,16 @@ def stationary_moments(system, beta, sigma, key, num_chains=256, num_steps=4000,
     return np.asarray(per_chain), exact
 
 
-@pytest.mark.parametrize("strong_field", [False, True], ids=["G=0", "strong G"])
+@pytest.mark.parametrize(
+    "strong_field",
+    [
+        # slow: the same Gibbs law without a field; the default suite checks this with
+        # test_charged_particle.py::test_stationary_law_is_gibbs_whatever_the_field[strong G]
+        pytest.param(False, marks=pytest.mark.slow),
+        True,
+    ],
+    ids=["G=0", "strong G"],
+)
 def test_stationary_law_is_gibbs_whatever_the_field(strong_field):
     """Moments of ``exp(−βV − β|p|²/2m)`` within 4.5 MCSE (independent chains' spread).
 

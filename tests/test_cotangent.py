@@ -91,6 +91,10 @@ def test_kinetic_flow_conserves_kinetic_energy_and_matches_the_linear_ode():
     np.testing.assert_allclose(got, z1, rtol=0, atol=1e-12)
 
 
+# slow: 2·10⁴ draws of the momentum law; the default suite checks this with the dense-mass
+# [adjusted langevin] case of test_geometric_samplers.py::
+# test_a_magnetic_field_and_a_dense_mass_on_the_euclidean_block_keep_the_exact_law
+@pytest.mark.slow
 def test_momentum_law_and_ou_step_keep_n0m():
     """``N(0, M)`` draws and the OU step from it have covariance ``M`` (dense block, sphere)."""
     space = {"a": S.Euclidean((2,)), "s": S.Sphere(2)}

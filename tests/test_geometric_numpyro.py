@@ -52,6 +52,10 @@ def test_vmf_draws_are_exact(d, kappa):
     assert abs(other.mean()) < 5 * other.std() / np.sqrt(len(other))
 
 
+# slow: exact draws at one F and a normalised log_prob; the default suite checks this with
+# test_geometric_numpyro.py::test_matrix_fisher_exact_sampler_for_concentrated_and_rotated_F and
+# test_numpyro_distributions.py::test_parameters_may_be_traced_under_jit_and_match_the_references
+@pytest.mark.slow
 def test_matrix_fisher_draws_and_log_prob():
     F = np.diag([2.0, 1.0, -0.5])
     law = MatrixFisher(F)

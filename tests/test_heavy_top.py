@@ -151,6 +151,9 @@ def test_casimirs_of_any_sign_are_valid_orbits():
         assert not bool(info.is_divergent)
 
 
+# slow: a 2·10⁴-step long run of the orbit check; the default suite checks this with
+# stability/test_stability.py::test_hard_case_is_stable_and_gibbs_exact[heavy top mgl=30-float64]
+@pytest.mark.slow
 def test_casimirs_preserved_over_many_steps():
     """2·10⁴ splitting steps on three orbits (Π·Γ > 0, = 0, < 0): both Casimirs kept to < 1e-10
     relative (to max(|C₀|, |μ|²), the sampler's casimir_error), while the chains did move.
@@ -189,7 +192,16 @@ def test_casimirs_preserved_over_many_steps():
 # ---------------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("integrator", ["splitting", "rkmk_heun", "lie_euler"])
+@pytest.mark.parametrize(
+    "integrator",
+    [
+        "splitting",
+        "rkmk_heun",
+        # slow: a third integrator, same pathwise check; the default suite checks this with
+        # test_heavy_top.py::test_without_gravity_pi_follows_the_rigid_body[splitting]
+        pytest.param("lie_euler", marks=pytest.mark.slow),
+    ],
+)
 def test_without_gravity_pi_follows_the_rigid_body(integrator):
     """Deterministic scene (σ = 0, θ = 0), same keys, same step: Π's trajectory is the rigid
     body's to round-off; with gravity on it is not."""

@@ -166,6 +166,9 @@ def test_noise_hamiltonians_are_the_spin_components():
 # ---------------------------------------------------------------------------------------------
 
 
+# slow: a 10⁴-step long run of the unit-spin (orbit) check; the default suite checks this with
+# test_properties.py::test_one_step_stays_on_the_orbit[spin chain-splitting]
+@pytest.mark.slow
 def test_unit_spins_are_preserved_over_ten_thousand_steps():
     num_steps = 10_000
     algorithm = liesample.lie_poisson_langevin(CHAIN_SYSTEM, beta=BETA, sigma=1.0, step_size=0.05)

@@ -170,7 +170,9 @@ def run_chains(algorithm, position, num_chains, num_draws, seed, num_warmup=200)
 @pytest.mark.parametrize(
     "label, strength, options, dense",
     [
-        ("G = 0", 0.0, {}, False),
+        # slow: the exact law without a field; the default suite checks this with test_magnetic.py::
+        # test_magnetic_hmc_moments_exact_for_any_field[strong G, partial refresh, dense M-...]
+        pytest.param("G = 0", 0.0, {}, False, marks=pytest.mark.slow),
         # default siblings: the two other strong-G cases here (persistent sign with a partial
         # refresh and a dense M; a full refresh with sign flips on acceptance) and, for this
         # persistent full-refresh chain, test_schemes.py's magnetic_hmc-minimal_norm case and

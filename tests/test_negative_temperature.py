@@ -25,7 +25,15 @@ def _z(tree, values, exact):
     return (values.reshape(-1, values.shape[-1]).mean(0) - exact) / mcse
 
 
-@pytest.mark.parametrize("beta", [-2.0, pytest.param(-6.0, marks=pytest.mark.slow)])
+@pytest.mark.parametrize(
+    "beta",
+    [
+        # slow: the adjusted rigid body's law again; the default suite checks this with
+        # test_adjusted.py::test_exact_on_the_rigid_body_where_the_unadjusted_chain_is_biased
+        pytest.param(-2.0, marks=pytest.mark.slow),
+        pytest.param(-6.0, marks=pytest.mark.slow),
+    ],
+)
 def test_adjusted_rigid_body_at_negative_beta_by_the_default_path(beta):
     """The restricted Gaussian at β < 0 concentrates on the largest-inertia axis (maximum
     energy); the adjusted sampler tunes its step by dual averaging and is exact."""

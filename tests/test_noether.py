@@ -81,6 +81,9 @@ def test_generic_noise_breaks_it():
     assert pi3_drift_along_sampler(lagrange_top(generic_noise)) > 0.1
 
 
+# slow: a second way to break the symmetry; the default suite checks this with
+# test_noether.py::test_generic_noise_breaks_it
+@pytest.mark.slow
 def test_broken_symmetry_breaks_it():
     """``I₁ ≠ I₂``: ``h`` is no longer invariant, so ``Π₃`` moves even with invariant noise."""
     assert pi3_drift_along_sampler(lagrange_top(inertia=(1.0, 1.6, 2.5))) > 0.1
@@ -103,7 +106,12 @@ def test_joint_generator_keeps_it_to_integrator_accuracy():
 @pytest.mark.parametrize(
     "driver",
     [
-        pytest.param(DriftedBrownianMotion(drift=0.8, scale=1.2), id="drifted"),
+        # slow: Π₃ kept under a drifted driver; the default suite checks this with
+        # test_noether.py::test_invariant_noise_keeps_pi3_to_round_off and, for the drifted
+        # driver, test_drivers.py::test_casimirs_kept_pathwise_under_every_driver[splitting-drifted]
+        pytest.param(
+            DriftedBrownianMotion(drift=0.8, scale=1.2), id="drifted", marks=pytest.mark.slow
+        ),
         pytest.param(
             TimeChangedBrownianMotion(lambda t: t + t**2), id="time-changed", marks=pytest.mark.slow
         ),

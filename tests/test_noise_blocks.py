@@ -173,6 +173,9 @@ def test_block_size_is_recorded_and_kept_by_the_warm_up():
     assert np.all(np.isfinite(np.asarray(states.position)))
 
 
+# slow: the adjusted rigid body's law again; the default suite checks this with
+# test_adjusted.py::test_exact_on_the_rigid_body_where_the_unadjusted_chain_is_biased
+@pytest.mark.slow
 def test_blocked_adjusted_chains_have_the_exact_moments():
     """The exact law through the blocked driver: E[μ_i²] of the rigid body within 5 MCSE of the
     exact Bingham moments (MCSE from independent chains started at exact draws)."""

@@ -42,6 +42,10 @@ def test_log_density_follows_a_bound_that_depends_on_another_site():
     np.testing.assert_allclose(values["b"], b, rtol=1e-12)
 
 
+# slow: a statistical run; the default suite checks this with
+# test_numpyro_dependent_support.py::test_log_density_follows_a_bound_that_depends_on_another_site
+# (the kernel's law: test_numpyro_mcmc.py::test_vmf_posterior_matches_quadrature_and_arviz_...)
+@pytest.mark.slow
 def test_draws_match_the_exact_posterior_with_a_dependent_bound():
     mcmc = MCMC(
         GeometricHMC(triangle_model),

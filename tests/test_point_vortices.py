@@ -258,7 +258,13 @@ def test_three_vortices_against_importance_sampling():
 
 @pytest.mark.parametrize(
     ("num_vortices", "max_degree", "angle"),
-    [(6, 4, 90.0), (4, 3, math.degrees(math.acos(-1.0 / 3.0)))],
+    [
+        (6, 4, 90.0),
+        # slow: a second regular configuration; the default suite checks this with the
+        # [6-4-90.0] case of test_point_vortices.py::
+        # test_pure_dissipation_descends_to_the_regular_configuration
+        pytest.param(4, 3, math.degrees(math.acos(-1.0 / 3.0)), marks=pytest.mark.slow),
+    ],
 )
 def test_pure_dissipation_descends_to_the_regular_configuration(num_vortices, max_degree, angle):
     system = point_vortices(np.ones(num_vortices), max_degree=max_degree)
@@ -390,6 +396,9 @@ def test_close_approach_to_a_third_vortex_stays_collision_free():
     assert np.all(turning > 0) or np.all(turning < 0)
 
 
+# slow: a long run at the stiffest setting; the default suite checks this with
+# test_point_vortices.py::test_close_approach_to_a_third_vortex_stays_collision_free
+@pytest.mark.slow
 def test_long_run_at_the_stiffest_setting_has_no_nan_and_no_escape():
     """Like-signed pair at pair exponent −0.95 (the bound is −1): the vortices spend much of their
     time within 0.01 of each other. Sampled the stiffness-free way (``hamiltonian=False``, same
@@ -617,13 +626,16 @@ def _onsager_check(beta, num_chains, num_sweeps, published=None):
     return ours
 
 
+# slow: vortex_metropolis's law again, on ten vortices; the default suite checks this with
+# test_point_vortices.py::test_vortex_metropolis_samples_the_exact_pair_law
+@pytest.mark.slow
 def test_vortex_metropolis_matches_an_independent_metropolis_on_ten_vortices():
     """10 vortices (Γ = +1 ×5, −1 ×5) at β = −4: Onsager clusters, ``E|D|²`` ≈ 66.97 ± 0.10
     (the user's own single-vortex Metropolis, 64 chains × 20 000 sweeps)."""
     _onsager_check(-4.0, 512, 150, published=(66.97, 0.10))
 
 
-@pytest.mark.slow  # 8× the chains of the default test above (which stays), and β = −2
+@pytest.mark.slow  # 8× the chains of the test above, and β = −2
 @pytest.mark.parametrize(("beta", "published"), [(-4.0, (66.97, 0.10)), (-2.0, (25.48, 0.07))])
 def test_vortex_metropolis_matches_an_independent_metropolis_many_chains(beta, published):
     _onsager_check(beta, 4096, 300, published=published)

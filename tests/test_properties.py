@@ -128,8 +128,18 @@ def _random_position(system, raw):
     return position
 
 
-@pytest.mark.parametrize("integrator", ["splitting", "rkmk_heun", "lie_euler"])
-@pytest.mark.parametrize("name", list(SYSTEMS))
+def _orbit_cases():
+    """Every system with the splitting and every integrator on the rigid body by default."""
+    for name in SYSTEMS:
+        for integrator in ("splitting", "rkmk_heun", "lie_euler"):
+            quick = integrator == "splitting" or name == "rigid body"
+            # slow: another integrator on another system; the default suite checks this with
+            # test_properties.py::test_one_step_stays_on_the_orbit[rigid body-<integrator>]
+            marks = () if quick else pytest.mark.slow
+            yield pytest.param(name, integrator, id=f"{name}-{integrator}", marks=marks)
+
+
+@pytest.mark.parametrize(("name", "integrator"), list(_orbit_cases()))
 def test_one_step_stays_on_the_orbit(name, integrator):
     system = SYSTEMS[name]
     size = int(np.prod(system.event_shape))

@@ -235,7 +235,15 @@ def test_ambient_euler_heun_leaves_the_orbit():
 # ---------------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("integrator", ORBIT_PRESERVING)
+@pytest.mark.parametrize(
+    "integrator",
+    [
+        "splitting",
+        # slow: 2·10⁴-step runs repeated per integrator; the default suite checks this with
+        # test_rigid_body.py::test_negative_temperature_runs_on_the_orbit[splitting]
+        *(pytest.param(i, marks=pytest.mark.slow) for i in ("rkmk_heun", "lie_euler")),
+    ],
+)
 def test_negative_temperature_runs_on_the_orbit(integrator):
     num_steps = 20_000
     algorithm, run = stochastic_runner(integrator, beta=-2.0)

@@ -223,7 +223,16 @@ def test_a_plain_blackjax_algorithm_runs_as_a_sampler_with_the_defaults(plain):
 TUNED_OPTIONS = {"adjusted_lie_poisson": {}, "lie_poisson_langevin": {"integrator": "lie_euler"}}
 
 
-@pytest.mark.parametrize("name", ["adjusted_lie_poisson", "lie_poisson_langevin"])
+@pytest.mark.parametrize(
+    "name",
+    [
+        # slow: the same promise for a second sampler; the default suite checks this with the
+        # [lie_poisson_langevin] case of
+        # test_runner.py::test_the_warm_up_tunes_a_new_sampler_and_leaves_the_given_one
+        pytest.param("adjusted_lie_poisson", marks=pytest.mark.slow),
+        "lie_poisson_langevin",
+    ],
+)
 def test_the_warm_up_tunes_a_new_sampler_and_leaves_the_given_one(name):
     """The step size the sampler declares tunable is chosen by the tuning layer into a new
     sampler (recorded in its settings); the sampler passed in is not changed, and its step

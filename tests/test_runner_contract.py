@@ -277,6 +277,9 @@ def _check_vmf(tree, bias_tolerance=0.0):
 STARTS_S2 = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [-0.6, 0.0, 0.8]])
 
 
+# slow: the unadjusted default path's law again, on the vMF; the default suite checks this with
+# test_negative_temperature.py::test_unadjusted_rigid_body_at_negative_beta_by_the_default_path
+@pytest.mark.slow
 def test_vmf_unadjusted_without_step_size_matches_the_exact_law():
     sampler = liesample.lie_poisson_langevin(VMF, beta=1.0)
     tree = liesample.sample(

@@ -248,7 +248,10 @@ def ring_correlations(s):
 @pytest.mark.parametrize(
     ("sampler", "length", "periodic"),
     [
-        ("heat bath + over-relaxation", 16, False),
+        # slow: the heat bath's chain law again; the default suite checks this with the
+        # [heat bath + over-relaxation-5-True] case of
+        # test_spin_samplers.py::test_samplers_match_the_exact_chain_and_ring
+        pytest.param("heat bath + over-relaxation", 16, False, marks=pytest.mark.slow),
         ("heat bath + over-relaxation", 5, True),  # odd ring: three colour classes
         ("wolff", 16, False),
         pytest.param("wolff", 4, True, marks=pytest.mark.slow),

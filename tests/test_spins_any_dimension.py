@@ -124,7 +124,15 @@ def test_cluster_moves_match_fisher_on_the_open_chain(sampler):
     assert abs(samples.mean() - float(langevin_function(2 * beta))) > 10 * se[0]
 
 
-@pytest.mark.parametrize("sampler", ["heat bath + over-relaxation", "swendsen-wang"])
+@pytest.mark.parametrize(
+    "sampler",
+    [
+        "heat bath + over-relaxation",
+        # slow: Swendsen–Wang's law again; the default suite checks this with the [swendsen-wang]
+        # case of test_spins_any_dimension.py::test_cluster_moves_match_fisher_on_the_open_chain
+        pytest.param("swendsen-wang", marks=pytest.mark.slow),
+    ],
+)
 def test_cubic_lattice_matches_the_high_temperature_series(sampler):
     """Periodic 6³ lattice at K = 0.3: the mean bond against the series to O(K⁷); the
     loop-free value ``u`` (what a sampler blind to the lattice's loops would give) is rejected

@@ -76,7 +76,17 @@ def random_steps(system, count=5, seed=3, step_size=0.1):
     return jnp.asarray(states), jnp.asarray(increments)
 
 
-@pytest.mark.parametrize("name", SYSTEMS)
+@pytest.mark.parametrize(
+    "name",
+    [
+        # slow: the one-degree-of-freedom pendula repeat the pathwise check; the default suite
+        # checks this with the [coupled n=2] case of
+        # test_symplectic.py::test_midpoint_step_is_symplectic_pathwise_and_heun_is_not
+        pytest.param("pendulum", marks=pytest.mark.slow),
+        pytest.param("pendulum p²", marks=pytest.mark.slow),
+        "coupled n=2",
+    ],
+)
 def test_midpoint_step_is_symplectic_pathwise_and_heun_is_not(name):
     system = SYSTEMS[name]
 
