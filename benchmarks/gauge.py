@@ -84,21 +84,54 @@ def make_run(step, observable):
     return run
 
 
-def _chain(run, state, key, num_updates, max_seconds=math.inf):
+def _chain(run, state, key, num_updates, max_seconds=math.inf, kept=None):
     """``num_updates`` (rounded up to chunks) steps, fewer if ``max_seconds`` of timed chunks
-    pass first; the first chunk compiles and is not timed."""
+    pass first; the first chunk compiles and is not timed. ``kept``: a list that receives the
+    links at the end of every chunk (host copies, outside the timing)."""
     chunks = jax.random.split(key, -(-num_updates // CHUNK) + 1)
     jax.block_until_ready(run(state, jax.random.split(chunks[0], CHUNK)))  # compile
     values, rates = [], []
-    start = time.perf_counter()
+    seconds = 0.0
     for key in chunks[1:]:
+        start = time.perf_counter()
         state, (v, r) = jax.block_until_ready(run(state, jax.random.split(key, CHUNK)))
+        seconds += time.perf_counter() - start
         values.append(np.asarray(v))
         rates.append(np.asarray(r))
-        if time.perf_counter() - start > max_seconds:
+        if kept is not None:
+            kept.append(np.asarray(state.position))
+        if seconds > max_seconds:
             break
-    seconds = time.perf_counter() - start
     return state, np.concatenate(values), float(np.mean(np.concatenate(rates))), seconds
+
+
+# --------------------------------------------------------------------------- Wilson flow
+
+FLOW = {"time": 3.5, "steps": 70, "at": 2.0, "kept": 40}
+"""Flowed energy density: each kept configuration (at most ``kept`` chunk ends a chain, evenly
+spaced) flowed to ``time`` in ``steps`` RK3 steps (``liesample.samplers.gauge.flow``); the ESS
+row is ``t² E(t)`` at ``t = at``, ``t₀`` where the mean ``t² E(t)`` over every sampler's
+configurations reaches 0.3."""
+
+
+def flowed_energies(system, configurations, flow=FLOW):
+    """``(t, E)``: the flow times and ``E(t)`` of each configuration, shape ``(n, steps)``."""
+    from liesample.samplers.gauge.flow import wilson_flow
+
+    along = jax.jit(lambda links: wilson_flow(system, links, flow["time"], flow["steps"])[1])
+    times = flow["time"] * np.arange(1, flow["steps"] + 1) / flow["steps"]
+    return times, np.stack([np.asarray(along(jnp.asarray(u))) for u in configurations])
+
+
+def _flowed_statistics(times, energies, seconds, flow=FLOW):
+    """The ESS row of ``t² E(t)`` at ``t = flow["at"]`` over one chain's kept configurations."""
+    k = int(np.argmin(np.abs(times - flow["at"])))
+    series = times[k] ** 2 * energies[:, k]
+    ess = float(az.ess(series[None, :])) if series.size >= 4 else math.nan
+    se = float(np.std(series, ddof=1) / math.sqrt(ess)) if ess > 0 else math.nan
+    return {"flow_time": float(times[k]), "flowed_t2e": float(np.mean(series)),
+            "flowed_mcse": se, "flowed_configurations": int(series.size),
+            "flowed_ess": ess, "flowed_ess_per_s": ess / seconds}  # fmt: skip
 
 
 # --------------------------------------------------------------------------- plain HMC (baseline)
@@ -162,13 +195,17 @@ def _thermalised(size, thermalisation, seed):
     return state.position, heat_bath, run
 
 
-def su3_rows(size, counts, thermalisation, log, seed=0, max_seconds=math.inf, tile=1):
+def su3_rows(size, counts, thermalisation, log, seed=0, max_seconds=math.inf, tile=1, flow=None):
     """The 4-D SU(3) rows at β = 6.0 (one chain each, from one thermalised configuration) and
     that configuration's plaquette; each chain stops early once ``max_seconds`` are timed.
 
     ``tile > 1``: the configuration is thermalised on ``(L/tile)⁴`` and repeated ``tile`` times
     along each axis (a configuration of the larger torus with the same plaquettes, which the
-    untimed first chunk of every chain then moves on), and there is no heat-bath row."""
+    untimed first chunk of every chain then moves on), and there is no heat-bath row.
+
+    ``flow`` (like :data:`FLOW`): every row also gets the ESS of the flowed energy density, and
+    the function returns a third item, the flow's ``t₀`` over all rows' configurations (``nan``
+    if the flow stops short of it) and that mean curve."""
     links, heat_bath, heat_bath_run = _thermalised(size // tile, thermalisation, seed)
     system = wilson_gauge("SU3", (size,) * 4)
     if tile > 1:
@@ -192,19 +229,35 @@ def su3_rows(size, counts, thermalisation, log, seed=0, max_seconds=math.inf, ti
         "SMD": (smd, None, smd_step, 1, 1, counts["smd"]),
         "plain HMC": (plain, None, hmc_step, hmc_steps, hmc_steps, counts["hmc"]),
     }  # fmt: skip
-    rows = []
+    rows, curves = [], []
     num_links = system.dim * size**4
     for name, (sampler, run, step_size, steps, sweeps, updates) in samplers.items():
         run = run or make_run(sampler.step, system.mean_plaquette)
+        kept = None if flow is None else []
         _, values, rate, seconds = _chain(run, sampler.init(links), jax.random.key(seed + 2),
-                                          updates, max_seconds)  # fmt: skip
+                                          updates, max_seconds, kept)  # fmt: skip
         row = {"sampler": name, "step_size": step_size, "steps": steps,
                "updates": int(values.size), **_statistics(values, rate, seconds),
                "link_updates_per_s": values.size * sweeps * num_links / seconds}  # fmt: skip
+        if flow is not None:
+            thin = max(1, math.ceil(len(kept) / flow["kept"]))
+            times, energies = flowed_energies(system, kept[thin - 1 :: thin], flow)
+            row |= _flowed_statistics(times, energies, seconds, flow)
+            row["updates_between_flowed"] = CHUNK * thin
+            curves.append(energies)
+            log(f"  {name}: t²E({row['flow_time']:g}) {row['flowed_t2e']:.4f} ± "
+                f"{row['flowed_mcse']:.4f}, ESS {row['flowed_ess']:.1f}")  # fmt: skip
         rows.append(row)
         log(f"  {name}: plaquette {row['plaquette']:.5f} ± {row['mcse']:.5f}, acceptance "
             f"{rate:.2f}, ESS {row['ess']:.1f}, {seconds:.0f} s")  # fmt: skip
-    return rows, float(system.mean_plaquette(links))
+    start_plaquette = float(system.mean_plaquette(links))
+    if flow is None:
+        return rows, start_plaquette
+    from liesample.samplers.gauge.flow import flow_scale
+
+    mean = np.concatenate(curves).mean(axis=0)
+    scale = {"t0": flow_scale(times, mean), "times": times.tolist(), "mean_energy": mean.tolist()}
+    return rows, start_plaquette, scale
 
 
 def _statistics(values, rate, seconds):

@@ -127,19 +127,31 @@ def heat_bath_compile_seconds(sizes) -> dict:
     return {"what": HEAT_BATH_PROBE, "seconds": seconds, "not_finished": {}}
 
 
-def gauge_measurement(sizes, max_seconds: float, tile: int = 1, log=print) -> dict:
+def gauge_measurement(
+    sizes, max_seconds: float, tile: int = 1, log=print, flow: bool = False, probe: bool = True
+) -> dict:
     """4-D SU(3) at β = 6.0 on each ``L⁴`` in ``sizes``: the rows of ``benchmarks/gauge.py``
-    (every chain stops once ``max_seconds`` are timed; ``tile``: see ``gauge.su3_rows``), as
+    (every chain stops once ``max_seconds`` are timed; ``tile``: see ``gauge.su3_rows``;
+    ``flow``: with the flowed energy density and ``t₀``, :data:`benchmarks.gauge.FLOW`), as
     ``gpu_gauge.json``."""
-    rows, start_plaquettes = [], {}
-    probe = heat_bath_compile_seconds(sorted({8, *sizes}))
-    log(f"  heat-bath step compilation: {probe['seconds']} s")
+    rows, start_plaquettes, scales = [], {}, {}
+    extra = {}
+    if probe:
+        extra["heat_bath_compile_probe"] = heat_bath_compile_seconds(sorted({8, *sizes}))
+        log(f"  heat-bath step compilation: {extra['heat_bath_compile_probe']['seconds']} s")
     for size in sizes:
         log(f"  SU(3) {size}⁴")
-        su3, start_plaquettes[size] = gauge.su3_rows(
-            size, GAUGE_COUNTS, GAUGE_THERMALISATION, log, max_seconds=max_seconds, tile=tile
-        )
-        rows += [{"size": size, "tile": tile, **row} for row in su3]
+        out = gauge.su3_rows(
+            size, GAUGE_COUNTS, GAUGE_THERMALISATION, log, max_seconds=max_seconds, tile=tile,
+            flow=gauge.FLOW if flow else None,
+        )  # fmt: skip
+        start_plaquettes[size] = out[1]
+        if flow:
+            scales[str(size)] = out[2]
+            log(f"  t0 on {size}⁴: {out[2]['t0']:.4g}")
+        rows += [{"size": size, "tile": tile, **row} for row in out[0]]
+    if flow:
+        extra |= {"flow": gauge.FLOW, "flow_scale": scales}
     return {
         **_device_fields(),
         "machine": common.machine_info(),
@@ -149,7 +161,7 @@ def gauge_measurement(sizes, max_seconds: float, tile: int = 1, log=print) -> di
         "start_plaquette": start_plaquettes,
         "published": gauge.PUBLISHED,
         "su3": rows,
-        "heat_bath_compile_probe": probe,
+        **extra,
     }
 
 
@@ -228,6 +240,43 @@ def report(out_dir: Path, md_dir: Path) -> str:
     return "\n".join(parts)
 
 
+def _flow_lines(data: dict, short: str) -> list[str]:
+    """The flowed energy density's rows (``--gauge-flow``) and the flow's ``t₀``."""
+    rows = [r for r in data["su3"] if "flowed_t2e" in r]
+    if not rows:
+        return []
+    flow = data["flow"]
+    lines = [
+        "",
+        f"Flowed energy density (`--gauge-flow`): up to {flow['kept']} configurations a chain, "
+        "evenly spaced over its timed updates, each flowed to t = "
+        f"{flow['time']:g} in {flow['steps']} RK3 steps (`liesample.samplers.gauge.flow`); "
+        f"t²E(t) at t = {flow['at']:g} with ArviZ's bulk ESS over the configurations, ESS/s "
+        "over the chain's sampling time (the flow itself is not timed).",
+        "",
+        f"| L⁴ | sampler | configurations (updates apart) | t²E(t) ± MCSE | ESS | "
+        f"ESS/s ({short}) |",
+        "|---|---|---:|---|---:|---:|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['size']}⁴ | {r['sampler']} | {r['flowed_configurations']} "
+            f"({r['updates_between_flowed']}) | {r['flowed_t2e']:.4f} ± {r['flowed_mcse']:.4f} | "
+            f"{common.format_g(r['flowed_ess'])} | {common.format_g(r['flowed_ess_per_s'])} |"
+        )
+    for size, scale in data.get("flow_scale", {}).items():
+        t = np.asarray(scale["times"])
+        y = t**2 * np.asarray(scale["mean_energy"])
+        found = (
+            f"t₀ = {scale['t0']:.3g}"
+            if np.isfinite(scale["t0"])
+            else f"t₀ not reached: the mean t²E(t) stays below 0.3 up to t = {t[-1]:g}"
+        )
+        lines += ["", f"On {size}⁴, over every row's configurations: {found} (t²E = "
+                  f"{y[len(y) // 4]:.3f} at t = {t[len(t) // 4]:g}, {y[-1]:.3f} at t = {t[-1]:g})."]
+    return lines
+
+
 def gauge_section(data: dict, out_dir: Path) -> str:
     """The SU(3) rows measured on the device, beside the CPU rows of ``gauge.json``."""
     cpu_path = out_dir / "gauge.json"
@@ -281,6 +330,7 @@ def gauge_section(data: dict, out_dir: Path) -> str:
         "Where the ESS is a few, the plaquette and its MCSE are not estimates to rely on; the "
         "link updates per second are.",
     ]
+    lines += _flow_lines(data, short)
     probe = data.get("heat_bath_compile_probe")
     if probe:
         done = ", ".join(f"{size}⁴: {sec:g} s" for size, sec in probe["seconds"].items())
@@ -366,13 +416,20 @@ def main(argv=None):
     )
     parser.add_argument("--gauge-seconds", type=float, default=25.0, help="timed seconds a chain")
     parser.add_argument(
+        "--gauge-flow", action="store_true", help="also the flowed energy density's ESS and t₀"
+    )
+    parser.add_argument(
+        "--no-probe", action="store_true", help="skip the heat-bath compilation probe"
+    )
+    parser.add_argument(
         "--gauge-tile", type=int, default=1, help="thermalise on (L/K)⁴ and tile (no heat bath)"
     )
     args = parser.parse_args(argv)
     if args.gauge:
         data = gauge_measurement(
-            args.gauge, args.gauge_seconds, args.gauge_tile, lambda m: print(m, flush=True)
-        )
+            args.gauge, args.gauge_seconds, args.gauge_tile, lambda m: print(m, flush=True),
+            flow=args.gauge_flow, probe=not args.no_probe,
+        )  # fmt: skip
     else:
         data = measure(args.quick)
     args.out.parent.mkdir(parents=True, exist_ok=True)
