@@ -42,6 +42,7 @@ import numpy as np
 
 import liesample
 from benchmarks import common
+from liesample.samplers.gauge.flow import flow_scale, wilson_flow
 from liesample.samplers.gauge.hmc import gauge_hmc
 from liesample.systems import wilson_gauge
 from liesample.targets import gauge as exact
@@ -116,22 +117,20 @@ configurations reaches 0.3."""
 
 def flowed_energies(system, configurations, flow=FLOW):
     """``(t, E)``: the flow times and ``E(t)`` of each configuration, shape ``(n, steps)``."""
-    from liesample.samplers.gauge.flow import wilson_flow
-
     along = jax.jit(lambda links: wilson_flow(system, links, flow["time"], flow["steps"])[1])
     times = flow["time"] * np.arange(1, flow["steps"] + 1) / flow["steps"]
     return times, np.stack([np.asarray(along(jnp.asarray(u))) for u in configurations])
 
 
-def _flowed_statistics(times, energies, seconds, flow=FLOW):
-    """The ESS row of ``t² E(t)`` at ``t = flow["at"]`` over one chain's kept configurations."""
+def _flowed_statistics(times, energies, rate, seconds, flow=FLOW):
+    """The ESS row of ``t² E(t)`` at ``t = flow["at"]`` over one chain's kept configurations
+    (:func:`_statistics` of that series)."""
     k = int(np.argmin(np.abs(times - flow["at"])))
     series = times[k] ** 2 * energies[:, k]
-    ess = float(az.ess(series[None, :])) if series.size >= 4 else math.nan
-    se = float(np.std(series, ddof=1) / math.sqrt(ess)) if ess > 0 else math.nan
-    return {"flow_time": float(times[k]), "flowed_t2e": float(np.mean(series)),
-            "flowed_mcse": se, "flowed_configurations": int(series.size),
-            "flowed_ess": ess, "flowed_ess_per_s": ess / seconds}  # fmt: skip
+    row = _statistics(series, rate, seconds)
+    return {"flow_time": float(times[k]), "flowed_t2e": row["plaquette"],
+            "flowed_mcse": row["mcse"], "flowed_configurations": int(series.size),
+            "flowed_ess": row["ess"], "flowed_ess_per_s": row["ess_per_s"]}  # fmt: skip
 
 
 # --------------------------------------------------------------------------- plain HMC (baseline)
@@ -242,7 +241,7 @@ def su3_rows(size, counts, thermalisation, log, seed=0, max_seconds=math.inf, ti
         if flow is not None:
             thin = max(1, math.ceil(len(kept) / flow["kept"]))
             times, energies = flowed_energies(system, kept[thin - 1 :: thin], flow)
-            row |= _flowed_statistics(times, energies, seconds, flow)
+            row |= _flowed_statistics(times, energies, rate, seconds, flow)
             row["updates_between_flowed"] = CHUNK * thin
             curves.append(energies)
             log(f"  {name}: t²E({row['flow_time']:g}) {row['flowed_t2e']:.4f} ± "
@@ -253,8 +252,6 @@ def su3_rows(size, counts, thermalisation, log, seed=0, max_seconds=math.inf, ti
     start_plaquette = float(system.mean_plaquette(links))
     if flow is None:
         return rows, start_plaquette
-    from liesample.samplers.gauge.flow import flow_scale
-
     mean = np.concatenate(curves).mean(axis=0)
     scale = {"t0": flow_scale(times, mean), "times": times.tolist(), "mean_energy": mean.tolist()}
     return rows, start_plaquette, scale
