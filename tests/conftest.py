@@ -18,12 +18,13 @@ if os.environ.get("LIESAMPLE_TEST_FULL_OPTIMIZATION") != "1":
 # The test workers (pytest-xdist) and the tests' subprocesses compile many of the same programs:
 # one session's persistent compilation cache, in a temporary folder the first process makes and
 # its children inherit, compiles each once. Its key holds the program, the XLA flags and the
-# versions, so a hit runs the very executable a compilation would have made. A cache the user set
-# is left as it is.
+# versions, so a hit runs the very executable a compilation would have made. Only programs whose
+# compilation took 0.3 s or more are stored: writing and reading a small one costs more than
+# compiling it again. A cache the user set is left as it is.
 if "JAX_COMPILATION_CACHE_DIR" not in os.environ:
     SESSION_CACHE = tempfile.mkdtemp(prefix="liesample-test-xla-cache-")
     os.environ["JAX_COMPILATION_CACHE_DIR"] = SESSION_CACHE
-    os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"
+    os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.3")
     os.environ["JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES"] = "-1"
 else:
     SESSION_CACHE = None

@@ -141,6 +141,10 @@ def _dispersed_starts(space, key):
     return starts
 
 
+@pytest.mark.slow  # a long statistical run; default siblings: GeometricHMC's exact law through
+# test_numpyro_mcmc.py's vMF posterior, the product space's by the "adjusted langevin" case of
+# test_a_magnetic_field_and_a_dense_mass_on_the_euclidean_block_keep_the_exact_law, and the
+# SO(3) flow by test_spaces.py::test_flow_is_reversible_and_stays_on_the_manifold
 def test_hmc_on_spheres_rotations_and_r2_matches_exact_moments():
     space, logdensity, observables, exact = product_target(list(PRODUCT))
     sampler = liesample.geometric_hmc(logdensity, space, step_size=0.25, num_integration_steps=6)
@@ -152,7 +156,7 @@ def test_hmc_on_spheres_rotations_and_r2_matches_exact_moments():
 
 @pytest.mark.slow  # default sibling: the "adjusted langevin" case of
 # test_a_magnetic_field_and_a_dense_mass_on_the_euclidean_block_keep_the_exact_law (the adjusted
-# chain's exact law on S² × R²; the SO(3) blocks' flow by test_hmc_on_spheres_rotations_and_r2_...)
+# chain's exact law on S² × R²; its SO(3) blocks' in make test-slow)
 def test_adjusted_langevin_matches_exact_moments():
     space, logdensity, observables, exact = product_target(["s2", "fisher", "x"])
     sampler = liesample.geometric_langevin(

@@ -376,7 +376,11 @@ def ergodic_averages(system, beta, step_size, num_chains, total_time, seed):
     return np.asarray(liesample.jit(jax.vmap(chain))(keys, starts))
 
 
-@pytest.mark.parametrize("split_hamiltonian", [pytest.param(False, marks=pytest.mark.slow), True])
+# A long statistical run (32 chains × T = 400): make test-slow. The default suite checks the
+# heavy top's Gibbs law by tests/stability/test_stability.py's heavy-top hard case and the
+# sampler's flow by test_without_gravity_pi_follows_the_rigid_body.
+@pytest.mark.slow
+@pytest.mark.parametrize("split_hamiltonian", [False, True])
 def test_sampler_matches_exact_gibbs_law(split_hamiltonian):
     """E[Γ·χ] and E[Π_i²] from 32 independent chains (T = 400 each) match HeavyTopGibbs, |z| < 3.5
     (Bonferroni over 4 observables; MCSE ≈ 2.5e-3 for Γ·χ and Π₁², 1.2e-2 for Π₃²).

@@ -77,12 +77,12 @@ def test_invariant_noise_keeps_pi3_to_round_off():
     assert pi3_drift_along_sampler(lagrange_top()) < 1e-12
 
 
+@pytest.mark.slow  # the negative control; the kept invariant runs by default (the test above)
 def test_generic_noise_breaks_it():
     assert pi3_drift_along_sampler(lagrange_top(generic_noise)) > 0.1
 
 
-# slow: a second way to break the symmetry; the default suite checks this with
-# test_noether.py::test_generic_noise_breaks_it
+# slow: a second way to break the symmetry, beside test_generic_noise_breaks_it
 @pytest.mark.slow
 def test_broken_symmetry_breaks_it():
     """``I₁ ≠ I₂``: ``h`` is no longer invariant, so ``Π₃`` moves even with invariant noise."""

@@ -88,7 +88,11 @@ def exact_second_moments(beta):
     return np.diag(np.asarray(rigid_body(INERTIA).reference(beta, [RADIUS, 0, 0]).second_moments()))
 
 
-@pytest.mark.parametrize("beta", [pytest.param(3.0, marks=pytest.mark.slow), -2.0])
+# Long statistical runs: make test-slow. The default suite checks the rigid body's exact law on
+# the default path by tests/test_negative_temperature.py::test_unadjusted_rigid_body_at_negative_
+# beta_by_the_default_path and tests/stability/test_stability.py's hard cases.
+@pytest.mark.slow
+@pytest.mark.parametrize("beta", [3.0, -2.0])
 def test_second_moments_match_exact_law(beta):
     """E[μ_iμ_j] from several chains matches the exact moments (anisotropic body, β of both
     signs). At dt = 0.05 the splitting's bias (~5e-4, benchmarks/RESULTS.md) is far below the
@@ -119,6 +123,7 @@ def test_second_moments_match_exact_law(beta):
     assert np.any(np.abs((table["estimate"] - RADIUS**2 / 3) / table["mcse"]) > 10)
 
 
+@pytest.mark.slow  # three long ensembles; default sibling: test_lie_euler_bias_is_first_order
 def test_second_order_integrator_beats_first_order_ones():
     """At dt = 0.2 the Lie–Euler and joint-Heun biases are resolved (≫ SE) and several times
     the splitting's, whose bias at this step is ~5e-3 (benchmarks/RESULTS.md)."""
@@ -169,6 +174,8 @@ def test_splitting_bias_is_second_order():
     assert abs(b2 - b1 / 2) > 3 * np.hypot(s2, s1 / 2), estimates
 
 
+@pytest.mark.slow  # a long statistical run; the dynamics' path by the default tests of
+# tests/test_zeitlin.py::test_su2_is_the_isotropic_rigid_body_pathwise
 def test_isotropic_autocorrelation_matches_exact():
     """Isotropic inertia: Brownian motion on the sphere, E[μ(t)·μ(0)] = r² e^{−σ²t} (MATH.md §2).
 
