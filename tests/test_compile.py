@@ -113,3 +113,24 @@ def test_jit_as_decorator_with_arguments():
         return x**n
 
     assert float(power(2.0, 3)) == 8.0
+
+
+def test_evaluate_gives_concrete_values_at_top_level_and_inside_a_staged_function():
+    """``evaluate`` (the library's start checks): concrete values at top level, and inside
+    ``jax.jit`` too, where a plain call would return tracers."""
+    from liesample.foundation.compile import evaluate
+
+    @liesample.jit
+    def norm_plus_constant(x):
+        return jnp.sqrt(jnp.sum(x**2)) + jnp.sin(jnp.asarray(0.5)) ** 2  # a constant subexpression
+
+    x = np.array([3.0, 4.0])
+    expected = 5.0 + np.sin(0.5) ** 2
+    assert float(evaluate(norm_plus_constant, x)) == pytest.approx(expected, rel=1e-15)
+
+    @jax.jit
+    def staged(y):
+        value = float(evaluate(norm_plus_constant, x))  # concrete although staged
+        return y * value
+
+    assert float(staged(2.0)) == pytest.approx(2.0 * expected, rel=1e-15)

@@ -20,7 +20,7 @@ from typing import Any
 
 import jax
 
-__all__ = ["SAFE_COMPILER_OPTIONS", "jit", "safe_compiler_options"]
+__all__ = ["SAFE_COMPILER_OPTIONS", "evaluate", "jit", "safe_compiler_options"]
 
 SAFE_COMPILER_OPTIONS = {"xla_disable_hlo_passes": "small-while-loop-hoisting"}
 
@@ -88,3 +88,19 @@ def jit(fun: Callable | None = None, /, **jit_kwargs: Any) -> Callable:
     compiled.trace = safe.trace
     compiled.eval_shape = safe.eval_shape
     return compiled
+
+
+def evaluate(fun: Callable, /, *args: Any) -> Any:
+    """``fun(*args)`` with concrete (numpy) arguments, as concrete values even while an enclosing
+    computation (``jax.jit``, ``grad``) is being staged: pass numpy arrays, as ``jnp.asarray``
+    outside this call would stage them too.
+
+    There it runs under ``jax.ensure_compile_time_eval``. Called at top level it runs as it is:
+    under that context a jitted ``fun`` would be traced with eager constant folding, so each of
+    its constant operations would compile as a program of its own, and ``fun`` would compile
+    again under a cache key of its own.
+    """
+    if _inside_staged_computation():
+        with jax.ensure_compile_time_eval():
+            return fun(*args)
+    return fun(*args)

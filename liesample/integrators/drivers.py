@@ -34,7 +34,7 @@ import numpy as np
 
 from liesample.dynamics.poisson_langevin import PoissonLangevin, Scene
 from liesample.dynamics.system import LiePoissonSystem, checked_beta
-from liesample.foundation.compile import jit
+from liesample.foundation.compile import evaluate, jit
 from liesample.foundation.validation import finite_float
 from liesample.integrators.orbit import DEFAULT_INTEGRATOR, get_integrator
 
@@ -143,8 +143,7 @@ class TimeChangedBrownianMotion(_Driver):
         return jnp.sqrt(self.quadratic_variation(t, dt)) * normal
 
     def check_times(self, times) -> None:
-        with jax.ensure_compile_time_eval():
-            tau = np.asarray(jax.vmap(self.clock)(jnp.asarray(times)), dtype=float)
+        tau = np.asarray(evaluate(jax.vmap(self.clock), np.asarray(times)), dtype=float)
         if not np.all(np.isfinite(tau)):
             raise ValueError("clock returned a non-finite value on the time grid")
         if abs(tau[0]) > 1e-12 * max(1.0, float(np.max(np.abs(tau)))):

@@ -51,7 +51,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from liesample.foundation.compile import jit
+from liesample.foundation.compile import evaluate, jit
 from liesample.foundation.validation import raise_or_warn
 from liesample.integrators.orbit import INTEGRATORS, Integrator
 
@@ -127,8 +127,7 @@ def stiffness(system, theta, position) -> float:
     if theta == 0.0:
         return 0.0
     position = np.asarray(position, dtype=float)
-    with jax.ensure_compile_time_eval():
-        casimirs = np.asarray(system.casimirs(jnp.asarray(position)))
+    casimirs = np.asarray(evaluate(system.casimirs, np.asarray(position)))
     cache_key = (position.shape, tuple(np.round(casimirs, 12).reshape(-1)))
     cache = system.__dict__.setdefault("_stiffness_cache", {})
     if cache_key not in cache:
@@ -141,8 +140,7 @@ def stiffness(system, theta, position) -> float:
                 )
             )
             system.__dict__["_curvatures_on_orbit"] = curvatures_on
-        with jax.ensure_compile_time_eval():
-            curvatures = curvatures_on(jnp.asarray(position))
+        curvatures = evaluate(curvatures_on, np.asarray(position))
         cache[cache_key] = float(np.max(np.abs(np.asarray(curvatures))))
     return abs(theta) * cache[cache_key]
 
@@ -154,8 +152,7 @@ def stiffness_on_orbits(system, theta, positions) -> np.ndarray:
     positions = np.asarray(positions, dtype=float)
     if theta == 0.0:
         return np.zeros(len(positions))
-    with jax.ensure_compile_time_eval():
-        casimirs = np.asarray(jax.vmap(system.casimirs)(jnp.asarray(positions)))
+    casimirs = np.asarray(evaluate(jax.vmap(system.casimirs), np.asarray(positions)))
     keys = [(positions.shape[1:], tuple(np.round(c, 12).reshape(-1))) for c in casimirs]
     cache = system.__dict__.setdefault("_stiffness_cache", {})
     missing = sorted({i for i, key in enumerate(keys) if key not in cache})
@@ -174,8 +171,7 @@ def stiffness_on_orbits(system, theta, positions) -> np.ndarray:
             system.__dict__["_curvatures_on_orbits"] = batched
         # Padded to a power of two: a few compiled shapes serve every number of orbits.
         padded = missing + [missing[-1]] * (2 ** math.ceil(math.log2(len(missing))) - len(missing))
-        with jax.ensure_compile_time_eval():
-            values = np.asarray(batched(jnp.asarray(positions[padded])))[: len(missing)]
+        values = np.asarray(evaluate(batched, np.asarray(positions[padded])))[: len(missing)]
         for i, value in zip(missing, values, strict=True):
             cache[keys[i]] = float(value)
     return abs(theta) * np.array([cache[key] for key in keys])

@@ -40,7 +40,7 @@ from jax.typing import ArrayLike
 
 from liesample.dynamics.poisson_langevin import Scene, make_dynamics
 from liesample.dynamics.sde import PoissonLangevinSDE, stratonovich_heun_step
-from liesample.foundation.compile import jit
+from liesample.foundation.compile import evaluate, jit
 from liesample.foundation.validation import concrete_array, finite_float
 from liesample.geometry.cotangent import (
     BAOAB,
@@ -395,10 +395,9 @@ def _derived_friction_rate(system: ChargedParticleSystem, sde: PoissonLangevinSD
     unit = PoissonLangevinSDE(
         sde.structure, sde.hamiltonian, sde.noise_hamiltonians, 1.0, 0.0, sde.scene
     )
-    with jax.ensure_compile_time_eval():
-        dissipation, fields = jit(jax.vmap(lambda z: (sde.dissipation(z), unit.noise_fields(z))))(
-            jnp.asarray(probes)
-        )
+    dissipation, fields = evaluate(
+        jit(jax.vmap(lambda z: (sde.dissipation(z), unit.noise_fields(z)))), probes
+    )
     dissipation, fields = np.asarray(dissipation), np.asarray(fields[0])
     momenta = probes[:, n:]
     gamma = -float(np.sum(dissipation[:, n:] * momenta) / np.sum(momenta * momenta))

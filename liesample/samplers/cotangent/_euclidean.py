@@ -20,7 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.flatten_util import ravel_pytree
 
-from liesample.foundation.compile import jit
+from liesample.foundation.compile import evaluate, jit
 from liesample.foundation.validation import concrete_array
 from liesample.geometry.cotangent import (
     KineticMagneticFlow,
@@ -128,8 +128,7 @@ def check_euclidean_starts(positions, logdensity_fn, dimension=None):
             f"initial_positions[0] has {size} coordinates but inverse_mass_matrix and "
             f"magnetic_field are for {dimension}"
         )
-    with jax.ensure_compile_time_eval():
-        ok = np.asarray(jit(jax.vmap(finite))(positions))
+    ok = np.asarray(evaluate(jit(jax.vmap(finite)), positions))
     chain = first_bad_chain(ok)
     if chain is not None:
         raise ValueError(

@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from liesample.dynamics.system import LiePoissonSystem
-from liesample.foundation.compile import jit
+from liesample.foundation.compile import evaluate, jit
 from liesample.foundation.validation import concrete_array
 from liesample.samplers.contract import PositionCheck, first_bad_chain, raise_first_bad
 
@@ -96,8 +96,9 @@ def check_orbit_starts(system: LiePoissonSystem, positions):
     finite = np.all(np.isfinite(flat), axis=1)
     raise_first_bad([PositionCheck(finite, "must be finite")], positions, system.check_position)
     batched = getattr(system, "check_positions", None)
-    with jax.ensure_compile_time_eval():
-        casimirs, energies = _start_values(system)(jnp.asarray(positions, jnp.result_type(float)))
+    casimirs, energies = evaluate(
+        _start_values(system), np.asarray(positions, jnp.result_type(float))
+    )
     casimirs, energies = np.asarray(casimirs), np.asarray(energies)
     if batched is not None:
         batched(positions, "initial_positions")
