@@ -184,6 +184,8 @@ def _delivered(system, beta, choice, observables, starts, exact, total_time, see
     return run.estimate - exact, run.mcse
 
 
+@pytest.mark.slow  # a long statistical run (pilot and production ensembles); the knob's parts
+# (Richardson–Romberg, the coupled levels, the parameter checks) run by default above
 def test_chosen_step_delivers_the_tolerance_on_another_rigid_body():
     """Tolerance 0.004 on E[μ_i²] of a rigid body the defaults were not tuned on, σ chosen among
     (0.5, 1, 2). Pilot: 256 chains × 40 time units at h, h/2, h/4 (coupled). Production: the same
@@ -216,7 +218,7 @@ HT_INERTIA, HT_CHI, HT_BETA = (1.0, 1.5, 2.5), (0.2, 0.0, 1.0), 2.0
 HT_MU0 = np.array([0.5, 0.0, 0.0, 1.0, 0.0, 0.0])
 
 
-@pytest.mark.slow  # the rigid-body case runs by default
+@pytest.mark.slow  # a second system beside the rigid-body case
 def test_chosen_step_delivers_the_tolerance_on_the_heavy_top():
     """Heavy top (observables Γ·χ and Π_i²), tolerance 0.01, σ = 1: pilot 128 chains × 40 time
     units; production 128 chains × 200 time units from exact draws: |error| ≤ 0.01 + 4 MCSE."""

@@ -307,7 +307,16 @@ def test_metropolis_reports_acceptance_and_energy():
 # ---------------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("hamiltonian", [True, False], ids=["with-drift", "dissipation-only"])
+@pytest.mark.parametrize(
+    "hamiltonian",
+    [
+        # slow: the same descent with the precession added; the step with the precession runs
+        # by default in tests/stability/test_stability.py (the batched Heisenberg step)
+        pytest.param(True, marks=pytest.mark.slow),
+        False,
+    ],
+    ids=["with-drift", "dissipation-only"],
+)
 def test_pure_dissipation_aligns_the_ferromagnetic_chain(hamiltonian):
     """Double-bracket descent from a random start (θ = 1) to the aligned ground state.
 
