@@ -127,6 +127,8 @@ def _z_scores(algorithm, starts, observables, exact, num_steps, seed):
     return (result.estimate - exact) / result.mcse, result
 
 
+@pytest.mark.slow  # a long statistical run; the adjusted sampler's exact law runs by default in
+# tests/test_zeitlin.py (the N = 3 orbit at a large step, where a biased chain would fail)
 def test_exact_on_the_rigid_body_where_the_unadjusted_chain_is_biased():
     """dt = 0.8, 256 chains × 250 steps from exact draws. The unadjusted splitting sampler's
     bias of E[μ_i²] (≈ 0.019 in benchmarks/RESULTS.md) is ≥ 5 MCSE; the adjusted sampler is

@@ -43,6 +43,8 @@ def check_exact(tree):
     assert float(az.rhat(tree, var_names=["x"])["x"].max()) < 1.05
 
 
+@pytest.mark.slow  # a long statistical run; by default README.md's multi-chain block runs this
+# workflow, and test_adapt_on_one_chain_then_sample_fresh_chains_by_default checks the exact law
 def test_window_adaptation_adapts_a_batch_of_starts_and_hands_them_on():
     """``window_adaptation(...).run`` on 4 starts adapts the chains together and returns every
     chain's state; sampling from them (no further warm-up) gives the exact law."""

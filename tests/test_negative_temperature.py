@@ -28,8 +28,8 @@ def _z(tree, values, exact):
 @pytest.mark.parametrize(
     "beta",
     [
-        # slow: the adjusted rigid body's law again; the default suite checks this with
-        # test_adjusted.py::test_exact_on_the_rigid_body_where_the_unadjusted_chain_is_biased
+        # slow: the adjusted rigid body's law again; the default suite checks the adjusted
+        # sampler's exact law with tests/test_zeitlin.py's N = 3 orbit at a large step
         pytest.param(-2.0, marks=pytest.mark.slow),
         pytest.param(-6.0, marks=pytest.mark.slow),
     ],
