@@ -28,6 +28,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from liesample.foundation.compile import evaluate
+
 __all__ = ["MAX_COORDINATES", "NoiseSpan", "check_noise_reaches_orbit", "noise_span"]
 
 MAX_COORDINATES = 1100
@@ -80,8 +82,8 @@ def _orbit_point(system, mu, seed: int, size: float):
 def noise_span(system) -> NoiseSpan | None:
     """Rank of the noise fields and their brackets at a generic point of the orbit of
     ``system.default_position`` (module docstring); ``None`` if the state is too large."""
-    with jax.ensure_compile_time_eval(), jax.enable_x64(True):
-        return _noise_span(system)
+    with jax.enable_x64(True):
+        return evaluate(_noise_span, system)
 
 
 def _noise_span(system) -> NoiseSpan | None:

@@ -15,6 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from liesample.dynamics.noise_span import check_noise_reaches_orbit
+from liesample.foundation.compile import evaluate
 from liesample.foundation.validation import concrete_array, finite_float
 from liesample.geometry.algebras import LieAlgebra
 
@@ -227,8 +228,7 @@ class LiePoissonSystem:
             return
         if not np.all(np.isfinite(value)):
             raise ValueError(f"{name} must be finite, got {value}")
-        with jax.ensure_compile_time_eval():
-            casimirs = np.asarray(self.casimirs(value))
+        casimirs = np.asarray(evaluate(self.casimirs, value))
         if self.positive_casimirs is not None:
             casimirs = casimirs[..., list(self.positive_casimirs)]
         if np.any(casimirs <= 0):

@@ -127,7 +127,7 @@ def stiffness(system, theta, position) -> float:
     if theta == 0.0:
         return 0.0
     position = np.asarray(position, dtype=float)
-    casimirs = np.asarray(evaluate(system.casimirs, np.asarray(position)))
+    casimirs = np.asarray(evaluate(system.casimirs, position))
     cache_key = (position.shape, tuple(np.round(casimirs, 12).reshape(-1)))
     cache = system.__dict__.setdefault("_stiffness_cache", {})
     if cache_key not in cache:
@@ -140,7 +140,7 @@ def stiffness(system, theta, position) -> float:
                 )
             )
             system.__dict__["_curvatures_on_orbit"] = curvatures_on
-        curvatures = evaluate(curvatures_on, np.asarray(position))
+        curvatures = evaluate(curvatures_on, position)
         cache[cache_key] = float(np.max(np.abs(np.asarray(curvatures))))
     return abs(theta) * cache[cache_key]
 
@@ -152,7 +152,7 @@ def stiffness_on_orbits(system, theta, positions) -> np.ndarray:
     positions = np.asarray(positions, dtype=float)
     if theta == 0.0:
         return np.zeros(len(positions))
-    casimirs = np.asarray(evaluate(jax.vmap(system.casimirs), np.asarray(positions)))
+    casimirs = np.asarray(evaluate(jax.vmap(system.casimirs), positions))
     keys = [(positions.shape[1:], tuple(np.round(c, 12).reshape(-1))) for c in casimirs]
     cache = system.__dict__.setdefault("_stiffness_cache", {})
     missing = sorted({i for i, key in enumerate(keys) if key not in cache})
@@ -171,7 +171,7 @@ def stiffness_on_orbits(system, theta, positions) -> np.ndarray:
             system.__dict__["_curvatures_on_orbits"] = batched
         # Padded to a power of two: a few compiled shapes serve every number of orbits.
         padded = missing + [missing[-1]] * (2 ** math.ceil(math.log2(len(missing))) - len(missing))
-        values = np.asarray(evaluate(batched, np.asarray(positions[padded])))[: len(missing)]
+        values = np.asarray(evaluate(batched, positions[padded]))[: len(missing)]
         for i, value in zip(missing, values, strict=True):
             cache[keys[i]] = float(value)
     return abs(theta) * np.array([cache[key] for key in keys])

@@ -48,6 +48,7 @@ import numpy as np
 from blackjax.adaptation.step_size import dual_averaging_adaptation
 from blackjax.adaptation.window_adaptation import build_schedule
 
+from liesample.foundation.compile import evaluate
 from liesample.integrators.chain_loop import NoiseBlocks, declared_noise_blocks, run_steps
 from liesample.samplers.contract import Sampler
 
@@ -90,8 +91,7 @@ def schedule(num_steps: int) -> Row:
     (``blackjax.adaptation.window_adaptation.build_schedule``; constants, also under ``jit``).
     ``average`` marks the transitions from the start of the last slow window to the end (the
     second half without a slow window)."""
-    with jax.ensure_compile_time_eval():
-        table = np.asarray(build_schedule(int(num_steps)))
+    table = np.asarray(evaluate(build_schedule, int(num_steps)))
     stages = table[:, 0].astype(np.int32)
     ends = table[:, 1].astype(bool)
     slow = np.flatnonzero(stages == 1)

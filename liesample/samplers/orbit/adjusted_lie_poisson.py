@@ -67,6 +67,7 @@ import numpy as np
 
 from liesample.dynamics.poisson_langevin import PoissonLangevin, Scene
 from liesample.dynamics.system import LiePoissonSystem, checked_beta
+from liesample.foundation.compile import evaluate
 from liesample.foundation.validation import concrete_array, finite_float
 from liesample.integrators.chain_loop import DEFAULT_NOISE_BLOCK_SIZE, NoiseBlocks, check_block_size
 from liesample.integrators.stability import check_precision, stiffness
@@ -154,8 +155,7 @@ def check_linear_noise(system: LiePoissonSystem) -> None:
             [np.asarray(jax.jvp(system.noise_hamiltonians, (point,), (v,))[1]) for v in probes]
         )
 
-    with jax.ensure_compile_time_eval():
-        jacobians = [slopes(p) for p in points]
+    jacobians = evaluate(lambda: [slopes(p) for p in points])
     scale = max(1.0, float(np.max(np.abs(jacobians[0]))))
     for jacobian in jacobians[1:]:
         if not np.allclose(jacobian, jacobians[0], rtol=0.0, atol=1e-9 * scale):

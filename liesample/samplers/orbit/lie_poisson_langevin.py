@@ -31,6 +31,7 @@ import numpy as np
 
 from liesample.dynamics.poisson_langevin import PoissonLangevin, Scene, make_dynamics
 from liesample.dynamics.system import LiePoissonSystem
+from liesample.foundation.compile import evaluate
 from liesample.foundation.validation import concrete_array, finite_float
 from liesample.integrators import accuracy
 from liesample.integrators.chain_loop import DEFAULT_NOISE_BLOCK_SIZE, NoiseBlocks, check_block_size
@@ -105,8 +106,9 @@ def init(position, system: LiePoissonSystem, rng_key=None) -> LiePoissonState:
     system.check_position(position)
     value = concrete_array(position)
     if value is not None:
-        with jax.ensure_compile_time_eval():
-            energy = concrete_array(system.hamiltonian(jnp.asarray(value, jnp.result_type(float))))
+        energy = concrete_array(
+            evaluate(system.hamiltonian, np.asarray(value, jnp.result_type(float)))
+        )
         if energy is not None:  # None when staged out: the runner checks every start itself
             _starts.check_start_energy(system, value, energy)
     position = jnp.asarray(position, dtype=jnp.result_type(float))
