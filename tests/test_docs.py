@@ -20,11 +20,19 @@ def _slug(heading: str) -> str:
     return text.replace(" ", "-")
 
 
+# The README links to the project's own files by their address on GitHub (so that the links work
+# on the package index too); those must name files the repository has, like relative ones.
+OWN_FILES = re.compile(r"^https://github\.com/liesample/liesample/(?:blob|tree)/main/")
+
+
 def _relative_links(path: Path):
+    """``(target, folder it is relative to)`` of each link to a file of the project."""
     for target in LINK.findall(path.read_text()):
-        if re.match(r"^[a-z][a-z0-9+.-]*:", target):  # http:, https:, mailto:
-            continue
-        yield target
+        own = OWN_FILES.match(target)
+        if own:
+            yield target[own.end() :], ROOT
+        elif not re.match(r"^[a-z][a-z0-9+.-]*:", target):  # not http:, https:, mailto:
+            yield target, path.parent
 
 
 def test_there_are_docs_to_check():
@@ -35,9 +43,9 @@ def test_there_are_docs_to_check():
 @pytest.mark.parametrize("document", DOCUMENTS, ids=lambda p: p.name)
 def test_every_relative_link_resolves_inside_the_project(document):
     broken = []
-    for target in _relative_links(document):
+    for target, folder in _relative_links(document):
         file_part, _, anchor = target.partition("#")
-        resolved = (document.parent / file_part).resolve() if file_part else document
+        resolved = (folder / file_part).resolve() if file_part else document
         if not resolved.is_relative_to(ROOT) or not resolved.exists():
             broken.append(target)
             continue
@@ -46,6 +54,21 @@ def test_every_relative_link_resolves_inside_the_project(document):
             if anchor not in {_slug(h) for h in headings}:
                 broken.append(target)
     assert not broken, f"{document.name}: links that do not resolve: {broken}"
+
+
+def test_links_to_the_projects_own_files_on_github_are_checked(tmp_path):
+    page = tmp_path / "page.md"
+    page.write_text(
+        "[a](https://github.com/liesample/liesample/blob/main/docs/mathematics.md#sign)"
+        " [b](https://github.com/other/project/blob/main/x.md) [c](local.md)"
+    )
+    assert list(_relative_links(page)) == [("docs/mathematics.md#sign", ROOT), ("local.md", tmp_path)]
+
+
+def test_the_readme_links_work_on_the_package_index():
+    """The package index shows the README without the repository: a relative link is dead."""
+    relative = [t for t in LINK.findall((ROOT / "README.md").read_text()) if ":" not in t]
+    assert not relative, f"README.md: relative links (use the GitHub address): {relative}"
 
 
 @pytest.mark.parametrize("document", DOCUMENTS, ids=lambda p: p.name)
