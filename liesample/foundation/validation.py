@@ -103,23 +103,50 @@ def nonzero_circulations(circulations: ArrayLike) -> np.ndarray:
     return gamma
 
 
+KEY_FORMS = "jax.random.key(seed), or the older jax.random.PRNGKey(seed)"
+"""The key styles every key argument accepts (:func:`prng_key`)."""
+
+
 def prng_key(rng_key: ArrayLike, name: str = "rng_key") -> jax.Array:
     """A typed JAX key from either key style: ``jax.random.key(seed)`` (returned as is) or the
     raw ``uint32`` key data of ``jax.random.PRNGKey(seed)`` (wrapped, same random stream); a
-    leading batch axis is kept. Anything else is a ``TypeError`` that says what is allowed."""
+    leading batch axis is kept. Anything else (an integer seed among them) is a ``TypeError``
+    that says what is allowed. Only the shape and dtype are read: a traced key is accepted."""
     import jax.numpy as jnp
 
     if isinstance(rng_key, jax.Array) and jnp.issubdtype(rng_key.dtype, jax.dtypes.prng_key):
         return rng_key
     array = concrete_array(rng_key) if not isinstance(rng_key, jax.Array) else rng_key
+    key_shape = jax.eval_shape(lambda: jax.random.key_data(jax.random.key(0))).shape
     if array is not None and getattr(array, "dtype", None) == np.uint32:
-        key_shape = jax.random.key_data(jax.random.key(0)).shape
         if tuple(array.shape[-len(key_shape) :]) == key_shape:
             return jax.random.wrap_key_data(jnp.asarray(array, dtype=jnp.uint32))
+    if isinstance(rng_key, (int, np.integer)) and not isinstance(rng_key, bool):
+        raise TypeError(
+            f"{name} must be a JAX random key, {KEY_FORMS}; got the integer {int(rng_key)}, "
+            f"a seed, not a key: pass jax.random.key({int(rng_key)})"
+        )
+    if isinstance(rng_key, (np.ndarray, jax.Array)):
+        got = f"an array of dtype {rng_key.dtype} and shape {rng_key.shape}"
+    else:
+        got = repr(rng_key)
     raise TypeError(
-        f"{name} must be a JAX random key, jax.random.key(seed) or jax.random.PRNGKey(seed); "
-        f"got {rng_key!r}"
+        f"{name} must be a JAX random key, {KEY_FORMS} (uint32 data of shape {key_shape}); got "
+        f"{got}: pass jax.random.key(seed)"
     )
+
+
+def single_key(rng_key: ArrayLike, name: str = "rng_key", *, batch_fix: str = "") -> jax.Array:
+    """One typed JAX key (:func:`prng_key`), or a ``ValueError`` for a batch of keys that says
+    what to do instead (``batch_fix``). Reads only the shape and dtype, so that it serves inside
+    ``jax.jit`` and ``jax.vmap`` (where a vmapped key has the shape of one)."""
+    key = prng_key(rng_key, name)
+    if key.shape != ():
+        raise ValueError(
+            f"{name} must be one key, got a batch of keys of shape {key.shape}"
+            + (f": {batch_fix}" if batch_fix else "")
+        )
+    return key
 
 
 def is_single_array(positions: PyTree) -> bool:

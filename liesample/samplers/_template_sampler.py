@@ -32,7 +32,7 @@ import jax.numpy as jnp
 
 from liesample.dynamics.system import LiePoissonSystem
 from liesample.foundation.validation import finite_float
-from liesample.samplers.contract import Sampler, sampling_api
+from liesample.samplers.contract import Sampler, sampling_api, step_key
 
 __all__ = [
     "OrbitMetropolisInfo",
@@ -116,7 +116,7 @@ def as_top_level_api(system: LiePoissonSystem, *, beta, scale=0.5) -> Sampler:
         return init(position, system, rng_key)
 
     def step_fn(rng_key, state):
-        return kernel(rng_key, state, beta, scale)
+        return kernel(step_key(rng_key), state, beta, scale)
 
     settings = {"sampler": "orbit_metropolis", "system": system.name, "beta": beta, "scale": scale}
     return Sampler(init_fn, step_fn, settings=settings)

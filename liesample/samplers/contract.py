@@ -58,6 +58,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from liesample.foundation.validation import single_key
 from liesample.integrators.chain_loop import DeclaresNoiseBlocks
 
 __all__ = [
@@ -76,6 +77,7 @@ __all__ = [
     "first_bad_chain",
     "sampling_api",
     "setting",
+    "step_key",
 ]
 
 CONTRACT_FIELDS = ("is_divergent", "acceptance_rate", "energy")
@@ -333,6 +335,20 @@ def as_sampler(algorithm) -> Sampler:
     if isinstance(algorithm, Sampler):
         return algorithm
     return Sampler(algorithm.init, algorithm.step, energy_name="energy")
+
+
+STEP_KEY_FIX = (
+    "a step moves one chain with one key; to step several chains at once, vmap it: "
+    "jax.vmap(sampler.step)(jax.random.split(key, num_chains), states)"
+)
+
+
+def step_key(rng_key) -> jax.Array:
+    """The ``rng_key`` a sampler's ``step`` was given, as one typed key: either key style
+    (``jax.random.key``, the older ``jax.random.PRNGKey``), a batch of keys or anything else
+    refused by name (:func:`liesample.foundation.validation.single_key`). Every liesample
+    ``step`` reads its key through this; it reads only shapes and dtypes (traced keys pass)."""
+    return single_key(rng_key, "rng_key", batch_fix=STEP_KEY_FIX)
 
 
 def energy_name(sampler: Sampler, position) -> str:

@@ -33,7 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from liesample.foundation.validation import concrete_array
-from liesample.samplers.contract import Sampler, Tunable, sampling_api, setting
+from liesample.samplers.contract import Sampler, Tunable, sampling_api, setting, step_key
 from liesample.samplers.cotangent._core import (
     GeometricInfo,
     GeometricState,
@@ -280,7 +280,7 @@ def _settings(space, step_size, num_integration_steps, divergence_threshold, mag
 
 def _step(move, num_integration_steps, jitter, options, rng_key, state):
     """One transition: ``L`` steps, or ``ceil(u L)`` with ``u`` uniform when ``jitter``."""
-    steps = num_integration_steps
+    rng_key, steps = step_key(rng_key), num_integration_steps
     if jitter:
         key_length, rng_key = jax.random.split(rng_key)
         u = jax.random.uniform(key_length, (), state.logdensity.dtype)

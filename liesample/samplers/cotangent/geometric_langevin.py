@@ -35,7 +35,7 @@ import jax.numpy as jnp
 
 from liesample.foundation.validation import concrete_array, finite_float
 from liesample.geometry.cotangent import check_scheme
-from liesample.samplers.contract import Sampler, Tunable, sampling_api, setting
+from liesample.samplers.contract import Sampler, Tunable, sampling_api, setting, step_key
 from liesample.samplers.cotangent._core import (
     GeometricInfo,
     GeometricState,
@@ -257,7 +257,8 @@ def as_top_level_api(
     move = make_move(logdensity_fn, space, step_size, inverse_mass_matrix, magnetic_field, scheme)
 
     def step_fn(rng_key, state):
-        return transition(rng_key, state, move, friction, adjusted, divergence_threshold)
+        key = step_key(rng_key)
+        return transition(key, state, move, friction, adjusted, divergence_threshold)
 
     return space_sampler(logdensity_fn, space, step_fn, settings, tunable)
 

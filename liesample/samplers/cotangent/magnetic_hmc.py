@@ -38,9 +38,10 @@ import jax
 import jax.numpy as jnp
 
 from liesample.geometry.cotangent import LEAPFROG, PhasePoint, compose, drift, kick
-from liesample.samplers.contract import Sampler, Tunable, sampling_api, setting
+from liesample.samplers.contract import Sampler, Tunable, sampling_api, setting, step_key
 from liesample.samplers.cotangent._core import (
     UNSET,
+    check_logdensity_fn,
     hamiltonian_scheme,
     ravelled,
     scheme_setting,
@@ -283,6 +284,7 @@ def as_top_level_api(
         flows ``e^{±εGM⁻¹}`` are computed once here, not per step. Tune ``step_size`` and
         ``inverse_mass_matrix`` with ``blackjax.window_adaptation(liesample.magnetic_hmc, …)``.
     """
+    check_logdensity_fn(logdensity_fn)
     options = check_options(momentum_persistence, divergence_threshold, persistent)
     scheme = _scheme(integrator)
     tuned = (step_size, inverse_mass_matrix, num_integration_steps, magnetic_field)
@@ -305,7 +307,8 @@ def as_top_level_api(
         return state
 
     def step_fn(rng_key, state):
-        return _transition(rng_key, state, logdensity_fn, move, num_integration_steps, options)
+        key = step_key(rng_key)
+        return _transition(key, state, logdensity_fn, move, num_integration_steps, options)
 
     settings = {
         "sampler": "magnetic_hmc",
@@ -391,7 +394,7 @@ def jittered_magnetic_hmc(
     )
 
     def step_fn(rng_key, state):
-        key_length, key_step = jax.random.split(rng_key)
+        key_length, key_step = jax.random.split(step_key(rng_key))
         u = jax.random.uniform(key_length, (), jnp.asarray(step_size).dtype)
         steps = jnp.clip(jnp.ceil(u * num_integration_steps), 1, num_integration_steps)
         sampler = magnetic_hmc(

@@ -35,8 +35,8 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from liesample.samplers.contract import Sampler, sampling_api, setting
-from liesample.samplers.cotangent._core import ravelled, scheme_setting
+from liesample.samplers.contract import Sampler, sampling_api, setting, step_key
+from liesample.samplers.cotangent._core import check_logdensity_fn, ravelled, scheme_setting
 from liesample.samplers.cotangent._euclidean import (
     check_parameters,
     check_starts,
@@ -207,7 +207,7 @@ def as_top_level_api(
         return init(position, logdensity_fn, rng_key)
 
     def step_fn(rng_key, state):
-        return _step(rng_key, state, logdensity_fn, move, friction)
+        return _step(step_key(rng_key), state, logdensity_fn, move, friction)
 
     settings = {
         "sampler": "magnetic_langevin",

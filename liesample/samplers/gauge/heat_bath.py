@@ -28,7 +28,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from liesample.foundation.validation import finite_float
-from liesample.samplers.contract import BasicInfo, DrawNames, Sampler, Structure, sampling_api
+from liesample.samplers.contract import (
+    BasicInfo,
+    DrawNames,
+    Sampler,
+    Structure,
+    sampling_api,
+    step_key,
+)
 from liesample.samplers.gauge._local import (
     quaternion_part,
     su2_from_a0,
@@ -230,7 +237,7 @@ class _Stepper:
         kernel = build_kernel(self.system, self.heat_bath_sweeps, self.overrelaxation)
 
         def step_fn(rng_key, state):
-            return kernel(rng_key, state, beta)
+            return kernel(step_key(rng_key), state, beta)
 
         return Sampler(plain_init_fn(init, self.system), step_fn, **hooks)
 

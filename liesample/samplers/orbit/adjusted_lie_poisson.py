@@ -71,7 +71,14 @@ from liesample.foundation.compile import evaluate
 from liesample.foundation.validation import concrete_array, finite_float
 from liesample.integrators.chain_loop import DEFAULT_NOISE_BLOCK_SIZE, NoiseBlocks, check_block_size
 from liesample.integrators.stability import check_precision, stiffness
-from liesample.samplers.contract import Sampler, Structure, Tunable, rebuilt, sampling_api
+from liesample.samplers.contract import (
+    Sampler,
+    Structure,
+    Tunable,
+    rebuilt,
+    sampling_api,
+    step_key,
+)
 from liesample.samplers.orbit._starts import (
     check_orbit_starts,
     check_start_energy,
@@ -407,7 +414,7 @@ class _Stepper:
         kernel = _keyed(system, noise_kernel)
 
         def step_fn(rng_key, state):
-            return kernel(rng_key, state, value, sigma, beta)
+            return kernel(step_key(rng_key), state, value, sigma, beta)
 
         def block_step(noise, state):
             return noise_kernel(noise, state, value, sigma, beta)

@@ -42,7 +42,14 @@ from liesample.integrators.stability import (
     check_step_size,
     stiffness_on_orbits,
 )
-from liesample.samplers.contract import Sampler, Structure, Tunable, rebuilt, sampling_api
+from liesample.samplers.contract import (
+    Sampler,
+    Structure,
+    Tunable,
+    rebuilt,
+    sampling_api,
+    step_key,
+)
 from liesample.samplers.orbit import _starts
 
 __all__ = [
@@ -398,7 +405,7 @@ class _Stepper:
         noise_kernel = build_noise_kernel(system, integrator, scene)
 
         def step_fn(rng_key, state):
-            return kernel(rng_key, state, dt(), sigma, theta)
+            return kernel(step_key(rng_key), state, dt(), sigma, theta)
 
         def block_step(noise, state):
             return noise_kernel(noise, state, dt(), sigma, theta)

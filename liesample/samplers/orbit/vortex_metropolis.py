@@ -46,6 +46,7 @@ from liesample.samplers.contract import (
     Tunable,
     rebuilt,
     sampling_api,
+    step_key,
 )
 from liesample.samplers.orbit._starts import orbit_settings, plain_init_fn
 from liesample.systems.point_vortices import PointVortexSystem
@@ -266,7 +267,7 @@ class _Stepper:
         kernel = build_kernel(self.system, self.proposal)
 
         def step_fn(rng_key, state):
-            return kernel(rng_key, state, beta, value)
+            return kernel(step_key(rng_key), state, beta, value)
 
         return Sampler(plain_init_fn(init, self.system), step_fn, **hooks)
 

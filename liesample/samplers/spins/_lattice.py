@@ -37,7 +37,7 @@ import numpy as np
 
 from liesample.foundation.validation import finite_float
 from liesample.geometry.algebras import so3
-from liesample.samplers.contract import BasicInfo, Sampler, Structure
+from liesample.samplers.contract import BasicInfo, Sampler, Structure, step_key
 from liesample.samplers.orbit._starts import orbit_groups, orbit_settings, plain_init_fn
 from liesample.systems.heisenberg import (
     SpinLatticeSystem,
@@ -142,7 +142,7 @@ class _SpinStepper:
         kernel = self.build_kernel(self.system, *self.structural)
 
         def step_fn(rng_key, state):
-            return kernel(rng_key, state, beta, *parameters)
+            return kernel(step_key(rng_key), state, beta, *parameters)
 
         return Sampler(plain_init_fn(init, self.system), step_fn, **hooks)
 
