@@ -40,6 +40,7 @@ import numpy as np
 from jax.typing import ArrayLike
 
 from liesample.dynamics.system import LiePoissonSystem
+from liesample.foundation.precision import check_dtype, float64_hint, roundoff_tolerance
 from liesample.foundation.validation import concrete_array, finite_float
 from liesample.geometry.algebras import so3
 from liesample.targets.spins import HeisenbergChainReference, HeisenbergRingReference
@@ -55,15 +56,16 @@ __all__ = [
 ]
 
 UNIT_NORM_TOLERANCE = 1e-9
-"""How far ``|s_k|`` may be from 1 in an initial state."""
+"""How far ``|s_k|`` may be from 1 in a float64 initial state (in float32, the round-off of the
+start's dtype: :func:`liesample.foundation.precision.roundoff_tolerance`)."""
 
 
 class SpinLatticeSystem(LiePoissonSystem):
     """A :class:`LiePoissonSystem` whose states are stacks of *unit* spins.
 
     Only ``check_position`` differs from the base class: after its checks (shape, finite,
-    non-degenerate orbit) every spin must satisfy ``| |s_k| − 1 | ≤ 1e-9``; a ``ValueError``
-    names the first offending site.
+    non-degenerate orbit) every spin must satisfy ``| |s_k| − 1 | ≤ 1e-9`` (in float32, 1000 units
+    of float32 round-off); a ``ValueError`` names the first offending site.
     """
 
     def check_position(self, position: ArrayLike, name: str = "position") -> None:
@@ -71,14 +73,16 @@ class SpinLatticeSystem(LiePoissonSystem):
         value = concrete_array(position)
         if value is None:  # traced: value checks happen outside jit
             return
+        dtype = check_dtype(value)
+        tolerance = roundoff_tolerance(dtype, floor=UNIT_NORM_TOLERANCE)
         norms = np.linalg.norm(np.asarray(value, dtype=float), axis=-1)
-        bad = np.abs(norms - 1.0) > UNIT_NORM_TOLERANCE
+        bad = np.abs(norms - 1.0) > tolerance
         if np.any(bad):
             site = tuple(int(i) for i in np.argwhere(bad)[0])
             raise ValueError(
-                f"{name} must hold unit spins (|s_k| = 1 to {UNIT_NORM_TOLERANCE:g}); the spin at "
+                f"{name} must hold unit spins (|s_k| = 1 to {tolerance:.2g}); the spin at "
                 f"site {site} has norm {float(norms[site]):.12g} "
-                f"({int(np.sum(bad))} bad spin(s) in all)"
+                f"({int(np.sum(bad))} bad spin(s) in all)." + float64_hint(dtype)
             )
 
 

@@ -67,6 +67,7 @@ from jax.typing import ArrayLike
 
 from liesample.dynamics.poisson_langevin import Scene
 from liesample.dynamics.system import LiePoissonSystem
+from liesample.foundation.precision import check_dtype, float64_hint, roundoff_tolerance
 from liesample.foundation.validation import concrete_array, finite_float, nonzero_circulations
 from liesample.geometry.algebras import LieAlgebra, cross, so3
 from liesample.geometry.spherical_harmonics import num_harmonics, transport_mode, transport_modes
@@ -90,7 +91,8 @@ __all__ = [
 ]
 
 ON_SPHERE_TOLERANCE = 1e-9
-"""How far ``|x_k|/R`` may be from 1 in an initial state."""
+"""How far ``|x_k|/R`` may be from 1 in a float64 initial state (in float32, the round-off of
+the start's dtype: :func:`liesample.foundation.precision.roundoff_tolerance`)."""
 
 MIN_SEPARATION = 1e-9
 """Smallest chordal distance ``|x_j − x_k|/R`` accepted between two initial positions."""
@@ -226,7 +228,8 @@ class PointVortexSystem(LiePoissonSystem):
     :func:`point_vortices`.
 
     ``check_position`` adds to the base checks: every ``|x_k|`` within ``1e-9`` (relative) of
-    ``R``, and no two vortices closer than ``1e-9 R``.
+    ``R`` (in float32, 1000 units of float32 round-off), and no two vortices closer than
+    ``1e-9 R``.
     """
 
     circulations: np.ndarray = field(default_factory=lambda: np.ones(1))
@@ -238,15 +241,18 @@ class PointVortexSystem(LiePoissonSystem):
         value = concrete_array(position)
         if value is None:  # traced: value checks happen outside jit
             return
+        dtype = check_dtype(value)
+        tolerance = roundoff_tolerance(dtype, floor=ON_SPHERE_TOLERANCE)
         value = np.asarray(value, dtype=float)
         norms = np.linalg.norm(value, axis=-1) / self.radius
-        bad = np.abs(norms - 1.0) > ON_SPHERE_TOLERANCE
+        bad = np.abs(norms - 1.0) > tolerance
         if np.any(bad):
             k = int(np.argmax(bad))
             raise ValueError(
                 f"{name} must hold points on the sphere of radius {self.radius:g} "
-                f"(|x_k| = R to {ON_SPHERE_TOLERANCE:g} relative); vortex {k} has |x| = "
-                f"{norms[k] * self.radius:.12g} ({int(np.sum(bad))} off the sphere in all)"
+                f"(|x_k| = R to {tolerance:.2g} relative); vortex {k} has |x| = "
+                f"{norms[k] * self.radius:.12g} ({int(np.sum(bad))} off the sphere in all)."
+                + float64_hint(dtype)
             )
         if value.shape[0] > 1:
             diff = value[:, None, :] - value[None, :, :]

@@ -57,7 +57,8 @@ import scipy.linalg
 from jax.typing import ArrayLike
 
 from liesample.dynamics.system import LiePoissonSystem
-from liesample.foundation.validation import concrete_array
+from liesample.foundation.precision import check_dtype, float64_hint, roundoff_tolerance
+from liesample.foundation.validation import concrete_array, float_array
 from liesample.geometry.algebras import Unitary
 from liesample.geometry.spherical_harmonics import degrees_and_orders, real_spherical_harmonics
 from liesample.integrators.orbit import Integrator
@@ -424,6 +425,11 @@ class SkewHermitianUnitary(Unitary):
         return _skew_hermitian_exponential(-self.to_matrix(zeta))
 
 
+TRACE_TOLERANCE = 1e-10
+"""The float64 floor of the trace a start may have, relative to its norm (in float32 the
+round-off of the start's dtype sets it: :meth:`ZeitlinSystem.check_position`)."""
+
+
 class ZeitlinSystem(LiePoissonSystem):
     """A :class:`LiePoissonSystem` whose states must also be trace-free (su(N), not u(N))."""
 
@@ -440,14 +446,20 @@ class ZeitlinSystem(LiePoissonSystem):
         return jnp.abs(norm_sq - reference) / jnp.maximum(jnp.abs(reference), norm_sq)
 
     def check_position(self, position: ArrayLike, name: str = "position") -> None:
+        """The base checks, and a trace-free state: ``|tr W| ≤ tol · ‖W‖`` with ``tol`` the
+        larger of ``1e-10`` and ``N`` sums' round-off in the start's dtype
+        (:func:`liesample.foundation.precision.roundoff_tolerance`)."""
         super().check_position(position, name)
         value = concrete_array(position)
         if value is not None:
+            dtype = check_dtype(value)
             trace, size = float(np.trace(value)), float(np.linalg.norm(value))
-            if abs(trace) > 1e-10 * max(size, 1e-300):
+            tolerance = roundoff_tolerance(dtype, floor=TRACE_TOLERANCE, terms=len(value))
+            if abs(trace) > tolerance * max(size, 1e-300):
                 raise ValueError(
-                    f"{name} must be trace-free (a vorticity in su(N)); its trace is {trace:.3g}. "
-                    "Subtract trace/N from the diagonal"
+                    f"{name} must be trace-free (a vorticity in su(N)); its trace is {trace:.3g} "
+                    f"(allowed: {tolerance:.2g} of its norm {size:.3g}). Subtract trace/N from "
+                    "the diagonal." + float64_hint(dtype)
                 )
 
 
@@ -548,7 +560,7 @@ def zeitlin_euler(
 
     if position is None:
         position = random_vorticity(size)
-    position = np.array(position, dtype=float)
+    position = float_array(position, f"position must be a real ({size}, {size}) array", TypeError)
     system = ZeitlinSystem(
         name=f"Zeitlin su({size}) Euler",
         algebra=algebra,
