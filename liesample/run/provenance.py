@@ -25,7 +25,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-FORMAT = "liesample-run-2"
+FORMAT = "liesample-run-3"
 """The file format this fingerprint belongs to (stored as the field ``format``)."""
 
 

@@ -7,18 +7,24 @@ more group, ``liesample_run``, holds what a resume needs and what proves the fil
 
 - ``fingerprint``: what made the run (:mod:`liesample.run.provenance`), checked on resume;
 - ``state_<slot>_<i>``: leaf ``i`` of the chains' states after the last saved chunk, in two
-  slots written in turn, so the state a resume needs is never the one being overwritten;
+  slots written in turn;
 - ``chunk_end``, ``chunk_sha256``: where each saved chunk ends and a SHA-256 of its stored
   draws (every variable's slice and the ``draw`` coordinate);
 - ``info_names``: each ``sample_stats`` variable's ``info`` key and dtype;
-- ``commit``: ``draws_done``, the number of chunks, the state's slot and its SHA-256, written
-  last, in one attribute: a chunk interrupted while being written is not part of the run (its
-  draws past ``draws_done`` are ignored and overwritten by the resume).
+- ``commit``: ``draws_done``, the number of chunks, the state's slot and its SHA-256, and a
+  SHA-256 of every attribute the run wrote (the root's, each group's and variable's, each
+  field of ``fingerprint`` and ``info_names``) with a short checksum per attribute, so that an
+  edited setting is refused by name.
 
-Each chunk opens and closes the file, so a run killed between chunks leaves a whole file, and
-one killed while writing leaves the last committed chunk and state intact. Resuming and
+A committed chunk stays readable whatever happens after it: the file is never modified in
+place (HDF5 is not crash-safe in place: a write that fails half-way may break metadata that
+earlier chunks share). Each chunk is written to a copy of the file beside it, which then
+replaces the file in one rename (:mod:`liesample.run.atomic`; that module gives the cost of the
+copies); a full disk, an I/O error, an interrupt or a kill before the rename leaves the file as
+it was, and the next writer removes a copy that a killed one left. Every HDF5 handle is closed
+on every path, an error's included, so a failed write does not fail again at exit. Resuming and
 :func:`load_chains` verify every checksum; an edited, truncated, empty or foreign file is
-refused with its path and what is wrong (:class:`RunFileError`).
+refused with its path, what is wrong and what to do (:class:`RunFileError`).
 """
 
 from __future__ import annotations
@@ -32,6 +38,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from liesample.run import atomic
 from liesample.run.lock import OutputLock
 from liesample.run.provenance import FORMAT, differences
 
@@ -65,30 +72,75 @@ def check_output_path(output, resume: bool) -> str:
     return path
 
 
+_START_AFRESH = (
+    "delete it (or move it away) to start the run afresh at this path, or choose another output"
+)
+
+
+def _unreadable(path, error) -> str:
+    return (
+        f"{path!r} is not a readable NetCDF-4 (HDF5) file: it is empty, truncated, damaged or "
+        f"of another kind ({error}), and holds no draws that liesample can read; "
+        + _START_AFRESH
+    )
+
+
 @contextlib.contextmanager
-def _open(path, mode="r"):
-    """The file at ``path`` opened with h5netcdf; any error reading or writing it is raised
-    naming the path (:class:`RunFileError`, or ``OSError`` for a write)."""
+def _open(path):
+    """The file at ``path`` opened for reading with h5netcdf, on an HDF5 handle closed however
+    the block ends; any error reading it is a :class:`RunFileError` naming the path."""
     import h5netcdf
+    import h5py
 
     try:
-        f = h5netcdf.File(path, mode)
-    except (OSError, ValueError) as error:
-        if mode != "r":
-            raise OSError(f"cannot write the run file {path!r}: {error}") from None
-        raise RunFileError(
-            f"{path!r} is not a readable NetCDF-4 (HDF5) file: it is empty, truncated or of "
-            f"another kind ({error})"
-        ) from None
+        h5 = h5py.File(path, "r")
+    except Exception as error:
+        raise RunFileError(_unreadable(path, error)) from None
     try:
-        with f:
+        try:
+            h5.attrs.get("_nc3_strict")  # what h5netcdf reads first, before it is set up
+            f = h5netcdf.File(h5, "r")
+        except Exception as error:
+            raise RunFileError(_unreadable(path, error)) from None
+        try:
             yield f
-    except RunFileError:
+        except RunFileError:
+            raise
+        except Exception as error:
+            raise RunFileError(
+                f"{path!r} is incomplete or corrupt ({error!r}): its draws cannot be read; "
+                + _START_AFRESH
+            ) from None
+        finally:
+            f.close()
+    finally:
+        h5.close()
+
+
+@contextlib.contextmanager
+def _writing(path, new: bool):
+    """``path`` (the copy a new version of a run file is written to) opened for writing with
+    h5netcdf (created if ``new``). Its HDF5 handle is closed however the block ends: after an
+    error the copy, discarded anyway, is emptied first, which frees the space HDF5 needs to
+    write out what it holds and close (a handle left open fails again, and may crash, at
+    exit)."""
+    import h5netcdf
+    import h5py
+
+    h5 = h5py.File(path, "w" if new else "r+", track_order=True)
+    f = None
+    try:
+        f = h5netcdf.File(h5, "w" if new else "a")
+        yield f
+        f.close()
+        h5.close()
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.truncate(path, 0)
+        for close in ([] if f is None else [f.close]) + [h5.close, h5.close]:
+            with contextlib.suppress(Exception):
+                close()
         raise
-    except (OSError, KeyError, IndexError, TypeError, ValueError) as error:
-        if mode != "r":
-            raise OSError(f"cannot write the run file {path!r}: {error!r}") from None
-        raise RunFileError(f"{path!r} is incomplete or corrupt: {error!r}") from None
 
 
 def _run_group(f, path):
@@ -103,12 +155,107 @@ def _run_group(f, path):
             f"{RUN_GROUP!r} group): read it with xarray.open_datatree"
         )
     group = f.groups[RUN_GROUP]
-    if group.attrs.get("format") != FORMAT:
+    found = group.attrs.get("format")
+    if found in _OLDER_FORMATS:
         raise RunFileError(
-            f"{path!r} has run format {group.attrs.get('format')!r}; this liesample reads "
-            f"{FORMAT!r}"
+            f"{path!r} was written by an older liesample (run format {found!r}, whose "
+            "checksums do not cover the run's settings): it cannot be resumed or verified by "
+            f"this one (format {FORMAT!r}); read it with xarray.open_datatree, and start a new "
+            "output to go on sampling"
+        )
+    if found != FORMAT:
+        raise RunFileError(
+            f"{path!r} has run format {found!r}; this liesample reads {FORMAT!r}: read it "
+            "with xarray.open_datatree, or with the liesample that wrote it"
         )
     return group
+
+
+_OLDER_FORMATS = ("liesample-run-1", "liesample-run-2")
+_JSON_ATTRS = ("fingerprint", "info_names")
+
+
+def _attr_bytes(value) -> bytes:
+    """An attribute's value as the bytes its checksum covers (text and numbers apart)."""
+    if isinstance(value, bytes):
+        value = value.decode("utf-8", "replace")
+    if isinstance(value, str):
+        return b"str|" + value.encode()
+    array = np.asarray(value)
+    if array.dtype.kind in "OSU":
+        items = [v.decode("utf-8", "replace") if isinstance(v, bytes) else str(v)
+                 for v in array.reshape(-1)]  # fmt: skip
+        return f"text|{array.shape}|".encode() + json.dumps(items).encode()
+    array = np.ascontiguousarray(array)
+    return f"{array.dtype.str}|{array.shape}|".encode() + array.tobytes()
+
+
+def _attribute_fields(f, path) -> dict[str, bytes]:
+    """Every attribute the run wrote, by a name that says where it is (``attrs['beta']`` of
+    the root, ``posterior.attrs['beta']``, ``sample_stats/diverging.attrs['dtype']``, and each
+    field of the run's JSON records: ``fingerprint['num_warmup']``), as :func:`_attr_bytes`.
+    The commit record, which holds their checksums, is not one of them."""
+    fields = {}
+
+    def add(where, attrs, skip=()):
+        for name in attrs:
+            if name not in skip:
+                fields[f"{where}attrs[{name!r}]"] = _attr_bytes(attrs[name])
+
+    add("", f.attrs)
+    for group_name in sorted(f.groups):
+        group = f.groups[group_name]
+        if group_name == RUN_GROUP:
+            add(f"{group_name}.", group.attrs, skip=("commit", *_JSON_ATTRS))
+            for name in _JSON_ATTRS:
+                for key, value in _json_attr(group, name, path).items():
+                    fields[f"{name}[{key!r}]"] = json.dumps(value, sort_keys=True).encode()
+        else:
+            add(f"{group_name}.", group.attrs)
+        for var in sorted(group.variables):
+            add(f"{group_name}/{var}.", group.variables[var].attrs)
+    return fields
+
+
+def _attribute_sums(f, path) -> dict:
+    """The commit's checksums of the attributes: ``attrs_sha256``, a SHA-256 of them all, and
+    ``attr_sums``, the first 16 hex digits of each one's (which name an edited one)."""
+    full, short = hashlib.sha256(), {}
+    for name, value in sorted(_attribute_fields(f, path).items()):
+        digest = hashlib.sha256(value).hexdigest()
+        full.update(f"{name}={digest};".encode())
+        short[name] = digest[:16]
+    return {"attrs_sha256": full.hexdigest(), "attr_sums": short}
+
+
+def _check_attributes(f, path, commit):
+    """Refuse a file whose attributes are not those its commit records, naming each one that
+    was changed, added or removed."""
+    sums = _attribute_sums(f, path)
+    if sums["attrs_sha256"] == commit.get("attrs_sha256"):
+        return
+    saved, now = commit.get("attr_sums"), sums["attr_sums"]
+    if not isinstance(saved, dict):
+        saved = {}
+    found = [f"{name} was changed" for name in now if name in saved and saved[name] != now[name]]
+    found += [f"{name} was added" for name in now if name not in saved]
+    found += [f"{name} was removed" for name in saved if name not in now]
+    raise RunFileError(
+        f"{path!r}: "
+        + ("; ".join(found) if found and saved else "its attributes do not match their checksum")
+        + " since the run wrote it: the file was edited or is corrupt, and its draws cannot be "
+        "trusted to be the saved run's. Restore the file as it was written, or "
+        + _START_AFRESH
+    )
+
+
+def _header(path):
+    """``(fingerprint, info_names)`` of the run file at ``path``, after checking its format,
+    its commit record and its attributes (not yet its draws: :func:`verify`)."""
+    with _open(path) as f:
+        group = _run_group(f, path)
+        _check_attributes(f, path, _json_attr(group, "commit", path))
+        return _json_attr(group, "fingerprint", path), _json_attr(group, "info_names", path)
 
 
 def _check_names(f, tree, path):
@@ -180,10 +327,12 @@ def _state_arrays(group, slot):
 
 
 def verify(f, path) -> dict:
-    """The commit record of the run in ``f``, after checking the chunk table, every chunk's
-    checksum and the saved state's (:class:`RunFileError` naming what is wrong)."""
+    """The commit record of the run in ``f``, after checking the attributes, the chunk table,
+    every chunk's checksum and the saved state's (:class:`RunFileError` naming what is
+    wrong)."""
     group = _run_group(f, path)
     commit = _json_attr(group, "commit", path)
+    _check_attributes(f, path, commit)
     done, chunks = commit.get("draws_done"), commit.get("chunks")
     if not all(isinstance(v, int) and v >= 0 for v in (done, chunks)):
         raise RunFileError(f"{path!r}: draws_done {done!r} and chunks {chunks!r} are invalid")
@@ -202,9 +351,11 @@ def verify(f, path) -> dict:
     stored = _stored_draws(f, done)
     for k, (first, end) in enumerate(zip([0, *ends], ends, strict=False)):
         if _chunk_digest(_slices(stored, first, end)) != bytes(sums[k]):
+            intact = f"; draws 0 to {first - 1} before it match theirs" if first else ""
             raise RunFileError(
                 f"{path!r}: chunk {k} (draws {first} to {end - 1}) does not match its "
-                "checksum: the file was edited or is corrupt"
+                f"checksum: the file was edited or is corrupt{intact}. Restore the file as it "
+                "was written, or " + _START_AFRESH
             )
     if done and _chunk_digest(_state_arrays(group, commit["state_slot"])).hex() != commit.get(
         "state_sha256"
@@ -221,8 +372,10 @@ def load_chains(path):
     (complete or interrupted) as an ArviZ ``DataTree``: the groups, variables and attributes of
     the tree :func:`liesample.sample` returns, up to the last saved draw.
 
-    Every chunk's checksum and the saved state's are verified first: an edited, truncated,
-    empty or foreign file is refused with its path (:class:`RunFileError`)."""
+    Every checksum (the attributes', every chunk's and the saved state's) is verified first:
+    an edited, truncated, empty or foreign file is refused with its path
+    (:class:`RunFileError`). A run stopped by a full disk, an error or a kill holds every chunk
+    it committed, and a copy that a killed writer left beside the file is not read."""
     import xarray as xr
 
     path = os.fspath(path)
@@ -230,13 +383,19 @@ def load_chains(path):
         raise FileNotFoundError(f"no run file at {path!r}")
     with _open(path) as f:
         done = verify(f, path)["draws_done"]
-    with xr.open_datatree(path, engine="h5netcdf") as tree:
-        children = {
-            name: child.to_dataset().isel(draw=slice(0, done)).load()
-            for name, child in tree.children.items()
-            if name != RUN_GROUP
-        }
-        root = dict(tree.attrs)
+    try:
+        with xr.open_datatree(path, engine="h5netcdf") as tree:
+            children = {
+                name: child.to_dataset().isel(draw=slice(0, done)).load()
+                for name, child in tree.children.items()
+                if name != RUN_GROUP
+            }
+            root = dict(tree.attrs)
+    except Exception as error:
+        raise RunFileError(
+            f"{path!r} passed its checks but xarray cannot read it ({error!r}); read it with "
+            "xarray.open_datatree to see why"
+        ) from None
     loaded = xr.DataTree.from_dict(children)
     loaded.attrs = root
     return loaded
@@ -247,8 +406,10 @@ def saved_num_warmup(path) -> int | None:
     path = os.fspath(path)
     if not os.path.isfile(path):
         return None
-    with _open(path) as f:
-        return int(_json_attr(_run_group(f, path), "fingerprint", path)["num_warmup"])
+    try:
+        return int(_header(path)[0]["num_warmup"])
+    except (KeyError, TypeError, ValueError):
+        raise RunFileError(f"{path!r}: its fingerprint records no num_warmup") from None
 
 
 def _to_stored(leaf):
@@ -279,26 +440,31 @@ def _update_attrs(stored, attrs):
 
 class RunFile:
     """The run file of one ``sample_chains`` call: locked for its whole run (:meth:`open`),
-    checked against the run's fingerprint, read to resume, and grown chunk by chunk."""
+    checked against the run's fingerprint, read to resume, and grown chunk by chunk, each chunk
+    published whole or not at all (:mod:`liesample.run.atomic`)."""
 
     def __init__(self, path: str, lock: OutputLock):
         self.path = path
         self.lock = lock
         self.exists = os.path.exists(path)
+        # what a resume adopts and checks, read (format, commit, attributes checked) at once
+        self.header = _header(path) if self.exists else None
         self.chunks = 0
         self.state_slot = 1  # the slot the next state goes to is the other one
 
     @classmethod
     def open(cls, output, resume: bool) -> RunFile:
-        """Check ``output`` (:func:`check_output_path`) and take its lock, before any work."""
+        """Check ``output`` (:func:`check_output_path`), take its lock, remove what a killed
+        writer left beside it, and read the saved run's header, before any work."""
         path = check_output_path(output, resume=True)
         lock = OutputLock(path).acquire()  # a writer at work is named before anything else
         try:
             check_output_path(path, resume)
-        except Exception:
+            atomic.remove_leftovers(path)  # no live writer owns them: we hold the lock
+            return cls(path, lock)
+        except BaseException:
             lock.release()
             raise
-        return cls(path, lock)
 
     def close(self):
         self.lock.release()
@@ -312,10 +478,7 @@ class RunFile:
 
         if not self.exists:
             return spec
-        with _open(self.path) as f:
-            group = _run_group(f, self.path)
-            saved = _json_attr(group, "fingerprint", self.path)
-            info_names = _json_attr(group, "info_names", self.path)
+        saved, info_names = self.header
         energy = [name for name, (key, _) in info_names.items() if key == "energy"]
         var_name, event_dims = json.loads(saved.get("names", "[null, null]"))
         if isinstance(event_dims, list):
@@ -335,9 +498,7 @@ class RunFile:
         refused if it is ``required`` (:func:`liesample.run.provenance.differences`)."""
         if not self.exists:
             return
-        with _open(self.path) as f:
-            saved = _json_attr(_run_group(f, self.path), "fingerprint", self.path)
-        found = differences(saved, json.loads(json.dumps(fingerprint)), required)
+        found = differences(self.header[0], json.loads(json.dumps(fingerprint)), required)
         if found:
             raise RunFileError(
                 f"cannot resume from {self.path!r}: it was saved by another run: "
@@ -388,72 +549,88 @@ class RunFile:
     def append(self, first, tree, info_names, states, fingerprint):
         """Write the draws ``first …`` of ``tree`` (a ``DataTree`` of this chunk: the groups
         and attributes of the run's tree), the ``states`` after them, their checksums, and then
-        the commit. The first call creates the file with the run's ``fingerprint``."""
+        the commit, to a copy of the file that then replaces it (the first call creates it with
+        the run's ``fingerprint``). A failure leaves the file as it was (``OSError`` naming the
+        path, the draws it holds and how to go on)."""
         states = _state_leaves(states)
-        if not self.exists:
-            self._create(tree, info_names, states, fingerprint)
         count = tree["posterior"].sizes["draw"]
         end = first + count
-        slot = 1 - self.state_slot
         chunk = {}  # what is written, as stored, in the order the checksum takes it
         for name in sorted(tree.children):
             chunk[f"{name}/draw"] = np.arange(first, end, dtype=np.int64)
             for var in sorted(tree[name].data_vars):
                 chunk[f"{name}/{var}"] = np.ascontiguousarray(_to_stored(tree[name][var].values))
-        with _open(self.path, "a") as f:
-            _check_names(f, tree, self.path)
-            for name, child in tree.children.items():
-                group = f.groups[name]
-                group.resize_dimension("draw", end)
-                group.variables["draw"][first:end] = chunk[f"{name}/draw"]
-                for var in child.data_vars:
-                    group.variables[var][:, first:end] = chunk[f"{name}/{var}"]
-                _update_attrs(group.attrs, child.attrs)
-            _update_attrs(f.attrs, tree.attrs)
-            run = f.groups[RUN_GROUP]
-            for i, leaf in enumerate(states):
-                run.variables[f"state_{slot}_{i}"][...] = leaf
-            run.resize_dimension("chunk", self.chunks + 1)
-            run.variables["chunk_end"][self.chunks] = end
-            run.variables["chunk_sha256"][self.chunks] = np.frombuffer(
-                _chunk_digest(_slices(chunk, 0, count)), np.uint8
-            )
-            state_sha = _chunk_digest(
-                [(f"state_{slot}_{i}", leaf) for i, leaf in enumerate(states)]
-            ).hex()
-            commit = {"draws_done": end, "chunks": self.chunks + 1, "state_slot": slot}
-            run.attrs["commit"] = json.dumps({**commit, "state_sha256": state_sha})
-        self.chunks, self.state_slot = self.chunks + 1, slot
+        new_bytes = sum(a.nbytes for a in chunk.values()) + sum(a.nbytes for a in states)
+        with atomic.replacing(
+            self.path,
+            copy=self.exists,
+            extra_bytes=new_bytes,
+            saving=f"draws {first} to {end - 1} of the run",
+            kept=f"its {first} committed draws" if self.exists else None,
+        ) as work:
+            with _writing(work, new=not self.exists) as f:
+                if self.exists:
+                    _check_names(f, tree, self.path)
+                else:
+                    self._create(f, tree, info_names, states, fingerprint)
+                self._write_chunk(f, tree, chunk, states, first, end)
+        self.exists = True
+        self.chunks, self.state_slot = self.chunks + 1, 1 - self.state_slot
 
-    def _create(self, tree, info_names, states, fingerprint):
+    def _write_chunk(self, f, tree, chunk, states, first, end):
+        """Write one chunk's draws, the tree's attributes then, the states after it, its
+        checksum and the commit (last) into the open copy ``f``."""
+        slot = 1 - self.state_slot
+        for name, child in tree.children.items():
+            group = f.groups[name]
+            group.resize_dimension("draw", end)
+            group.variables["draw"][first:end] = chunk[f"{name}/draw"]
+            for var in child.data_vars:
+                group.variables[var][:, first:end] = chunk[f"{name}/{var}"]
+            _update_attrs(group.attrs, child.attrs)
+        _update_attrs(f.attrs, tree.attrs)
+        run = f.groups[RUN_GROUP]
+        for i, leaf in enumerate(states):
+            run.variables[f"state_{slot}_{i}"][...] = leaf
+        run.resize_dimension("chunk", self.chunks + 1)
+        run.variables["chunk_end"][self.chunks] = end
+        run.variables["chunk_sha256"][self.chunks] = np.frombuffer(
+            _chunk_digest(_slices(chunk, 0, end - first)), np.uint8
+        )
+        state_sha = _chunk_digest([(f"state_{slot}_{i}", leaf) for i, leaf in enumerate(states)])
+        commit = {"draws_done": end, "chunks": self.chunks + 1, "state_slot": slot}
+        commit |= {"state_sha256": state_sha.hex(), **_attribute_sums(f, self.path)}
+        run.attrs["commit"] = json.dumps(commit)
+
+    def _create(self, f, tree, info_names, states, fingerprint):
+        """Lay out a new run file in ``f``: the tree's groups, coordinates and (empty)
+        variables with their attributes, and the run group."""
         import h5py
 
-        with _open(self.path, "w") as f:
-            f.attrs.update(tree.attrs)
-            for name, child in tree.children.items():
-                group = f.create_group(name)
-                group.attrs.update(child.attrs)
-                group.dimensions = {
-                    dim: None if dim == "draw" else size for dim, size in child.sizes.items()
-                }
-                group.create_variable("draw", ("draw",), np.int64)
-                for coord, value in child.coords.items():
-                    if coord == "draw":
-                        continue
-                    value = np.asarray(value.values)
-                    if value.dtype.kind in "UO":
-                        value = value.astype(object)
-                        dtype = h5py.string_dtype()
-                    else:
-                        dtype = value.dtype
-                    group.create_variable(coord, (coord,), dtype, data=value)
-                for var, value in child.data_vars.items():
-                    stored = _to_stored(value.values)
-                    variable = group.create_variable(var, value.dims, stored.dtype)
-                    if value.dtype == bool:
-                        variable.attrs["dtype"] = "bool"  # xarray reads it back as booleans
-            self._create_run_group(f, info_names, states, fingerprint)
-        self.exists = True
+        f.attrs.update(tree.attrs)
+        for name, child in tree.children.items():
+            group = f.create_group(name)
+            group.attrs.update(child.attrs)
+            group.dimensions = {
+                dim: None if dim == "draw" else size for dim, size in child.sizes.items()
+            }
+            group.create_variable("draw", ("draw",), np.int64)
+            for coord, value in child.coords.items():
+                if coord == "draw":
+                    continue
+                value = np.asarray(value.values)
+                if value.dtype.kind in "UO":
+                    value = value.astype(object)
+                    dtype = h5py.string_dtype()
+                else:
+                    dtype = value.dtype
+                group.create_variable(coord, (coord,), dtype, data=value)
+            for var, value in child.data_vars.items():
+                stored = _to_stored(value.values)
+                variable = group.create_variable(var, value.dims, stored.dtype)
+                if value.dtype == bool:
+                    variable.attrs["dtype"] = "bool"  # xarray reads it back as booleans
+        self._create_run_group(f, info_names, states, fingerprint)
 
     def _create_run_group(self, f, info_names, states, fingerprint):
         run = f.create_group(RUN_GROUP)
@@ -470,7 +647,6 @@ class RunFile:
         run.attrs["format"] = FORMAT
         run.attrs["fingerprint"] = json.dumps(fingerprint)
         run.attrs["info_names"] = json.dumps(info_names)
-        run.attrs["commit"] = json.dumps({"draws_done": 0, "chunks": 0, "state_slot": 1})
 
 
 class Layout:
