@@ -32,6 +32,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from liesample.foundation.validation import finite_float, prng_key
 from liesample.geometry import spaces
 
 __all__ = ["GROUPS", "WilsonGauge", "wilson_gauge"]
@@ -66,6 +67,29 @@ def _lattice_shape(shape) -> tuple[int, ...]:
             f"got {shape!r}"
         )
     return tuple(int(s) for s in shape)
+
+
+def _index(name: str, value, size: int, what: str) -> int:
+    """``value`` as an int in ``[0, size)``, or an error naming ``name`` and the range."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be an int (an axis of the lattice), got {value!r}")
+    if not 0 <= value < size:
+        raise ValueError(
+            f"{name} must be {what} in 0 … {size - 1} for a {size}-dimensional lattice, got "
+            f"{value}"
+        )
+    return int(value)
+
+
+def _real_dtype(dtype, name: str):
+    """``dtype`` (or the default float) as a real floating dtype, or a ``TypeError``."""
+    dtype = jnp.dtype(dtype or jnp.zeros(()).dtype)
+    if not jnp.issubdtype(dtype, jnp.floating):
+        raise TypeError(
+            f"{name} must be a real floating dtype (float32 or float64; SU(N) links are then "
+            f"complex of that precision), got {dtype}"
+        )
+    return dtype
 
 
 def _dagger(u):
@@ -117,6 +141,35 @@ class WilsonGauge:
     def planes(self) -> tuple[tuple[int, int], ...]:
         return tuple((mu, nu) for mu in range(self.dim) for nu in range(mu + 1, self.dim))
 
+    def check_links(self, links, name: str = "links") -> None:
+        """Raise unless ``links`` has the shape and dtype of this system's links (cheap: shape
+        and dtype only, so it costs nothing under ``jit``; ``system.space.check`` also checks
+        that a concrete field lies on the group)."""
+        expected = self.space.position_array_shape
+        if np.shape(links) != expected:
+            kind = "angles" if self.abelian else f"{self.n}×{self.n} matrices"
+            raise ValueError(
+                f"{name} must have shape {expected} for {self!r} ({kind}: a direction axis of "
+                f"{self.dim}, then the lattice {self.shape}), got {np.shape(links)}; build them "
+                "with system.hot_start(key) or system.cold_start()"
+            )
+        dtype = jnp.result_type(links)
+        good = jnp.issubdtype(dtype, jnp.floating if self.abelian else jnp.complexfloating)
+        if not good:
+            wanted = "real floating (angles)" if self.abelian else "complex (SU(N) matrices)"
+            raise TypeError(f"{name} must be a {wanted} array for {self.group}, got {dtype}")
+
+    def check_axis(self, name: str, value) -> int:
+        """``value`` as a lattice direction ``0 … d−1``, or an error naming ``name``."""
+        return _index(name, value, self.dim, "a lattice direction")
+
+    def check_plane(self, mu, nu) -> tuple[int, int]:
+        """Two distinct lattice directions, or an error naming ``mu`` and ``nu``."""
+        mu, nu = self.check_axis("mu", mu), self.check_axis("nu", nu)
+        if mu == nu:
+            raise ValueError(f"mu and nu must be two different directions (a plane), got {mu}")
+        return mu, nu
+
     def plaquette_mask(self, mu: int, nu: int) -> np.ndarray:
         """Which sites ``x`` carry a plaquette in the plane ``(μ, ν)`` (all on the torus)."""
         mask = np.ones(self.shape, bool)
@@ -150,6 +203,8 @@ class WilsonGauge:
 
     def plaquette(self, links: jax.Array, mu: int, nu: int) -> jax.Array:
         """``U_μν(x)`` at every site (angles for U(1))."""
+        self.check_links(links)
+        mu, nu = self.check_plane(mu, nu)
         u_mu, u_nu = links[mu], links[nu]
         return self.multiply(
             u_mu,
@@ -162,6 +217,8 @@ class WilsonGauge:
         """``A_μ(x)``: the sum of staples, ``Σ_P∋U_μ(x) Re tr(U_P)/N = Re tr(U_μ(x) A_μ(x))/N``.
 
         For U(1) a complex number ``Σ e^{iα}`` (the action of the link is ``−Re(e^{iθ} A)``)."""
+        self.check_links(links)
+        mu = self.check_axis("mu", mu)
         total = 0.0
         for nu in range(self.dim):
             if nu == mu:
@@ -189,6 +246,7 @@ class WilsonGauge:
     # ------------------------------------------------------------------ action
     def action(self, links: jax.Array) -> jax.Array:
         """``S/β = Σ_P (1 − Re tr U_P / N)``."""
+        self.check_links(links)
         total = 0.0
         for mu, nu in self.planes:
             mask = jnp.asarray(self.plaquette_mask(mu, nu))
@@ -197,18 +255,22 @@ class WilsonGauge:
         return total
 
     def logdensity(self, beta: float) -> Callable[[jax.Array], jax.Array]:
-        """``links ↦ −β S/β``: the ``log π`` (Haar measure) of a ``T*G`` sampler."""
-        beta = float(beta)
+        """``links ↦ −β S/β``: the ``log π`` (Haar measure) of a ``T*G`` sampler.
+
+        ``β`` is any finite real: the groups are compact, so ``exp(−β S/β)`` is normalisable at
+        either sign (``β < 0`` favours plaquettes far from the identity)."""
+        beta = finite_float("beta", beta)
         return lambda links: -beta * self.action(links)
 
     # ------------------------------------------------------------------ starts
     def hot_start(self, rng_key: jax.Array, dtype=None) -> jax.Array:
-        """Haar-random links (pure JAX: vmaps over keys)."""
-        return self.space.uniform(rng_key, dtype)
+        """Haar-random links (pure JAX: vmaps over keys); ``dtype`` real floating (the
+        precision; SU(N) links are complex of it)."""
+        return self.space.uniform(prng_key(rng_key), _real_dtype(dtype, "dtype"))
 
     def cold_start(self, dtype=None) -> jax.Array:
-        """Every link the identity."""
-        dtype = jnp.dtype(dtype or jnp.zeros(()).dtype)
+        """Every link the identity (``dtype`` as for :meth:`hot_start`)."""
+        dtype = _real_dtype(dtype, "dtype")
         if self.abelian:
             return jnp.zeros((self.dim, *self.shape), dtype)
         eye = jnp.eye(self.n, dtype=jnp.result_type(dtype, jnp.complex64))
@@ -224,6 +286,7 @@ class WilsonGauge:
 
         Other groups and dimensions: the clover charge of :func:`clover_charge` (flow first,
         :func:`liesample.samplers.gauge.wilson_flow`, for a near-integer value)."""
+        self.check_links(links)
         if self.abelian and self.dim == 2:
             theta = self.plaquette(links, 0, 1)
             return jnp.sum(jnp.angle(jnp.exp(1j * theta))) / (2.0 * jnp.pi)
@@ -238,14 +301,43 @@ class WilsonGauge:
         self, links: jax.Array, r: int, t: int, mu: int = 0, nu: int | None = None
     ) -> jax.Array:
         """Mean of ``Re tr W / N`` over the ``r × t`` rectangles in the plane ``(μ, ν)``
-        (``ν`` the last axis by default: time), over every site (periodic indexing)."""
+        (``ν`` the last axis by default: time).
+
+        The extents are integers ``1 ≤ r < L_μ``, ``1 ≤ t < L_ν`` (a zero extent is no loop; an
+        extent of the lattice size or more wraps the torus, a product of Polyakov lines rather
+        than a Wilson loop: :meth:`polyakov_loop`). On the torus the mean is over every site;
+        with ``boundary="open"`` over the sites whose rectangle stays inside the lattice (it
+        never uses a far-edge link, which no plaquette holds)."""
+        self.check_links(links)
         nu = self.dim - 1 if nu is None else nu
+        mu, nu = self.check_plane(mu, nu)
+        r, t = self._extent("r", r, mu), self._extent("t", t, nu)
         bottom = self._line(links[mu], mu, r)
         right = self.shift(self._line(links[nu], nu, t), mu, r)
         top = self.shift(self._line(links[mu], mu, r), nu, t)
         left = self._line(links[nu], nu, t)
         loop = self.multiply(bottom, right, self.inverse(top), self.inverse(left))
-        return jnp.mean(self.retrace(loop))
+        if self.boundary == "periodic":
+            return jnp.mean(self.retrace(loop))
+        inside = np.ones(self.shape, bool)
+        for axis, extent in ((mu, r), (nu, t)):
+            index = [slice(None)] * self.dim
+            index[axis] = slice(self.shape[axis] - extent, None)
+            inside[tuple(index)] = False
+        return jnp.sum(jnp.where(inside, self.retrace(loop), 0.0)) / np.sum(inside)
+
+    def _extent(self, name: str, value, axis: int) -> int:
+        """A loop extent along ``axis``: an int in ``1 … L − 1``, or an error naming it."""
+        size = self.shape[axis]
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+            raise TypeError(f"{name} must be an int (a loop extent in lattice units), got {value!r}")
+        if not 1 <= value < size:
+            raise ValueError(
+                f"{name} must be an extent in 1 … {size - 1} along direction {axis} (size "
+                f"{size}), got {value}: a zero extent is no loop, and one of {size} or more wraps "
+                "the lattice (for lines that close around it use polyakov_loop)"
+            )
+        return int(value)
 
     def _line(self, link, axis, length):
         """``U(x) U(x+ê) … U(x+(length−1)ê)`` along ``axis`` at every site."""
@@ -257,7 +349,14 @@ class WilsonGauge:
     def polyakov_loop(self, links: jax.Array, axis: int | None = None) -> jax.Array:
         """Mean over the spatial sites of ``tr Π_t U_t(x, t) / N`` (complex), ``axis`` the time
         direction (the last by default); needs a periodic lattice."""
-        axis = self.dim - 1 if axis is None else axis
+        self.check_links(links)
+        axis = self.check_axis("axis", self.dim - 1 if axis is None else axis)
+        if self.boundary != "periodic":
+            raise ValueError(
+                "polyakov_loop needs boundary='periodic': on an open lattice a line along the "
+                "time direction does not close (its far-edge link belongs to no plaquette); "
+                "use wilson_loop, or build the system with boundary='periodic'"
+            )
         line = self._line(links[axis], axis, self.shape[axis])
         value = jnp.exp(1j * line) if self.abelian else jnp.trace(line, axis1=-2, axis2=-1) / self.n
         return jnp.mean(jnp.take(value, 0, axis=axis))
