@@ -1,5 +1,5 @@
-"""The checks run on a finished run: divergences, stuck chains, chains that disagree, and the
-per-variable checks of the draws.
+"""The checks run on a finished run: divergences, stuck chains, chains that disagree, chains
+that left their orbits, and the per-variable checks of the draws.
 
 Each check warns (or raises, for divergences with ``on_nonfinite="raise"``) with a message that
 names the chains and a fix; none changes the draws. :func:`check_run` runs them all on a
@@ -13,15 +13,24 @@ from __future__ import annotations
 import math
 import warnings
 
+import jax.numpy as jnp
 import numpy as np
 
 from liesample.analysis.convergence import convergence_warnings
+from liesample.foundation.precision import (
+    ROUNDOFF_ULPS,
+    X64_SWITCH,
+    check_dtype,
+    roundoff_tolerance,
+)
 from liesample.foundation.validation import raise_or_warn
 
 DEFAULT_MIN_ACCEPTANCE_RATE = 0.05
 """A chain whose mean acceptance rate over the run is below this is reported as stuck."""
 MAX_ENERGY_RHAT = 1.05
 """Chains whose energies have a split R-hat above this are reported as not converged."""
+CASIMIR_DRIFT_FLOOR = 1e-9
+"""The float64 floor of :func:`casimir_drift_bound`."""
 
 
 class NonFiniteStateError(FloatingPointError):
@@ -41,8 +50,9 @@ def check_run(
     stacklevel=2,
 ):
     """Every post-run check: :func:`report_divergences`, :func:`report_stuck_chains`,
-    :func:`report_unconverged` (on ``info``, per-draw arrays ``(chains, draws)``) and
-    :func:`check_variables` (on ``variables``, name -> ``(chains, draws, ...)``).
+    :func:`report_unconverged`, :func:`report_casimir_drift` (on ``info``, per-draw arrays
+    ``(chains, draws)``) and :func:`check_variables` (on ``variables``, name ->
+    ``(chains, draws, ...)``).
 
     ``groups``: the sampler's law groups (a label per chain, chains with one label sample one
     law), or ``None`` (one law). ``stacklevel`` as for ``warnings.warn`` called here."""
@@ -50,6 +60,7 @@ def check_run(
     report_divergences(info, on_nonfinite, level)
     report_stuck_chains(info, min_acceptance_rate, stuck_advice, level)
     report_unconverged(info, groups, level)
+    report_casimir_drift(info, level)
     check_variables(variables, groups, convergence=convergence, stacklevel=level)
 
 
@@ -166,6 +177,70 @@ def _varies(values) -> bool:
     values = np.asarray(values, dtype=float)
     finite = values[np.isfinite(values)]
     return finite.size > 0 and np.ptp(finite) > 1e-9 * max(np.max(np.abs(finite)), 1e-300)
+
+
+def casimir_drift_bound(dtype) -> float:
+    """The largest Casimir drift a run in ``dtype`` shows without a warning: ``max(1e-9,
+    1000 ε)``, ``ε`` the round-off unit of ``dtype``: as far as a start may be off its orbit
+    (:func:`liesample.foundation.precision.roundoff_tolerance`). In float64 only a scheme
+    that leaves the orbit reaches it; in float32 the round-off of many steps does (it grows like
+    ``ε √n`` over ``n`` steps)."""
+    return roundoff_tolerance(dtype, floor=CASIMIR_DRIFT_FLOOR)
+
+
+def casimir_drift(info) -> float | None:
+    """The run's Casimir drift: the largest finite ``info["casimir_error"]`` over chains and
+    draws (each a step's ``|C(μ) − C(μ₀)|`` relative to the Casimir's scale, the largest over
+    the steps a draw spans), or ``None`` for a sampler that records none."""
+    errors = info.get("casimir_error")
+    if errors is None:
+        return None
+    errors = np.asarray(errors)
+    finite = errors[np.isfinite(errors)]
+    return float(np.max(finite)) if finite.size else None
+
+
+def record_casimir_drift(settings: dict, info) -> None:
+    """Keep in ``settings["casimir_drift"]`` the largest :func:`casimir_drift` of the chunks
+    seen so far (``info`` is one chunk's; nothing for a sampler that records none)."""
+    drift = casimir_drift(info)
+    if drift is not None:
+        settings["casimir_drift"] = max(drift, settings.get("casimir_drift", 0.0))
+
+
+def report_casimir_drift(info, stacklevel=2) -> float | None:
+    """A ``RuntimeWarning`` when the run's :func:`casimir_drift` is above
+    :func:`casimir_drift_bound` of the dtype it was recorded in, naming the chains, the causes
+    and their fixes (float32 round-off: ``jax_enable_x64``); returns the drift."""
+    drift = casimir_drift(info)
+    if drift is None:
+        return None
+    errors = np.asarray(info["casimir_error"])
+    dtype = check_dtype(errors)
+    bound = casimir_drift_bound(dtype)
+    if not drift > bound:
+        return drift
+    per_chain = np.max(np.where(np.isfinite(errors), errors, 0.0).reshape(len(errors), -1), 1)
+    chains = np.flatnonzero(per_chain > bound)
+    message = (
+        f"the chains left their orbits: the largest Casimir drift |C(μ) − C(μ₀)| (relative to "
+        f"the Casimir's scale) over the draws is {drift:.3g} (chains {chain_list(chains)}), "
+        f"above the bound {bound:.2g} ({ROUNDOFF_ULPS} units of {dtype.name} round-off, at "
+        "least 1e-9: as far as a start may be off its orbit); sample_stats 'casimir_error' "
+        "holds it per draw."
+    )
+    if float(jnp.finfo(dtype).eps) > float(np.finfo(np.float64).eps):
+        message += (
+            f" In {dtype.name} the round-off of the steps adds up (like ε √n over n steps): to "
+            f"run in float64, call {X64_SWITCH} at start-up, before any array is made; or "
+            "run fewer steps per chain, with more chains."
+        )
+    message += (
+        " A scheme that does not move by coadjoint actions (integrator='euler_heun') drifts by "
+        "its step error: use an orbit-preserving integrator (the default 'splitting')."
+    )
+    warnings.warn(message, RuntimeWarning, stacklevel=stacklevel)
+    return drift
 
 
 def report_unconverged(info, groups, stacklevel=2):

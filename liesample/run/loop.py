@@ -27,7 +27,7 @@ from liesample.foundation.compile import jit
 from liesample.foundation.validation import finite_float, is_single_array, prng_key
 from liesample.integrators.chain_loop import run_draws, run_steps
 from liesample.run import arguments
-from liesample.run.checks import DEFAULT_MIN_ACCEPTANCE_RATE, check_run
+from liesample.run.checks import DEFAULT_MIN_ACCEPTANCE_RATE, check_run, record_casimir_drift
 from liesample.run.provenance import adapted_fingerprint, run_fingerprint
 from liesample.run.sharding import chain_sharding, shard_chains, to_host
 from liesample.run.store import Layout, RunFile
@@ -490,6 +490,8 @@ class _Run:
         first: dicts as :meth:`_split` makes them) and the wall time."""
         o = self.options
         chunks = [] if previous is None else [previous]
+        if previous is not None:
+            record_casimir_drift(self.settings, previous["info"])
         start = time.perf_counter()
         states, bar = self.states, self.bar
         values = self.program[1]
@@ -507,6 +509,7 @@ class _Run:
                 states, self.chain_keys, first_step, values
             )
             chunks.append(self._split(*to_host(recorded)))
+            record_casimir_drift(self.settings, chunks[-1]["info"])  # the file records it
             wall_time = time.perf_counter() - start
             done += count
             if self.store is not None:

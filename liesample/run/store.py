@@ -428,7 +428,7 @@ def _state_leaves(states):
     ]
 
 
-CHUNK_ATTRS = ("sampling_time", "num_steps")
+CHUNK_ATTRS = ("sampling_time", "num_steps", "casimir_drift")
 """The tree's attributes that change from chunk to chunk (the others are written once)."""
 
 
