@@ -14,8 +14,11 @@ only when they are concrete; traced values are not checked, as with NumPyro's ``
 With ``validate_args=True`` (or NumPyro's validation enabled), ``log_prob`` checks its value as
 NumPyro's ``ProjectedNormal`` does: the wrong event shape raises ``ValueError``; a concrete value
 off the support (not a unit vector, not a rotation) warns "Out-of-support values", and the
-density is still the formula's (a sampler's state carries round-off off the manifold).
-``infer_shapes`` gives ``(batch_shape, event_shape)`` from the parameters' shapes.
+density is still the formula's (a sampler's state carries round-off off the manifold). A
+likelihood's log-density is evaluated only traced, where nothing is checked: the kernel
+:class:`liesample.interop.numpyro_kernel.GeometricHMC` checks every observed site's concrete
+value against its distribution's support at ``init`` (:func:`check_observed_sites`) and raises
+naming the site. ``infer_shapes`` gives ``(batch_shape, event_shape)`` from the parameters' shapes.
 
 - ``VonMisesFisher(mean_direction, concentration)`` on ``S^{d−1}`` (``κ = 0``: uniform): density
   ``C_d(κ) exp(κ μ·x)`` with respect to the surface measure, ``C_d(κ) = κ^{d/2−1} /
@@ -79,7 +82,14 @@ from liesample.geometry.spaces import SO
 from liesample.targets import groups, orbits
 from liesample.targets.spins import von_mises_fisher
 
-__all__ = ["Bingham", "MatrixFisher", "VonMisesFisher", "log_bessel_iv", "rotation"]
+__all__ = [
+    "Bingham",
+    "MatrixFisher",
+    "VonMisesFisher",
+    "check_observed_sites",
+    "log_bessel_iv",
+    "rotation",
+]
 
 
 def _check_finite(name, value):
@@ -103,6 +113,52 @@ def _check_value(distribution, value):
                 f"{type(distribution).__name__}, got shape {jnp.shape(value)}"
             )
         distribution._validate_sample(value)
+
+
+def _validating(distribution) -> bool:
+    """Whether ``distribution`` (or the distribution a NumPyro wrapper holds) validates."""
+    while distribution is not None:
+        if getattr(distribution, "_validate_args", False):
+            return True
+        distribution = getattr(distribution, "base_dist", None)
+    return False
+
+
+def check_observed_sites(trace) -> None:
+    """``ValueError`` naming the first observed site of a model ``trace`` (NumPyro's
+    ``handlers.trace``) whose distribution validates (``validate_args=True``, or NumPyro's
+    validation enabled) and whose concrete value is off that distribution's support.
+
+    NumPyro checks values only where ``log_prob`` sees them concrete; a sampler evaluates the
+    likelihood traced, so an observation off the sphere (or a matrix that is not a rotation)
+    would otherwise be sampled against without a word. Traced observations are not checked."""
+    for name, site in trace.items():
+        if site["type"] != "sample" or not site["is_observed"] or not _validating(site["fn"]):
+            continue
+        value = concrete_array(site["value"])
+        if value is None:
+            continue
+        inside = np.asarray(site["fn"].support(value))
+        if np.all(inside):
+            continue
+        support = site["fn"].support
+        bad = tuple(int(i) for i in np.unravel_index(int(np.argmax(~inside)), inside.shape))
+        raise ValueError(
+            f"observed site {name!r}: its value is off the support of "
+            f"{type(site['fn']).__name__} ({type(support).__name__.strip('_')}) at "
+            f"{int(np.sum(~inside))} of {inside.size} point(s), the first at batch index {bad}: "
+            f"{value[bad]} (checked as the distribution validates: validate_args). Its "
+            "log-density would be evaluated there as if it were inside; give data inside the "
+            f"support: {_support_fix(support)}"
+        )
+
+
+def _support_fix(support) -> str:
+    if support is constraints.sphere:
+        return "unit vectors, e.g. x / np.linalg.norm(x, axis=-1, keepdims=True)"
+    if support is rotation:
+        return "rotation matrices (RᵀR = I, det R = 1), e.g. the polar factor U Vᵀ of R's SVD"
+    return f"values where support(value) is True ({support})"
 
 
 # --------------------------------------------------------------------------- vMF

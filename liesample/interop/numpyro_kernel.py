@@ -109,7 +109,7 @@ from liesample.foundation.compile import jit
 from liesample.foundation.validation import concrete_array, finite_float
 from liesample.geometry import spaces
 from liesample.geometry.cotangent import cotangent_bundle
-from liesample.interop.numpyro_distributions import rotation
+from liesample.interop.numpyro_distributions import check_observed_sites, rotation
 from liesample.samplers.cotangent.geometric_hmc import geometric_hmc
 from liesample.tuning.protocol import restart_step_size, row_at, schedule
 from liesample.tuning.trajectory import (
@@ -569,6 +569,7 @@ class GeometricHMC(MCMCKernel):
             numpyro.handlers.seed(self._model, rng_key), substitute_fn=_feasible_value
         )
         trace = numpyro.handlers.trace(model).get_trace(*model_args, **model_kwargs)
+        check_observed_sites(trace)  # concrete here; the log-density is only ever traced
         sites = {}
         for name, site in trace.items():
             if site["type"] == "sample" and not site["is_observed"]:
