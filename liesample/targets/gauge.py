@@ -50,13 +50,25 @@ def _plaquettes(num_plaquettes) -> int:
 
 
 def u1_torus_plaquette_mean(beta, num_plaquettes) -> float:
-    """``E[cos θ_P]`` of 2-D U(1) on a torus of ``V`` plaquettes: ``(1/V) ∂_β log Σ_k I_k^V``."""
-    beta = finite_float("beta", beta, positive=True)
+    """``E[cos θ_P]`` of 2-D U(1) on a torus of ``V`` plaquettes: ``(1/V) ∂_β log Σ_k I_k^V``.
+
+    Any finite ``β`` (the law is normalisable on the compact links): at ``β < 0``,
+    ``I_k(β) = (−1)^k I_k(|β|)``, so the terms carry the signs ``(−1)^{kV}`` and each
+    ``∂_β log I_k`` changes sign (for even ``V`` the mean is minus that at ``|β|``)."""
+    beta = finite_float("beta", beta)
+    if beta == 0.0:
+        return 0.0
     v = _plaquettes(num_plaquettes)
     k = np.arange(-TERMS, TERMS + 1)
-    i_k = special.ive(k, beta)
-    derivative = 0.5 * (special.ive(k - 1, beta) + special.ive(k + 1, beta)) / i_k
-    return _weighted_mean(v * np.log(i_k), derivative)
+    x = abs(beta)
+    k = k[special.ive(k, x) > 0]  # at small |β| the high orders underflow: they weigh nothing
+    i_k = special.ive(k, x)
+    derivative = 0.5 * (special.ive(k - 1, x) + special.ive(k + 1, x)) / i_k
+    if beta > 0:
+        return _weighted_mean(v * np.log(i_k), derivative)
+    log_w = v * np.log(i_k)
+    w = np.exp(log_w - np.max(log_w)) * np.where((k * v) % 2, -1.0, 1.0)
+    return float(-np.sum(w * derivative) / np.sum(w))
 
 
 def su2_torus_plaquette_mean(beta, num_plaquettes) -> float:

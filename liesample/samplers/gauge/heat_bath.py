@@ -16,10 +16,17 @@ action: ``θ ↦ −2 arg A − θ`` for U(1), ``s = V†²`` in each SU(2) subg
 ``heat_bath_sweeps`` heat-bath sweeps then ``overrelaxation`` over-relaxation sweeps; each
 sweep visits ``2d`` classes (direction × parity). Each class move keeps ``exp(−S)`` exactly, so
 there is no step size and no discretisation bias.
+
+``β < 0`` (a normalisable law: the groups are compact) is drawn exactly too: the conditional law
+of a U(1) link is then the von Mises law with ``κ = |β||A|`` about ``π − arg A``, and in each
+SU(2) subgroup ``W ∝ exp(α ½ tr W)`` with ``α < 0`` is ``−W′``, ``W′ ∝ exp(|α| ½ tr W′)`` (``−I``
+is central and keeps the Haar measure), so ``a₀`` is drawn at ``|α|`` and negated.
+Over-relaxation keeps the action whatever the sign.
 """
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -42,7 +49,6 @@ from liesample.samplers.gauge._local import (
     su2_heat_bath_a0,
     von_mises,
 )
-from liesample.samplers.orbit._starts import plain_init_fn
 from liesample.systems.wilson_gauge import WilsonGauge
 
 __all__ = ["GaugeState", "as_top_level_api", "build_kernel", "init", "wilson_heat_bath"]
@@ -93,8 +99,9 @@ def _left_multiply(s, idx, u):
 def _update_u1(system, key, theta, staple, beta, heat):
     centre = -jnp.angle(staple)
     if heat:
-        phi = von_mises(key, beta * jnp.abs(staple))
-        return jnp.mod(centre + phi + jnp.pi, 2.0 * jnp.pi) - jnp.pi
+        mode = centre + jnp.where(beta < 0, jnp.pi, 0.0)  # the conditional law's maximum
+        phi = von_mises(key, jnp.abs(beta) * jnp.abs(staple))
+        return jnp.mod(mode + phi + jnp.pi, 2.0 * jnp.pi) - jnp.pi
     return jnp.mod(2.0 * centre - theta + jnp.pi, 2.0 * jnp.pi) - jnp.pi
 
 
@@ -108,7 +115,8 @@ def _update_sun(system, key, u, staple, beta, heat):
         v_dag = jnp.conj(jnp.swapaxes(v, -1, -2))
         if heat:
             k1, k2 = jax.random.split(key)
-            a0 = su2_heat_bath_a0(k1, 2.0 * beta * k / system.n)
+            a0 = su2_heat_bath_a0(k1, 2.0 * jnp.abs(beta) * k / system.n)
+            a0 = jnp.where(beta < 0, -a0, a0)  # W = −W′ at α < 0 (module notes)
             s = su2_from_a0(k2, a0, u.dtype) @ v_dag
         else:
             s = v_dag @ v_dag
@@ -178,7 +186,8 @@ def as_top_level_api(
     system : WilsonGauge
         From :func:`liesample.systems.wilson_gauge` (even extents on a torus).
     beta : float
-        The coupling ``β`` of ``S = β Σ_P (1 − Re tr U_P / N)`` (finite, ``>= 0``).
+        The coupling ``β`` of ``S = β Σ_P (1 − Re tr U_P / N)``: any finite real (``β < 0``
+        is normalisable on the compact links and drawn exactly, module notes).
     heat_bath_sweeps : int
         Heat-bath sweeps per step (``>= 0``; with 0 the chain keeps the action and samples the
         Gibbs law only from exact starts).
@@ -194,8 +203,6 @@ def as_top_level_api(
     check_system(system)
     check_checkerboard(system)
     beta = finite_float("beta", beta)
-    if beta < 0:
-        raise ValueError(f"beta must be >= 0 for the gauge heat bath, got {beta}")
     heat_bath_sweeps = _count("heat_bath_sweeps", heat_bath_sweeps)
     overrelaxation = _count("overrelaxation", overrelaxation)
     if heat_bath_sweeps + overrelaxation == 0:
@@ -239,7 +246,13 @@ class _Stepper:
         def step_fn(rng_key, state):
             return kernel(step_key(rng_key), state, beta)
 
-        return Sampler(plain_init_fn(init, self.system), step_fn, **hooks)
+        return Sampler(functools.partial(_init_on, self.system), step_fn, **hooks)
+
+
+def _init_on(system: WilsonGauge, position, rng_key=None) -> GaugeState:
+    """``init(position, system)``: the links' own check (shape, dtype, on the group), which
+    takes the complex SU(N) links that an orbit start's real-coordinate check refuses."""
+    return init(position, system, rng_key)
 
 
 wilson_heat_bath = sampling_api(as_top_level_api, init, build_kernel, "wilson_heat_bath", __name__)

@@ -15,6 +15,11 @@ extents is ``4d`` (the staggered mode). The leapfrog is unstable on that mode wh
 ``ε ω ≥ 2``, ``ω² = 2 c β · 4d``; such a step is refused. Below the limit the quadratic part
 is stable, but the non-linear couplings still heat a long trajectory from an ordered field at
 ``0.8`` of the limit; useful steps are about half the limit or less.
+
+``β < 0`` is a normalisable law on the compact links (it favours plaquettes far from the
+identity). For U(1) the action's Hessian is ``β Σ_P cos θ_P g_P g_Pᵀ`` (``g_P`` the
+plaquette's incidence vector), bounded by ``|β|`` times the quadratic form above at every field;
+the check uses ``|β|`` for every group.
 """
 
 from __future__ import annotations
@@ -30,9 +35,13 @@ __all__ = ["gauge_hmc", "stability_limit"]
 
 
 def stability_limit(system: WilsonGauge, beta) -> float:
-    """The leapfrog step ``2/ω`` beyond which the stiffest weak-coupling mode is unstable."""
+    """The leapfrog step ``2/ω`` beyond which the stiffest weak-coupling mode is unstable
+    (``ω² = 2c|β|·4d``, module notes; ``inf`` at ``β = 0``)."""
+    if not isinstance(system, WilsonGauge):
+        raise TypeError(f"system must be a wilson_gauge(...) system, got {type(system).__name__}")
+    beta = finite_float("beta", beta)
     c = 0.5 if system.abelian else 1.0 / system.n
-    omega = math.sqrt(2.0 * c * float(beta) * 4 * system.dim)
+    omega = math.sqrt(2.0 * c * abs(beta) * 4 * system.dim)
     return math.inf if omega == 0 else 2.0 / omega
 
 
@@ -47,12 +56,14 @@ def gauge_hmc(
 ) -> Sampler:
     """:func:`liesample.geometric_hmc` of ``exp(−β S/β)`` on ``system.space`` (HMC; with
     ``momentum_persistence > 0`` generalised HMC / SMD), the step checked against
-    :func:`stability_limit`. ``options`` go to :func:`liesample.geometric_hmc`."""
+    :func:`stability_limit`; ``beta`` any finite real (``β < 0`` too, module notes).
+    ``options`` go to :func:`liesample.geometric_hmc`."""
     if not isinstance(system, WilsonGauge):
         raise TypeError(f"system must be a wilson_gauge(...) system, got {type(system).__name__}")
     beta = finite_float("beta", beta)
+    step_size = finite_float("step_size", step_size, positive=True)
     limit = stability_limit(system, beta)
-    if float(step_size) >= limit:
+    if step_size >= limit:
         raise ValueError(
             f"step_size = {float(step_size):g} is past the leapfrog's stability limit "
             f"{limit:.4g} for {system.group} at beta = {beta:g} in {system.dim} dimensions "

@@ -24,12 +24,27 @@ Proposals (both symmetric in the area measure, so the acceptance needs no propos
 - ``"uniform"``: ``u'`` uniform on the sphere, independent of ``u``.
 
 A proposal that lands on another vortex (``Δh`` not finite) is rejected.
+
+**Where it mixes.** A pair ``j, k`` with exponent ``p = βΓ_jΓ_k/(4π) < 0`` attracts: its chord
+``d`` has the Gibbs density ``∝ d^{2p}`` in the area measure. From a pair at ``d`` much below
+the proposal's reach ``ε``, a proposal of either vortex lands at distance ``r ~ ε`` and is
+accepted with probability ``(d/r)^{2|p|}`` on average, so the chain stays put for a time
+``∝ d^{−2|p|}``, whose mean under the Gibbs law, ``∫ d^{−2|p|} d^{2p} d(d²)``, is finite only for
+``p > −1/2`` (the same bound as the finite variance of the importance-sampling reference
+:func:`liesample.targets.vortices.gibbs_expectation`). For ``−1 < p < −1/2`` the law is
+normalisable but the chain's averages converge more slowly than ``1/√n`` and their MCSE, ESS
+and R-hat are unreliable: :func:`as_top_level_api` warns (:func:`mixing_warning`; at
+``p = −1/2`` itself the divergence is only logarithmic, and it does not warn). The check
+takes pairs only; a collapsing cluster of more vortices has a stricter bound of the same kind,
+met only by deep clusters that carry little of the law's mass.
 """
 
 from __future__ import annotations
 
 import functools
 import math
+import os
+import warnings
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -50,6 +65,7 @@ from liesample.samplers.contract import (
 )
 from liesample.samplers.orbit._starts import orbit_settings, plain_init_fn
 from liesample.systems.point_vortices import PointVortexSystem
+from liesample.targets.vortices import pair_exponents
 
 __all__ = [
     "DEFAULT_PROPOSAL_SCALE",
@@ -60,6 +76,7 @@ __all__ = [
     "as_top_level_api",
     "build_kernel",
     "init",
+    "mixing_warning",
     "vortex_metropolis",
 ]
 
@@ -92,6 +109,39 @@ def _check_system(system) -> PointVortexSystem:
             f"system must be a point_vortices(...) PointVortexSystem, got {type(system).__name__}"
         )
     return system
+
+
+_PACKAGE = os.path.dirname(os.path.dirname(os.path.dirname(__file__)))  # liesample/: warn the caller
+
+MIXING_EXPONENT = -0.5
+"""The pair exponent ``p = βΓ_jΓ_k/(4π)`` below which the mean holding time of a collapsed pair
+grows without bound under the Gibbs law (module notes, "Where it mixes")."""
+
+
+def mixing_warning(system: PointVortexSystem, beta: float) -> str | None:
+    """Why the sweeps do not mix at ``beta`` (module notes, "Where it mixes"), or ``None``."""
+    gamma = np.asarray(system.circulations, dtype=float)
+    if gamma.size < 2:
+        return None
+    p = pair_exponents(gamma, beta)
+    j, k = np.unravel_index(np.argmin(p), p.shape)
+    if p[j, k] >= MIXING_EXPONENT:
+        return None
+    bound = MIXING_EXPONENT * 4.0 * math.pi / (gamma[j] * gamma[k])
+    side = ">" if bound < 0 else "<"
+    message = (
+        f"vortex_metropolis at beta = {beta:g}: the pair of vortices ({j}, {k}) has the exponent "
+        f"p = beta*Γ_jΓ_k/(4π) = {p[j, k]:.3g} < -1/2. The Gibbs law is normalisable (p > -1), "
+        "but a collapsed pair holds the chain for a time whose mean under that law is infinite, "
+        "so chain averages converge more slowly than 1/sqrt(n) and their MCSE, ESS and R-hat "
+        f"are unreliable. The sweeps mix for beta {side}= {bound:.6g}"
+    )
+    if gamma.size == 2:
+        return message + (
+            "; for this pair draw the exact law instead: "
+            "system.reference(beta).sample(rng_key, num_samples) (the law of x1·x2)"
+        )
+    return message + "; at this beta run far more sweeps and compare independent runs"
 
 
 def init(position, system: PointVortexSystem, rng_key=None) -> VortexState:
@@ -200,6 +250,15 @@ def as_top_level_api(
     """
     _check_system(system)
     beta = checked_beta(system, beta)
+    message = mixing_warning(system, beta)
+    if message is not None:
+        warnings.warn(message, UserWarning, skip_file_prefixes=(_PACKAGE,))
+    return _build(system, beta, proposal, proposal_scale, target_acceptance_rate)
+
+
+def _build(system, beta, proposal, proposal_scale, target_acceptance_rate) -> Sampler:
+    """:func:`as_top_level_api` after its checks of ``system`` and ``beta`` (what the warm-up's
+    rebuild calls, so the mixing warning is given once)."""
     if proposal not in PROPOSALS:
         raise ValueError(f"proposal must be one of {PROPOSALS}, got {proposal!r}")
     given = proposal_scale is not None
@@ -251,7 +310,9 @@ def _choose(positions, rng_key=None):
 
 def _rebuild(system, beta, options, value, source):
     value = min(float(value), MAX_PROPOSAL_SCALE)
-    return rebuilt(as_top_level_api, source, system, beta=beta, proposal_scale=value, **options)
+    return rebuilt(
+        _build, source, system, beta, options["proposal"], value, options["target_acceptance_rate"]
+    )
 
 
 @dataclass(frozen=True)
