@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 JOBS ?= 2
 
-.PHONY: demo test test-slow test-oldest bench docs clean check-python
+.PHONY: demo test test-slow test-oldest bench docs docs-figures clean check-python
 
 check-python:
 	@test -n "$(PYTHON)" || { echo "error: Python >= 3.12 not found (tried: $(PY_CANDIDATES))"; exit 1; }
@@ -76,6 +76,11 @@ $(BIN)/.installed-docs: $(BIN)/.installed
 
 docs: $(BIN)/.installed-docs
 	$(BIN)/python -m mkdocs build --strict
+
+# The figures checked in under docs/figures/ (the demo's and the examples'), drawn anew: each
+# script runs once (minutes). The benchmark figures come from `make bench`.
+docs-figures: $(BIN)/.installed
+	$(BIN)/python docs/figures/make_figures.py
 
 clean:
 	rm -rf $(VENV) $(VENV_OLDEST) liesample-demo-output .pytest_cache site

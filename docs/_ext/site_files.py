@@ -18,7 +18,9 @@ from pygments.formatters import HtmlFormatter
 
 ROOT = Path(__file__).resolve().parents[2]
 BENCHMARK_FIGURES = ROOT / "benchmarks" / "results"
-OWN_PAGES = re.compile(r"\]\(https://github\.com/liesample/liesample/blob/main/docs/([^)\s]+)\)")
+OWN_PAGES = re.compile(
+    r'href="https://github\.com/liesample/liesample/blob/main/docs/([^"#]+\.md)(#[^"]*)?"'
+)
 BENCHMARK_LINK = re.compile(r"\]\((?:\.\./)?benchmarks/results/([\w.-]+\.png)\)")
 
 
@@ -35,7 +37,18 @@ def on_files(files, config, **kwargs):
 
 
 def on_page_markdown(markdown: str, page, **kwargs) -> str:
-    depth = page.file.src_uri.count("/")
-    up = "../" * depth
-    markdown = OWN_PAGES.sub(lambda m: f"]({up}{m[1]})", markdown)
+    up = "../" * page.file.src_uri.count("/")
     return BENCHMARK_LINK.sub(lambda m: f"]({up}figures/benchmarks/{m[1]})", markdown)
+
+
+def on_page_content(html: str, page, files, **kwargs) -> str:
+    """The README's links to the guides on GitHub, as links to the site's own pages (the README
+    arrives through pymdownx.snippets, after ``on_page_markdown``, hence on the HTML)."""
+
+    def local(match: re.Match) -> str:
+        target = files.get_file_from_path(match[1])
+        if target is None:  # not a page of the site: keep the GitHub address
+            return match[0]
+        return f'href="{target.url_relative_to(page.file)}{match[2] or ""}"'
+
+    return OWN_PAGES.sub(local, html)

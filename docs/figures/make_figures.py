@@ -76,7 +76,6 @@ OUTPUTS = {
     "directional_statistics": [PYTHON, "examples/directional_statistics.py"],
     "numpyro_directional": [PYTHON, "examples/numpyro_directional.py"],
     "numpyro_magnetic_hmc": [PYTHON, "examples/numpyro_magnetic_hmc.py"],
-    "lattice_gauge": [PYTHON, "examples/lattice_gauge.py", "--quick"],
 }
 
 
