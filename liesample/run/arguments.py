@@ -1,14 +1,19 @@
-"""The checks of a run's arguments, made before any compilation: the starts (an array or a
-pytree with a leading chain axis), the observables, the counts, and whether the warm-up adapts.
+"""The checks of a run's arguments, made before any compilation: the algorithm, the starts (an
+array or a pytree with a leading chain axis), the observables, the counts and options, whether
+the warm-up adapts, and whether the run's steps and kept draws fit.
 """
 
 from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from liesample.foundation.validation import is_single_array
+from liesample.foundation.validation import finite_float, is_single_array
 from liesample.samplers.contract import Sampler
 
 
@@ -100,30 +105,163 @@ def as_positions(initial_positions):
     return jax.tree.unflatten(treedef, leaves), leaves[0].shape[0]
 
 
+def check_chain_axis(sampler: Sampler, positions) -> None:
+    """A single-array ``positions`` that is one start, not starts with a leading chain axis
+    (its first chain is no start for ``sampler`` but the whole array is), refused with the fix.
+    Shapes only (``jax.eval_shape`` of ``init``): nothing is compiled."""
+    if not is_single_array(positions):
+        return  # a pytree's leaves were checked for a shared chain axis (as_positions)
+    try:
+        jax.eval_shape(sampler.init, take_chain(positions, 0))
+        return
+    except Exception:  # a probe: the checks of the starts report what is wrong
+        pass
+    try:
+        jax.eval_shape(sampler.init, positions)
+    except Exception:  # not one start either: the checks of the starts report it
+        return
+    ones = ", 1" * positions.ndim
+    raise ValueError(
+        f"initial_positions needs a leading chain axis: its shape {positions.shape} is that of "
+        f"one start (read as {positions.shape[0]} chains of shape {positions.shape[1:]}); pass "
+        f"x[None] for one chain, or jnp.tile(x, (num_chains{ones})) for num_chains chains from "
+        "it"
+    )
+
+
 def take_chain(positions, chain):
     return jax.tree.map(lambda leaf: leaf[chain], positions)
 
 
+def _integer(name, value, low):
+    if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value < low:
+        raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
+
+
 def check_run_arguments(num_draws, num_warmup, thinning, on_nonfinite, chunk_draws, adapt):
-    for name, value, low in (
-        ("num_draws", num_draws, 1),
-        ("num_warmup", num_warmup, 0),
-        ("thinning", thinning, 1),
-    ):
-        if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value < low:
-            raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
+    """The counts (``num_draws >= 1``, ``num_warmup >= 0``, ``thinning >= 1``, ``chunk_draws``
+    None or ``>= 1``), ``on_nonfinite`` and ``adapt``, each refused by name."""
+    _integer("num_draws", num_draws, 1)
+    _integer("num_warmup", num_warmup, 0)
+    _integer("thinning", thinning, 1)
     if chunk_draws is not None and (
         not isinstance(chunk_draws, (int, np.integer))
         or isinstance(chunk_draws, bool)
         or chunk_draws < 1
     ):
         raise ValueError(f"chunk_draws must be None or an integer >= 1, got {chunk_draws!r}")
-    if on_nonfinite not in ("warn", "raise"):
+    if not isinstance(on_nonfinite, str) or on_nonfinite not in ("warn", "raise"):
         raise ValueError(f"on_nonfinite must be 'warn' or 'raise', got {on_nonfinite!r}")
-    if adapt not in (None, True, False):
+    if adapt is not None and not isinstance(adapt, bool):
         raise TypeError(f"adapt must be None, True or False, got {adapt!r}")
     if adapt is True and num_warmup == 0:
         raise ValueError("adapt=True needs warm-up steps: pass num_warmup > 0")
+
+
+def _flag(name, value, meaning):
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be a bool, True or False ({meaning}), got {value!r}")
+
+
+def check_options(num_draws, options) -> None:
+    """Every keyword of :func:`liesample.sample_chains` that is a plain value, refused by name
+    with what is allowed, before anything is traced or compiled (``options``: its
+    :class:`liesample.run.loop.RunOptions`; the observables, ``log_likelihood`` and ``devices``
+    are checked where they are read)."""
+    o = options
+    check_run_arguments(num_draws, o.num_warmup, o.thinning, o.on_nonfinite, o.chunk_draws, o.adapt)
+    _flag("progress_bar", o.progress_bar, "show a progress bar")
+    _flag("keep_positions", o.keep_positions, "store the positions of every draw")
+    rate = finite_float("min_acceptance_rate", o.min_acceptance_rate, nonnegative=True)
+    if not rate < 1.0:
+        raise ValueError(
+            f"min_acceptance_rate must be in [0, 1), got {rate}: chains whose mean acceptance "
+            "rate is below it are reported as stuck (0 disables the check)"
+        )
+    check_output(o.output, o.resume)
+    if o.callback is not None and not callable(o.callback):
+        raise TypeError(f"callback must be a function of draws_done, got {o.callback!r}")
+
+
+def check_output(output, resume) -> None:
+    """``output`` a path or None, ``resume`` a bool that needs ``output``."""
+    _flag("resume", resume, "continue the run saved in output=")
+    if output is not None and not isinstance(output, (str, os.PathLike)):
+        raise TypeError(
+            "output must be None or the path of the run file (a str or os.PathLike, e.g. "
+            f"'run.nc'), got {type(output).__name__}"
+        )
+    if resume and output is None:
+        raise ValueError("resume=True needs output= (the file the run was saved to)")
+
+
+def _dim_names(name, dims) -> None:
+    if isinstance(dims, str) or not isinstance(dims, (list, tuple)):
+        raise TypeError(
+            f"{name} must be a list or tuple of dim names, one per event axis (e.g. "
+            f"('row', 'col')), got {dims!r}"
+        )
+    for dim in dims:
+        if not isinstance(dim, str) or not dim:
+            raise TypeError(f"{name} must hold non-empty strings (dim names), got {dim!r}")
+
+
+def check_tree_names(var_name, event_dims, coords, attrs) -> None:
+    """The names of :func:`liesample.sample`'s tree by type (``var_name`` a non-empty string,
+    ``event_dims`` dim names or a mapping leaf name -> dim names, ``coords`` a mapping dim ->
+    values, ``attrs`` a mapping); whether they fit the starts is checked on the starts."""
+    if var_name is not None and not isinstance(var_name, str):
+        raise TypeError(f"var_name must be None or a non-empty string, got {var_name!r}")
+    if var_name == "":
+        raise ValueError("var_name must be None or a non-empty string, got ''")
+    if isinstance(event_dims, Mapping):
+        for leaf, dims in event_dims.items():
+            _dim_names(f"event_dims[{leaf!r}]", dims)
+    elif event_dims is not None:
+        _dim_names("event_dims", event_dims)
+    if coords is not None:
+        if not isinstance(coords, Mapping):
+            raise TypeError(
+                "coords must be None or a mapping {dim name: coordinate values}, e.g. "
+                f"{{'component': ['x', 'y', 'z']}}; got {type(coords).__name__}"
+            )
+        for dim, values in coords.items():
+            if not isinstance(dim, str) or isinstance(values, str) or np.ndim(values) != 1:
+                raise TypeError(
+                    f"coords[{dim!r}] must be the 1-D coordinate values of a dim named by a "
+                    f"string, got {values!r}"
+                )
+    if attrs is not None and (
+        not isinstance(attrs, Mapping) or not all(isinstance(k, str) for k in attrs)
+    ):
+        raise TypeError(f"attrs must be None or a mapping of str names to values, got {attrs!r}")
+
+
+def check_algorithm(algorithm) -> None:
+    """``algorithm`` is a sampler: an object with ``init(position)`` and ``step(rng_key,
+    state)`` (a liesample sampler, a BlackJAX ``SamplingAlgorithm``); anything else is a
+    ``TypeError`` that says what is expected and how to build one."""
+    if callable(getattr(algorithm, "init", None)) and callable(getattr(algorithm, "step", None)):
+        return
+    expected = (
+        "algorithm must be a sampler: a liesample sampler such as "
+        "liesample.lie_poisson_langevin(system, beta=1.0), or a BlackJAX SamplingAlgorithm "
+        "with init(position) and step(rng_key, state) such as blackjax.nuts(logdensity_fn, "
+        "step_size, inverse_mass_matrix)"
+    )
+    if callable(getattr(algorithm, "build_kernel", None)):  # the API object, not called
+        name = type(algorithm).__name__
+        raise TypeError(
+            f"{expected}; got the sampler family {name} itself: call it with its arguments "
+            f"first, {name}(...) (its help() lists them)"
+        )
+    if callable(algorithm):
+        raise TypeError(
+            f"{expected}; got the function {getattr(algorithm, '__name__', algorithm)!r}: a "
+            "step function alone is not a sampler, wrap it with its init as "
+            "blackjax.base.SamplingAlgorithm(init, step)"
+        )
+    raise TypeError(f"{expected}; got {type(algorithm).__name__}")
 
 
 def wants_adaptation(sampler: Sampler, adapt, num_warmup, name: str) -> bool:
@@ -198,3 +336,118 @@ def as_log_likelihood(log_likelihood):
                 f"non-empty string name, got {type(function).__name__}"
             )
     return tuple(log_likelihood.items())
+
+
+# --------------------------------------------------------------------------- sizes
+
+KEY_DATA_BITS = 32
+"""A step's key is ``fold_in(key_c, step)``, which folds in the step index as 32 bits."""
+
+
+def chunk_length(num_draws: int, chunk_draws) -> int:
+    """Draws per compiled chunk: ``chunk_draws``, else about 20 chunks."""
+    return int(chunk_draws) if chunk_draws else max(1, math.ceil(num_draws / 20))
+
+
+def max_steps(sampler: Sampler) -> int:
+    """The most steps a chain can run: its step index is a JAX integer of the default dtype
+    (``int32`` unless ``jax_enable_x64``), the end of its last noise block must fit it too, and
+    ``fold_in`` reads the index as 32 bits (:mod:`liesample.integrators.chain_loop`)."""
+    counter = np.iinfo(jax.dtypes.canonicalize_dtype(np.int64)).max
+    blocks = sampler.noise_blocks
+    return min(counter - (0 if blocks is None else blocks.size - 1), 2**KEY_DATA_BITS)
+
+
+def check_steps(sampler: Sampler, num_draws: int, options) -> None:
+    """``num_warmup + num_draws * thinning`` steps fit the step counter (:func:`max_steps`)."""
+    o = options
+    steps, limit = o.num_warmup + num_draws * o.thinning, max_steps(sampler)
+    if steps <= limit:
+        return
+    dtype = jax.dtypes.canonicalize_dtype(np.int64).name
+    x64 = "" if dtype == "int64" else "; jax_enable_x64 makes it int64, up to 2**32 steps"
+    raise ValueError(
+        f"num_draws={num_draws}, thinning={o.thinning} and num_warmup={o.num_warmup} make "
+        f"num_warmup + num_draws * thinning = {steps} steps per chain, more than the {limit} a "
+        f"chain's step counter ({dtype}, folded into each step's key as {KEY_DATA_BITS} bits"
+        f"{x64}) can count: lower num_draws, thinning or num_warmup (liesample.sample's default "
+        "num_warmup is num_draws * thinning); for more draws, run more chains"
+    )
+
+
+def _bytes(count: int) -> str:
+    return f"{count} bytes ({count / 2**30:.3g} GiB)"
+
+
+def host_memory() -> int | None:
+    """The host's physical memory in bytes (``None`` where the system does not say)."""
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def device_memory(devices) -> tuple[int | None, str]:
+    """The free memory in bytes of the fullest of ``devices`` (``memory_stats``) and its name;
+    the host's memory where a device does not report it (the CPU)."""
+    free = []
+    for device in devices:
+        try:
+            stats = device.memory_stats()
+        except (NotImplementedError, RuntimeError):
+            stats = None
+        if not stats or "bytes_limit" not in stats:
+            return host_memory(), "host memory"
+        free.append(int(stats["bytes_limit"]) - int(stats.get("bytes_in_use", 0)))
+    return min(free), f"{devices[0].platform} device memory"
+
+
+def info_bytes(positions, contract: bool) -> int:
+    """Bytes of one step's info, at least: the Info contract's fields (``is_divergent``, a
+    bool; ``acceptance_rate`` and ``energy`` in the positions' real dtype) for a liesample
+    sampler (``contract``), nothing known for another algorithm."""
+    if not contract:
+        return 0
+    dtype = jnp.result_type(*jax.tree.leaves(positions))
+    real = dtype if jnp.issubdtype(dtype, jnp.inexact) else jnp.result_type(float)
+    return 1 + 2 * jnp.finfo(real).dtype.itemsize
+
+
+def draw_bytes(positions, keep_positions: bool, recorded, info: int) -> int:
+    """Bytes of one chain's kept draw: its position (if kept), the shapes ``recorded`` (the
+    observables' and log-likelihoods', chains first) and ``info``."""
+    trees = [*recorded, positions] if keep_positions else list(recorded)
+    leaves = [leaf for tree in trees if tree is not None for leaf in jax.tree.leaves(tree)]
+    return info + sum(math.prod(leaf.shape[1:]) * np.dtype(leaf.dtype).itemsize for leaf in leaves)
+
+
+def check_memory(sizes, num_draws: int, options, devices) -> None:
+    """The kept draws fit: the whole run in host memory (the draws are returned there), one
+    chunk and its thinning window on each device. ``sizes``: ``(chains, bytes of one chain's
+    draw, bytes of one step's info)``. Lower bounds: only what surely cannot fit is refused."""
+    o, (chains, per_draw, info) = options, sizes
+    total, host = chains * num_draws * per_draw, host_memory()
+    fewer = (
+        "keep_positions=False with observables= (only the functions of the position you need)"
+        if o.keep_positions
+        else "fewer or smaller observables"
+    )
+    if host is not None and total > host:
+        raise ValueError(
+            f"num_draws={num_draws}: the kept draws need at least {_bytes(total)} of host "
+            f"memory ({chains} chains × {num_draws} draws × {per_draw} bytes), more than the "
+            f"{_bytes(host)} this machine has: keep fewer draws (a smaller num_draws, or a "
+            f"larger thinning: one draw every thinning steps), or {fewer}"
+        )
+    chunk = min(chunk_length(num_draws, o.chunk_draws), num_draws)
+    per_device = math.ceil(chains / len(devices))
+    need = per_device * (chunk * per_draw + o.thinning * info)
+    free, where = device_memory(devices)
+    if free is not None and need > free:
+        raise ValueError(
+            f"chunk_draws={o.chunk_draws} (chunks of {chunk} draws) and thinning={o.thinning}: "
+            f"one compiled chunk needs at least {_bytes(need)} of {where} ({per_device} chains "
+            f"× ({chunk} draws × {per_draw} bytes + a window of {o.thinning} steps × {info} "
+            f"bytes of info)), more than the {_bytes(free)} available: a smaller chunk_draws, "
+            f"a smaller thinning, devices= to spread the chains, or {fewer}"
+        )

@@ -12,7 +12,6 @@ from __future__ import annotations
 import collections
 import dataclasses
 import functools
-import math
 import time
 import warnings
 from collections.abc import Callable, Mapping
@@ -24,7 +23,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from liesample.foundation.compile import jit
-from liesample.foundation.validation import finite_float, is_single_array, prng_key
+from liesample.foundation.validation import is_single_array, single_key
 from liesample.integrators.chain_loop import run_draws, run_steps
 from liesample.run import arguments
 from liesample.run.checks import DEFAULT_MIN_ACCEPTANCE_RATE, check_run, record_casimir_drift
@@ -305,12 +304,25 @@ def _run_chunk(
     )(states, keys)
 
 
+ONE_KEY = (
+    "a run takes one key and splits it over the chains itself (chain c steps with "
+    "split(rng_key, num_chains)[c]): pass one, e.g. jax.random.key(0)"
+)
+
+
 class _Run:
     """One call of :func:`sample_chains`: its checked arguments, sampler, states and file."""
 
     def __init__(self, algorithm, rng_key, initial_positions, num_draws, options, spec):
         o = options
+        # Every argument checked before anything is traced or compiled.
+        arguments.check_algorithm(algorithm)
+        self.rng_key = single_key(rng_key, batch_fix=ONE_KEY)
+        arguments.check_options(num_draws, o)
+        self.sampler = as_sampler(algorithm)  # its info reduced to scalars in start()
+        arguments.check_steps(self.sampler, int(num_draws), o)
         self.positions, self.num_chains = arguments.as_positions(initial_positions)
+        arguments.check_chain_axis(self.sampler, self.positions)
         self.observe, self.observables_key = arguments.as_observables(
             o.observables, o.keep_positions
         )
@@ -325,27 +337,25 @@ class _Run:
             if self.log_likelihood_key is None
             else arguments.observable_shapes(_observe(self.log_likelihood_key), self.positions)
         )
-        arguments.check_run_arguments(
-            num_draws, o.num_warmup, o.thinning, o.on_nonfinite, o.chunk_draws, o.adapt
-        )
-        self.rng_key = prng_key(rng_key)
-        finite_float("min_acceptance_rate", o.min_acceptance_rate, nonnegative=True)
-        if not isinstance(o.resume, bool):
-            raise TypeError(f"resume must be a bool, got {o.resume!r}")
-        if o.resume and o.output is None:
-            raise ValueError("resume=True needs output= (the file the run was saved to)")
-        if o.callback is not None and not callable(o.callback):
-            raise TypeError(f"callback must be a function of draws_done, got {o.callback!r}")
         arguments.check_finite_starts(self.positions, self.num_chains)
         self.sharding = chain_sharding(o.devices, self.num_chains)
+        self._check_memory(algorithm, int(num_draws), o)
         self.algorithm, self.num_draws, self.options = algorithm, int(num_draws), o
-        self.sampler = as_sampler(algorithm)  # its info reduced to scalars in _open
         self.spec, self.store = spec, None
         # shown from the start: the phases before the first draw take most of a short run
         self.bar = tqdm(
             total=self.num_draws, disable=not o.progress_bar, unit="draw", dynamic_ncols=True
         )
         self.phase("checking the starts")
+
+    def _check_memory(self, algorithm, num_draws, options):
+        """The kept draws fit the host's memory and one chunk the devices'."""
+        info = arguments.info_bytes(self.positions, isinstance(algorithm, Sampler))
+        recorded = (self.observable_shapes, self.log_likelihood_shapes)
+        per_draw = arguments.draw_bytes(self.positions, options.keep_positions, recorded, info)
+        devices = [jax.devices()[0]] if self.sharding is None else list(self.sharding.device_set)
+        sizes = (self.num_chains, per_draw, info)
+        arguments.check_memory(sizes, num_draws, options, devices)
 
     def phase(self, name):
         """Name what the run is doing now on the progress bar."""
@@ -460,7 +470,7 @@ class _Run:
         one), compiled before the timed loop; ``jax.jit``'s cache keeps them for a next run."""
         o = self.options
         self.phase("compiling")
-        self.chunk = o.chunk_draws or max(1, math.ceil(self.num_draws / 20))
+        self.chunk = arguments.chunk_length(self.num_draws, o.chunk_draws)
         static, values = self.program
         args = (self.states, self.chain_keys, 0, values)
         if self.run_warmup:

@@ -270,6 +270,7 @@ def sample(
     tunes the step size by dual averaging in a warm-up of 1000 steps, then samples.
     """
     options = _sample_options(run_options, num_draws, num_warmup, exact_starts)
+    arguments.check_tree_names(var_name, event_dims, coords, attrs)
     spec = TreeSpec(var_name, event_dims, coords, attrs)
     result, spec = run_chains(
         algorithm, rng_key, initial_positions, num_draws, options, spec, convergence=True
@@ -309,6 +310,7 @@ def _sample_options(run_options, num_draws, num_warmup, exact_starts) -> RunOpti
     if not isinstance(exact_starts, bool):
         raise TypeError(f"exact_starts must be a bool, got {exact_starts!r}")
     options = RunOptions(**run_options)
+    arguments.check_output(options.output, options.resume)  # before reading a saved run
     if num_warmup is None and options.resume and options.output is not None:
         num_warmup = saved_num_warmup(options.output)
     if num_warmup is None:
