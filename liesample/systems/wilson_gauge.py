@@ -49,9 +49,7 @@ def _group_order(group) -> int:
         n = int(group[2:])
         if n >= 2:
             return n
-    raise ValueError(
-        f"group must be 'U1', 'SU2', 'SU3' (or 'SU<N>' with N >= 2), got {group!r}"
-    )
+    raise ValueError(f"group must be 'U1', 'SU2', 'SU3' (or 'SU<N>' with N >= 2), got {group!r}")
 
 
 def _lattice_shape(shape) -> tuple[int, ...]:
@@ -75,8 +73,7 @@ def _index(name: str, value, size: int, what: str) -> int:
         raise TypeError(f"{name} must be an int (an axis of the lattice), got {value!r}")
     if not 0 <= value < size:
         raise ValueError(
-            f"{name} must be {what} in 0 … {size - 1} for a {size}-dimensional lattice, got "
-            f"{value}"
+            f"{name} must be {what} in 0 … {size - 1} for a {size}-dimensional lattice, got {value}"
         )
     return int(value)
 
@@ -108,9 +105,7 @@ class WilsonGauge:
         _group_order(self.group)
         object.__setattr__(self, "shape", _lattice_shape(self.shape))
         if self.boundary not in ("periodic", "open"):
-            raise ValueError(
-                f"boundary must be 'periodic' or 'open', got {self.boundary!r}"
-            )
+            raise ValueError(f"boundary must be 'periodic' or 'open', got {self.boundary!r}")
 
     # ------------------------------------------------------------------ structure
     @property
@@ -330,7 +325,7 @@ class WilsonGauge:
         """A loop extent along ``axis``: an int in ``1 … L − 1``, or an error naming it."""
         size = self.shape[axis]
         if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-            raise TypeError(f"{name} must be an int (a loop extent in lattice units), got {value!r}")
+            raise TypeError(f"{name} must be an int (a loop extent), got {value!r}")
         if not 1 <= value < size:
             raise ValueError(
                 f"{name} must be an extent in 1 … {size - 1} along direction {axis} (size "

@@ -111,7 +111,7 @@ def _check_system(system) -> PointVortexSystem:
     return system
 
 
-_PACKAGE = os.path.dirname(os.path.dirname(os.path.dirname(__file__)))  # liesample/: warn the caller
+_PACKAGE = os.path.dirname(os.path.dirname(os.path.dirname(__file__)))  # warn the caller
 
 MIXING_EXPONENT = -0.5
 """The pair exponent ``p = βΓ_jΓ_k/(4π)`` below which the mean holding time of a collapsed pair
