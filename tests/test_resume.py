@@ -56,22 +56,22 @@ SCRIPT = textwrap.dedent(
 )
 
 # The same run killed in the middle of writing chunk KILL_AFTER + 1: its draws and the state
-# after it are written, the commit is not (the checksum of that chunk's stored draws is the
-# store's last step before the commit).
+# after it are written to the copy of the file that would replace it, the commit is not (the
+# checksums of the attributes are the store's last step before the commit).
 MIDWRITE = SCRIPT.replace(
     "def kill(draws_done):",
     textwrap.dedent(
         f"""
         from liesample.run import store
-        digest, calls = store._chunk_digest, []
+        write, calls = store.RunFile._write_chunk, []
 
-        def dying_digest(arrays):
+        def dying_write(run_file, *args):
             calls.append(1)
-            if len(calls) == 2 * {KILL_AFTER} + 1:  # two digests per saved chunk
-                os.kill(os.getpid(), signal.SIGKILL)
-            return digest(arrays)
+            if len(calls) == {KILL_AFTER} + 1:
+                store._attribute_sums = lambda fields: os.kill(os.getpid(), signal.SIGKILL)
+            return write(run_file, *args)
 
-        store._chunk_digest = dying_digest
+        store.RunFile._write_chunk = dying_write
 
         def kill(draws_done):"""
     ),
@@ -119,6 +119,10 @@ def test_killed_run_resumes_to_the_same_draws(tmp_path, uninterrupted, script):
         with xr.open_datatree(path, engine="h5netcdf") as tree:
             assert tree["posterior"].sizes["draw"] == saved_draws
     assert os.path.exists(f"{path}.lock")  # the killed run's lock file is left: it blocks nothing
+    # killed while writing: the copy it wrote is left beside the file, ignored, and removed
+    # by the resume
+    copies = [name for name in os.listdir(tmp_path) if name.startswith(".run.nc.tmp-")]
+    assert len(copies) == (script is MIDWRITE), copies
 
     resumed = run(output=path, resume=True)
     np.testing.assert_array_equal(resumed.positions, uninterrupted.positions)
@@ -128,6 +132,7 @@ def test_killed_run_resumes_to_the_same_draws(tmp_path, uninterrupted, script):
     # …and the file now holds the whole run; the lock is gone.
     np.testing.assert_array_equal(load_chains(path).posterior["mu"], uninterrupted.positions)
     assert not os.path.exists(f"{path}.lock")
+    assert sorted(os.listdir(tmp_path)) == ["run.nc"]
 
 
 def test_saved_run_equals_returned_run_and_can_be_extended(tmp_path, uninterrupted, monkeypatch):

@@ -30,9 +30,11 @@ refused with its path, what is wrong and what to do (:class:`RunFileError`).
 from __future__ import annotations
 
 import contextlib
+import errno
 import hashlib
 import json
 import os
+import re
 
 import jax
 import jax.numpy as jnp
@@ -80,8 +82,7 @@ _START_AFRESH = (
 def _unreadable(path, error) -> str:
     return (
         f"{path!r} is not a readable NetCDF-4 (HDF5) file: it is empty, truncated, damaged or "
-        f"of another kind ({error}), and holds no draws that liesample can read; "
-        + _START_AFRESH
+        f"of another kind ({error}), and holds no draws that liesample can read; " + _START_AFRESH
     )
 
 
@@ -132,14 +133,19 @@ def _writing(path, new: bool):
     try:
         f = h5netcdf.File(h5, "w" if new else "a")
         yield f
+        f.flush()
+        h5.flush()  # everything written out here, while nothing is closed: it may fail
         f.close()
         h5.close()
-    except BaseException:
+    except BaseException as error:
         with contextlib.suppress(OSError):
             os.truncate(path, 0)
         for close in ([] if f is None else [f.close]) + [h5.close, h5.close]:
             with contextlib.suppress(Exception):
                 close()
+        if isinstance(error, RuntimeError):  # h5py's word for some failed writes
+            code = re.search(r"errno = (\d+)", str(error))
+            raise OSError(int(code[1]) if code else errno.EIO, str(error)) from None
         raise
 
 
@@ -151,8 +157,10 @@ def _run_group(f, path):
                 "cannot be resumed or verified; read it with xarray.open_dataset"
             )
         raise RunFileError(
-            f"{path!r} was not written by liesample's sample_chains or sample (it has no "
-            f"{RUN_GROUP!r} group): read it with xarray.open_datatree"
+            f"{path!r} has no {RUN_GROUP!r} group: it was not written by liesample's "
+            "sample_chains or sample, or its writer stopped before its first chunk was "
+            "committed, and it holds no committed draws. Read it with xarray.open_datatree; "
+            + _START_AFRESH
         )
     group = f.groups[RUN_GROUP]
     found = group.attrs.get("format")
@@ -200,7 +208,7 @@ def _attribute_fields(f, path) -> dict[str, bytes]:
     def add(where, attrs, skip=()):
         for name in attrs:
             if name not in skip:
-                fields[f"{where}attrs[{name!r}]"] = _attr_bytes(attrs[name])
+                fields[_field(where, name)] = _attr_bytes(attrs[name])
 
     add("", f.attrs)
     for group_name in sorted(f.groups):
@@ -217,23 +225,40 @@ def _attribute_fields(f, path) -> dict[str, bytes]:
     return fields
 
 
-def _attribute_sums(f, path) -> dict:
-    """The commit's checksums of the attributes: ``attrs_sha256``, a SHA-256 of them all, and
-    ``attr_sums``, the first 16 hex digits of each one's (which name an edited one)."""
+def _field(where, name) -> str:
+    return f"{where}attrs[{name!r}]"
+
+
+def _chunk_fields(f, fields, groups) -> dict[str, bytes]:
+    """``fields`` (:func:`_attribute_fields` of the file before this chunk) with the attributes
+    that change from chunk to chunk read again from ``f``, at the root and in ``groups``."""
+    fields = dict(fields)
+    for where, attrs in [("", f.attrs), *((f"{g}.", f.groups[g].attrs) for g in groups)]:
+        for name in CHUNK_ATTRS:
+            if name in attrs:
+                fields[_field(where, name)] = _attr_bytes(attrs[name])
+    return fields
+
+
+def _attribute_sums(fields) -> dict:
+    """The commit's checksums of the attributes ``fields`` (:func:`_attribute_fields`):
+    ``attrs_sha256``, a SHA-256 of them all, and ``attr_sums``, the first 16 hex digits of each
+    one's (which name an edited one)."""
     full, short = hashlib.sha256(), {}
-    for name, value in sorted(_attribute_fields(f, path).items()):
+    for name, value in sorted(fields.items()):
         digest = hashlib.sha256(value).hexdigest()
         full.update(f"{name}={digest};".encode())
         short[name] = digest[:16]
     return {"attrs_sha256": full.hexdigest(), "attr_sums": short}
 
 
-def _check_attributes(f, path, commit):
-    """Refuse a file whose attributes are not those its commit records, naming each one that
-    was changed, added or removed."""
-    sums = _attribute_sums(f, path)
+def _check_attributes(f, path, commit) -> dict[str, bytes]:
+    """The attributes of ``f`` (:func:`_attribute_fields`); refused unless they are those its
+    commit records, naming each one that was changed, added or removed."""
+    fields = _attribute_fields(f, path)
+    sums = _attribute_sums(fields)
     if sums["attrs_sha256"] == commit.get("attrs_sha256"):
-        return
+        return fields
     saved, now = commit.get("attr_sums"), sums["attr_sums"]
     if not isinstance(saved, dict):
         saved = {}
@@ -244,8 +269,7 @@ def _check_attributes(f, path, commit):
         f"{path!r}: "
         + ("; ".join(found) if found and saved else "its attributes do not match their checksum")
         + " since the run wrote it: the file was edited or is corrupt, and its draws cannot be "
-        "trusted to be the saved run's. Restore the file as it was written, or "
-        + _START_AFRESH
+        "trusted to be the saved run's. Restore the file as it was written, or " + _START_AFRESH
     )
 
 
@@ -297,17 +321,18 @@ def _tree_groups(f):
     return sorted(name for name in f.groups if name != RUN_GROUP)
 
 
-def _stored_draws(f, done):
-    """Every group's ``draw`` coordinate and draw variables (dims ``(chain, draw, …)``) up to
-    draw ``done``, as stored, in the order the checksums take them (read once each)."""
+def _stored_draws(f, done, first=0):
+    """Every group's ``draw`` coordinate and draw variables (dims ``(chain, draw, …)``) from
+    draw ``first`` up to draw ``done``, as stored, in the order the checksums take them (read
+    once each)."""
     stored = {}
     for group_name in _tree_groups(f):
         group = f.groups[group_name]
-        stored[f"{group_name}/draw"] = np.asarray(group.variables["draw"][:done])
+        stored[f"{group_name}/draw"] = np.asarray(group.variables["draw"][first:done])
         for name in sorted(group.variables):
             variable = group.variables[name]
             if variable.dimensions[:2] == ("chain", "draw"):
-                stored[f"{group_name}/{name}"] = np.asarray(variable[:, :done])
+                stored[f"{group_name}/{name}"] = np.asarray(variable[:, first:done])
     return stored
 
 
@@ -326,13 +351,13 @@ def _state_arrays(group, slot):
     return [(name, np.asarray(group.variables[name][...])) for name in names]
 
 
-def verify(f, path) -> dict:
-    """The commit record of the run in ``f``, after checking the attributes, the chunk table,
-    every chunk's checksum and the saved state's (:class:`RunFileError` naming what is
-    wrong)."""
+def verify(f, path) -> tuple[dict, dict]:
+    """The commit record of the run in ``f`` and its attributes (:func:`_attribute_fields`),
+    after checking the attributes, the chunk table, every chunk's checksum and the saved
+    state's (:class:`RunFileError` naming what is wrong)."""
     group = _run_group(f, path)
     commit = _json_attr(group, "commit", path)
-    _check_attributes(f, path, commit)
+    fields = _check_attributes(f, path, commit)
     done, chunks = commit.get("draws_done"), commit.get("chunks")
     if not all(isinstance(v, int) and v >= 0 for v in (done, chunks)):
         raise RunFileError(f"{path!r}: draws_done {done!r} and chunks {chunks!r} are invalid")
@@ -364,7 +389,40 @@ def verify(f, path) -> dict:
             f"{path!r}: the saved chain states do not match their checksum: the file was "
             "edited or is corrupt, and the run cannot be resumed"
         )
-    return commit
+    return commit, fields
+
+
+def _read_back(work, chunk, states, first, commit):
+    """Refuse (``OSError``) to publish the copy ``work`` of a run file unless its ``commit``
+    record, its new ``chunk`` (the arrays written from draw ``first``, by ``group/name``) and
+    its ``states`` read back as they were written: HDF5 may lose a write without raising (a
+    dataset closed on a full disk). Read with h5py alone, and only what was written."""
+    import h5py
+
+    end, slot = commit["draws_done"], commit["state_slot"]
+    try:
+        with h5py.File(work, "r") as h5:
+            saved = h5[RUN_GROUP].attrs["commit"]
+            saved = json.loads(saved.decode() if isinstance(saved, bytes) else saved)
+            stored = [
+                (name, h5[name][first:end] if name.endswith("/draw") else h5[name][:, first:end])
+                for name in chunk
+            ]
+            states = [
+                (f"state_{slot}_{i}", h5[f"{RUN_GROUP}/state_{slot}_{i}"][...])
+                for i in range(len(states))
+            ]
+            row = bytes(np.asarray(h5[f"{RUN_GROUP}/chunk_sha256"][commit["chunks"] - 1]))
+    except Exception as error:
+        raise OSError(errno.EIO, f"its new version does not read back ({error!r})") from None
+    expected = _chunk_digest(chunk.items())
+    if (
+        saved != commit
+        or row != expected
+        or _chunk_digest(stored) != expected
+        or _chunk_digest(states).hex() != commit["state_sha256"]
+    ):
+        raise OSError(errno.EIO, "its new version does not read back as it was written")
 
 
 def load_chains(path):
@@ -382,7 +440,7 @@ def load_chains(path):
     if not os.path.isfile(path):
         raise FileNotFoundError(f"no run file at {path!r}")
     with _open(path) as f:
-        done = verify(f, path)["draws_done"]
+        done = verify(f, path)[0]["draws_done"]
     try:
         with xr.open_datatree(path, engine="h5netcdf") as tree:
             children = {
@@ -451,6 +509,7 @@ class RunFile:
         self.header = _header(path) if self.exists else None
         self.chunks = 0
         self.state_slot = 1  # the slot the next state goes to is the other one
+        self.fields = None  # the attributes of the file as committed (_attribute_fields)
 
     @classmethod
     def open(cls, output, resume: bool) -> RunFile:
@@ -513,7 +572,7 @@ class RunFile:
         items when nothing is saved). ``states`` gives the state's
         structure and dtypes; ``layout`` is the :class:`Layout` of the run's variables."""
         with _open(self.path) as f:
-            commit = verify(f, self.path)
+            commit, self.fields = verify(f, self.path)
             done = commit["draws_done"]
             if done > num_draws:
                 raise RunFileError(
@@ -573,13 +632,15 @@ class RunFile:
                     _check_names(f, tree, self.path)
                 else:
                     self._create(f, tree, info_names, states, fingerprint)
-                self._write_chunk(f, tree, chunk, states, first, end)
-        self.exists = True
-        self.chunks, self.state_slot = self.chunks + 1, 1 - self.state_slot
+                commit, fields = self._write_chunk(f, tree, chunk, states, first, end)
+            _read_back(work, chunk, states, first, commit)
+        self.exists, self.fields = True, fields
+        self.chunks, self.state_slot = commit["chunks"], commit["state_slot"]
 
     def _write_chunk(self, f, tree, chunk, states, first, end):
         """Write one chunk's draws, the tree's attributes then, the states after it, its
-        checksum and the commit (last) into the open copy ``f``."""
+        checksum and the commit (last) into the open copy ``f``; the commit record and the
+        attributes it covers."""
         slot = 1 - self.state_slot
         for name, child in tree.children.items():
             group = f.groups[name]
@@ -598,9 +659,14 @@ class RunFile:
             _chunk_digest(_slices(chunk, 0, end - first)), np.uint8
         )
         state_sha = _chunk_digest([(f"state_{slot}_{i}", leaf) for i, leaf in enumerate(states)])
+        if self.fields is None:  # a new file (or one not read yet): every attribute, once
+            fields = _attribute_fields(f, self.path)
+        else:  # the committed file's, and those this chunk changed
+            fields = _chunk_fields(f, self.fields, tree.children)
         commit = {"draws_done": end, "chunks": self.chunks + 1, "state_slot": slot}
-        commit |= {"state_sha256": state_sha.hex(), **_attribute_sums(f, self.path)}
+        commit |= {"state_sha256": state_sha.hex(), **_attribute_sums(fields)}
         run.attrs["commit"] = json.dumps(commit)
+        return commit, fields
 
     def _create(self, f, tree, info_names, states, fingerprint):
         """Lay out a new run file in ``f``: the tree's groups, coordinates and (empty)
