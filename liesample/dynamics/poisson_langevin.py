@@ -87,7 +87,7 @@ def make_dynamics(system, *, beta=None, sigma=1.0, theta=None, hamiltonian=True)
                 "theta is derived from beta and sigma (theta = beta*sigma**2/2); "
                 "pass beta, not theta"
             )
-        theta = 0.5 * beta * sigma**2
+        theta = finite_float("theta = beta*sigma**2/2 (reduce sigma)", 0.5 * beta * sigma * sigma)
     else:
         if beta is not None:
             raise ValueError(

@@ -15,8 +15,10 @@ from liesample.foundation.types import PyTree
 
 def float_array(value: object, requirement: str, error: type[Exception] = ValueError) -> np.ndarray:
     """``np.array(value, dtype=float)``, or ``error("<requirement>, got <value>")`` when ``value``
-    is not an array of real numbers."""
+    is not an array of real numbers (bool, complex and string arrays included: none is cast)."""
     try:
+        if np.asarray(value).dtype.kind in "bcSU":  # bool, complex, bytes, str
+            raise TypeError
         return np.array(value, dtype=float)
     except (TypeError, ValueError):
         raise error(f"{requirement}, got {value!r}") from None
@@ -32,7 +34,7 @@ def finite_float(
 ) -> float:
     """``value`` as a Python float, or a ``ValueError``/``TypeError`` that says what is allowed
     (``rate``: strictly between 0 and 1, as a target acceptance rate)."""
-    if isinstance(value, bool) or np.ndim(value) != 0:
+    if isinstance(value, (bool, np.bool_, str, bytes)) or np.ndim(value) != 0:
         raise TypeError(f"{name} must be a real scalar, got {value!r}")
     try:
         x = float(value)

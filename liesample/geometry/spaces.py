@@ -51,6 +51,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+import operator
 from collections.abc import Callable, Sequence
 
 import jax
@@ -59,7 +60,7 @@ import numpy as np
 from jax.typing import ArrayLike, DTypeLike
 
 from liesample.foundation.types import PyTree
-from liesample.foundation.validation import concrete_array
+from liesample.foundation.validation import concrete_array, prng_key
 
 __all__ = [
     "SO",
@@ -85,9 +86,9 @@ def _shape(name, shape) -> tuple[int, ...]:
     if isinstance(shape, (int, np.integer)) and not isinstance(shape, bool):
         shape = (int(shape),)
     try:
-        if isinstance(shape, str):
+        if isinstance(shape, str) or any(isinstance(s, (bool, np.bool_)) for s in shape):
             raise TypeError
-        shape = tuple(int(s) for s in shape)
+        shape = tuple(operator.index(s) for s in shape)  # 2.5 is refused, not truncated
     except (TypeError, ValueError):
         raise TypeError(f"{name} must be a tuple of non-negative ints, got {shape!r}") from None
     if any(s < 0 for s in shape):
@@ -184,6 +185,8 @@ class Space:
         Shape and dtype are always checked; the manifold constraint only when ``x`` is concrete
         (under ``jit`` there is nothing to inspect). Tolerance: 1000 ulps of ``x``'s dtype.
         """
+        if not hasattr(x, "dtype"):  # a number or a nested list
+            x = np.asarray(x)
         if np.shape(x) != self.position_array_shape:
             raise ValueError(
                 f"{name} must have shape {self.position_array_shape} for {self!r}, got "
@@ -628,7 +631,7 @@ def check_position(space: Space | PyTree, position: PyTree, name: str = "positio
 def uniform(space: Space | PyTree, rng_key: jax.Array, dtype: DTypeLike | None = None) -> PyTree:
     """A draw from the uniform (Haar) law of every block (Euclidean blocks have none)."""
     leaves = _spaces(space)
-    keys = iter(jax.random.split(rng_key, len(leaves)))
+    keys = iter(jax.random.split(prng_key(rng_key), len(leaves)))
     return _map(lambda s: s.uniform(next(keys), dtype), space)
 
 
@@ -641,7 +644,7 @@ def real_finite_array(name: str, value: ArrayLike, ndims: Sequence[int]) -> np.n
         raise ValueError(f"{name} must be a {want} array, got shape {shape}")
     array = concrete_array(value)
     if array is not None:
-        if array.dtype.kind not in "biuf":
+        if array.dtype.kind not in "iuf":
             raise TypeError(f"{name} must be a real array, got dtype {array.dtype}")
         if not np.all(np.isfinite(array)):
             raise ValueError(f"{name} must be finite, got non-finite entries")
@@ -707,6 +710,10 @@ def check_inverse_mass(
             given = _map(lambda s: jax.tree.leaves(inverse_mass)[0], space)
 
     def one(s, m):
+        dtype = np.dtype(m.dtype if hasattr(m, "dtype") else np.asarray(m).dtype)
+        if dtype.kind not in "iuf":
+            raise TypeError(f"inverse mass for {s!r} must be real (floats > 0), got dtype "
+                            f"{dtype}; pass an array of positive floats")  # fmt: skip
         if is_dense_inverse_mass(s, m):
             check_inverse_mass_matrix(m, name=f"inverse mass for {s!r}")
             return jnp.asarray(m, dtype)

@@ -217,6 +217,10 @@ class _CoupledRun:
     """One compiled coupled runner for a system, integrator, level count and observables."""
 
     def __init__(self, system, beta, observables, integrator, levels, initial_positions):
+        if not isinstance(system, LiePoissonSystem):
+            raise TypeError(f"system must be a LiePoissonSystem, got {type(system).__name__}")
+        if not callable(observables):
+            raise TypeError(f"observables must be a callable μ ↦ array, got {observables!r}")
         self.system = system
         self.beta = beta
         self.integrator = get_integrator(integrator)
@@ -666,6 +670,9 @@ def choose_step_size(
         raise ValueError(f"sigmas must be a non-empty sequence of floats > 0, got {sigmas!r}")
     sigmas = [finite_float(f"sigmas[{i}]", s, positive=True) for i, s in enumerate(sigmas)]
     pilot_step_size = finite_float("pilot_step_size", pilot_step_size, positive=True)
+    pilot_time = finite_float("pilot_time", pilot_time, positive=True)
+    burn_in = finite_float("burn_in", burn_in, nonnegative=True)
+    max_refinements = _positive_int("max_refinements", max_refinements, low=0)
     run = _CoupledRun(system, beta, observables, integrator, 3, initial_positions)
     candidates, wall = [], 0.0
     for i, sigma in enumerate(sigmas):

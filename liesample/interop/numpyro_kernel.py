@@ -537,10 +537,16 @@ class GeometricHMC(MCMCKernel):
             num_integration_steps, integration_time, num_steps, trajectory_length
         )
         self._lengths = trajectory_adaptation(time, learn=learn)
-        if not isinstance(jitter, bool):
-            raise TypeError(f"jitter must be a bool, got {jitter!r}")
+        flags = {"jitter": jitter, "adapt_step_size": adapt_step_size,
+                 "adapt_mass_matrix": adapt_mass_matrix,
+                 "find_heuristic_step_size": find_heuristic_step_size}  # fmt: skip
+        for name, flag in flags.items():  # bool("no") would be True
+            if not isinstance(flag, (bool, np.bool_)):
+                raise TypeError(f"{name} must be a bool (True or False), got {flag!r}")
         self._jitter = jitter
         self._num_integration_steps = num_integration_steps
+        if inverse_mass_matrix is not None and not isinstance(inverse_mass_matrix, dict):
+            finite_float("inverse_mass_matrix", inverse_mass_matrix, positive=True)  # else a dict
         self._initial_mass = inverse_mass_matrix
         self._dense_mass = _dense_spec(dense_mass)
         adapted = geometric_hmc.adaptation.adapted
@@ -553,6 +559,7 @@ class GeometricHMC(MCMCKernel):
         if not 0.0 < target < 1.0:
             raise ValueError(f"target_accept_prob must be in (0, 1), got {target}")
         self._target = target
+        divergence_threshold = finite_float("divergence_threshold", divergence_threshold)
         self._kernel = geometric_hmc.build_kernel(divergence_threshold, integrator=integrator)
         self._sites = None
         self._adaptation = None

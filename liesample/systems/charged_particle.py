@@ -41,7 +41,7 @@ from jax.typing import ArrayLike
 from liesample.dynamics.poisson_langevin import Scene, make_dynamics
 from liesample.dynamics.sde import PoissonLangevinSDE, stratonovich_heun_step
 from liesample.foundation.compile import evaluate, jit
-from liesample.foundation.validation import concrete_array, finite_float
+from liesample.foundation.validation import concrete_array, finite_float, float_array
 from liesample.geometry.cotangent import (
     BAOAB,
     PhasePoint,
@@ -181,6 +181,8 @@ def charged_particle(
     charge = finite_float("charge", charge)
     if magnetic_field is not None and vector_potential is not None:
         raise ValueError("give at most one of magnetic_field (constant) or vector_potential")
+    if magnetic_field is not None and not callable(magnetic_field):
+        float_array(magnetic_field, "magnetic_field must be a real array (B or G)", TypeError)
     if magnetic_field is None and vector_potential is None:
         if dimension is None:
             raise ValueError("dimension is required without a magnetic field (q lives in R^n)")
@@ -199,6 +201,8 @@ def charged_particle(
             f"{given_name} must map a position of shape ({n},) to a scalar, got "
             f"{getattr(probe, 'shape', probe)}"
         )
+    if probe.dtype.kind != "f":
+        raise TypeError(f"{given_name} must return a real floating scalar, got dtype {probe.dtype}")
     field = "none"
     if magnetic_field is not None:
         field = np.asarray(magnetic_field, dtype=float).tolist()

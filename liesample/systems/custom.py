@@ -58,6 +58,11 @@ def lie_poisson_system(
     energy = jax.eval_shape(hamiltonian, jnp.asarray(position))
     if energy.shape != ():
         raise ValueError(f"hamiltonian must return a scalar, got shape {energy.shape}")
+    if energy.dtype.kind != "f":
+        raise TypeError(
+            f"hamiltonian must return a real floating scalar, got dtype {energy.dtype}; return "
+            "the real energy h(μ) as a float"
+        )
     system = LiePoissonSystem(
         name=name,
         algebra=algebra,

@@ -60,10 +60,10 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 
 from liesample.foundation.compile import jit
-from liesample.foundation.validation import finite_float
+from liesample.foundation.validation import finite_float, prng_key
 from liesample.geometry import spaces
 from liesample.samplers.contract import Sampler, as_sampler, first_bad_chain
-from liesample.samplers.cotangent._core import check_starts
+from liesample.samplers.cotangent._core import check_logdensity_fn, check_starts
 from liesample.samplers.cotangent._euclidean import default_magnetic_field
 from liesample.samplers.cotangent.magnetic_hmc import magnetic_hmc
 from liesample.tuning.protocol import run_adaptation, schedule
@@ -202,6 +202,8 @@ def window_adaptation(
         )
     if space is None:
         raise TypeError(f"window_adaptation({name}, logdensity_fn, space): give the space")
+    check_logdensity_fn(logdensity_fn)
+    _check_flags(adapt_mass=adapt_mass, progress_bar=progress_bar)
     del progress_bar  # accepted for BlackJAX compatibility; the warm-up runs in one compiled loop
     spaces._spaces(space)
     finite_float("initial_step_size", initial_step_size, positive=True)
@@ -222,6 +224,13 @@ def window_adaptation(
         return warm_up(rng_key, initial_position, num_steps)
 
     return GeometricAdaptation(run)
+
+
+def _check_flags(**flags) -> None:
+    """A ``TypeError`` naming the first flag that is not a bool (``"no"`` would read as true)."""
+    for name, value in flags.items():
+        if not isinstance(value, (bool, np.bool_)):
+            raise TypeError(f"{name} must be a bool (True or False), got {value!r}")
 
 
 class _WindowPlan(NamedTuple):
@@ -285,6 +294,7 @@ def _window_run(plan, algorithm, logdensity_fn, space, initial_step_size, adapt_
     tuned parameters."""
     if isinstance(num_steps, bool) or int(num_steps) != num_steps or num_steps < 20:
         raise ValueError(f"num_steps must be an integer >= 20, got {num_steps!r}")
+    rng_key = prng_key(rng_key)
     num_chains = _num_chains(space, initial_position)
     batched = num_chains is not None
     init = lambda x: algorithm.init(x, logdensity_fn, space)
@@ -292,7 +302,14 @@ def _window_run(plan, algorithm, logdensity_fn, space, initial_step_size, adapt_
         check_starts(space)(initial_position)
         states = jit(jax.vmap(init))(initial_position)  # one compilation, not one per operation
     else:
+        spaces.check_position(space, initial_position, "initial_position")
         states = jax.tree.map(lambda leaf: leaf[None], jit(init)(initial_position))
+    chain = first_bad_chain(np.isfinite(np.asarray(states.logdensity)))
+    if chain is not None:  # under jit, init does not check log π
+        raise ValueError(
+            f"initial_position{f'[{chain}]' if batched else ''}: logdensity_fn is not finite "
+            "there; start every chain where log π is finite"
+        )
     dtype = jnp.asarray(states.logdensity).dtype
     start = {
         "step_size": jnp.asarray(initial_step_size, dtype),
@@ -485,6 +502,7 @@ def magnetic_window_adaptation(
     algorithm
         The sampler tuned: ``liesample.magnetic_hmc`` or one with its signature.
     """
+    _check_flags(progress_bar=progress_bar)
     del progress_bar  # accepted for BlackJAX compatibility; the warm-up is one compiled loop
     plan = _magnetic_plan(
         algorithm, logdensity_fn, angle, initial_step_size, target_acceptance_rate,
@@ -518,6 +536,12 @@ def _magnetic_plan(algorithm, logdensity_fn, angle, initial_step_size, target_ac
                    divergence_threshold, max_num_integration_steps,
                    integrator) -> _MagneticPlan:  # fmt: skip
     """:func:`magnetic_window_adaptation`'s arguments checked, each error naming its parameter."""
+    check_logdensity_fn(logdensity_fn)
+    if not callable(getattr(algorithm, "build_kernel", None)):
+        raise TypeError(
+            f"algorithm must be liesample.magnetic_hmc or a sampler with its signature (a "
+            f"build_kernel), got {algorithm!r}"
+        )
     scheme = {} if integrator is None else {"integrator": integrator}
     algorithm.build_kernel(**scheme)  # validates the scheme now
     angle = finite_float("angle", angle, nonnegative=True)
@@ -553,6 +577,7 @@ def _magnetic_run(plan: _MagneticPlan, rng_key, initial_positions, num_steps):
     if isinstance(num_steps, bool) or int(num_steps) != num_steps or num_steps < 20:
         raise ValueError(f"num_steps must be an integer >= 20, got {num_steps!r}")
     num_steps = int(num_steps)
+    rng_key = prng_key(rng_key)
     flat = _flat_starts(initial_positions, plan.logdensity_fn)
     num_chains, dimension = flat.shape
     states = jax.vmap(lambda x: plan.algorithm.init(x, plan.logdensity_fn))(initial_positions)

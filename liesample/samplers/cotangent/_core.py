@@ -54,6 +54,8 @@ __all__ = [
     "GeometricInfo",
     "GeometricState",
     "Move",
+    "check_logdensity_fn",
+    "check_logdensity_value",
     "check_positive_step_size",
     "check_starts",
     "drift_flows",
@@ -123,9 +125,38 @@ class GeometricInfo(NamedTuple):
     num_gradient_evaluations: jax.Array
 
 
+def check_logdensity_fn(logdensity_fn) -> Callable:
+    """``logdensity_fn`` if callable, else a ``TypeError`` that says what is expected."""
+    if not callable(logdensity_fn):
+        raise TypeError(
+            f"logdensity_fn must be a callable position -> log π(position) (a real scalar), "
+            f"got {logdensity_fn!r}"
+        )
+    return logdensity_fn
+
+
+def check_logdensity_value(logdensity_fn: Callable, position) -> None:
+    """A ``TypeError`` unless ``logdensity_fn(position)`` is one real floating scalar; only its
+    shape and dtype are read (``jax.eval_shape``), so it serves under ``jit`` and ``vmap``."""
+    check_logdensity_fn(logdensity_fn)
+    value = jax.eval_shape(logdensity_fn, position)
+    leaves = jax.tree.leaves(value)
+    if len(leaves) != 1 or leaves[0].shape != () or leaves[0].dtype.kind != "f":
+        got = (
+            f"shape {leaves[0].shape} and dtype {leaves[0].dtype}" if len(leaves) == 1
+            else f"{value!r}"
+        )  # fmt: skip
+        raise TypeError(
+            f"logdensity_fn must return one real floating scalar log π(position), got {got}; "
+            "reduce it to a scalar (e.g. jnp.sum over independent terms) and return its real "
+            "log density as a float"
+        )
+
+
 def init(position, logdensity_fn: Callable, space) -> GeometricState:
     """Initial state; raises if ``position`` is off the space or ``log π`` is not finite there."""
     spaces.check_position(space, position)
+    check_logdensity_value(logdensity_fn, position)
     value_and_grad = spaces.trivialised_value_and_grad(logdensity_fn, space)
     logdensity, grad = value_and_grad(position)
     values = concrete_array(
@@ -159,6 +190,8 @@ def check_positive_step_size(step_size):
     if np.ndim(step_size) != 0:
         raise ValueError(f"step_size must be a scalar, got shape {np.shape(step_size)}")
     value = concrete_array(step_size)
+    if value is not None and value.dtype.kind not in "iuf":  # bool, complex, str: no step
+        raise TypeError(f"step_size must be a real scalar, got {step_size!r}")
     if value is not None and not (np.isfinite(value) and value > 0):
         raise ValueError(f"step_size must be finite and > 0, got {float(value)}")
 
@@ -339,6 +372,7 @@ def space_sampler(logdensity_fn, space, step_fn: Callable, settings: dict,
     """The :class:`~liesample.samplers.contract.Sampler` of ``step_fn`` on ``space``: keyless
     :func:`init` and :func:`check_starts`; ``adaptation`` its
     :class:`~liesample.samplers.contract.Tunable`."""
+    check_logdensity_fn(logdensity_fn)
 
     def init_fn(position, rng_key=None):
         del rng_key

@@ -21,7 +21,7 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 
 from liesample.foundation.compile import evaluate, jit
-from liesample.foundation.validation import concrete_array
+from liesample.foundation.validation import concrete_array, finite_float
 from liesample.geometry.cotangent import (
     KineticMagneticFlow,
     Metric,
@@ -31,7 +31,11 @@ from liesample.geometry.cotangent import (
 )
 from liesample.geometry.spaces import Euclidean, check_inverse_mass_matrix
 from liesample.samplers.contract import first_bad_chain
-from liesample.samplers.cotangent._core import check_positive_step_size, make_move
+from liesample.samplers.cotangent._core import (
+    check_logdensity_value,
+    check_positive_step_size,
+    make_move,
+)
 
 __all__ = [
     "MagneticFlow",
@@ -91,6 +95,7 @@ def initial_values(position, logdensity_fn):
     Raises a ``ValueError`` when ``log π`` or its gradient is not finite (checked when concrete:
     under ``jit``/``vmap`` the kernels' non-finite guard takes over).
     """
+    check_logdensity_value(logdensity_fn, position)
     logdensity, grad = jax.value_and_grad(logdensity_fn)(position)
     flat_grad = ravel(grad)
     values = concrete_array(jnp.append(flat_grad, logdensity))
@@ -182,12 +187,9 @@ def default_magnetic_field(inverse_mass_matrix, strength, covariance=None):
     numpy.ndarray, (d, d)
         An antisymmetric field (exactly: it is built as ``A − Aᵀ``).
     """
+    check_inverse_mass_matrix(inverse_mass_matrix)  # before the cast: complex is refused
     imm = np.asarray(inverse_mass_matrix, dtype=float)
-    check_inverse_mass_matrix(imm)
-    if isinstance(strength, bool) or np.ndim(strength) != 0 or not np.isfinite(strength):
-        raise ValueError(f"strength must be a finite real scalar, got {strength!r}")
-    if strength < 0:
-        raise ValueError(f"strength must be >= 0, got {strength}")
+    strength = finite_float("strength", strength, nonnegative=True)
     d = imm.shape[0]
     if imm.ndim == 1:
         mass_sqrt = np.diag(1.0 / np.sqrt(imm))
@@ -218,5 +220,5 @@ def default_magnetic_field(inverse_mass_matrix, strength, covariance=None):
         a, b = basis[:, k], basis[:, k + 1]
         rotation += np.outer(a, b)
     rotation = rotation - rotation.T
-    field = float(strength) * mass_sqrt @ rotation @ mass_sqrt
+    field = strength * mass_sqrt @ rotation @ mass_sqrt
     return 0.5 * (field - field.T)

@@ -192,6 +192,7 @@ def as_top_level_api(
     liesample.samplers.contract.Sampler
         ``init(position, rng_key=None)`` and ``step(rng_key, state) -> (state, info)``.
     """
+    check_logdensity_fn(logdensity_fn)
     d = check_parameters(step_size, inverse_mass_matrix, magnetic_field)
     check_friction(friction)
     scheme = langevin_scheme(integrator)

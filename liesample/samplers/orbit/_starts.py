@@ -27,6 +27,7 @@ __all__ = [
     "orbit_init_fn",
     "orbit_settings",
     "plain_init_fn",
+    "real_position",
 ]
 
 
@@ -36,8 +37,26 @@ def orbit_settings(name: str, system: LiePoissonSystem, beta, **settings) -> dic
     return {"sampler": name, "system": system.name, "beta": beta, **settings}
 
 
+def real_position(position, name: str = "position"):
+    """``position`` when it is an array of real numbers (a number or nested list becomes one
+    array), else a ``TypeError`` naming ``name``: a bool, complex, string or object array is no
+    point of ``g*`` (a complex one would pass as a degenerate orbit, a bool one as 0/1)."""
+    if not hasattr(position, "dtype"):  # a number, or a (nested) list
+        try:
+            position = np.asarray(position)
+        except ValueError:
+            raise TypeError(f"{name} must be a real array (floats), got {position!r}") from None
+    dtype = position.dtype
+    if np.dtype(dtype).kind not in "iuf":  # signed, unsigned, floating
+        raise TypeError(
+            f"{name} must be a real array (floats), got dtype {dtype}; pass "
+            "np.asarray(position, dtype=float) of real coordinates"
+        )
+    return position
+
+
 def _init_on(init, system, position, rng_key=None):
-    return init(position, system, rng_key)
+    return init(real_position(position), system, rng_key)
 
 
 def plain_init_fn(init, system):
@@ -52,6 +71,7 @@ def orbit_init_fn(init, system: LiePoissonSystem, check_orbits):
     one chain of a batch (the sampler's own step-size and precision checks)."""
 
     def init_fn(position, rng_key=None):
+        position = real_position(position)
         state = init(position, system, rng_key)
         value = concrete_array(position)
         if value is not None:
@@ -85,7 +105,7 @@ def check_orbit_starts(system: LiePoissonSystem, positions):
     Raises ``ValueError`` naming the first bad chain. Returns the Casimirs of every start,
     shape ``(chains, ...)``, for :func:`distinct_orbits`.
     """
-    positions = np.asarray(positions)
+    positions = np.asarray(real_position(positions, "initial_positions"))
     if positions.shape[1:] != tuple(system.event_shape):
         system.check_position(positions[0], "initial_positions[0]")  # the system's message
         raise ValueError(
