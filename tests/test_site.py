@@ -54,8 +54,9 @@ def test_the_first_page_is_the_tutorial():
     assert "Two commands" in text and "Run in float64" in text
     links = {attrs.get("href", "") for tag, attrs in page.tags if tag == "a"}
     assert "mathematics/" in links  # the README's GitHub links lead to the site's own pages
-    assert not any(link.startswith("https://github.com/liesample/liesample/blob/main/docs/")
-                   for link in links)
+    assert not any(
+        link.startswith("https://github.com/liesample/liesample/blob/main/docs/") for link in links
+    )
 
 
 def test_at_least_eight_figures_that_resolve():
@@ -84,9 +85,7 @@ def test_mathematics_is_rendered_as_mathml(name):
 
 def test_the_gallery_shows_every_example_with_its_source():
     page = _page("gallery")
-    headings = {
-        attrs.get("id") for tag, attrs in page.tags if tag == "h2"
-    }
+    headings = {attrs.get("id") for tag, attrs in page.tags if tag == "h2"}
     scripts = {path.stem for path in (ROOT / "examples").glob("*.py")}
     assert scripts <= {h.replace("-", "_") for h in headings if h}, scripts
     text = "".join(page.text)
@@ -101,8 +100,9 @@ def _parameters(html: str, function: str) -> dict[str, str]:
     entry = html[start : end if end > 0 else None]
     section = entry[entry.index("Parameters:") :]
     section = section[: section.find("Returns:")] if "Returns:" in section else section
-    items = re.findall(r"<b><code>(\w+)</code></b>\s*(?:\((<code>.*?</code>))?", section,
-                       flags=re.DOTALL)
+    items = re.findall(
+        r"<b><code>(\w+)</code></b>\s*(?:\((<code>.*?</code>))?", section, flags=re.DOTALL
+    )
     return {name: re.sub(r"<[^>]+>|\s+", "", kind) for name, kind in items}
 
 
@@ -131,6 +131,8 @@ def test_no_asset_from_an_outside_host():
             if source and outside.match(source):
                 offenders.append(f"{path.relative_to(SITE)}: <{tag}> {source}")
     for path in SITE.rglob("*.css"):
-        offenders += [f"{path.relative_to(SITE)}: {url}"
-                      for url in re.findall(r"url\(['\"]?((?:https?:)?//[^)'\"]+)", path.read_text())]
+        offenders += [
+            f"{path.relative_to(SITE)}: {url}"
+            for url in re.findall(r"url\(['\"]?((?:https?:)?//[^)'\"]+)", path.read_text())
+        ]
     assert not offenders, offenders

@@ -72,17 +72,18 @@ def _section(script: Path, figures: list[str]) -> str:
     if printout.exists():
         parts.append(f"What it prints:\n\n```text\n{printout.read_text().rstrip()}\n```")
     source = script.read_text().rstrip()
-    parts.append(f'??? example "Source: examples/{script.name}"\n\n    ```python\n'
-                 + "\n".join(f"    {line}" if line else "" for line in source.splitlines())
-                 + "\n    ```")
+    parts.append(
+        f'??? example "Source: examples/{script.name}"\n\n    ```python\n'
+        + "\n".join(f"    {line}" if line else "" for line in source.splitlines())
+        + "\n    ```"
+    )
     return "\n\n".join(parts)
 
 
 def gallery_markdown() -> str:
     figures = _figures_by_example()
     sections = [
-        _section(script, figures.get(script.stem, []))
-        for script in sorted(EXAMPLES.glob("*.py"))
+        _section(script, figures.get(script.stem, [])) for script in sorted(EXAMPLES.glob("*.py"))
     ]
     return INTRO + "\n\n" + "\n\n".join(sections) + "\n"
 

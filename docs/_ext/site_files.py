@@ -27,9 +27,7 @@ BENCHMARK_LINK = re.compile(r"\]\((?:\.\./)?benchmarks/results/([\w.-]+\.png)\)"
 def on_files(files, config, **kwargs):
     for figure in sorted(BENCHMARK_FIGURES.glob("*.png")):
         files.append(
-            File.generated(
-                config, f"figures/benchmarks/{figure.name}", abs_src_path=str(figure)
-            )
+            File.generated(config, f"figures/benchmarks/{figure.name}", abs_src_path=str(figure))
         )
     style = HtmlFormatter(style="default").get_style_defs(".highlight")
     files.append(File.generated(config, "css/pygments.css", content=style))

@@ -29,21 +29,46 @@ PYTHON = sys.executable
 # "{out}" in a command is the scratch folder.
 FIGURES = {
     "demo": (
-        [PYTHON, "-m", "liesample.cli", "demo", "--output", "{out}", "--time", "1000",
-         "--no-progress"],
-        {"sphere.png": "demo_sphere.png", "autocorrelation.png": "demo_autocorrelation.png",
-         "marginals.png": "demo_marginals.png"},
+        [
+            PYTHON,
+            "-m",
+            "liesample.cli",
+            "demo",
+            "--output",
+            "{out}",
+            "--time",
+            "1000",
+            "--no-progress",
+        ],
+        {
+            "sphere.png": "demo_sphere.png",
+            "autocorrelation.png": "demo_autocorrelation.png",
+            "marginals.png": "demo_marginals.png",
+        },
     ),
     "binder_3d": (
-        [PYTHON, "examples/binder_3d.py", "--sizes", "6,10", "--betas",
-         "0.66,0.675,0.69,0.705,0.72", "--draws", "1000", "--warmup", "200",
-         "--plot", "{out}/binder.png"],
+        [
+            PYTHON,
+            "examples/binder_3d.py",
+            "--sizes",
+            "6,10",
+            "--betas",
+            "0.66,0.675,0.69,0.705,0.72",
+            "--draws",
+            "1000",
+            "--warmup",
+            "200",
+            "--plot",
+            "{out}/binder.png",
+        ],
         {"binder.png": "binder_3d.png"},
     ),
     "vortex_scenes": (
         [PYTHON, "examples/vortex_scenes.py", "--out", "{out}"],
-        {"vortex_dissipation.png": "vortex_dissipation.png",
-         "vortex_scenes.png": "vortex_scenes.png"},
+        {
+            "vortex_dissipation.png": "vortex_dissipation.png",
+            "vortex_scenes.png": "vortex_scenes.png",
+        },
     ),
     "onsager_clusters": (
         [PYTHON, "examples/onsager_clusters.py", "--draws", "400", "--plot", "{out}/onsager.png"],
@@ -59,13 +84,17 @@ FIGURES = {
     ),
     "salt_euler": (
         [PYTHON, "examples/salt_euler.py", "--size", "12", "--out", "{out}"],
-        {"salt_euler_scenes.png": "salt_euler_scenes.png",
-         "salt_euler_energy.png": "salt_euler_energy.png"},
+        {
+            "salt_euler_scenes.png": "salt_euler_scenes.png",
+            "salt_euler_energy.png": "salt_euler_energy.png",
+        },
     ),
     "condensation": (
         [PYTHON, "examples/condensation.py", "--output", "{out}"],
-        {"condensation_spectra.png": "condensation_spectra.png",
-         "condensation_vorticity.png": "condensation_vorticity.png"},
+        {
+            "condensation_spectra.png": "condensation_spectra.png",
+            "condensation_vorticity.png": "condensation_vorticity.png",
+        },
     ),
 }
 
