@@ -35,6 +35,11 @@ def _figures_by_example() -> dict[str, list[str]]:
     return {name: list(files.values()) for name, (_, files) in module.FIGURES.items()}
 
 
+def _escape(text: str) -> str:
+    """``text`` with Markdown's emphasis characters taken literally (``se(2)*``)."""
+    return text.replace("*", "\\*").replace("_", "\\_")
+
+
 def _fence_indented_blocks(text: str) -> str:
     """``text`` with each block indented by four spaces after a blank line fenced as code.
 
@@ -62,7 +67,7 @@ def _section(script: Path, figures: list[str]) -> str:
     title, _, body = docstring.partition("\n")
     parts = [
         f"## {script.stem}",
-        f"**{title.strip()}** ([`examples/{script.name}`]({SOURCE}/{script.name}))",
+        f"**{_escape(title.strip())}** ([`examples/{script.name}`]({SOURCE}/{script.name}))",
         _fence_indented_blocks(body.strip("\n")),
     ]
     for figure in figures:

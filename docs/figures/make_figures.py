@@ -19,8 +19,6 @@ import sys
 import tempfile
 from pathlib import Path
 
-from PIL import Image
-
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent.parent
 PYTHON = sys.executable
@@ -114,6 +112,8 @@ MAX_BYTES = 150_000  # a figure checked in stays small
 def shrink(source: Path, target: Path) -> None:
     """Store ``source`` at ``target`` as a palette PNG: 256 colours (the plots have few), fewer
     while the file is over ``MAX_BYTES`` (the smooth maps of the vorticity)."""
+    from PIL import Image  # matplotlib's own dependency; only this script needs it
+
     with Image.open(source) as image:
         rgb = image.convert("RGB")
     colours = 256
