@@ -41,7 +41,6 @@ FIGURES = {
         {
             "sphere.png": "demo_sphere.png",
             "autocorrelation.png": "demo_autocorrelation.png",
-            "marginals.png": "demo_marginals.png",
         },
     ),
     "binder_3d": (
