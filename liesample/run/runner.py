@@ -10,7 +10,9 @@ The run is in three parts: this module's chunked loop (:func:`sample_chains`, :f
 the run file (:mod:`liesample.run.store`, with the run's fingerprint in
 :mod:`liesample.run.provenance` and the one-writer lock in :mod:`liesample.run.lock`) and the
 checks of a finished run (:mod:`liesample.run.checks`); the arguments are checked by
-:mod:`liesample.run.arguments` before any compilation.
+:mod:`liesample.run.arguments` before any compilation: the algorithm, the key, every option's
+range, the starts' chain axis, and whether the steps fit the chains' step counter and the kept
+draws the host's and the device's memory (a run that cannot fit is refused, not started).
 
 - **Devices.** ``devices=`` splits the chain axis over several devices with JAX's own sharding
   (:mod:`liesample.run.sharding`); the draws are those of the unsharded run.
@@ -121,6 +123,7 @@ def sample_chains(
         (:class:`liesample.samplers.contract.Sampler`) also declare checks of the starts,
         settings, step-size tuning and noise blocks; any other algorithm gets the defaults.
     rng_key : jax.random.key or jax.random.PRNGKey
+        One key, split over the chains here (a batch of keys, or an int seed, is refused).
     initial_positions : array ``(chains, *event_shape)``, or a pytree of such arrays
         A pytree (dict, tuple, named tuple; e.g. the positions of ``liesample.geometric_hmc``
         on a product space) gives draws with the same structure; every leaf has the chain axis
@@ -150,9 +153,9 @@ def sample_chains(
         What to do if any step diverged (``info.is_divergent``: a non-finite state or energy):
         a ``RuntimeWarning`` naming the chains, or :class:`NonFiniteStateError`.
     min_acceptance_rate : float
-        Chains whose mean ``acceptance_rate`` is below this are reported as stuck; 0 disables
-        the check. The other post-run checks: :mod:`liesample.run.checks`; the convergence
-        checks of every variable run in :func:`sample` only (call
+        In ``[0, 1)``: chains whose mean ``acceptance_rate`` is below this are reported as
+        stuck; 0 disables the check. The other post-run checks: :mod:`liesample.run.checks`;
+        the convergence checks of every variable run in :func:`sample` only (call
         :func:`liesample.analysis.convergence.convergence_warnings` on this loop's draws).
     devices : None, "all", int, sequence of jax devices, or NamedSharding
         Split the chains over these devices (:func:`liesample.run.sharding.chain_sharding`); the
