@@ -303,9 +303,11 @@ class _RotationConstraint(constraints.Constraint):
     event_dim = 2
 
     def __call__(self, x):
-        gram = jnp.swapaxes(x, -1, -2) @ x
-        ok = jnp.all(jnp.abs(gram - jnp.eye(3)) < 1e-6, axis=(-2, -1))
-        return ok & (jnp.abs(jnp.linalg.det(x) - 1.0) < 1e-6)
+        concrete = concrete_array(x)  # a concrete value is checked in NumPy: nothing compiled
+        xp, x = (jnp, x) if concrete is None else (np, concrete)
+        gram = xp.swapaxes(x, -1, -2) @ x
+        ok = xp.all(xp.abs(gram - xp.eye(3)) < 1e-6, axis=(-2, -1))
+        return ok & (xp.abs(xp.linalg.det(x) - 1.0) < 1e-6)
 
     def feasible_like(self, prototype):
         return jnp.broadcast_to(jnp.eye(3), prototype.shape)
