@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 JOBS ?= 2
 
-.PHONY: demo test test-slow test-oldest bench docs docs-figures clean check-python
+.PHONY: demo test test-slow test-oldest bench docs doctest docs-figures clean check-python
 
 check-python:
 	@test -n "$(PYTHON)" || { echo "error: Python >= 3.12 not found (tried: $(PY_CANDIDATES))"; exit 1; }
@@ -76,6 +76,12 @@ $(BIN)/.installed-docs: $(BIN)/.installed
 
 docs: $(BIN)/.installed-docs
 	$(BIN)/python -m mkdocs build --strict
+
+# Every docstring's Examples section, run (not part of `make test`): x64 on, the examples' names
+# and XLA's cheap back-end setting come from the root conftest.py.
+doctest: $(BIN)/.installed-test
+	$(BIN)/python -m pytest -q -p no:cacheprovider --doctest-modules liesample -o addopts="" \
+		-o doctest_optionflags="NORMALIZE_WHITESPACE ELLIPSIS"
 
 # The figures checked in under docs/figures/ (the demo's and the examples'), drawn anew: each
 # script runs once (minutes). The benchmark figures come from `make bench`.
