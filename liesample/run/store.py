@@ -88,8 +88,9 @@ def _unreadable(path, error) -> str:
 
 @contextlib.contextmanager
 def _open(path):
-    """The file at ``path`` opened for reading with h5netcdf, on an HDF5 handle closed however
-    the block ends; any error reading it is a :class:`RunFileError` naming the path."""
+    """``(f, h5)``: the file at ``path`` opened for reading with h5netcdf (its structure and
+    attributes, ``f``) on an h5py handle (its data, read many times faster, ``h5``) closed
+    however the block ends; any error reading it is a :class:`RunFileError` naming the path."""
     import h5netcdf
     import h5py
 
@@ -104,7 +105,7 @@ def _open(path):
         except Exception as error:
             raise RunFileError(_unreadable(path, error)) from None
         try:
-            yield f
+            yield f, h5
         except RunFileError:
             raise
         except Exception as error:
@@ -276,7 +277,7 @@ def _check_attributes(f, path, commit) -> dict[str, bytes]:
 def _header(path):
     """``(fingerprint, info_names)`` of the run file at ``path``, after checking its format,
     its commit record and its attributes (not yet its draws: :func:`verify`)."""
-    with _open(path) as f:
+    with _open(path) as (f, _):
         group = _run_group(f, path)
         _check_attributes(f, path, _json_attr(group, "commit", path))
         return _json_attr(group, "fingerprint", path), _json_attr(group, "info_names", path)
@@ -321,18 +322,16 @@ def _tree_groups(f):
     return sorted(name for name in f.groups if name != RUN_GROUP)
 
 
-def _stored_draws(f, done, first=0):
-    """Every group's ``draw`` coordinate and draw variables (dims ``(chain, draw, …)``) from
-    draw ``first`` up to draw ``done``, as stored, in the order the checksums take them (read
-    once each)."""
+def _stored_draws(f, h5, done):
+    """Every group's ``draw`` coordinate and draw variables (dims ``(chain, draw, …)``) up to
+    draw ``done``, as stored, in the order the checksums take them (read once each)."""
     stored = {}
     for group_name in _tree_groups(f):
         group = f.groups[group_name]
-        stored[f"{group_name}/draw"] = np.asarray(group.variables["draw"][first:done])
+        stored[f"{group_name}/draw"] = np.asarray(h5[group_name]["draw"][:done])
         for name in sorted(group.variables):
-            variable = group.variables[name]
-            if variable.dimensions[:2] == ("chain", "draw"):
-                stored[f"{group_name}/{name}"] = np.asarray(variable[:, first:done])
+            if group.variables[name].dimensions[:2] == ("chain", "draw"):
+                stored[f"{group_name}/{name}"] = np.asarray(h5[group_name][name][:, :done])
     return stored
 
 
@@ -343,26 +342,27 @@ def _slices(stored, first, end):
         yield name, array[first:end] if name.endswith("/draw") else array[:, first:end]
 
 
-def _state_arrays(group, slot):
-    names = sorted(
-        (n for n in group.variables if n.startswith(f"state_{slot}_")),
-        key=lambda n: int(n.rsplit("_", 1)[1]),
-    )
-    return [(name, np.asarray(group.variables[name][...])) for name in names]
+def _state_arrays(h5, slot):
+    """The saved state's leaves in slot ``slot``, read from the h5py file ``h5``."""
+    group = h5[RUN_GROUP]
+    leaf = re.compile(rf"state_{int(slot)}_(\d+)")  # not the dimensions state_<i>_dim_<j>
+    names = sorted((n for n in group if leaf.fullmatch(n)), key=lambda n: int(leaf.fullmatch(n)[1]))
+    return [(name, np.asarray(group[name][...])) for name in names]
 
 
-def verify(f, path) -> tuple[dict, dict]:
-    """The commit record of the run in ``f`` and its attributes (:func:`_attribute_fields`),
-    after checking the attributes, the chunk table, every chunk's checksum and the saved
-    state's (:class:`RunFileError` naming what is wrong)."""
+def verify(f, h5, path) -> tuple[dict, dict]:
+    """The commit record of the run in ``f`` (its data read through h5py as ``h5``,
+    :func:`_open`) and its attributes (:func:`_attribute_fields`), after checking the
+    attributes, the chunk table, every chunk's checksum and the saved state's
+    (:class:`RunFileError` naming what is wrong)."""
     group = _run_group(f, path)
     commit = _json_attr(group, "commit", path)
     fields = _check_attributes(f, path, commit)
     done, chunks = commit.get("draws_done"), commit.get("chunks")
     if not all(isinstance(v, int) and v >= 0 for v in (done, chunks)):
         raise RunFileError(f"{path!r}: draws_done {done!r} and chunks {chunks!r} are invalid")
-    ends = np.asarray(group.variables["chunk_end"][:chunks]).tolist()
-    sums = np.asarray(group.variables["chunk_sha256"][:chunks])
+    ends = np.asarray(h5[RUN_GROUP]["chunk_end"][:chunks]).tolist()
+    sums = np.asarray(h5[RUN_GROUP]["chunk_sha256"][:chunks])
     sizes = {f.groups[g].dimensions["draw"].size for g in _tree_groups(f)}
     if len(ends) != chunks or any(b <= a for a, b in zip([0, *ends], ends, strict=False)):
         raise RunFileError(f"{path!r}: its chunk table {ends} is not increasing")
@@ -373,7 +373,7 @@ def verify(f, path) -> tuple[dict, dict]:
         )
     if min(sizes, default=0) < done:
         raise RunFileError(f"{path!r}: it holds {min(sizes)} draws, draws_done = {done}")
-    stored = _stored_draws(f, done)
+    stored = _stored_draws(f, h5, done)
     for k, (first, end) in enumerate(zip([0, *ends], ends, strict=False)):
         if _chunk_digest(_slices(stored, first, end)) != bytes(sums[k]):
             intact = f"; draws 0 to {first - 1} before it match theirs" if first else ""
@@ -382,7 +382,7 @@ def verify(f, path) -> tuple[dict, dict]:
                 f"checksum: the file was edited or is corrupt{intact}. Restore the file as it "
                 "was written, or " + _START_AFRESH
             )
-    if done and _chunk_digest(_state_arrays(group, commit["state_slot"])).hex() != commit.get(
+    if done and _chunk_digest(_state_arrays(h5, commit["state_slot"])).hex() != commit.get(
         "state_sha256"
     ):
         raise RunFileError(
@@ -439,8 +439,8 @@ def load_chains(path):
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise FileNotFoundError(f"no run file at {path!r}")
-    with _open(path) as f:
-        done = verify(f, path)[0]["draws_done"]
+    with _open(path) as (f, h5):
+        done = verify(f, h5, path)[0]["draws_done"]
     try:
         with xr.open_datatree(path, engine="h5netcdf") as tree:
             children = {
@@ -571,8 +571,8 @@ class RunFile:
         ``positions``, ``info``, ``observables``, ``log_likelihood`` (``None`` for the last two
         items when nothing is saved). ``states`` gives the state's
         structure and dtypes; ``layout`` is the :class:`Layout` of the run's variables."""
-        with _open(self.path) as f:
-            commit, self.fields = verify(f, self.path)
+        with _open(self.path) as (f, h5):
+            commit, self.fields = verify(f, h5, self.path)
             done = commit["draws_done"]
             if done > num_draws:
                 raise RunFileError(
@@ -582,15 +582,14 @@ class RunFile:
             self.chunks, self.state_slot = commit["chunks"], commit["state_slot"]
             if done == 0:
                 return 0, None, None
-            group = f.groups[RUN_GROUP]
-            names = _json_attr(group, "info_names", self.path)
-            stats = f.groups["sample_stats"].variables
+            names = _json_attr(f.groups[RUN_GROUP], "info_names", self.path)
+            stats = h5["sample_stats"]
             info = {
                 key: np.asarray(stats[name][:, :done]).astype(dtype)
                 for name, (key, dtype) in names.items()
             }
-            draws = layout.read(f, done) | {"info": info}
-            saved = _state_arrays(group, self.state_slot)
+            draws = layout.read(h5, done) | {"info": info}
+            saved = _state_arrays(h5, self.state_slot)
         leaves, treedef = jax.tree.flatten(states)
         restored = []
         for leaf, (name, value) in zip(leaves, saved, strict=True):
@@ -746,14 +745,15 @@ class Layout:
             ),
         }
 
-    def read(self, f, done) -> dict:
-        """The first ``done`` draws of each recorded tree (``None`` where none is recorded)."""
+    def read(self, h5, done) -> dict:
+        """The first ``done`` draws of each recorded tree (``None`` where none is recorded), from
+        the run file opened with h5py as ``h5``."""
         read = {}
         for name, (group, layout) in self.trees.items():
             if layout is None:
                 read[name] = None
                 continue
-            variables, (treedef, names, dtypes) = f.groups[group].variables, layout
+            variables, (treedef, names, dtypes) = h5[group], layout
             leaves = []
             for parts, dtype in zip(names, dtypes, strict=True):
                 values = [np.asarray(variables[part][:, :done]) for part in parts]
