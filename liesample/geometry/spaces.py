@@ -137,6 +137,17 @@ class Space:
 
     Subclasses set ``point_shape`` (one copy), ``momentum_shape`` (algebra coordinates of one
     copy), ``mass_shape`` (the inverse mass of one copy) and ``copy_dimension``.
+
+    Examples
+    --------
+    Every space has a dimension, the array shape of its points and a uniform law where it has
+    one; a product of spaces is a pytree of them:
+
+    >>> from liesample.spaces import SO, Sphere
+    >>> Sphere(2, shape=(4,)).position_array_shape, Sphere(2, shape=(4,)).dimension
+    ((4, 3), 8)
+    >>> SO(3).uniform(jax.random.key(0)).shape
+    (3, 3)
     """
 
     shape: tuple[int, ...]
@@ -250,7 +261,15 @@ class Space:
 
 @dataclasses.dataclass(frozen=True)
 class Euclidean(Space):
-    """``R^shape`` with Lebesgue measure; the flow is a translation ``x + t M⁻¹p``."""
+    """``R^shape`` with Lebesgue measure; the flow is a translation ``x + t M⁻¹p``.
+
+    Examples
+    --------
+    >>> from liesample.spaces import Euclidean
+    >>> space = Euclidean((3,))
+    >>> space.dimension, space.position_array_shape
+    (3, (3,))
+    """
 
     shape: tuple[int, ...] = ()
     compact = False
@@ -285,6 +304,13 @@ class U1(Space):
     """The circle group ``U(1)`` as angles ``θ`` (any real: ``θ`` and ``θ + 2π`` are one point).
 
     Haar measure is ``dθ/2π``; the flow ``θ ← wrap(θ + t m⁻¹p)`` returns angles in ``[−π, π)``.
+
+    Examples
+    --------
+    >>> from liesample.spaces import U1
+    >>> theta = U1((4,)).uniform(jax.random.key(0))
+    >>> theta.shape, bool(jnp.all((theta >= -jnp.pi) & (theta < jnp.pi)))
+    ((4,), True)
     """
 
     shape: tuple[int, ...] = ()
@@ -318,6 +344,13 @@ class Sphere(Space):
 
     Momenta are tangent vectors in ambient coordinates (``n + 1`` numbers, ``p·x = 0``); the
     drift is the exact geodesic flow with parallel transport (module docstring).
+
+    Examples
+    --------
+    >>> from liesample.spaces import Sphere
+    >>> x = Sphere(2, shape=(5,)).uniform(jax.random.key(0))  # five points of S²
+    >>> x.shape, bool(jnp.allclose(jnp.linalg.norm(x, axis=-1), 1.0, atol=1e-12))
+    ((5, 3), True)
     """
 
     n: int
@@ -490,6 +523,15 @@ class SO(_MatrixGroup):
     Algebra coordinates: ``n(n−1)/2`` numbers in an orthonormal basis of antisymmetric
     matrices; for n = 3 they are the angular velocity (``hat(ω) v = ω × v``). ``exp`` is
     Rodrigues' formula for n = 3 and a Hermitian eigendecomposition otherwise.
+
+    Examples
+    --------
+    >>> from liesample.spaces import SO
+    >>> R = SO(3).uniform(jax.random.key(0))  # a Haar-uniform rotation
+    >>> R.shape, bool(jnp.allclose(R.T @ R, jnp.eye(3), atol=1e-12))
+    ((3, 3), True)
+    >>> SO(3).exponential(jnp.array([0.0, 0.0, jnp.pi / 2])).round(12) @ jnp.array([1.0, 0, 0])
+    Array([0., 1., 0.], dtype=float64)
     """
 
     draw_name = "R"
@@ -538,6 +580,13 @@ class SU(_MatrixGroup):
     matrices; for n = 2, ``iσ_x, iσ_y, iσ_z``), orthonormal for ``½ Re tr(X†Y)``. ``exp`` is
     closed-form for n = 2 (``cos|c| I + i sin|c| ĉ·σ``) and a Hermitian eigendecomposition
     otherwise.
+
+    Examples
+    --------
+    >>> from liesample.spaces import SU
+    >>> U = SU(2, shape=(3,)).uniform(jax.random.key(0))  # three Haar-uniform SU(2) matrices
+    >>> U.shape, U.dtype, bool(jnp.allclose(jnp.linalg.det(U), 1.0, atol=1e-12))
+    ((3, 2, 2), dtype('complex128'), True)
     """
 
     draw_name = "U"
@@ -590,6 +639,14 @@ class SU(_MatrixGroup):
 
 
 def is_space(value: object) -> bool:
+    """Whether ``value`` is one block (a :class:`Space`), not a pytree of them.
+
+    Examples
+    --------
+    >>> from liesample.spaces import Sphere, is_space
+    >>> is_space(Sphere(2)), is_space({"x": Sphere(2)}), is_space(3.0)
+    (True, False, False)
+    """
     return isinstance(value, Space)
 
 
@@ -609,12 +666,30 @@ def _map(fn: Callable, space, *trees):
 
 
 def dimension(space: Space | PyTree) -> int:
-    """Dimension of a space or product of spaces."""
+    """Dimension of a space or product of spaces.
+
+    Examples
+    --------
+    >>> from liesample.spaces import SO, Euclidean, dimension
+    >>> dimension({"R": SO(3), "x": Euclidean((2,))})
+    5
+    """
     return sum(s.dimension for s in _spaces(space))
 
 
 def check_position(space: Space | PyTree, position: PyTree, name: str = "position") -> None:
-    """Structure, shape, dtype and manifold constraint of a position (clear errors)."""
+    """Structure, shape, dtype and manifold constraint of a position (clear errors).
+
+    Examples
+    --------
+    A point off the sphere is refused, with the fix:
+
+    >>> from liesample.spaces import Sphere, check_position
+    >>> check_position(Sphere(2), jnp.array([0.0, 0.0, 1.0]))  # a unit vector: accepted
+    >>> check_position(Sphere(2), jnp.array([1.0, 1.0, 0.0]))
+    Traceback (most recent call last):
+    ValueError: position is off Sphere(n=2, shape=()) by 0.414 ... divide by the norm first.
+    """
     _spaces(space)
     space_structure = jax.tree.structure(space, is_leaf=is_space)
     position_structure = jax.tree.structure(position)
@@ -629,7 +704,15 @@ def check_position(space: Space | PyTree, position: PyTree, name: str = "positio
 
 
 def uniform(space: Space | PyTree, rng_key: jax.Array, dtype: DTypeLike | None = None) -> PyTree:
-    """A draw from the uniform (Haar) law of every block (Euclidean blocks have none)."""
+    """A draw from the uniform (Haar) law of every block (Euclidean blocks have none).
+
+    Examples
+    --------
+    >>> from liesample.spaces import SO, U1, uniform
+    >>> x = uniform({"R": SO(3), "theta": U1((2,))}, jax.random.key(0))
+    >>> x["R"].shape, x["theta"].shape
+    ((3, 3), (2,))
+    """
     leaves = _spaces(space)
     keys = iter(jax.random.split(prng_key(rng_key), len(leaves)))
     return _map(lambda s: s.uniform(next(keys), dtype), space)
@@ -655,7 +738,16 @@ def check_inverse_mass_matrix(
     inverse_mass_matrix: ArrayLike, dimension: int | None = None, name: str = "inverse_mass_matrix"
 ) -> None:
     """A flat ``M⁻¹``: diagonal (``(d,)``, entries > 0) or dense (``(d, d)``, symmetric positive
-    definite); value checks only when concrete."""
+    definite); value checks only when concrete.
+
+    Examples
+    --------
+    >>> from liesample.spaces import check_inverse_mass_matrix
+    >>> check_inverse_mass_matrix(jnp.array([1.0, 2.0]))  # a diagonal M⁻¹: accepted
+    >>> check_inverse_mass_matrix(jnp.array([1.0, -1.0]))
+    Traceback (most recent call last):
+    ValueError: inverse_mass_matrix (diagonal) must have all entries > 0
+    """
     imm = real_finite_array(name, inverse_mass_matrix, (1, 2))
     shape = np.shape(inverse_mass_matrix)
     if len(shape) == 2 and shape[0] != shape[1]:
@@ -691,7 +783,16 @@ def check_inverse_mass(
     broadcast to each block's ``mass_array_shape`` → a pytree of arrays of those shapes.
 
     A ``Euclidean`` block of ``n`` coordinates may instead take a dense symmetric positive
-    definite ``(n, n)`` matrix (its coordinates in raveled order), kept as it is."""
+    definite ``(n, n)`` matrix (its coordinates in raveled order), kept as it is.
+
+    Examples
+    --------
+    >>> from liesample.spaces import Euclidean, check_inverse_mass
+    >>> check_inverse_mass(Euclidean((3,)), 2.0)  # a scalar, broadcast to the block
+    Array([2., 2., 2.], dtype=float64)
+    >>> check_inverse_mass({"x": Euclidean((2,))}, None)  # unit mass
+    {'x': Array([1., 1.], dtype=float64)}
+    """
     leaves = _spaces(space)
     dtype = dtype or jnp.zeros(()).dtype
     if inverse_mass is None:
@@ -739,7 +840,18 @@ def check_inverse_mass(
 
 def trivialised_value_and_grad(logdensity_fn: Callable, space: Space | PyTree) -> Callable:
     """``x ↦ (log π(x), ∇ log π(x))`` with the gradient in algebra coordinates: left-trivialised
-    on groups (``d/dε log π(g exp(εX_k))``), Riemannian on spheres, ordinary on ``Rᵈ``."""
+    on groups (``d/dε log π(g exp(εX_k))``), Riemannian on spheres, ordinary on ``Rᵈ``.
+
+    Examples
+    --------
+    The height on S²: its Riemannian gradient vanishes at the pole and is ``e_z`` on the equator:
+
+    >>> from liesample.spaces import Sphere, trivialised_value_and_grad
+    >>> value_and_grad = trivialised_value_and_grad(lambda x: x[2], Sphere(2))
+    >>> value, grad = value_and_grad(jnp.array([1.0, 0.0, 0.0]))
+    >>> float(value), grad.tolist()
+    (0.0, [0.0, 0.0, 1.0])
+    """
 
     def value_and_grad(position):
         def along(eps):
@@ -752,6 +864,14 @@ def trivialised_value_and_grad(logdensity_fn: Callable, space: Space | PyTree) -
 
 
 def zero_momentum(space: Space | PyTree, position: PyTree) -> PyTree:
+    """The zero momentum of every block (algebra coordinates, in the position's dtype).
+
+    Examples
+    --------
+    >>> from liesample.spaces import SO, zero_momentum
+    >>> zero_momentum(SO(3), jnp.eye(3)).shape  # one algebra coordinate per generator
+    (3,)
+    """
     return _map(
         lambda s, x: jnp.zeros(s.momentum_array_shape, s.momentum_dtype(x)), space, position
     )
