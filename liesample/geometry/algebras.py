@@ -45,6 +45,15 @@ class LieAlgebra:
     Elements of ``g`` and ``g*`` are arrays of the same shape, paired by the sum of the
     elementwise product. Subclasses provide ``bracket``, ``ad_star``, ``coadjoint_exp`` and
     ``casimirs``; all of them broadcast over leading axes where the algebra says so.
+
+    Examples
+    --------
+    Every algebra moves a point of ``g*`` along its coadjoint orbit, keeping its Casimirs:
+
+    >>> from liesample.algebras import so3
+    >>> mu, zeta = jnp.array([1.0, 2.0, 2.0]), jnp.array([0.3, -0.1, 0.2])
+    >>> bool(jnp.allclose(so3.casimirs(so3.coadjoint_exp(zeta, mu)), so3.casimirs(mu), atol=1e-12))
+    True
     """
 
     name: str = "g"
@@ -69,7 +78,14 @@ class LieAlgebra:
 
 
 def cross(a: ArrayLike, b: ArrayLike) -> jax.Array:
-    """``a × b`` over the last axis (length 3), broadcasting."""
+    """``a × b`` over the last axis (length 3), broadcasting.
+
+    Examples
+    --------
+    >>> from liesample.algebras import cross
+    >>> cross(jnp.array([1.0, 0.0, 0.0]), jnp.array([0.0, 1.0, 0.0]))
+    Array([0., 0., 1.], dtype=float64)
+    """
     return jnp.cross(a, b)
 
 
@@ -103,6 +119,15 @@ class SO3(LieAlgebra):
     Arrays of shape ``(..., 3)`` are stacks of independent copies: a state of shape
     ``(N, 3)`` lives on the product ``(so(3)*)^N`` and the operations act copy by copy,
     vectorised. The Casimirs are the squared norms ``|μ_k|²`` of the copies.
+
+    Examples
+    --------
+    >>> from liesample.algebras import so3
+    >>> mu = jnp.array([[1.0, 2.0, 2.0], [0.0, 0.0, 2.0]])  # two copies of so(3)*
+    >>> so3.casimirs(mu)  # |μ_k|², one per copy
+    Array([9., 4.], dtype=float64)
+    >>> so3.coadjoint_exp(jnp.array([0.1, 0.2, 0.3]), mu).shape
+    (2, 3)
     """
 
     name: str = "so(3)"
@@ -175,6 +200,16 @@ class SE3(LieAlgebra):
     - bracket ``[(ξ, v), (η, w)] = (ξ×η, ξ×w − η×v)``;
     - ``ad*_{(ξ,v)}(Π, Γ) = (Π×ξ + Γ×v, Γ×ξ)``, from ``⟨ad*_ζ μ, η⟩ = ⟨μ, [ζ, η]⟩``;
     - Casimirs ``(|Γ|², Π·Γ)`` (shape ``(..., 2)``); ``Π·Γ`` may be zero or negative.
+
+    Examples
+    --------
+    >>> from liesample.algebras import se3
+    >>> mu = jnp.array([0.0, 0.0, 1.0, 0.0, 0.0, 1.0])  # (Π, Γ)
+    >>> se3.casimirs(mu)  # (|Γ|², Π·Γ)
+    Array([1., 1.], dtype=float64)
+    >>> moved = se3.coadjoint_exp(jnp.array([0.1, 0.2, 0.3, 0.4, 0.5, 0.6]), mu)
+    >>> bool(jnp.allclose(se3.casimirs(moved), se3.casimirs(mu), atol=1e-12))
+    True
     """
 
     name: str = "se(3)"
@@ -263,6 +298,20 @@ class StructureConstants(LieAlgebra):
     casimirs : callable, optional
         ``μ ↦ C(μ)`` with shape ``μ.shape[:-1] + (p,)``.
     name : str
+
+    Examples
+    --------
+    so(3) from its structure constants ``c_{ij}^k = ε_{ijk}``, with the squared norm declared as
+    its Casimir:
+
+    >>> import numpy as np
+    >>> from liesample.algebras import StructureConstants
+    >>> eps = np.zeros((3, 3, 3))
+    >>> for i, j, k in [(0, 1, 2), (1, 2, 0), (2, 0, 1)]:
+    ...     eps[i, j, k], eps[j, i, k] = 1.0, -1.0
+    >>> algebra = StructureConstants(eps, casimirs=lambda mu: (mu**2).sum(-1, keepdims=True))
+    >>> algebra.bracket(jnp.array([1.0, 0.0, 0.0]), jnp.array([0.0, 1.0, 0.0]))
+    Array([0., 0., 1.], dtype=float64)
     """
 
     constants: np.ndarray = field(default=None, repr=False)
@@ -425,6 +474,17 @@ class Unitary(LieAlgebra):
     ----------
     size : int
         ``N ≥ 1``.
+
+    Examples
+    --------
+    Conjugation keeps the spectrum, so a diagonal point stays on the orbit of its eigenvalues:
+
+    >>> from liesample.algebras import unitary
+    >>> u3 = unitary(3)
+    >>> w0 = jnp.diag(jnp.array([1.0, 2.0, 3.0]))
+    >>> w = u3.coadjoint_exp(jax.random.normal(jax.random.key(0), (3, 3)), w0)
+    >>> w.shape, bool(jnp.allclose(u3.spectrum(w), u3.spectrum(w0), atol=1e-12))
+    ((3, 3), True)
     """
 
     size: int = 2
@@ -499,5 +559,12 @@ class Unitary(LieAlgebra):
 
 
 def unitary(size: int) -> Unitary:
-    """``u(N)`` (:class:`Unitary`)."""
+    """``u(N)`` (:class:`Unitary`).
+
+    Examples
+    --------
+    >>> from liesample.algebras import unitary
+    >>> unitary(4).casimirs(jnp.eye(4)).shape  # the spectrum of iW, then ‖W‖²
+    (5,)
+    """
     return Unitary(size)
