@@ -54,7 +54,14 @@ def u1_torus_plaquette_mean(beta, num_plaquettes) -> float:
 
     Any finite ``β`` (the law is normalisable on the compact links): at ``β < 0``,
     ``I_k(β) = (−1)^k I_k(|β|)``, so the terms carry the signs ``(−1)^{kV}`` and each
-    ``∂_β log I_k`` changes sign (for even ``V`` the mean is minus that at ``|β|``)."""
+    ``∂_β log I_k`` changes sign (for even ``V`` the mean is minus that at ``|β|``).
+
+    Examples
+    --------
+    >>> from liesample.targets import u1_plaquette_mean, u1_torus_plaquette_mean
+    >>> bool(0 < u1_torus_plaquette_mean(1.0, num_plaquettes=4) < 1)
+    True
+    """
     beta = finite_float("beta", beta)
     if beta == 0.0:
         return 0.0
@@ -73,7 +80,14 @@ def u1_torus_plaquette_mean(beta, num_plaquettes) -> float:
 
 def su2_torus_plaquette_mean(beta, num_plaquettes) -> float:
     """``E[½ tr U_P]`` of 2-D SU(2) on a torus of ``V`` plaquettes:
-    ``(1/V) ∂_β log Σ_{n≥1} ((2/β) I_n(β))^V``."""
+    ``(1/V) ∂_β log Σ_{n≥1} ((2/β) I_n(β))^V``.
+
+    Examples
+    --------
+    >>> from liesample.targets import su2_torus_plaquette_mean
+    >>> bool(0 < su2_torus_plaquette_mean(1.0, num_plaquettes=4) < 1)
+    True
+    """
     beta = finite_float("beta", beta, positive=True)
     v = _plaquettes(num_plaquettes)
     n = np.arange(1, TERMS + 1)
@@ -96,7 +110,15 @@ def sun_character_coefficients(beta, n: int, max_row: int = 40, windings: int = 
     Returns ``(λ, c, dc, d)``: the highest weights ``λ`` (rows ``λ_1 ≥ … ≥ λ_N = 0``, ``λ_1 ≤
     max_row``), ``c_λ e^{−β}``, ``∂_β c_λ e^{−β}`` and the dimensions ``d_λ``, from
     ``c_λ = Σ_{|k| ≤ windings} det[I_{λ_j+k+i−j}(β/N)]`` (the common factor ``e^{−β}`` keeps
-    large ``β`` finite)."""
+    large ``β`` finite).
+
+    Examples
+    --------
+    >>> from liesample.targets import sun_character_coefficients
+    >>> weights, c, dc, dims = sun_character_coefficients(1.0, n=2, max_row=5)
+    >>> weights[:3, 0].tolist(), dims[:3].tolist()  # SU(2): the spins 0, ½, 1
+    ([0, 1, 2], [1.0, 2.0, 3.0])
+    """
     beta = finite_float("beta", beta)
     if isinstance(n, bool) or int(n) != n or n < 2:
         raise ValueError(f"n must be an integer >= 2 (SU(n)), got {n!r}")
@@ -130,7 +152,15 @@ def sun_character_coefficients(beta, n: int, max_row: int = 40, windings: int = 
 
 def sun_torus_plaquette_mean(beta, num_plaquettes, n: int) -> float:
     """``E[Re tr U_P / N]`` of 2-D SU(N) on a torus of ``V`` plaquettes:
-    ``(1/V) ∂_β log Σ_λ (c_λ/d_λ)^V`` (:func:`sun_character_coefficients`)."""
+    ``(1/V) ∂_β log Σ_λ (c_λ/d_λ)^V`` (:func:`sun_character_coefficients`).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from liesample.targets import su2_torus_plaquette_mean, sun_torus_plaquette_mean
+    >>> bool(np.isclose(sun_torus_plaquette_mean(1.0, 4, n=2), su2_torus_plaquette_mean(1.0, 4)))
+    True
+    """
     beta = finite_float("beta", beta, positive=True)
     v = _plaquettes(num_plaquettes)
     max_row = 30 + int(10.0 * np.sqrt(beta / n))  # I_m(β/N) is negligible beyond (and k too)
@@ -150,12 +180,28 @@ def sun_torus_plaquette_mean(beta, num_plaquettes, n: int) -> float:
 
 def su3_torus_plaquette_mean(beta, num_plaquettes) -> float:
     """``E[Re tr U_P / 3]`` of 2-D SU(3) on a torus of ``V`` plaquettes
-    (:func:`sun_torus_plaquette_mean` with ``n = 3``)."""
+    (:func:`sun_torus_plaquette_mean` with ``n = 3``).
+
+    Examples
+    --------
+    >>> from liesample.targets import su3_torus_plaquette_mean
+    >>> bool(0 < su3_torus_plaquette_mean(1.0, num_plaquettes=4) < 1)
+    True
+    """
     return sun_torus_plaquette_mean(beta, num_plaquettes, 3)
 
 
 def u1_torus_charge_law(beta, num_plaquettes, max_charge: int = 10) -> np.ndarray:
-    """``P(Q = q)`` for ``q = −max_charge … max_charge`` (2-D U(1) torus, geometric charge)."""
+    """``P(Q = q)`` for ``q = −max_charge … max_charge`` (2-D U(1) torus, geometric charge).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from liesample.targets import u1_torus_charge_law
+    >>> law = u1_torus_charge_law(1.0, num_plaquettes=4, max_charge=3)  # P(Q = −3), …, P(Q = 3)
+    >>> law.shape, bool(np.isclose(law.sum(), 1.0)), bool(np.allclose(law, law[::-1]))
+    ((7,), True, True)
+    """
     beta = finite_float("beta", beta)
     v = _plaquettes(num_plaquettes)
     phi, w_phi = np.polynomial.legendre.leggauss(400)
@@ -173,7 +219,15 @@ def u1_torus_charge_law(beta, num_plaquettes, max_charge: int = 10) -> np.ndarra
 
 def single_plaquette_mean(beta, n: int) -> float:
     """``E[Re tr U / N]`` under ``exp((β/N) Re tr U) dHaar`` on U(1) (``n = 1``), SU(2), SU(3)
-    (Weyl's integration formula over the eigenphases)."""
+    (Weyl's integration formula over the eigenphases).
+
+    Examples
+    --------
+    >>> from liesample.targets import single_plaquette_mean, u1_plaquette_mean
+    >>> import numpy as np
+    >>> bool(np.isclose(single_plaquette_mean(1.0, n=1), u1_plaquette_mean(1.0)))
+    True
+    """
     beta = finite_float("beta", beta)
     if n == 1:
         return float(special.ive(1, beta) / special.ive(0, beta))

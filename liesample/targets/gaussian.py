@@ -38,7 +38,16 @@ __all__ = [
 
 @dataclass(frozen=True)
 class Gaussian:
-    """``N(mean, covariance)`` on Rᵈ with its log-density (up to a constant)."""
+    """``N(mean, covariance)`` on Rᵈ with its log-density (up to a constant).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from liesample.targets import Gaussian
+    >>> target = Gaussian(np.zeros(2), np.array([[2.0, 1.0], [1.0, 2.0]]))
+    >>> target.dimension, float(target.logdensity_fn(jnp.zeros(2)))
+    (2, 0.0)
+    """
 
     mean: np.ndarray
     covariance: np.ndarray
@@ -88,6 +97,16 @@ def correlated_gaussian(
 
     For ``dimension = 2`` the eigenvalues are ``1 ± ρ`` with ``ρ = (κ − 1)/(κ + 1)`` on the
     diagonals at 45°, i.e. unit variances and correlation ``ρ``.
+
+    Examples
+    --------
+    In two dimensions: unit variances and correlation ``ρ = (κ − 1)/(κ + 1)``:
+
+    >>> import numpy as np
+    >>> from liesample.targets import correlated_gaussian
+    >>> target = correlated_gaussian(2, condition_number=9.0)
+    >>> bool(np.allclose(target.second_moments(), [[1.0, 0.8], [0.8, 1.0]], atol=1e-12))
+    True
     """
     if not isinstance(dimension, (int, np.integer)) or isinstance(dimension, bool) or dimension < 1:
         raise ValueError(f"dimension must be an integer >= 1, got {dimension!r}")
@@ -117,7 +136,19 @@ def ou_drift(
     magnetic_field: npt.ArrayLike,
     friction: float,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``(A, ΣΣᵀ)`` of the magnetic Langevin SDE on a Gaussian target (``β = 1``, ``σ² = 2θ``)."""
+    """``(A, ΣΣᵀ)`` of the magnetic Langevin SDE on a Gaussian target (``β = 1``, ``σ² = 2θ``).
+
+    Examples
+    --------
+    The magnetic Langevin SDE on ``N(0, I₂)``: its stationary covariance is the target's, for
+    any field:
+
+    >>> import numpy as np
+    >>> from liesample.targets import ou_drift, ou_stationary_covariance
+    >>> drift, diffusion = ou_drift(np.eye(2), np.ones(2), np.array([[0.0, 1.0], [-1.0, 0.0]]), 1.0)
+    >>> drift.shape, bool(np.allclose(ou_stationary_covariance(drift, diffusion), np.eye(4)))
+    ((4, 4), True)
+    """
     k = np.atleast_2d(np.asarray(precision, dtype=float))
     d = k.shape[0]
     imm = np.asarray(inverse_mass_matrix, dtype=float)
@@ -130,7 +161,17 @@ def ou_drift(
 
 
 def ou_stationary_covariance(drift: npt.ArrayLike, diffusion: npt.ArrayLike) -> np.ndarray:
-    """``C₀`` with ``A C₀ + C₀ Aᵀ + ΣΣᵀ = 0``."""
+    """``C₀`` with ``A C₀ + C₀ Aᵀ + ΣΣᵀ = 0``.
+
+    Examples
+    --------
+    The Ornstein–Uhlenbeck process ``dz = −z dt + √2 dW`` is stationary at ``N(0, 1)``:
+
+    >>> import numpy as np
+    >>> from liesample.targets import ou_stationary_covariance
+    >>> ou_stationary_covariance(-np.eye(1), 2.0 * np.eye(1))
+    array([[1.]])
+    """
     c0 = scipy.linalg.solve_continuous_lyapunov(np.asarray(drift), -np.asarray(diffusion))
     return 0.5 * (c0 + c0.T)
 
@@ -138,7 +179,15 @@ def ou_stationary_covariance(drift: npt.ArrayLike, diffusion: npt.ArrayLike) -> 
 def ou_cross_covariance(
     drift: npt.ArrayLike, stationary_covariance: npt.ArrayLike, time: float
 ) -> np.ndarray:
-    """``Cov(z_t, z_0) = e^{At} C₀`` (entry ``[i, j] = Cov(z_i(t), z_j(0))``)."""
+    """``Cov(z_t, z_0) = e^{At} C₀`` (entry ``[i, j] = Cov(z_i(t), z_j(0))``).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from liesample.targets import ou_cross_covariance
+    >>> bool(np.allclose(ou_cross_covariance(-np.eye(1), np.eye(1), 1.0), np.exp(-1.0)))
+    True
+    """
     return scipy.linalg.expm(np.asarray(drift) * time) @ np.asarray(stationary_covariance)
 
 
@@ -156,6 +205,16 @@ def linear_step_moments(
     Returns
     -------
     dict lag -> (n, n) array; lag 0 is the stationary covariance ``C = T C Tᵀ + N Nᵀ``.
+
+    Examples
+    --------
+    The AR(1) chain ``z' = z/2 + ξ``: variance ``1/(1 − 1/4) = 4/3``, lag-one covariance ``2/3``:
+
+    >>> import numpy as np
+    >>> from liesample.targets import linear_step_moments
+    >>> moments = linear_step_moments(np.array([[0.5]]), np.array([[1.0]]), lags=(0, 1))
+    >>> bool(np.allclose(moments[0], 4 / 3)), bool(np.allclose(moments[1], 2 / 3))
+    (True, True)
     """
     t = np.asarray(transition, dtype=float)
     n = np.asarray(noise, dtype=float)

@@ -32,7 +32,15 @@ __all__ = [
 
 
 def langevin_function(x: npt.ArrayLike) -> np.ndarray:
-    """``L(x) = coth x − 1/x`` (``x/3`` near 0, odd), stable for every finite ``x``."""
+    """``L(x) = coth x − 1/x`` (``x/3`` near 0, odd), stable for every finite ``x``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from liesample.targets import langevin_function
+    >>> langevin_function(np.array([0.0, -1.0])) + langevin_function(np.array([0.0, 1.0]))  # odd
+    array([0., 0.])
+    """
     x = np.asarray(x, dtype=float)
     small = np.abs(x) < 1e-3
     safe = np.where(small, 1.0, x)
@@ -47,6 +55,14 @@ def heisenberg_chain_correlation(
 
     For the open classical Heisenberg chain without field or anisotropy, at any length and for
     any ``k``: the bond angles are independent under the Gibbs law. ``n ≥ 0`` (array or int).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from liesample.targets import heisenberg_chain_correlation, langevin_function
+    >>> c = heisenberg_chain_correlation(np.arange(3), beta=1.0)
+    >>> bool(c[0] == 1.0), bool(np.isclose(c[2], langevin_function(1.0) ** 2))
+    (True, True)
     """
     n = np.asarray(n)
     if not np.issubdtype(n.dtype, np.integer) or np.any(n < 0):
@@ -63,6 +79,16 @@ class HeisenbergChainReference:
     With ``K = βJ``, the ``length − 1`` bond cosines ``c_k = s_k·s_{k+1}`` are i.i.d. with
     density ``∝ exp(K c)`` on ``[−1, 1]``: mean ``L(K)`` (Langevin function) and variance
     ``L′(K) = 1/K² − 1/sinh²K``.
+
+    Examples
+    --------
+    The reference of ``systems.heisenberg((4,))`` at ``β = 1`` (``system.reference(1.0)``):
+
+    >>> import numpy as np
+    >>> from liesample.targets import HeisenbergChainReference, langevin_function
+    >>> reference = HeisenbergChainReference(length=4, beta=1.0, coupling=1.0)
+    >>> bool(np.isclose(reference.correlation(1), langevin_function(1.0)))
+    True
     """
 
     length: int

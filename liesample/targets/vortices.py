@@ -68,6 +68,15 @@ def beta_bounds(circulations: ArrayLike) -> tuple[float, float]:
     of size ``n`` the pair sum grows with every ``|Γ|``, so the worst is the ``n`` largest.
     ``β > 0``: same-sign clusters never fail; the opposite-signed pair with the largest
     ``|Γ_jΓ_k|`` gives ``β < 4π/|Γ_jΓ_k|``, and for ``N ≤ 12`` every cluster is enumerated.
+
+    Examples
+    --------
+    Two like-signed unit vortices: any ``β > −4π``; an opposite pair: any ``β < 4π``:
+
+    >>> import numpy as np
+    >>> from liesample.targets import beta_bounds
+    >>> bool(np.isclose(beta_bounds([1.0, 1.0])[0], -4 * np.pi)), beta_bounds([1.0, 1.0])[1]
+    (True, inf)
     """
     gamma = nonzero_circulations(circulations)
     beta_min = -math.inf
@@ -93,7 +102,16 @@ def beta_bounds(circulations: ArrayLike) -> tuple[float, float]:
 
 def check_vortex_beta(circulations: ArrayLike, beta: float) -> None:
     """``ValueError`` naming the bound when ``exp(−βh)`` is not normalisable (see
-    :func:`beta_bounds`)."""
+    :func:`beta_bounds`).
+
+    Examples
+    --------
+    >>> from liesample.targets import check_vortex_beta
+    >>> check_vortex_beta([1.0, -1.0], beta=1.0)  # normalisable: no error
+    >>> check_vortex_beta([1.0, -1.0], beta=100.0)
+    Traceback (most recent call last):
+    ValueError: beta = 100 makes the point-vortex Gibbs law non-normalisable: ...
+    """
     beta = finite_float("beta", beta)
     beta_min, beta_max = beta_bounds(circulations)
     if not beta_min < beta < beta_max:
@@ -112,6 +130,16 @@ class VortexPairLaw:
 
     ``u = (1 − c)/2 ~ Beta(p + 1, 1)``: density ``(p + 1) u^p`` on ``[0, 1]``, CDF ``u^{p+1}``.
     Requires ``p > −1``.
+
+    Examples
+    --------
+    At ``p = 0`` (``β = 0``) ``c = x₁·x₂`` is uniform on ``[−1, 1]``:
+
+    >>> import numpy as np
+    >>> from liesample.targets import VortexPairLaw
+    >>> law = VortexPairLaw(exponent=0.0)
+    >>> bool(np.isclose(law.mean(), 0.0)), bool(np.isclose(law.variance(), 1 / 3))
+    (True, True)
     """
 
     exponent: float
@@ -183,6 +211,17 @@ def gibbs_expectation(
     (numpy). Returns ``(estimate, standard_error, effective_sample_size)``, arrays ``(k,)`` and
     a float; the standard error is the delta-method one of a ratio estimator. Finite variance
     needs ``Σ_{j<k∈S} 2p_jk > −(n−1)`` on every cluster (e.g. every ``p_jk > −1/2``).
+
+    Examples
+    --------
+    ``E[x₁·x₂]`` of a pair at ``β = 0`` (exactly 0), with its standard error:
+
+    >>> from liesample.targets import gibbs_expectation
+    >>> cosine = lambda x: (x[:, 0] * x[:, 1]).sum(-1, keepdims=True)
+    >>> estimate, error, ess = gibbs_expectation([1.0, 1.0], 0.0, cosine, jax.random.key(0),
+    ...                                          num_samples=4096)
+    >>> estimate.shape, bool(abs(estimate[0]) < 5 * error[0])
+    ((1,), True)
     """
     gamma = nonzero_circulations(circulations)
     check_vortex_beta(gamma, beta)
