@@ -21,16 +21,17 @@ from liesample.foundation.precision import X64_SWITCH, roundoff_tolerance
 from liesample.geometry.algebras import so3
 from liesample.run.checks import casimir_drift_bound
 from liesample.run.runner import sample_chains
-from liesample.samplers.orbit._starts import check_orbit_starts
+from liesample.samplers.orbit._starts import check_orbit_starts, distinct_orbits, orbit_groups
 
 EPS32 = float(np.finfo(np.float32).eps)
 X64 = re.escape(X64_SWITCH)
 
 
 def float32_unit_vectors(shape, seed=0):
-    """Unit vectors normalised in float32 (each off by float32 round-off)."""
-    x = jax.random.normal(jax.random.key(seed), shape, jnp.float32)
-    return x / jnp.linalg.norm(x, axis=-1, keepdims=True)
+    """Unit vectors normalised in float32 (each off by float32 round-off); NumPy, so that
+    nothing is compiled for them."""
+    x = np.random.default_rng(seed).normal(size=shape).astype(np.float32)
+    return x / np.linalg.norm(x, axis=-1, keepdims=True)
 
 
 # ---------------------------------------------------------------------------- Zeitlin
@@ -69,11 +70,11 @@ def test_point_vortex_starts_normalised_in_float32_are_accepted():
     jax_enable_x64."""
     with jax.enable_x64(False):
         system = systems.point_vortices([1.0, -2.0, 0.5])
-        starts = jnp.stack([float32_unit_vectors((3, 3), seed) for seed in range(2)])
-        assert starts.dtype == jnp.float32
+        starts = np.stack([float32_unit_vectors((3, 3), seed) for seed in range(2)])
+        assert starts.dtype == np.float32
         check_orbit_starts(system, starts)  # the start check of every orbit sampler's run
         system.check_position(starts[0])
-        off = starts[1] * jnp.array([[1.0], [1.001], [1.0]], jnp.float32)
+        off = starts[1] * np.array([[1.0], [1.001], [1.0]], np.float32)
         with pytest.raises(ValueError, match=f"on the sphere of radius 1.*vortex 1.*{X64}"):
             system.check_position(off)
 
@@ -82,9 +83,9 @@ def test_spins_normalised_in_float32_are_accepted():
     with jax.enable_x64(False):
         system = systems.heisenberg((4,))
         spins = float32_unit_vectors((4, 3))
-        check_orbit_starts(system, jnp.stack([spins, spins]))
+        check_orbit_starts(system, np.stack([spins, spins]))
         with pytest.raises(ValueError, match=f"unit spins.*site \\(2,\\).*{X64}"):
-            system.check_position(spins.at[2].multiply(1.001))
+            system.check_position(spins * np.array([[1.0], [1.0], [1.001], [1.0]], np.float32))
 
 
 def test_other_orbit_systems_accept_float32_starts():
@@ -98,8 +99,21 @@ def test_other_orbit_systems_accept_float32_starts():
         rigid = systems.rigid_body([1.0, 2.0, 3.0])
         heavy = systems.heavy_top([1.0, 2.0, 3.0], 1.0)
         for system in (rigid, heavy, custom):
-            start = jnp.asarray(system.default_position, jnp.float32)
-            check_orbit_starts(system, jnp.stack([start, 0.5 * start]))
+            start = np.asarray(system.default_position, np.float32)
+            check_orbit_starts(system, np.stack([start, 0.5 * start]))
+
+
+def test_float32_starts_on_one_orbit_sample_one_law():
+    """Chains started at different float32 points of one orbit form one law group (their
+    Casimirs differ by round-off), so their R-hat is computed; another orbit is another law."""
+    with jax.enable_x64(False):
+        system = systems.heisenberg((4,))
+        spins = [float32_unit_vectors((4, 3), seed) for seed in range(3)]
+        starts = np.stack([*spins, 0.5 * spins[0]])
+        groups = orbit_groups(system)(starts)
+    assert groups.tolist()[:3] == [groups[0]] * 3 and groups[3] != groups[0]
+    casimirs = np.array([[2.25], [2.2500002], [1.0]], np.float32)  # |μ|² of three starts
+    assert distinct_orbits(casimirs).tolist() == [0, 2]
 
 
 def test_float64_checks_keep_their_floors():

@@ -17,6 +17,7 @@ import numpy as np
 
 from liesample.dynamics.system import LiePoissonSystem
 from liesample.foundation.compile import evaluate, jit
+from liesample.foundation.precision import check_dtype, roundoff_tolerance
 from liesample.foundation.validation import concrete_array
 from liesample.samplers.contract import PositionCheck, first_bad_chain, raise_first_bad
 
@@ -148,21 +149,29 @@ def check_orbit_starts(system: LiePoissonSystem, positions):
     return casimirs
 
 
+def _orbits(casimirs, dtype):
+    """``(first, labels)`` of :func:`numpy.unique` over the chains' Casimirs rounded to
+    ``floor(−log10(1000 ε))`` decimals of ``dtype`` (12 in float64, 3 in float32): starts
+    that differ by round-off lie on one orbit."""
+    decimals = int(np.floor(-np.log10(roundoff_tolerance(dtype))))
+    rounded = np.round(np.asarray(casimirs, dtype=float).reshape(len(casimirs), -1), decimals)
+    _, first, labels = np.unique(rounded, axis=0, return_index=True, return_inverse=True)
+    return first, labels.reshape(-1)
+
+
 def orbit_groups(system: LiePoissonSystem):
-    """The runner's ``law_groups`` hook: chains on one orbit (Casimirs equal to 12 decimals)
-    sample one Gibbs law."""
+    """The runner's ``law_groups`` hook: chains on one orbit (Casimirs equal to round-off,
+    :func:`_orbits`) sample one Gibbs law."""
 
     def groups(positions):
+        dtype = check_dtype(positions)
         positions = jnp.asarray(positions, jnp.result_type(float))
-        casimirs = np.asarray(jax.vmap(system.casimirs)(positions)).reshape(len(positions), -1)
-        _, labels = np.unique(np.round(casimirs, 12), axis=0, return_inverse=True)
-        return labels.reshape(-1)
+        casimirs = np.asarray(jax.vmap(system.casimirs)(positions))
+        return _orbits(casimirs, dtype)[1]
 
     return groups
 
 
 def distinct_orbits(casimirs) -> np.ndarray:
-    """Index of one start per distinct orbit (Casimirs equal to 12 decimals)."""
-    rounded = np.round(np.asarray(casimirs, dtype=float).reshape(len(casimirs), -1), 12)
-    _, first = np.unique(rounded, axis=0, return_index=True)
-    return np.sort(first)
+    """Index of one start per distinct orbit (Casimirs equal to round-off, :func:`_orbits`)."""
+    return np.sort(_orbits(casimirs, check_dtype(np.asarray(casimirs)))[0])
