@@ -15,6 +15,7 @@ import errno
 import os
 import re
 import shutil
+import signal
 import subprocess
 import sys
 import textwrap
@@ -33,7 +34,8 @@ from liesample.run.store import RunFileError
 
 # The sampler, starts, key and chunk of tests/test_run_file.py: the same compiled programs.
 SETTINGS = {"beta": 3.0, "sigma": 1.0, "step_size": 0.05, "integrator": "lie_euler"}
-ALGORITHM = liesample.lie_poisson_langevin(liesample.systems.rigid_body((1.0, 2.0, 4.0)), **SETTINGS)
+SYSTEM = liesample.systems.rigid_body((1.0, 2.0, 4.0))
+ALGORITHM = liesample.lie_poisson_langevin(SYSTEM, **SETTINGS)
 STARTS = np.array([[0.6, 1.0, 0.8], [1.0, 0.0, 0.0], [0.0, -2.0, 0.5]])
 KEY = jax.random.key(5)
 CHUNK, NUM_DRAWS = 4, 12  # three chunks: the file's creation, then two copies
@@ -113,13 +115,19 @@ class FileLayer:
 
 
 @pytest.fixture(scope="module")
-def writes(tmp_path_factory):
-    """The store's writes in an uninterrupted run, in order."""
-    path = tmp_path_factory.mktemp("recorded") / "run.nc"
+def recorded(tmp_path_factory):
+    """A whole run file, the store's writes that made it, in order, and its size after each
+    chunk."""
+    path, sizes = tmp_path_factory.mktemp("recorded") / "run.nc", []
     with pytest.MonkeyPatch.context() as monkeypatch:
         layer = FileLayer(monkeypatch, path)
-        run(path)
-    return layer.calls
+        run(path, callback=lambda done: sizes.append(os.path.getsize(path)))
+    return path, layer.calls, sizes
+
+
+@pytest.fixture(scope="module")
+def writes(recorded):
+    return recorded[1]
 
 
 def points(writes, chunk):
@@ -165,11 +173,10 @@ def fail_and_resume(monkeypatch, path, writes, fault, fail_at, uninterrupted):
     else:
         with pytest.raises(FileNotFoundError, match="no run file"):
             load_chains(path)
-    resumed = run(path, resume=True)
+    resumed = run(path, resume=True)  # (its file is what it returns: tests/test_resume.py)
     np.testing.assert_array_equal(resumed.positions, uninterrupted.positions)
     for name, values in uninterrupted.info.items():
         np.testing.assert_array_equal(resumed.info[name], values, err_msg=name)
-    np.testing.assert_array_equal(load_chains(path).posterior["mu"], uninterrupted.positions)
     assert sorted(os.listdir(path.parent)) == ["run.nc"]
 
 
@@ -180,7 +187,6 @@ DEFAULT = {
     (1, "write", "first", "kill"),  # a later chunk's draws, half written
     (0, "create", "first", "full disk"),  # the file's creation
     (1, "replace", "first", "interrupt"),  # the rename
-    (1, "sync", "last", "full disk"),  # the directory's sync, after the rename
 }
 KINDS = {
     0: ("open", "create", "resize", "write", "attribute", "flush", "close", "sync", "replace"),
@@ -221,3 +227,186 @@ def test_every_write_of_a_later_chunk_fails_cleanly(tmp_path, monkeypatch, write
             folder.mkdir()
             fail_and_resume(monkeypatch, folder / "run.nc", writes, "full disk", fail_at,
                             uninterrupted)  # fmt: skip
+
+
+def test_a_disk_without_room_is_refused_before_the_copy(tmp_path, monkeypatch):
+    path = tmp_path / "run.nc"
+    committed = {}
+
+    def disk_fills(draws_done):  # after the first chunk: 1000 bytes free
+        committed["bytes"] = path.read_bytes()
+        monkeypatch.setattr(atomic, "free_bytes", lambda where: 1000)
+
+    with pytest.raises(OSError) as error:
+        run(path, callback=disk_fills)
+    needed = len(committed["bytes"]) + 3 * CHUNK * 8 * 3  # the copy, and more than mu's bytes
+    message = str(error.value)
+    assert error.value.errno == errno.ENOSPC
+    assert re.search(
+        rf"not enough free space to save draws 4 to 7 of the run in {re.escape(repr(str(path)))}"
+        r": about (\d+) bytes are needed .* and 1000 are free .* still holds its 4 committed "
+        r"draws; free some space \(or move the file .*\), then pass resume=True",
+        message,
+    ), message
+    assert int(re.search(r"about (\d+) bytes", message)[1]) > needed
+    assert path.read_bytes() == committed["bytes"]  # refused before anything was written
+    assert sorted(os.listdir(tmp_path)) == ["run.nc"]
+
+
+def stray_files(folder, run_file):
+    """Files that hold no committed chunk: what a kill at a file's creation leaves (by an
+    earlier liesample, which created the file in place: HDF5's first bytes, then its first
+    groups without the run's), a run file cut short, and HDF5 and text files of another kind."""
+    strays = {}
+    with h5py.File(folder / "creating.nc", "w") as f:
+        strays["killed at creation"] = (folder / "creating.nc").read_bytes()  # as on disk now
+        f.create_group("posterior").attrs["beta"] = 3.0
+        f.flush()
+        strays["killed before the first commit"] = (folder / "creating.nc").read_bytes()
+    whole = run_file.read_bytes()
+    strays |= {"96 bytes of a run": whole[:96], "9.5 kB of a run": whole[:9500]}
+    with h5py.File(folder / "foreign.nc", "w") as f:
+        f["x"] = np.zeros(3)
+    strays["foreign HDF5"] = (folder / "foreign.nc").read_bytes()
+    strays["text"] = b"not a run\n"
+    return strays
+
+
+def test_a_file_without_a_committed_chunk_is_refused_saying_what_to_do(
+    tmp_path, monkeypatch, recorded
+):
+    def no_compiling(*args):
+        raise AssertionError("compiled before refusing the file")
+
+    monkeypatch.setattr(liesample.run.loop._Run, "compile", no_compiling)
+    for what, data in stray_files(tmp_path, recorded[0]).items():
+        path = tmp_path / f"{what}.nc"
+        path.write_bytes(data)
+        pattern = (
+            rf"{re.escape(repr(str(path)))}.*(holds no draws that liesample can read|holds no "
+            r"committed draws).*delete it \(or move it away\) to start the run afresh"
+        )
+        with pytest.raises(RunFileError, match=pattern):
+            load_chains(path)
+        with pytest.raises(RunFileError, match=pattern):
+            run(path, resume=True)
+        assert path.read_bytes() == data, what
+
+
+LIMITED = textwrap.dedent(
+    f"""
+    import resource, signal, sys
+    import jax
+    jax.config.update("jax_enable_x64", True)
+    import numpy as np
+    import liesample
+
+    # a real write failure inside HDF5: past this size a write fails (EFBIG, as ENOSPC would)
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (int(sys.argv[2]), int(sys.argv[2])))
+    algorithm = liesample.lie_poisson_langevin(
+        liesample.systems.rigid_body((1.0, 2.0, 4.0)), **{SETTINGS!r}
+    )
+    liesample.sample_chains(algorithm, jax.random.key(5), np.array({STARTS.tolist()}),
+                            {NUM_DRAWS}, output=sys.argv[1], **{RUN!r})
+    print("NOT STOPPED")
+    """
+)
+
+
+def size_limit(recorded):
+    """A file size that the run's file of two chunks fits in, and of three does not."""
+    sizes = recorded[2]
+    return (sizes[1] + sizes[2]) // 2
+
+
+def check_the_failure(path, message, uninterrupted):
+    pattern = (
+        rf"\[Errno {errno.EFBIG}\] cannot save draws 8 to 11 of the run in "
+        rf"{re.escape(repr(str(path)))}: .*File too large.*\. The file is unchanged and still "
+        r"holds its 8 committed draws; .* pass resume=True to continue the run"
+    )
+    assert re.fullmatch(pattern, message), message
+    np.testing.assert_array_equal(load_chains(path).posterior["mu"], uninterrupted.positions[:, :8])
+
+
+@pytest.mark.skipif(not hasattr(signal, "SIGXFSZ"), reason="needs POSIX resource limits")
+def test_a_real_write_failure_closes_every_hdf5_handle(tmp_path, recorded, uninterrupted):
+    import resource
+
+    path = tmp_path / "run.nc"
+    opened = len(h5py.h5f.get_obj_ids())
+    soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
+    previous = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    try:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (size_limit(recorded), hard))
+        with pytest.raises(OSError) as error:
+            run(path)
+    finally:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
+        signal.signal(signal.SIGXFSZ, previous)
+    assert len(h5py.h5f.get_obj_ids()) == opened  # none left to fail again at exit
+    check_the_failure(path, str(error.value), uninterrupted)
+    assert sorted(os.listdir(tmp_path)) == ["run.nc"]
+
+
+@pytest.mark.slow  # an interpreter of its own; the handles are checked above in this process
+@pytest.mark.skipif(not hasattr(signal, "SIGXFSZ"), reason="needs POSIX resource limits")
+def test_a_real_write_failure_exits_as_python_does(tmp_path, recorded, uninterrupted):
+    """After HDF5 failed to write, no handle is left to fail again, or crash, at exit: the
+    process ends with Python's status for an uncaught error."""
+    path = tmp_path / "run.nc"
+    completed = subprocess.run(
+        [sys.executable, "-c", LIMITED, str(path), str(size_limit(recorded))],
+        capture_output=True, text=True, timeout=300, check=False,
+    )  # fmt: skip
+    assert completed.returncode == 1, completed.stdout + completed.stderr[-3000:]
+    last = completed.stderr.strip().splitlines()[-1]
+    assert last.startswith("OSError: "), last
+    check_the_failure(path, last.removeprefix("OSError: "), uninterrupted)
+    assert sorted(os.listdir(tmp_path)) == ["run.nc"]
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """A 700 KiB file system (tmpfs), where the machine lets this process mount one."""
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    if sys.platform != "linux" or shutil.which("mount") is None:
+        pytest.skip("needs Linux's mount")
+    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=700k", "tmpfs", str(disk)],
+                             capture_output=True, text=True, check=False)  # fmt: skip
+    if mounted.returncode != 0:
+        pytest.skip(f"cannot mount a small tmpfs here: {mounted.stderr.strip()}")
+    yield disk
+    subprocess.run(["umount", str(disk)], check=False)
+
+
+@pytest.mark.slow  # thousands of draws until a real disk is full; the faults are injected above
+@pytest.mark.parametrize("checked", [True, False], ids=["refused early", "failed writing"])
+def test_a_full_disk_keeps_every_committed_draw_and_the_moved_file_resumes(
+    tmp_path, small_disk, monkeypatch, checked
+):
+    """A run fills a 700 KiB disk: it stops with ENOSPC (refused by the free-space check, or,
+    with the check off, failed inside HDF5), keeps every chunk it committed, and the file,
+    moved to a disk with room, resumes to the draws of an uninterrupted run."""
+    kwargs = {"chunk_draws": 100, "progress_bar": False}
+    whole = sample_chains(ALGORITHM, KEY, STARTS, 6000, **kwargs)
+    path = small_disk / "run.nc"
+    if not checked:
+        monkeypatch.setattr(atomic, "check_space", lambda *args: None)
+    with pytest.raises(OSError) as error:
+        sample_chains(ALGORITHM, KEY, STARTS, 6000, output=path, **kwargs)
+    assert error.value.errno == errno.ENOSPC, error.value
+    assert "resume=True" in str(error.value)
+    saved = load_chains(path)
+    done = saved.posterior.sizes["draw"]
+    assert done >= 1000 and done % 100 == 0
+    np.testing.assert_array_equal(saved.posterior["mu"], whole.positions[:, :done])
+    assert sorted(os.listdir(small_disk)) == ["run.nc"]
+    moved = tmp_path / "moved.nc"
+    shutil.move(path, moved)
+    resumed = sample_chains(ALGORITHM, KEY, STARTS, 6000, output=moved, resume=True, **kwargs)
+    np.testing.assert_array_equal(resumed.positions, whole.positions)
+    for name, values in whole.info.items():
+        np.testing.assert_array_equal(resumed.info[name], values, err_msg=name)

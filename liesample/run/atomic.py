@@ -132,7 +132,7 @@ def replacing(path: str, *, copy: bool, extra_bytes: int, saving: str, kept: str
         with contextlib.suppress(OSError):
             os.remove(work)
         if isinstance(error, OSError):
-            reason = error.strerror or str(error)
+            reason = " ".join((error.strerror or str(error)).split())  # HDF5's: many lines
             raise OSError(
                 error.errno, f"cannot save {saving} in {path!r}: {reason}. {advice(kept)}"
             ) from None
