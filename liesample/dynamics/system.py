@@ -108,6 +108,18 @@ class LiePoissonSystem:
         ``prop:stoch-noether``): the chain samples ``exp(−βh)`` restricted to it. ``"test"``
         (default, and after :meth:`with_noise` unless told): :meth:`check_noise` runs the rank
         test of :mod:`liesample.dynamics.noise_span` once, when a sampler is built.
+
+    Examples
+    --------
+    A spherical rigid body declared by hand (:func:`liesample.systems.lie_poisson_system` is the
+    usual way); the noise defaults to one linear noise per coordinate:
+
+    >>> from liesample.algebras import so3
+    >>> from liesample.systems import LiePoissonSystem
+    >>> system = LiePoissonSystem(name="sphere", algebra=so3, hamiltonian=lambda mu: 0.5 * mu @ mu,
+    ...                           default_position=jnp.array([0.0, 0.0, 1.0]))
+    >>> system.num_noises, system.event_shape
+    (3, (3,))
     """
 
     name: str

@@ -51,6 +51,17 @@ class Integrator:
         is skipped).
     form : {"stratonovich", "ito"}
         The reading of the noise that the one-step map is consistent with.
+
+    Examples
+    --------
+    Integrators are chosen by name or passed as objects:
+
+    >>> from liesample.systems import isospectral_midpoint
+    >>> isospectral_midpoint.preserves_orbit, isospectral_midpoint.weak_order
+    (True, 1)
+    >>> system = liesample.systems.zeitlin_euler(3)
+    >>> sampler = liesample.lie_poisson_langevin(system, beta=1.0, step_size=0.01,
+    ...                                          integrator=isospectral_midpoint)
     """
 
     name: str

@@ -167,6 +167,16 @@ def charged_particle(
         ``e`` (finite; its sign orients the gyration).
     dimension : int, optional
         ``n``; inferred from a constant ``magnetic_field``, otherwise required.
+
+    Examples
+    --------
+    A particle in a harmonic well and a constant field along ``e_z``:
+
+    >>> from liesample.systems import charged_particle
+    >>> system = charged_particle(potential_fn=lambda q: 0.5 * q @ q,
+    ...                           magnetic_field=jnp.array([0.0, 0.0, 1.0]))
+    >>> system.dimension
+    3
     """
     if (potential_fn is None) == (logdensity_fn is None):
         raise ValueError("give exactly one of potential_fn (V(q)) or logdensity_fn (log pi(q))")
@@ -478,6 +488,16 @@ def charged_particle_path(
     ``initial_state`` ``z0 = (q, p)`` of shape ``(2n,)``, ``step_size > 0``, ``num_steps ≥ 1``
     and ``thinning`` (a divisor of ``num_steps``). Warns when the path became non-finite or an
     implicit solve did not converge (both are also flagged in the result).
+
+    Examples
+    --------
+    >>> from liesample.systems import charged_particle, charged_particle_path
+    >>> system = charged_particle(potential_fn=lambda q: 0.5 * q @ q,
+    ...                           magnetic_field=jnp.array([0.0, 0.0, 1.0]))
+    >>> path = charged_particle_path(system, jax.random.key(0), jnp.zeros(6), step_size=0.1,
+    ...                              num_steps=10, beta=1.0, sigma=1.0)
+    >>> path.states.shape, bool(path.nonfinite)  # the start and 10 states (q, p)
+    ((11, 6), False)
     """
     dynamics = charged_particle_dynamics(system, **dynamics_options)
     system.check_state(initial_state)

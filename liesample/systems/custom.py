@@ -46,6 +46,18 @@ def lie_poisson_system(
     -----
     Everything else (the dissipation, Casimir checks, every integrator and sampler) comes from
     the engine; a planar pendulum on ``se(2)*`` is built this way from ``se2``.
+
+    Examples
+    --------
+    A rigid body with one noise, about the first axis (the dissipation is derived from it):
+
+    >>> from liesample.algebras import so3
+    >>> from liesample.systems import lie_poisson_system
+    >>> inertia = jnp.array([1.0, 2.0, 4.0])
+    >>> system = lie_poisson_system(so3, lambda mu: 0.5 * mu @ (mu / inertia),
+    ...                             lambda mu: mu[:1], jnp.array([0.0, 0.0, 1.0]))
+    >>> system.num_noises, system.event_shape
+    (1, (3,))
     """
     if not isinstance(algebra, LieAlgebra):
         raise TypeError(

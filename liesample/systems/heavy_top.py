@@ -62,6 +62,15 @@ def heavy_top(
         with ``Γ = 0`` are rejected (degenerate orbit); ``Π·Γ`` may be any real.
         ``reference(beta, position)`` is :class:`liesample.targets.HeavyTopGibbs` on the orbit
         through ``position`` (``β > 0``).
+
+    Examples
+    --------
+    >>> from liesample.systems import heavy_top
+    >>> system = heavy_top(inertia=(1.0, 2.0, 4.0), mgl=1.0)
+    >>> system.event_shape, system.algebra.casimirs(system.default_position).tolist()  # (|Γ|², Π·Γ)
+    ((6,), [1.0, 0.0])
+    >>> type(system.reference(1.0, system.default_position)).__name__
+    'HeavyTopGibbs'
     """
     moments = principal_moments(inertia)
     mgl = finite_float("mgl", mgl)

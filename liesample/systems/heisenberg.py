@@ -235,6 +235,17 @@ def heisenberg(
         ``init`` and default position all spins along ``e_z``. ``reference(beta)`` is the exact
         :class:`HeisenbergChainReference` for an open chain with ``B = 0``, ``D = 0``,
         :class:`HeisenbergRingReference` for a periodic one, else ``None``.
+
+    Examples
+    --------
+    A ferromagnetic open chain of four spins, all up, and its exact reference (Fisher):
+
+    >>> from liesample.systems import heisenberg
+    >>> system = heisenberg((4,), coupling=1.0)
+    >>> system.event_shape, float(system.hamiltonian(system.default_position))  # −J per bond
+    ((4, 3), -3.0)
+    >>> bool(0 < system.reference(1.0).correlation(1) < 1)
+    True
     """
     shape = lattice_shape(shape)
     coupling = finite_float("coupling", coupling)

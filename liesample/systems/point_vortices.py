@@ -301,6 +301,17 @@ def point_vortices(
         ``reference(beta)`` is the exact :class:`~liesample.targets.vortices.VortexPairLaw` of
         ``x₁·x₂/R²`` when ``N = 2``, else ``None``; ``check_beta`` refuses ``β`` where the Gibbs
         law is not normalisable (:func:`~liesample.targets.vortices.beta_bounds`).
+
+    Examples
+    --------
+    A vortex pair, whose exact reference is the law of ``x₁·x₂``:
+
+    >>> from liesample.systems import point_vortices
+    >>> system = point_vortices([1.0, -1.0], max_degree=2)
+    >>> system.event_shape, system.num_noises  # L(L + 2) noise modes
+    ((2, 3), 8)
+    >>> type(system.reference(1.0)).__name__
+    'VortexPairLaw'
     """
     gamma = nonzero_circulations(circulations)
     if isinstance(max_degree, bool) or not isinstance(max_degree, (int, np.integer)):
@@ -465,6 +476,16 @@ def point_vortex_integrator(
         Cap per step: the last substep takes the rest of the step, unresolved (the clock is
         kept; :mod:`liesample.integrators.substeps`). Under ``vmap`` a batch of chains costs
         its slowest chain's substeps, at most this many per step.
+
+    Examples
+    --------
+    >>> from liesample.systems import point_vortex_integrator, point_vortices
+    >>> system = point_vortices([1.0, 1.0, -1.0])
+    >>> integrator = point_vortex_integrator(system)  # adaptive substeps near collisions
+    >>> sampler = liesample.lie_poisson_langevin(system, beta=1.0, step_size=0.01,
+    ...                                          integrator=integrator)
+    >>> integrator.name
+    'splitting+substeps'
     """
     if not isinstance(system, PointVortexSystem):
         raise TypeError(f"system must be a PointVortexSystem, got {type(system).__name__}")

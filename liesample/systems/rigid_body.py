@@ -61,6 +61,16 @@ def rigid_body(
     -------
     LiePoissonSystem
         State ``μ`` of shape ``(3,)`` (body angular momentum); Casimir ``|μ|²``.
+
+    Examples
+    --------
+    >>> from liesample.systems import rigid_body
+    >>> system = rigid_body(inertia=(1.0, 2.0, 4.0))
+    >>> float(system.hamiltonian(jnp.array([1.0, 0.0, 0.0])))  # ½ μ·I⁻¹μ
+    0.5
+    >>> law = system.reference(3.0, jnp.array([1.5, 0.0, 0.0]))  # exact law on |μ| = 1.5
+    >>> bool(jnp.isclose(law.second_moments().sum(), 1.5**2))
+    True
     """
     moments = principal_moments(inertia)
     if not isinstance(split_hamiltonian, bool):

@@ -19,6 +19,17 @@ def stochastic_pendulum(
     position (``dq ∋ σ₂ ∘ dW²``), or, with ``quadratic_momentum_noise``, ``H_2 = σ₂ p²/2``
     (``dq ∋ σ₂ p ∘ dW²``, a random time change of the free motion). The two noises do not
     commute (``{H_1, H_2} ≠ 0``), so the midpoint rule has strong order 1/2 here.
+
+    Examples
+    --------
+    One path along given Brownian increments (``liesample.symplectic``):
+
+    >>> from liesample import symplectic
+    >>> from liesample.systems import stochastic_pendulum
+    >>> pendulum = stochastic_pendulum()
+    >>> increments = symplectic.brownian_increments(jax.random.key(0), 0.01, 10, 2)
+    >>> symplectic.symplectic_path(pendulum, jnp.array([0.0, 1.0]), increments).states.shape
+    (11, 2)
     """
     sigma_1 = finite_float("noise_position", noise_position)
     sigma_2 = finite_float("noise_momentum", noise_momentum)

@@ -95,7 +95,16 @@ def _dagger(u):
 
 @dataclasses.dataclass(frozen=True)
 class WilsonGauge:
-    """The Wilson gauge action on a ``d``-dimensional lattice (:func:`wilson_gauge`)."""
+    """The Wilson gauge action on a ``d``-dimensional lattice (:func:`wilson_gauge`).
+
+    Examples
+    --------
+    >>> from liesample.systems import wilson_gauge
+    >>> system = wilson_gauge("U1", (4, 4))
+    >>> links = system.cold_start()  # every link the identity
+    >>> links.shape, float(system.mean_plaquette(links)), system.num_plaquettes
+    ((2, 4, 4), 1.0, 16)
+    """
 
     group: str
     shape: tuple[int, ...]
@@ -425,6 +434,14 @@ def wilson_gauge(group: str, shape: Sequence[int], boundary: str = "periodic") -
         Sample it with :func:`liesample.recommended_sampler` (heat bath with over-relaxation,
         :func:`liesample.wilson_heat_bath`) or with :func:`liesample.geometric_hmc` on
         ``system.space`` with ``system.logdensity(beta)``.
+
+    Examples
+    --------
+    >>> from liesample.systems import wilson_gauge
+    >>> system = wilson_gauge("SU2", (4, 4))
+    >>> system.hot_start(jax.random.key(0)).shape  # (d, *shape, N, N), Haar-random links
+    (2, 4, 4, 2, 2)
+    >>> sampler = liesample.recommended_sampler(system, beta=2.0)  # heat bath, over-relaxation
     """
     return WilsonGauge(group, shape, boundary)
 

@@ -508,6 +508,15 @@ def zeitlin_euler(
         where that would be large (many directions at large ``N``).
         ``system.reference(beta, position)`` is the exact orbit law by Haar importance sampling
         (:class:`liesample.targets.zeitlin.UnitaryOrbitLaw`), for small ``N``.
+
+    Examples
+    --------
+    >>> from liesample.systems import zeitlin_euler
+    >>> system = zeitlin_euler(3)  # su(3): degrees ℓ = 1, 2
+    >>> system.event_shape, system.num_noises  # L(L + 2) noise modes, L = N − 1
+    ((3, 3), 8)
+    >>> type(system.reference(1.0, system.default_position)).__name__
+    'UnitaryOrbitLaw'
     """
     size = _check_size(size)
     if noise_degree is None:
