@@ -106,7 +106,7 @@ def _check_value(distribution, value):
     concrete value is off the support. The density itself is left as the formula: a sampler's
     state carries round-off off the sphere or the group, which must not turn into ``−inf``."""
     if distribution._validate_args:
-        event_shape = tuple(jnp.shape(value)[jnp.ndim(value) - len(distribution.event_shape):])
+        event_shape = tuple(jnp.shape(value)[jnp.ndim(value) - len(distribution.event_shape) :])
         if event_shape != distribution.event_shape:
             raise ValueError(
                 f"value must have the event shape {distribution.event_shape} of "
