@@ -16,16 +16,16 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Protocol, cast, overload
 
 import jax
 
-__all__ = ["SAFE_COMPILER_OPTIONS", "evaluate", "jit", "safe_compiler_options"]
+__all__ = ["SAFE_COMPILER_OPTIONS", "Jitted", "evaluate", "jit", "safe_compiler_options"]
 
 SAFE_COMPILER_OPTIONS = {"xla_disable_hlo_passes": "small-while-loop-hoisting"}
 
 
-def safe_compiler_options(compiler_options: dict | None = None) -> dict:
+def safe_compiler_options(compiler_options: dict[str, Any] | None = None) -> dict[str, Any]:
     """``compiler_options`` for ``jax.jit`` with the miscompiling XLA:CPU pass disabled.
 
     Options given here are kept; a user's own ``xla_disable_hlo_passes`` list is extended.
@@ -64,7 +64,28 @@ def _inside_staged_computation() -> bool:
         return not core.trace_state_clean()
 
 
-def jit(fun: Callable | None = None, /, **jit_kwargs: Any) -> Callable:
+class Jitted(Protocol):
+    """What :func:`jit` returns: the function, compiled on its first call, with ``jax.jit``'s
+    ``lower``, ``trace`` and ``eval_shape`` (which compile with the safe options)."""
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any: ...
+
+    lower: Callable[..., Any]
+    trace: Callable[..., Any]
+    eval_shape: Callable[..., Any]
+
+
+@overload
+def jit(fun: Callable[..., Any], /, **jit_kwargs: Any) -> Jitted: ...
+
+
+@overload
+def jit(fun: None = None, /, **jit_kwargs: Any) -> Callable[[Callable[..., Any]], Jitted]: ...
+
+
+def jit(
+    fun: Callable[..., Any] | None = None, /, **jit_kwargs: Any
+) -> Jitted | Callable[[Callable[..., Any]], Jitted]:
     """``jax.jit`` with :func:`safe_compiler_options`; usable as ``@jit`` or ``@jit(...)``.
 
     Takes every keyword of ``jax.jit`` (``static_argnums``, ``donate_argnums``, …). Called at top
@@ -80,17 +101,18 @@ def jit(fun: Callable | None = None, /, **jit_kwargs: Any) -> Callable:
     nested = jax.jit(fun, **jit_kwargs)
 
     @functools.wraps(fun)
-    def compiled(*args, **kwargs):
+    def call(*args: Any, **kwargs: Any) -> Any:
         chosen = nested if _inside_staged_computation() else safe
         return chosen(*args, **kwargs)
 
+    compiled = cast(Jitted, call)  # a plain function, given jax.jit's attributes below
     compiled.lower = safe.lower
     compiled.trace = safe.trace
     compiled.eval_shape = safe.eval_shape
     return compiled
 
 
-def evaluate(fun: Callable, /, *args: Any) -> Any:
+def evaluate(fun: Callable[..., Any], /, *args: Any) -> Any:
     """``fun(*args)`` with concrete (numpy) arguments, as concrete values even while an enclosing
     computation (``jax.jit``, ``grad``) is being staged: pass numpy arrays, as ``jnp.asarray``
     outside this call would stage them too.

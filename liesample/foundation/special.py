@@ -54,7 +54,7 @@ def _order(order) -> float:
 def _debye_polynomials() -> tuple[tuple[Fraction, ...], ...]:
     """Coefficients (in powers of ``p``) of ``U_0, …, U_K``:
     ``U_{k+1}(p) = ½ p²(1 − p²) U_k'(p) + ⅛ ∫_0^p (1 − 5t²) U_k(t) dt``, ``U_0 = 1``."""
-    polynomials = [(Fraction(1),)]
+    polynomials: list[tuple[Fraction, ...]] = [(Fraction(1),)]
     for _ in range(_DEBYE_TERMS):
         u = polynomials[-1]
         new = [Fraction(0)] * (len(u) + 3)

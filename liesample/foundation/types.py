@@ -1,11 +1,31 @@
-"""Type aliases of the annotations: what the public functions take and return."""
+"""Type aliases of the annotations: what the public functions take and return.
+
+``Tree[Leaf]`` is a pytree whose leaves have the type ``Leaf``: a leaf, ``None`` (an empty
+subtree), or a sequence (tuple, list, named tuple) or mapping (dict) of such trees, nested.
+``PyTree`` is a tree of arrays (positions on product spaces, observables, an ``info`` record);
+a tree of spaces is ``Tree[Space]``. A pytree node type registered with
+``jax.tree_util.register_pytree_node`` is not a sequence or a mapping, so a checker does not
+see it as a ``PyTree``: pass it with ``typing.cast(PyTree, value)``.
+
+``PRNGKey`` is a JAX random key, new-style (``jax.random.key``) or a legacy ``uint32[2]``
+array (``jax.random.PRNGKey``): both are ``jax.Array`` values.
+"""
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from typing import Any
 
-__all__ = ["PyTree"]
+import jax
+from jax.typing import ArrayLike
 
-PyTree = Any
-"""A pytree of arrays (an array, or a dict, tuple or named tuple of them, nested): positions on
-product spaces, observables, an ``info`` record. ``Any``, as JAX itself annotates pytrees."""
+__all__ = ["PRNGKey", "PyTree", "Tree"]
+
+type Tree[Leaf] = Leaf | Sequence[Tree[Leaf]] | Mapping[Any, Tree[Leaf]] | None
+"""A pytree with leaves of type ``Leaf``: a leaf, ``None``, or a sequence or mapping of trees."""
+
+type PyTree = Tree[ArrayLike]
+"""A pytree of arrays: an array or scalar, or a tuple, list, named tuple or dict of them."""
+
+type PRNGKey = jax.Array
+"""A JAX random key (``jax.random.key(seed)`` or the legacy ``jax.random.PRNGKey(seed)``)."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Sequence
+from typing import Any, SupportsFloat, cast
 
 import jax
 import numpy as np
@@ -34,10 +35,10 @@ def finite_float(
 ) -> float:
     """``value`` as a Python float, or a ``ValueError``/``TypeError`` that says what is allowed
     (``rate``: strictly between 0 and 1, as a target acceptance rate)."""
-    if isinstance(value, (bool, np.bool_, str, bytes)) or np.ndim(value) != 0:
+    if isinstance(value, (bool, np.bool_, str, bytes)) or np.ndim(cast(ArrayLike, value)) != 0:
         raise TypeError(f"{name} must be a real scalar, got {value!r}")
     try:
-        x = float(value)
+        x = float(cast(SupportsFloat, value))
     except (TypeError, ValueError):
         raise TypeError(f"{name} must be a real scalar, got {value!r}") from None
     if not math.isfinite(x):
@@ -59,7 +60,8 @@ def principal_moments(inertia: Sequence[float]) -> tuple[float, float, float]:
             f"inertia must be a sequence of 3 principal moments (each finite and > 0), "
             f"got {inertia!r}"
         )
-    return tuple(finite_float(f"inertia[{i}]", v, positive=True) for i, v in enumerate(inertia))
+    a, b, c = (finite_float(f"inertia[{i}]", v, positive=True) for i, v in enumerate(inertia))
+    return a, b, c
 
 
 def nonzero_vector3(name: str, value: ArrayLike) -> np.ndarray:
@@ -154,7 +156,7 @@ def single_key(rng_key: ArrayLike, name: str = "rng_key", *, batch_fix: str = ""
 def is_single_array(positions: PyTree) -> bool:
     """Whether ``positions`` is one array (an array, a number or a nested list), not a pytree
     of several leaves (dict, tuple, named tuple, …)."""
-    structure = jax.tree.structure(positions)
+    structure: Any = jax.tree.structure(positions)  # jaxlib ships no stub for PyTreeDef
     return isinstance(positions, list) or structure.num_nodes == structure.num_leaves == 1
 
 

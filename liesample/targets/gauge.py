@@ -98,7 +98,7 @@ def su2_torus_plaquette_mean(beta, num_plaquettes) -> float:
 
 def _highest_weights(n: int, max_row: int) -> np.ndarray:
     """Every ``λ_1 ≥ … ≥ λ_{N−1} ≥ λ_N = 0`` with ``λ_1 ≤ max_row`` (the SU(N) irreps), rows."""
-    rows = [(0,)]
+    rows: list[tuple[int, ...]] = [(0,)]
     for _ in range(n - 1):
         rows = [(v, *r) for r in rows for v in range(r[0], max_row + 1)]
     return np.array(sorted(rows), dtype=int)

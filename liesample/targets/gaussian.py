@@ -77,7 +77,7 @@ class Gaussian:
 
     def logdensity_fn(self, x: ArrayLike) -> jax.Array:
         """``−½(x − m)ᵀ K (x − m)`` (JAX-traceable)."""
-        r = x - jnp.asarray(self.mean)
+        r = jnp.asarray(x) - jnp.asarray(self.mean)
         return -0.5 * r @ (jnp.asarray(self.precision) @ r)
 
     def second_moments(self) -> np.ndarray:

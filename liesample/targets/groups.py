@@ -21,7 +21,9 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+from collections.abc import Mapping
 from types import ModuleType
+from typing import cast
 
 import jax
 import jax.numpy as jnp
@@ -29,7 +31,6 @@ import numpy as np
 from jax.typing import ArrayLike
 from scipy import integrate, special
 
-from liesample.foundation.types import PyTree
 from liesample.foundation.validation import finite_float
 from liesample.targets import orbits
 
@@ -263,10 +264,12 @@ class MatrixFisherLaw:
         (:meth:`quaternion_form`, angular-central-Gaussian rejection, acceptance ≳ 45 %)."""
         eigenvalues, eigenvectors = np.linalg.eigh(self.quaternion_form())
         x, _ = orbits.sample_bingham(rng_key, -eigenvalues, num_samples)
-        return quaternion_to_rotation(x @ jnp.asarray(eigenvectors).T)
+        return cast(jax.Array, quaternion_to_rotation(x @ jnp.asarray(eigenvectors).T))
 
 
-def quaternion_to_rotation(q: ArrayLike, xp: ModuleType = jnp) -> jax.Array | np.ndarray:
+def quaternion_to_rotation(
+    q: jax.Array | np.ndarray, xp: ModuleType = jnp
+) -> jax.Array | np.ndarray:
     """The rotation of a unit quaternion ``(w, x, y, z)`` (``±q`` give the same one); the
     entries are homogeneous quadratics in ``q``. Leading axes broadcast; ``xp=numpy`` computes
     it eagerly (also inside a trace).
@@ -329,7 +332,7 @@ class VonMisesFisherPosterior:
     def resultant(self) -> np.ndarray:
         return self.data.sum(0)
 
-    def logdensity(self, position: PyTree) -> jax.Array:
+    def logdensity(self, position: Mapping[str, jax.Array]) -> jax.Array:
         """``position = {"direction": unit 3-vector, "log_kappa": scalar}`` (jax-traceable)."""
         mu, eta = position["direction"], position["log_kappa"]
         kappa = jnp.exp(eta)

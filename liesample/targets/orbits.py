@@ -59,7 +59,7 @@ _GL_WEIGHTS = 0.5 * _GL_WEIGHTS
 _CUTOFF = 8.0
 
 
-def _as_lam(lam):
+def _as_lam(lam: ArrayLike) -> jax.Array:
     lam = jnp.asarray(lam, dtype=float)
     if lam.shape != (3,):
         raise ValueError(f"lam must have shape (3,), got shape {lam.shape}")

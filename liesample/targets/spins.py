@@ -199,7 +199,7 @@ def von_mises_fisher_cosine(uniform: ArrayLike, kappa: ArrayLike) -> jax.Array:
     to ``2v``, the uniform law) and for huge ``κ`` (``−log(1 − v)/κ``, never ``log 0``), and
     returning ``1 − w`` keeps ``sin = √((1 − w)(1 + w))`` accurate near the mean.
     """
-    positive = kappa > 0.0
+    positive = jnp.asarray(kappa) > 0.0
     safe = jnp.where(positive, kappa, 1.0)
     one_minus_w = -jnp.log1p(uniform * jnp.expm1(-2.0 * safe)) / safe
     return jnp.clip(jnp.where(positive, one_minus_w, 2.0 * uniform), 0.0, 2.0)
