@@ -404,7 +404,8 @@ def sampling_api(as_top_level_api, init, build_kernel, name: str, module: str, *
     none), declares how :func:`liesample.window_adaptation` (and the NumPyro kernel) tunes the
     sampler."""
     doc = inspect.cleandoc(as_top_level_api.__doc__ or "")
-    doc = doc + "\n" + _PRECISION_NOTE.format(name=name)
+    head, examples, tail = doc.partition("\nExamples\n--------\n")  # the examples stay last
+    doc = head + "\n" + _PRECISION_NOTE.format(name=name) + examples + tail
 
     @functools.wraps(as_top_level_api)
     def __call__(self, *args, **kwargs):

@@ -72,7 +72,17 @@ def spin_sampler_name(system: SpinLatticeSystem, beta) -> str:
 
 def recommended_sampler(system: LiePoissonSystem, *, beta, **options) -> Sampler:
     """The recommended sampler of ``exp(−βh)`` for ``system`` (module table), built with
-    ``beta`` and the sampler's own keyword ``options``; ``settings["sampler"]`` names it."""
+    ``beta`` and the sampler's own keyword ``options``; ``settings["sampler"]`` names it.
+
+    Examples
+    --------
+    >>> system = liesample.systems.heisenberg((4,))
+    >>> sampler = liesample.recommended_sampler(system, beta=1.0)  # heat bath + over-relaxation
+    >>> state = sampler.init(system.default_position)
+    >>> state, info = jax.jit(sampler.step)(jax.random.key(0), state)
+    >>> state.position.shape
+    (4, 3)
+    """
     if isinstance(system, WilsonGauge):
         options.setdefault("overrelaxation", 1)
         return wilson_heat_bath(system, beta=beta, **options)

@@ -186,6 +186,16 @@ def default_magnetic_field(inverse_mass_matrix, strength, covariance=None):
     -------
     numpy.ndarray, (d, d)
         An antisymmetric field (exactly: it is built as ``A − Aᵀ``).
+
+    Examples
+    --------
+    Unit mass in four dimensions: rotations in the planes ``(1, 2)`` and ``(3, 4)``:
+
+    >>> liesample.default_magnetic_field(jnp.ones(4), strength=1.0)
+    array([[ 0.,  1.,  0.,  0.],
+           [-1.,  0.,  0.,  0.],
+           [ 0.,  0.,  0.,  1.],
+           [ 0.,  0., -1.,  0.]])
     """
     check_inverse_mass_matrix(inverse_mass_matrix)  # before the cast: complex is refused
     imm = np.asarray(inverse_mass_matrix, dtype=float)

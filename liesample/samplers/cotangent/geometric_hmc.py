@@ -225,6 +225,17 @@ def as_top_level_api(
         ``u ~ Uniform(0, 1)`` (what :func:`liesample.window_adaptation` returns, with the
         ``T`` its ChEES rule learnt): a fixed length can sit at a resonance of the target (a
         direction whose half period is ``L ε`` barely moves). ``False`` (default): ``L`` steps.
+
+    Examples
+    --------
+    The matrix Fisher law ``∝ exp(tr R)`` on SO(3); a step keeps ``R`` a rotation:
+
+    >>> from liesample.spaces import SO
+    >>> sampler = liesample.geometric_hmc(jnp.trace, SO(3), step_size=0.1, num_integration_steps=5)
+    >>> state = sampler.init(jnp.eye(3))
+    >>> state, info = jax.jit(sampler.step)(jax.random.key(0), state)
+    >>> bool(jnp.allclose(state.position.T @ state.position, jnp.eye(3), atol=1e-12))
+    True
     """
     options = check_options(momentum_persistence, divergence_threshold, persistent)
     scheme = hamiltonian_scheme(integrator)

@@ -229,6 +229,17 @@ def as_top_level_api(
         coefficient list of kicks ``"B"``, drifts ``"A"`` and OU steps ``"O"``, the fractions
         of each summing to 1 (:mod:`liesample.geometry.cotangent`). With ``adjusted=True`` the
         ``O`` steps must stand at the ends, around a palindromic ``B``/``A`` core.
+
+    Examples
+    --------
+    The von Mises–Fisher law ``∝ exp(2 x_z)`` on S²:
+
+    >>> from liesample.spaces import Sphere
+    >>> sampler = liesample.geometric_langevin(lambda x: 2.0 * x[2], Sphere(2), step_size=0.1)
+    >>> state = sampler.init(jnp.array([1.0, 0.0, 0.0]))
+    >>> state, info = jax.jit(sampler.step)(jax.random.key(0), state)
+    >>> bool(jnp.isclose(jnp.linalg.norm(state.position), 1.0)), bool(info.is_divergent)
+    (True, False)
     """
     check_friction(friction)
     scheme = check_options(adjusted, divergence_threshold, integrator)

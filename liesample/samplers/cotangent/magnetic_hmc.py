@@ -283,6 +283,18 @@ def as_top_level_api(
         ``init(position, rng_key=None)`` and ``step(rng_key, state) -> (state, info)``. The two
         flows ``e^{±εGM⁻¹}`` are computed once here, not per step. Tune ``step_size`` and
         ``inverse_mass_matrix`` with ``blackjax.window_adaptation(liesample.magnetic_hmc, …)``.
+
+    Examples
+    --------
+    A standard normal in four dimensions, with the default field (two unit rotations):
+
+    >>> logdensity_fn = lambda x: -0.5 * x @ x
+    >>> field = liesample.default_magnetic_field(jnp.ones(4), strength=1.0)
+    >>> sampler = liesample.magnetic_hmc(logdensity_fn, 0.2, jnp.ones(4), 5, magnetic_field=field)
+    >>> state = sampler.init(jnp.zeros(4))
+    >>> state, info = jax.jit(sampler.step)(jax.random.key(0), state)
+    >>> state.position.shape, bool(info.is_divergent)
+    ((4,), False)
     """
     check_logdensity_fn(logdensity_fn)
     options = check_options(momentum_persistence, divergence_threshold, persistent)
@@ -383,6 +395,15 @@ def jittered_magnetic_hmc(
     transition is a ``magnetic_hmc`` transition, so the law is kept for every ``L``. Same
     arguments and ``options`` (``integrator`` included) as ``liesample.magnetic_hmc``; the flows
     ``e^{±εGM⁻¹}`` do not depend on ``L`` and are computed once per compiled run.
+
+    Examples
+    --------
+    >>> logdensity_fn = lambda x: -0.5 * x @ x
+    >>> field = liesample.default_magnetic_field(jnp.ones(4), strength=1.0)
+    >>> sampler = liesample.jittered_magnetic_hmc(logdensity_fn, 0.2, jnp.ones(4), 5, field)
+    >>> state, info = jax.jit(sampler.step)(jax.random.key(0), sampler.init(jnp.zeros(4)))
+    >>> 1 <= int(info.num_integration_steps) <= 5  # L drawn from {1, …, 5}
+    True
     """
     base = magnetic_hmc(
         logdensity_fn,

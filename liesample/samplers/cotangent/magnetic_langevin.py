@@ -191,6 +191,16 @@ def as_top_level_api(
     -------
     liesample.samplers.contract.Sampler
         ``init(position, rng_key=None)`` and ``step(rng_key, state) -> (state, info)``.
+
+    Examples
+    --------
+    >>> logdensity_fn = lambda x: -0.5 * x @ x
+    >>> field = liesample.default_magnetic_field(jnp.ones(4), strength=1.0)
+    >>> sampler = liesample.magnetic_langevin(logdensity_fn, 0.1, jnp.ones(4), 1.0, field)
+    >>> state = sampler.init(jnp.zeros(4))
+    >>> state, info = jax.jit(sampler.step)(jax.random.key(0), state)
+    >>> state.position.shape, float(info.acceptance_rate)  # unadjusted: reported as 1
+    ((4,), 1.0)
     """
     check_logdensity_fn(logdensity_fn)
     d = check_parameters(step_size, inverse_mass_matrix, magnetic_field)

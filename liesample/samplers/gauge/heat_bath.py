@@ -199,6 +199,15 @@ def as_top_level_api(
     Sampler
         ``init(links) -> GaugeState`` and ``step(rng_key, state) -> (state, BasicInfo)``
         (``energy`` is ``β S``); jit- and vmap-able, usable with :func:`liesample.sample`.
+
+    Examples
+    --------
+    >>> system = liesample.systems.wilson_gauge("U1", (4, 4))
+    >>> sampler = liesample.wilson_heat_bath(system, beta=1.0)
+    >>> state = sampler.init(system.cold_start())
+    >>> state, info = jax.jit(sampler.step)(jax.random.key(0), state)
+    >>> state.position.shape, bool(info.is_divergent)
+    ((2, 4, 4), False)
     """
     check_system(system)
     check_checkerboard(system)

@@ -359,6 +359,17 @@ def as_top_level_api(
         contract plus ``is_accepted`` and ``casimir_error``); ``rng_key`` may be
         ``jax.random.key`` or ``jax.random.PRNGKey``. It declares ``adaptation`` (dual averaging)
         and ``noise_blocks``.
+
+    Examples
+    --------
+    One step on the rigid body's orbit ``|μ| = 1.5``; the state stays on it:
+
+    >>> system = liesample.systems.rigid_body(inertia=(1.0, 2.0, 4.0))
+    >>> sampler = liesample.adjusted_lie_poisson(system, beta=3.0, step_size=0.1)
+    >>> state = sampler.init(jnp.array([1.5, 0.0, 0.0]))
+    >>> state, info = jax.jit(sampler.step)(jax.random.key(0), state)
+    >>> bool(jnp.isclose(jnp.linalg.norm(state.position), 1.5)), bool(info.is_divergent)
+    (True, False)
     """
     if not isinstance(system, LiePoissonSystem):
         raise TypeError(f"system must be a LiePoissonSystem, got {type(system).__name__}")

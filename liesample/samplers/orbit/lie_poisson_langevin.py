@@ -260,6 +260,17 @@ def as_top_level_api(
         ``init(position)`` and ``step(rng_key, state) -> (state, info)`` (``info``: the Info
         contract, plus ``casimir_error``); ``rng_key`` may be ``jax.random.key`` or
         ``jax.random.PRNGKey``.
+
+    Examples
+    --------
+    The README's sampler: one step of the unadjusted scheme, which keeps the orbit ``|μ| = 1.5``:
+
+    >>> system = liesample.systems.rigid_body(inertia=(1.0, 2.0, 4.0))
+    >>> sampler = liesample.lie_poisson_langevin(system, beta=3.0, sigma=1.0, step_size=0.05)
+    >>> state = sampler.init(jnp.array([1.5, 0.0, 0.0]))
+    >>> state, info = jax.jit(sampler.step)(jax.random.key(0), state)
+    >>> bool(jnp.isclose(jnp.linalg.norm(state.position), 1.5)), bool(info.is_divergent)
+    (True, False)
     """
     plan = _plan(system, beta, sigma, step_size, integrator, theta, hamiltonian, stability,
                  bias_tolerance, noise_block_size)  # fmt: skip

@@ -247,6 +247,15 @@ def as_top_level_api(
         ``init(position) -> VortexState`` and ``step(rng_key, state) -> (state, VortexInfo)``,
         one step being one sweep over the vortices; jit- and vmap-able, usable with
         ``liesample.sample``. It declares ``adaptation`` (dual averaging of ``proposal_scale``).
+
+    Examples
+    --------
+    >>> system = liesample.systems.point_vortices([1.0, 1.0, -1.0])
+    >>> sampler = liesample.vortex_metropolis(system, beta=1.0)
+    >>> state = sampler.init(system.default_position)
+    >>> state, info = jax.jit(sampler.step)(jax.random.key(0), state)
+    >>> state.position.shape, bool(info.is_divergent)
+    ((3, 3), False)
     """
     _check_system(system)
     beta = checked_beta(system, beta)

@@ -275,6 +275,15 @@ def as_top_level_api(system: SpinLatticeSystem, *, beta, clusters: str = "all") 
     Sampler
         ``init(position) -> SpinState`` and ``step(rng_key, state) -> (state, ClusterInfo)``
         (``info.cluster_size``: sites reflected); jit- and vmap-able.
+
+    Examples
+    --------
+    >>> system = liesample.systems.heisenberg((4,))
+    >>> sampler = liesample.heisenberg_cluster(system, beta=1.0)
+    >>> state = sampler.init(system.default_position)
+    >>> state, info = jax.jit(sampler.step)(jax.random.key(0), state)
+    >>> state.position.shape, bool(info.is_divergent)
+    ((4, 3), False)
     """
     if clusters not in CLUSTER_RULES:
         raise ValueError(

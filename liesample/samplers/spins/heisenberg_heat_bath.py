@@ -101,6 +101,15 @@ def as_top_level_api(
     Sampler
         ``init(position) -> SpinState`` and ``step(rng_key, state) -> (state, SpinInfo)``; one
         step is the sweeps above; jit- and vmap-able, usable with :mod:`liesample.run.runner`.
+
+    Examples
+    --------
+    >>> system = liesample.systems.heisenberg((4, 4), periodic=True)
+    >>> sampler = liesample.heisenberg_heat_bath(system, beta=1.0)
+    >>> state = sampler.init(system.default_position)
+    >>> state, info = jax.jit(sampler.step)(jax.random.key(0), state)
+    >>> state.position.shape, bool(info.is_divergent)
+    ((4, 4, 3), False)
     """
     beta = check_beta(beta)
     precession_angle = finite_float("precession_angle", precession_angle)

@@ -107,6 +107,15 @@ def as_top_level_api(
     Sampler
         ``init(position) -> SpinState`` and ``step(rng_key, state) -> (state, SpinInfo)``, one
         step being one full sweep; jit- and vmap-able, usable with :mod:`liesample.run.runner`.
+
+    Examples
+    --------
+    >>> system = liesample.systems.heisenberg((4,))
+    >>> sampler = liesample.heisenberg_metropolis(system, beta=1.0)
+    >>> state = sampler.init(system.default_position)
+    >>> state, info = jax.jit(sampler.step)(jax.random.key(0), state)
+    >>> bool(jnp.allclose(jnp.linalg.norm(state.position, axis=-1), 1.0))  # unit spins
+    True
     """
     check_spin_system(system)
     beta = check_beta(beta)

@@ -52,6 +52,15 @@ def as_top_level_api(system: SpinLatticeSystem, *, beta) -> Sampler:
         ``init(position) -> SpinState`` and ``step(rng_key, state) -> (state, WolffInfo)``, one
         step being one cluster reflection (``info.cluster_size`` sites); jit- and vmap-able.
         For a step that is one sweep, use :func:`liesample.heisenberg_cluster`.
+
+    Examples
+    --------
+    >>> system = liesample.systems.heisenberg((4,))
+    >>> sampler = liesample.heisenberg_wolff(system, beta=1.0)
+    >>> state = sampler.init(system.default_position)
+    >>> state, info = jax.jit(sampler.step)(jax.random.key(0), state)
+    >>> 1 <= int(info.cluster_size) <= 4  # one cluster flipped
+    True
     """
     check_cluster_system(system, "heisenberg_wolff")
     beta = check_cluster_beta(beta, "heisenberg_wolff")
