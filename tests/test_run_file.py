@@ -2,7 +2,8 @@
 
 - a resume with another sampler, setting or system parameter is refused, naming each field;
 - an edited, truncated, empty or foreign file is refused with its path, by the resume and by
-  ``load_chains``; a refused resume leaves the file as it was;
+  ``load_chains``; an edited setting or fingerprint field is named; a refused resume leaves
+  the file as it was;
 - one writer per path: a second is refused at once, naming the path and the holder (in one
   process, and two processes started together: exactly one succeeds);
 - a missing directory or an existing file without ``resume=True`` is refused before compiling;
@@ -130,7 +131,34 @@ EDITS = {
     ),
     "draws_done": (lambda f: set_commit(f, draws_done=12), "draws_done = 12 disagrees"),
     "a negative draws_done": (lambda f: set_commit(f, draws_done=-5), "draws_done -5 .* invalid"),
+    # the checksums cover the settings: every attribute the run wrote, each fingerprint field
+    "a setting": (
+        lambda f: f["posterior"].attrs.__setitem__("beta", 5.0),
+        r"posterior\.attrs\['beta'\] was changed since the run wrote it",
+    ),
+    "a root attribute": (
+        lambda f: f.attrs.__setitem__("integrator", "splitting"),
+        r": attrs\['integrator'\] was changed",
+    ),
+    "an added attribute": (
+        lambda f: f["sample_stats"].attrs.__setitem__("note", "edited"),
+        r"sample_stats\.attrs\['note'\] was added",
+    ),
+    "the fingerprint": (
+        lambda f: edit_fingerprint(f, num_warmup=7),
+        r"fingerprint\['num_warmup'\] was changed since the run wrote it",
+    ),
+    "an older format": (
+        lambda f: f["liesample_run"].attrs.__setitem__("format", "liesample-run-2"),
+        r"written by an older liesample \(run format 'liesample-run-2', whose checksums do not "
+        r"cover the run's settings\).*xarray.open_datatree",
+    ),
 }
+
+
+def edit_fingerprint(f, **fields):
+    fingerprint = json.loads(f["liesample_run"].attrs["fingerprint"])
+    f["liesample_run"].attrs["fingerprint"] = json.dumps({**fingerprint, **fields})
 
 
 @pytest.mark.parametrize("what", list(EDITS))
@@ -145,6 +173,14 @@ def test_an_edited_file_is_refused_with_its_path(saved, tmp_path, what):
     with pytest.raises(RunFileError, match=pattern):
         run(path, 12, resume=True)
     assert file_bytes(path) == before
+
+
+def test_an_edited_num_warmup_is_refused_when_sample_reads_it(saved, tmp_path):
+    """``sample`` without ``num_warmup`` takes the saved run's: from a verified fingerprint."""
+    path = copy_of(saved, tmp_path)
+    edit(path, lambda f: edit_fingerprint(f, num_warmup=7))
+    with pytest.raises(RunFileError, match=r"fingerprint\['num_warmup'\] was changed"):
+        liesample.sample(ALGORITHM, KEY, STARTS, 12, output=path, resume=True, **RUN)
 
 
 def test_truncated_empty_and_foreign_files_are_refused_with_their_path(saved, tmp_path):

@@ -187,6 +187,7 @@ DEFAULT = {
     (1, "write", "first", "kill"),  # a later chunk's draws, half written
     (0, "create", "first", "full disk"),  # the file's creation
     (1, "replace", "first", "interrupt"),  # the rename
+    (1, "sync", "last", "full disk"),  # the directory's sync, after the rename: committed
 }
 KINDS = {
     0: ("open", "create", "resize", "write", "attribute", "flush", "close", "sync", "replace"),

@@ -18,10 +18,11 @@ more group, ``liesample_run``, holds what a resume needs and what proves the fil
 
 A committed chunk stays readable whatever happens after it: the file is never modified in
 place (HDF5 is not crash-safe in place: a write that fails half-way may break metadata that
-earlier chunks share). Each chunk is written to a copy of the file beside it, which then
-replaces the file in one rename (:mod:`liesample.run.atomic`; that module gives the cost of the
-copies); a full disk, an I/O error, an interrupt or a kill before the rename leaves the file as
-it was, and the next writer removes a copy that a killed one left. Every HDF5 handle is closed
+earlier chunks share). Each chunk is written to a copy of the file beside it, whose new chunk,
+state and commit are read back, and which then replaces the file in one rename
+(:mod:`liesample.run.atomic`; that module gives the cost of the copies); a full disk, an I/O
+error, an interrupt or a kill before the rename leaves the file as it was, and the next writer
+removes a copy that a killed one left. Every HDF5 handle is closed
 on every path, an error's included, so a failed write does not fail again at exit. Resuming and
 :func:`load_chains` verify every checksum; an edited, truncated, empty or foreign file is
 refused with its path, what is wrong and what to do (:class:`RunFileError`).
@@ -464,8 +465,9 @@ def saved_num_warmup(path) -> int | None:
     path = os.fspath(path)
     if not os.path.isfile(path):
         return None
+    fingerprint = _header(path)[0]
     try:
-        return int(_header(path)[0]["num_warmup"])
+        return int(fingerprint["num_warmup"])
     except (KeyError, TypeError, ValueError):
         raise RunFileError(f"{path!r}: its fingerprint records no num_warmup") from None
 
