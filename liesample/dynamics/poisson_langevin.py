@@ -42,6 +42,11 @@ class Scene:
         The derived dissipation ``−θ Σ {h, ĥ_i} X_{ĥ_i}``.
     noise : bool
         The Stratonovich noise ``σ Σ X_{ĥ_i} ∘ dW_i``.
+
+    Examples
+    --------
+    >>> liesample.Scene(noise=False).effects  # energy descent with the Hamiltonian drift
+    ('hamiltonian', 'dissipation')
     """
 
     hamiltonian: bool = True
@@ -115,6 +120,18 @@ class PoissonLangevin:
         Dissipation strength ``θ``; Gibbs-exact for ``exp(−βh)`` when ``θ = βσ²/2``.
     scene : Scene
         The effects that exist.
+
+    Examples
+    --------
+    The generator ``ζ`` of one step of the rigid body at ``β = 3`` (``θ = βσ²/2``); moving by
+    ``Ad*_{exp ζ}`` keeps the orbit:
+
+    >>> system = liesample.systems.rigid_body(inertia=(1.0, 2.0, 4.0))
+    >>> dynamics = liesample.PoissonLangevin(system, sigma=1.0, theta=1.5, scene=liesample.Scene())
+    >>> mu = jnp.array([1.5, 0.0, 0.0])
+    >>> zeta = dynamics.generator(mu, 0.01, jnp.array([0.1, 0.0, 0.2]))  # dt, dW
+    >>> bool(jnp.isclose(jnp.linalg.norm(system.algebra.coadjoint_exp(zeta, mu)), 1.5))
+    True
     """
 
     system: LiePoissonSystem

@@ -29,6 +29,13 @@ def safe_compiler_options(compiler_options: dict[str, Any] | None = None) -> dic
     """``compiler_options`` for ``jax.jit`` with the miscompiling XLA:CPU pass disabled.
 
     Options given here are kept; a user's own ``xla_disable_hlo_passes`` list is extended.
+
+    Examples
+    --------
+    >>> options = liesample.safe_compiler_options()
+    >>> square = jax.jit(lambda x: x * x, compiler_options=options)
+    >>> float(square(3.0))
+    9.0
     """
     options = dict(compiler_options or {})
     disabled = [p for p in str(options.get("xla_disable_hlo_passes", "")).split(",") if p]
@@ -93,6 +100,17 @@ def jit(
     pass disabled. Inside another ``jax.jit`` (or ``grad``) it is traced into the enclosing
     computation (``jax.jit`` takes compiler options only at the top), so wrap the outermost
     function in ``liesample.jit``.
+
+    Examples
+    --------
+    >>> double = liesample.jit(lambda x: 2.0 * x)
+    >>> double(jnp.ones(2))
+    Array([2., 2.], dtype=float64)
+    >>> @liesample.jit(static_argnums=1)
+    ... def power(x, n):
+    ...     return x**n
+    >>> float(power(2.0, 3))
+    8.0
     """
     if fun is None:
         return functools.partial(jit, **jit_kwargs)

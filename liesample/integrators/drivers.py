@@ -216,6 +216,17 @@ def simulate(
         ``"ito"`` steps the Itô form by :func:`ito_euler_maruyama` instead (a cross-check).
     save_every : int ≥ 1
         Keep every ``save_every``-th state; ``num_steps`` must be a multiple of it.
+
+    Examples
+    --------
+    Ten steps of the rigid body's noisy flow (no dissipation: ``beta`` not given), every state
+    kept, on the orbit ``|μ| = 1.5``:
+
+    >>> system = liesample.systems.rigid_body(inertia=(1.0, 2.0, 4.0))
+    >>> path = liesample.simulate(system, jax.random.key(0), jnp.array([1.5, 0.0, 0.0]),
+    ...                           step_size=0.01, num_steps=10)
+    >>> path.positions.shape, bool(jnp.allclose(jnp.linalg.norm(path.positions, axis=-1), 1.5))
+    ((11, 3), True)
     """
     if not isinstance(system, LiePoissonSystem):
         raise TypeError(f"system must be a LiePoissonSystem, got {type(system).__name__}")

@@ -189,14 +189,18 @@ def sample_chains(
 
     Examples
     --------
-    The magnetisation and energy of a spin lattice at every draw, no states kept::
+    The magnetisation and energy of a spin chain at every draw, no states kept (two chains of
+    10 draws show the call; a real run keeps thousands):
 
-        result = sample_chains(
-            liesample.heisenberg_heat_bath(system, beta=1.0), key, starts, 1000,
-            observables={"m": lambda s: s.reshape(-1, 3).mean(0), "h": system.hamiltonian},
-            keep_positions=False,
-        )
-        result.observables["m"].shape  # (chains, 1000, 3)
+    >>> system = liesample.systems.heisenberg((4,))
+    >>> starts = jnp.stack([system.default_position, -system.default_position])
+    >>> result = liesample.sample_chains(
+    ...     liesample.heisenberg_heat_bath(system, beta=1.0), jax.random.key(0), starts, 10,
+    ...     observables={"m": lambda s: s.reshape(-1, 3).mean(0), "h": system.hamiltonian},
+    ...     keep_positions=False, progress_bar=False,
+    ... )
+    >>> result.observables["m"].shape, result.observables["h"].shape, result.positions
+    ((2, 10, 3), (2, 10), None)
     """
     options = {name: v for name, v in locals().items() if name in _OPTIONS}  # the keywords
     options = RunOptions(**options, progress_bar=_progress_bar(progress_bar, progress))
@@ -269,8 +273,18 @@ def sample(
 
     Examples
     --------
-    ``sample(liesample.adjusted_lie_poisson(system, beta=1.0), key, starts, 1000)``
-    tunes the step size by dual averaging in a warm-up of 1000 steps, then samples.
+    Without ``step_size`` the adjusted sampler tunes it by dual averaging in the warm-up (as
+    long as the draws span by default), then samples. Two chains of 10 draws show the call and
+    the tree (the run warns that they are too few to trust):
+
+    >>> system = liesample.systems.rigid_body(inertia=(1.0, 2.0, 4.0))
+    >>> starts = jnp.array([[1.5, 0.0, 0.0], [0.0, 1.5, 0.0]])
+    >>> tree = liesample.sample(liesample.adjusted_lie_poisson(system, beta=3.0),
+    ...                         jax.random.key(0), starts, 10, progress_bar=False)
+    >>> tree.posterior["mu"].dims, tree.posterior["mu"].shape
+    (('chain', 'draw', 'component'), (2, 10, 3))
+    >>> int(tree.attrs["num_warmup"]), bool(tree.attrs["adapted"])  # the step size was tuned
+    (10, True)
     """
     options = _sample_options(run_options, num_draws, num_warmup, exact_starts)
     arguments.check_tree_names(var_name, event_dims, coords, attrs)

@@ -434,7 +434,22 @@ def load_chains(path):
     Every checksum (the attributes', every chunk's and the saved state's) is verified first:
     an edited, truncated, empty or foreign file is refused with its path
     (:class:`RunFileError`). A run stopped by a full disk, an error or a kill holds every chunk
-    it committed, and a copy that a killed writer left beside the file is not read."""
+    it committed, and a copy that a killed writer left beside the file is not read.
+
+    Examples
+    --------
+    A run saved as it goes, read back (10 draws only show the call: the run warns that they are
+    too few):
+
+    >>> import os, tempfile
+    >>> system = liesample.systems.rigid_body(inertia=(1.0, 2.0, 4.0))
+    >>> starts = jnp.array([[1.5, 0.0, 0.0], [0.0, 1.5, 0.0]])
+    >>> path = os.path.join(tempfile.mkdtemp(), "run.nc")
+    >>> _ = liesample.sample_chains(liesample.adjusted_lie_poisson(system, beta=3.0, step_size=0.2),
+    ...                             jax.random.key(0), starts, 10, progress_bar=False, output=path)
+    >>> liesample.load_chains(path).posterior["mu"].shape  # (chain, draw, component)
+    (2, 10, 3)
+    """
     import xarray as xr
 
     path = os.fspath(path)

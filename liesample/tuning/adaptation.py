@@ -177,6 +177,19 @@ def window_adaptation(
         The sampler's other arguments: ``num_integration_steps`` (HMC, fixes ``L``),
         ``friction`` (Langevin, default 1), ``inverse_mass_matrix`` (the starting mass),
         and ``build_kernel`` options (``adjusted``, ``divergence_threshold``, ``integrator``).
+
+    Examples
+    --------
+    Tune geometric HMC's step size and mass on SO(3) (20 warm-up steps: only a sketch; use
+    hundreds), then sample with the tuned parameters:
+
+    >>> from liesample.spaces import SO
+    >>> adaptation = liesample.window_adaptation(liesample.geometric_hmc, jnp.trace, SO(3),
+    ...                                          num_integration_steps=3)
+    >>> (state, parameters), info = adaptation.run(jax.random.key(0), jnp.eye(3), num_steps=20)
+    >>> sorted(parameters)
+    ['inverse_mass_matrix', 'num_integration_steps', 'step_size']
+    >>> sampler = liesample.geometric_hmc(jnp.trace, SO(3), **parameters)
     """
     name = type(algorithm).__name__
     declared = getattr(algorithm, "adaptation", None)
@@ -501,6 +514,17 @@ def magnetic_window_adaptation(
         the warm-up and returned in ``parameters`` when given.
     algorithm
         The sampler tuned: ``liesample.magnetic_hmc`` or one with its signature.
+
+    Examples
+    --------
+    Four chains on a standard normal (20 warm-up steps: only a sketch; use hundreds):
+
+    >>> adaptation = liesample.magnetic_window_adaptation(lambda x: -0.5 * x @ x, angle=0.25)
+    >>> (states, parameters), info = adaptation.run(jax.random.key(0), jnp.zeros((4, 2)),
+    ...                                             num_steps=20)
+    >>> states.position.shape, sorted(parameters)
+    ((4, 2), ['inverse_mass_matrix', 'magnetic_field', 'num_integration_steps', 'step_size'])
+    >>> sampler = liesample.jittered_magnetic_hmc(lambda x: -0.5 * x @ x, **parameters)
     """
     _check_flags(progress_bar=progress_bar)
     del progress_bar  # accepted for BlackJAX compatibility; the warm-up is one compiled loop
