@@ -2,7 +2,10 @@
 
 The lock is the file ``<output>.lock`` locked with ``flock`` (POSIX advisory locks): the
 kernel drops it when its process ends, however it ends, so a run killed with SIGKILL leaves no
-lock behind that could block its resume (the stale file is taken over). The file holds the
+lock behind that could block its resume (the stale file is taken over). It is a file apart from
+the output, which each saved chunk replaces by a rename (:mod:`liesample.run.atomic`): the lock
+holds across those replacements, and while it is held no other writer's copy of the output can
+be live, so the holder removes the copies a killed writer left. The file holds the
 holder's process id, host and start time, so a refused writer can say who holds the path.
 Advisory locks protect against other liesample runs, not against other programs writing the
 file; on network file systems without ``flock`` support the lock may not hold.
