@@ -19,7 +19,7 @@ from typing import Any
 import jax
 from jax.typing import ArrayLike
 
-__all__ = ["PRNGKey", "PyTree", "Tree"]
+__all__ = ["PRNGKey", "PyTree", "Tree", "TreeDef"]
 
 type Tree[Leaf] = Leaf | Sequence[Tree[Leaf]] | Mapping[Any, Tree[Leaf]] | None
 """A pytree with leaves of type ``Leaf``: a leaf, ``None``, or a sequence or mapping of trees."""
@@ -29,3 +29,8 @@ type PyTree = Tree[ArrayLike]
 
 type PRNGKey = jax.Array
 """A JAX random key (``jax.random.key(seed)`` or the legacy ``jax.random.PRNGKey(seed)``)."""
+
+TreeDef = Any
+"""A ``jax.tree_util.PyTreeDef`` (what ``jax.tree.structure`` returns). jaxlib's compiled
+module ships no stub for that class, so a checker cannot see its methods (``num_leaves``,
+``unflatten``, ``flatten_up_to``, ``==``): hold one in a name annotated ``TreeDef``."""

@@ -5,13 +5,13 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Sequence
-from typing import Any, SupportsFloat, cast
+from typing import SupportsFloat, cast
 
 import jax
 import numpy as np
 from jax.typing import ArrayLike
 
-from liesample.foundation.types import PyTree
+from liesample.foundation.types import PyTree, TreeDef
 
 
 def float_array(value: object, requirement: str, error: type[Exception] = ValueError) -> np.ndarray:
@@ -156,7 +156,7 @@ def single_key(rng_key: ArrayLike, name: str = "rng_key", *, batch_fix: str = ""
 def is_single_array(positions: PyTree) -> bool:
     """Whether ``positions`` is one array (an array, a number or a nested list), not a pytree
     of several leaves (dict, tuple, named tuple, …)."""
-    structure: Any = jax.tree.structure(positions)  # jaxlib ships no stub for PyTreeDef
+    structure: TreeDef = jax.tree.structure(positions)
     return isinstance(positions, list) or structure.num_nodes == structure.num_leaves == 1
 
 

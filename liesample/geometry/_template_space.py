@@ -58,13 +58,13 @@ class PositiveReals(Space):
     def uniform(self, rng_key: jax.Array, dtype: DTypeLike | None = None) -> jax.Array:
         raise ValueError("PositiveReals has no uniform probability law; give the start explicitly")
 
-    def perturb(self, x: ArrayLike, eps: ArrayLike) -> jax.Array:
+    def perturb(self, x: jax.Array, eps: jax.Array) -> jax.Array:
         return x * jnp.exp(eps)
 
     def flow(
-        self, x: ArrayLike, p: ArrayLike, inverse_mass: ArrayLike, t: ArrayLike
+        self, x: jax.Array, p: jax.Array, inverse_mass: jax.Array, t: ArrayLike
     ) -> tuple[jax.Array, jax.Array]:
         return x * jnp.exp(t * inverse_mass * p), p
 
-    def log(self, x: ArrayLike, y: ArrayLike) -> jax.Array:
+    def log(self, x: jax.Array, y: jax.Array) -> jax.Array:
         return jnp.log(y / x)

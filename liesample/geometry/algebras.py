@@ -28,6 +28,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import cast
 
 import jax
 import jax.numpy as jnp
@@ -314,10 +315,16 @@ class StructureConstants(LieAlgebra):
     Array([0., 0., 1.], dtype=float64)
     """
 
-    constants: np.ndarray = field(default=None, repr=False)
-    casimir_function: Callable | None = None
+    # The default only follows the base's defaulted fields: __init__ always sets the array.
+    constants: np.ndarray = field(default=None, repr=False)  # type: ignore[arg-type]
+    casimir_function: Callable[[jax.Array], jax.Array] | None = None
 
-    def __init__(self, constants: ArrayLike, casimirs: Callable | None = None, name: str = "g"):
+    def __init__(
+        self,
+        constants: ArrayLike,
+        casimirs: Callable[[jax.Array], jax.Array] | None = None,
+        name: str = "g",
+    ):
         c = float_array(constants, "structure constants must be a real array of shape (n, n, n)")
         if c.ndim != 3 or not (c.shape[0] == c.shape[1] == c.shape[2]) or c.shape[0] == 0:
             raise ValueError(
@@ -375,7 +382,7 @@ class StructureConstants(LieAlgebra):
         """The declared Casimirs, or an empty array of shape ``μ.shape[:-1] + (0,)``."""
         if self.casimir_function is None:
             return _no_casimirs(mu)
-        return self.casimir_function(mu)
+        return self.casimir_function(cast(jax.Array, mu))  # μ as given: an array here
 
 
 def _se3_constants():

@@ -35,7 +35,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable, Sequence
-from typing import NamedTuple
+from typing import NamedTuple, cast
 
 import jax
 import jax.numpy as jnp
@@ -43,7 +43,7 @@ import jax.scipy.linalg
 import numpy as np
 from jax.typing import ArrayLike, DTypeLike
 
-from liesample.foundation.types import PyTree
+from liesample.foundation.types import PRNGKey, PyTree, TreeDef
 from liesample.foundation.validation import concrete_array
 from liesample.geometry import spaces
 from liesample.geometry.poisson import kinetic_magnetic_exponential
@@ -111,7 +111,11 @@ ANTISYMMETRY_TOLERANCE = 1e-10  # relative to max|G|: round-off of a user-built 
 
 
 def ornstein_uhlenbeck(
-    momentum: ArrayLike, noise: ArrayLike, rate: ArrayLike, diffusion: ArrayLike, time: ArrayLike
+    momentum: jax.Array,
+    noise: jax.Array | None,
+    rate: jax.Array | float,
+    diffusion: jax.Array | float,
+    time: jax.Array | float,
 ) -> jax.Array:
     """Exact solution of ``dp = −r p dt + √D dW`` over ``time``, coordinate by coordinate.
 
@@ -141,13 +145,13 @@ class Metric(NamedTuple):
     eigenvalues: jax.Array  # of M⁻¹, (d,)
     eigenvectors: jax.Array | None  # None when diagonal
 
-    def velocity(self, momentum: ArrayLike) -> jax.Array:
+    def velocity(self, momentum: jax.Array) -> jax.Array:
         """``M⁻¹ p``."""
         if self.eigenvectors is None:
             return self.inverse_mass_matrix * momentum
         return self.inverse_mass_matrix @ momentum
 
-    def kinetic_energy(self, momentum: ArrayLike) -> jax.Array:
+    def kinetic_energy(self, momentum: jax.Array) -> jax.Array:
         """``½ pᵀ M⁻¹ p``."""
         return 0.5 * jnp.dot(momentum, self.velocity(momentum))
 
@@ -157,13 +161,17 @@ class Metric(NamedTuple):
     def _to_eigenbasis(self, x):
         return x if self.eigenvectors is None else self.eigenvectors.T @ x
 
-    def sample_momentum(self, rng_key: jax.Array, dtype: DTypeLike) -> jax.Array:
+    def sample_momentum(self, rng_key: PRNGKey, dtype: DTypeLike) -> jax.Array:
         """A draw of ``N(0, M)``: ``U (ξ / √λ)``."""
         z = jax.random.normal(rng_key, self.eigenvalues.shape, dtype)
         return self._from_eigenbasis(z / jnp.sqrt(self.eigenvalues))
 
     def ornstein_uhlenbeck(
-        self, rng_key: jax.Array, momentum: ArrayLike, friction: ArrayLike, time: ArrayLike
+        self,
+        rng_key: PRNGKey,
+        momentum: jax.Array,
+        friction: jax.Array | float,
+        time: jax.Array | float,
     ) -> jax.Array:
         """Exact ``dp = −γ M⁻¹ p dt + √(2γ) dW`` over ``time`` (law ``N(0, M)`` kept): in the
         eigenbasis of ``M⁻¹`` a scalar OU process of rate ``γλ`` per coordinate."""
@@ -197,7 +205,7 @@ class KineticMagneticFlow(NamedTuple):
     displacement: jax.Array  # Φ, (d, d), or the time t
 
     def __call__(
-        self, metric: Metric, position: ArrayLike, momentum: ArrayLike
+        self, metric: Metric, position: jax.Array, momentum: jax.Array
     ) -> tuple[jax.Array, jax.Array]:
         if self.propagator is None:
             return position + metric.velocity(self.displacement * momentum), momentum
@@ -271,17 +279,17 @@ class CotangentBundle:
     :class:`Metric` (diagonal, or block-diagonal dense) and the optional field ``G`` (D × D).
     """
 
-    space: object
-    inverse_mass: object  # pytree like space
+    space: spaces.SpaceTree
+    inverse_mass: PyTree  # pytree like space
     magnetic_field: jax.Array | None
     metric: Metric | None  # of the Euclidean coordinates (None when there are none)
 
     @property
-    def structure(self) -> jax.tree_util.PyTreeDef:
+    def structure(self) -> TreeDef:
         return jax.tree.structure(self.space, is_leaf=spaces.is_space)
 
     @property
-    def blocks(self) -> list:
+    def blocks(self) -> list[spaces.Space]:
         return jax.tree.leaves(self.space, is_leaf=spaces.is_space)
 
     @property
@@ -328,7 +336,7 @@ class CotangentBundle:
         ]
         if self.metric is not None:
             terms.append(self.metric.kinetic_energy(self._flat(leaves)))
-        return sum(terms)
+        return cast(jax.Array, sum(terms))  # one term or more: every space has a block
 
     def _momentum_noise(self, rng_key, position, momentum, euclidean, curved):
         """Leaf by leaf: ``curved(s, x, p, m, ξ)`` with ``ξ`` a standard normal (tangent on
@@ -346,31 +354,31 @@ class CotangentBundle:
             out = self._unflat(out, euclidean(next(keys), self._flat(ps)))
         return self.structure.unflatten(out)
 
-    def sample_momentum(self, rng_key: jax.Array, position: PyTree) -> PyTree:
+    def sample_momentum(self, rng_key: PRNGKey, position: PyTree) -> PyTree:
         """A draw of ``N(0, M)`` in each tangent space."""
         zero = self.zero_momentum(position)
         return self._momentum_noise(
             rng_key,
             position,
             zero,
-            lambda key, p: self.metric.sample_momentum(key, p.dtype),
+            lambda key, p: cast(Metric, self.metric).sample_momentum(key, p.dtype),
             lambda p, m, z: z / jnp.sqrt(m),
         )
 
     def ornstein_uhlenbeck(
         self,
-        rng_key: jax.Array,
+        rng_key: PRNGKey,
         position: PyTree,
         momentum: PyTree,
-        friction: ArrayLike,
-        time: ArrayLike,
+        friction: jax.Array | float,
+        time: jax.Array | float,
     ) -> PyTree:
         """Exact OU step ``dp = −γ M⁻¹p dt + √(2γ) dW`` over ``time`` (``N(0, M)`` kept)."""
         return self._momentum_noise(
             rng_key,
             position,
             momentum,
-            lambda key, p: self.metric.ornstein_uhlenbeck(key, p, friction, time),
+            lambda key, p: cast(Metric, self.metric).ornstein_uhlenbeck(key, p, friction, time),
             lambda p, m, z: ornstein_uhlenbeck(p, z, friction * m, 2.0 * friction, time),
         )
 
@@ -400,8 +408,8 @@ class CotangentBundle:
 
 
 def cotangent_bundle(
-    space: spaces.Space | PyTree,
-    inverse_mass_matrix: ArrayLike | PyTree | None = None,
+    space: spaces.SpaceTree,
+    inverse_mass_matrix: PyTree = None,
     magnetic_field: ArrayLike | None = None,
     dtype: DTypeLike | None = None,
 ) -> CotangentBundle:
@@ -410,7 +418,8 @@ def cotangent_bundle(
     blocks) and an optional constant antisymmetric field on the ``Euclidean`` coordinates."""
     inverse_mass = spaces.check_inverse_mass(space, inverse_mass_matrix, dtype)
     blocks = jax.tree.leaves(space, is_leaf=spaces.is_space)
-    masses = jax.tree.structure(space, is_leaf=spaces.is_space).flatten_up_to(inverse_mass)
+    structure: TreeDef = jax.tree.structure(space, is_leaf=spaces.is_space)
+    masses = structure.flatten_up_to(inverse_mass)
     euclidean = [(s, m) for s, m in zip(blocks, masses) if isinstance(s, spaces.Euclidean)]
     dimension = sum(math.prod(s.shape) for s, _ in euclidean)
     if magnetic_field is not None:
@@ -435,7 +444,7 @@ def cotangent_bundle(
             )
         metric = make_metric(imm)
     if magnetic_field is not None:
-        magnetic_field = jnp.asarray(magnetic_field, metric.eigenvalues.dtype)
+        magnetic_field = jnp.asarray(magnetic_field, cast(Metric, metric).eigenvalues.dtype)
     return CotangentBundle(space, inverse_mass, magnetic_field, metric)
 
 
@@ -489,7 +498,9 @@ def drift(bundle: CotangentBundle, flows: dict) -> Callable:
     return effect
 
 
-def refresh(bundle: CotangentBundle, step_size: ArrayLike, friction: ArrayLike) -> Callable:
+def refresh(
+    bundle: CotangentBundle, step_size: jax.Array | float, friction: jax.Array | float
+) -> Callable:
     """``O``: the exact OU flow of the friction ``γ`` and noise ``√(2γ)`` over the fraction."""
 
     def effect(point, fraction, key):

@@ -33,8 +33,9 @@ and the invariant law does not depend on ``G``.)
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import jax
 import jax.numpy as jnp
@@ -53,18 +54,22 @@ _ANTISYMMETRY_RTOL = 1e-10
 class PoissonStructure:
     """Interface: a Poisson tensor ``J(z)``, known through ``apply(z, ζ) = J(z) ζ``."""
 
-    def apply(self, z: ArrayLike, covector: ArrayLike) -> jax.Array:  # pragma: no cover - interface
+    def apply(self, z: jax.Array, covector: jax.Array) -> jax.Array:  # pragma: no cover - interface
         raise NotImplementedError
 
-    def hamiltonian_vector_field(self, f: Callable, z: ArrayLike) -> jax.Array:
+    def hamiltonian_vector_field(
+        self, f: Callable[[jax.Array], jax.Array], z: jax.Array
+    ) -> jax.Array:
         """``X_f(z) = J(z) ∇f(z)``."""
         return self.apply(z, jax.grad(f)(z))
 
-    def bracket(self, f: Callable, g: Callable, z: ArrayLike) -> jax.Array:
+    def bracket(
+        self, f: Callable[[jax.Array], jax.Array], g: Callable[[jax.Array], jax.Array], z: jax.Array
+    ) -> jax.Array:
         """``{f, g}(z) = ∇f(z)ᵀ J(z) ∇g(z) = df(X_g)``."""
         return jnp.vdot(jax.grad(f)(z), self.hamiltonian_vector_field(g, z))
 
-    def poisson_tensor(self, z: ArrayLike) -> jax.Array:
+    def poisson_tensor(self, z: jax.Array) -> jax.Array:
         """The matrix ``J(z)`` (dense; for tests and small systems)."""
         flat = jnp.ravel(z)
         basis = jnp.eye(flat.size, dtype=flat.dtype).reshape((flat.size, *jnp.shape(z)))
@@ -78,20 +83,22 @@ class LiePoissonStructure(PoissonStructure):
 
     algebra: LieAlgebra
 
-    def apply(self, z: ArrayLike, covector: ArrayLike) -> jax.Array:
+    def apply(self, z: jax.Array, covector: jax.Array) -> jax.Array:
         return self.algebra.ad_star(covector, z)
 
 
-def cross_product_matrix(field: ArrayLike) -> np.ndarray:
+def cross_product_matrix(field: np.ndarray | Sequence[float]) -> np.ndarray:
     """The antisymmetric ``F`` with ``F w = w × B`` for a 3-vector ``B`` (``F_kj = ε_kjl B_l``)."""
     b1, b2, b3 = field
     return np.array([[0.0, b3, -b2], [-b3, 0.0, b1], [b2, -b1, 0.0]])
 
 
-def field_from_vector_potential(vector_potential: Callable) -> Callable:
+def field_from_vector_potential(
+    vector_potential: Callable[[jax.Array], jax.Array],
+) -> Callable[[jax.Array], jax.Array]:
     """``q ↦ B(q) = curl A(q)`` in R³, by forward-mode autodiff of ``A`` (divergence-free)."""
 
-    def field(q):
+    def field(q: jax.Array) -> jax.Array:
         jacobian = jax.jacfwd(vector_potential)(q)  # jacobian[j, k] = ∂_k A_j
         return jnp.stack(
             [
@@ -104,10 +111,12 @@ def field_from_vector_potential(vector_potential: Callable) -> Callable:
     return field
 
 
-def field_strength_from_vector_potential(vector_potential: Callable) -> Callable:
+def field_strength_from_vector_potential(
+    vector_potential: Callable[[jax.Array], jax.Array],
+) -> Callable[[jax.Array], jax.Array]:
     """``q ↦ F(q)``, ``F_kj = ∂_k A_j − ∂_j A_k`` in any ``Rⁿ`` (``F w = w × curl A`` in R³)."""
 
-    def field_strength(q):
+    def field_strength(q: jax.Array) -> jax.Array:
         jacobian = jax.jacfwd(vector_potential)(q)  # jacobian[j, k] = ∂_k A_j
         return jacobian.T - jacobian
 
@@ -158,7 +167,7 @@ class CanonicalStructure(PoissonStructure):
     """
 
     dimension: int
-    magnetic_term: object = None
+    magnetic_term: np.ndarray | Callable[[jax.Array], jax.Array] | None = None
 
     @property
     def magnetic(self) -> bool:
@@ -169,10 +178,10 @@ class CanonicalStructure(PoissonStructure):
         """``True`` when ``G`` is a constant array (its flow is then solved exactly)."""
         return self.magnetic and not callable(self.magnetic_term)
 
-    def split(self, z: ArrayLike) -> tuple[jax.Array, jax.Array]:
+    def split(self, z: jax.Array) -> tuple[jax.Array, jax.Array]:
         return z[: self.dimension], z[self.dimension :]
 
-    def magnetic_matrix(self, q: ArrayLike) -> jax.Array | None:
+    def magnetic_matrix(self, q: jax.Array) -> jax.Array | None:
         """``G(q)``, or ``None`` for the canonical structure."""
         if self.magnetic_term is None:
             return None
@@ -180,12 +189,12 @@ class CanonicalStructure(PoissonStructure):
             return self.magnetic_term(q)
         return jnp.asarray(self.magnetic_term, dtype=jnp.result_type(q))
 
-    def apply(self, z: ArrayLike, covector: ArrayLike) -> jax.Array:
+    def apply(self, z: jax.Array, covector: jax.Array) -> jax.Array:
         q, _ = self.split(z)
         covector_q, covector_p = self.split(covector)
         force = -covector_q
         if self.magnetic:
-            force = force + self.magnetic_matrix(q) @ covector_p
+            force = force + cast(jax.Array, self.magnetic_matrix(q)) @ covector_p
         return jnp.concatenate([covector_p, force])
 
     def without_magnetic_term(self) -> CanonicalStructure:
@@ -209,7 +218,7 @@ def _dimension(dimension) -> int:
 def magnetic_structure(
     *,
     magnetic_field: ArrayLike | None = None,
-    vector_potential: Callable | None = None,
+    vector_potential: Callable[[jax.Array], jax.Array] | None = None,
     charge: float = 1.0,
     dimension: int | None = None,
 ) -> CanonicalStructure:
@@ -251,6 +260,7 @@ def magnetic_structure(
             )
         field_strength = field_strength_from_vector_potential(vector_potential)
         return CanonicalStructure(dimension, lambda q: charge * field_strength(q))
+    assert magnetic_field is not None  # exactly one of the two was given (checked above)
     if callable(magnetic_field):
         raise TypeError(
             "magnetic_field must be a constant array (a 3-vector B or an antisymmetric (n, n) "
@@ -283,7 +293,7 @@ def kinetic_magnetic_exponential(
     ``q̇ = M⁻¹p, ṗ = G M⁻¹ p`` is ``p ← e^{tB} p``, ``q ← q + M⁻¹ t φ₁(tB) p``. Valid for
     singular ``G`` (``G = 0`` gives ``(I, tI)``); never from a symmetric eigensolver.
     """
-    generator = jnp.asarray(generator)
+    generator, time = jnp.asarray(generator), jnp.asarray(time)
     n = generator.shape[0]
     eye = jnp.eye(n, dtype=generator.dtype)
     zeros = jnp.zeros_like(generator)

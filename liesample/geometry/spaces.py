@@ -53,13 +53,14 @@ import functools
 import math
 import operator
 from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, cast
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.typing import ArrayLike, DTypeLike
 
-from liesample.foundation.types import PyTree
+from liesample.foundation.types import PRNGKey, PyTree, Tree, TreeDef
 from liesample.foundation.validation import concrete_array, prng_key
 
 __all__ = [
@@ -68,6 +69,7 @@ __all__ = [
     "U1",
     "Euclidean",
     "Space",
+    "SpaceTree",
     "Sphere",
     "check_inverse_mass",
     "check_inverse_mass_matrix",
@@ -151,10 +153,20 @@ class Space:
     """
 
     shape: tuple[int, ...]
-    point_shape: tuple[int, ...] = ()
-    momentum_shape: tuple[int, ...] = ()
+    if TYPE_CHECKING:  # read-only: a subclass sets each as a class attribute or a property
+
+        @property
+        def point_shape(self) -> tuple[int, ...]: ...
+        @property
+        def momentum_shape(self) -> tuple[int, ...]: ...
+        @property
+        def copy_dimension(self) -> int: ...
+
+    else:
+        point_shape = ()
+        momentum_shape = ()
+        copy_dimension = 1
     mass_shape: tuple[int, ...] = ()
-    copy_dimension: int = 1
     compact: bool = True
     # How draws of a single block are named in a DataTree: the variable, the dim of its copy
     # axes and the dims of one copy's point.
@@ -228,32 +240,36 @@ class Space:
         return 0.0
 
     # ---------------------------------------------------------------- geometry
-    def momentum_dtype(self, x: ArrayLike) -> np.dtype:
+    def momentum_dtype(self, x: jax.Array) -> np.dtype:
         return jnp.real(x).dtype
 
     def uniform(self, rng_key: jax.Array, dtype: DTypeLike | None = None) -> jax.Array:
         raise NotImplementedError
 
-    def perturb(self, x: ArrayLike, eps: ArrayLike) -> jax.Array:
+    def perturb(self, x: jax.Array, eps: jax.Array) -> jax.Array:
         """A curve through ``x`` with velocity ``eps`` at 0 (first order suffices)."""
         raise NotImplementedError
 
     def flow(
-        self, x: ArrayLike, p: ArrayLike, inverse_mass: ArrayLike, t: ArrayLike
+        self, x: jax.Array, p: jax.Array, inverse_mass: jax.Array, t: ArrayLike
     ) -> tuple[jax.Array, jax.Array]:
         """Exact flow of ``½ m⁻¹|p|²`` over time ``t``."""
         raise NotImplementedError
 
-    def project(self, x: ArrayLike, p: ArrayLike) -> jax.Array:
+    def project(self, x: jax.Array, p: jax.Array) -> jax.Array:
         """The tangent part of an ambient momentum (identity except on spheres)."""
         return p
 
-    def exp(self, x: ArrayLike, v: ArrayLike) -> jax.Array:
+    def exp(self, x: jax.Array, v: jax.Array) -> jax.Array:
         """The exponential map: the point reached from ``x`` with velocity ``v`` at time 1."""
         return self.flow(x, v, jnp.ones(self.mass_array_shape, v.dtype), 1.0)[0]
 
-    def log(self, x: ArrayLike, y: ArrayLike) -> jax.Array:
+    def log(self, x: jax.Array, y: jax.Array) -> jax.Array:
         raise NotImplementedError(f"log is not implemented for {self!r}")
+
+
+type SpaceTree = Tree[Space]
+"""A space, or a pytree of spaces (a dict, tuple or list of them, nested): a product space."""
 
 
 # ====================================================================== Euclidean
@@ -284,15 +300,15 @@ class Euclidean(Space):
             "Euclidean space has no uniform probability law; give the starting position explicitly"
         )
 
-    def perturb(self, x: ArrayLike, eps: ArrayLike) -> jax.Array:
+    def perturb(self, x: jax.Array, eps: jax.Array) -> jax.Array:
         return x + eps
 
     def flow(
-        self, x: ArrayLike, p: ArrayLike, inverse_mass: ArrayLike, t: ArrayLike
+        self, x: jax.Array, p: jax.Array, inverse_mass: jax.Array, t: ArrayLike
     ) -> tuple[jax.Array, jax.Array]:
         return x + t * inverse_mass * p, p
 
-    def log(self, x: ArrayLike, y: ArrayLike) -> jax.Array:
+    def log(self, x: jax.Array, y: jax.Array) -> jax.Array:
         return y - x
 
 
@@ -323,15 +339,15 @@ class U1(Space):
         dtype = jnp.dtype(dtype or jnp.zeros(()).dtype)
         return jax.random.uniform(rng_key, self.shape, dtype, -jnp.pi, jnp.pi)
 
-    def perturb(self, x: ArrayLike, eps: ArrayLike) -> jax.Array:
+    def perturb(self, x: jax.Array, eps: jax.Array) -> jax.Array:
         return x + eps
 
     def flow(
-        self, x: ArrayLike, p: ArrayLike, inverse_mass: ArrayLike, t: ArrayLike
+        self, x: jax.Array, p: jax.Array, inverse_mass: jax.Array, t: ArrayLike
     ) -> tuple[jax.Array, jax.Array]:
         return _wrap(x + t * inverse_mass * p), p
 
-    def log(self, x: ArrayLike, y: ArrayLike) -> jax.Array:
+    def log(self, x: jax.Array, y: jax.Array) -> jax.Array:
         return _wrap(y - x)
 
 
@@ -385,15 +401,15 @@ class Sphere(Space):
         z = jax.random.normal(rng_key, self.position_array_shape, dtype)
         return z / jnp.linalg.norm(z, axis=-1, keepdims=True)
 
-    def project(self, x: ArrayLike, p: ArrayLike) -> jax.Array:
+    def project(self, x: jax.Array, p: jax.Array) -> jax.Array:
         return p - jnp.sum(p * x, -1, keepdims=True) * x
 
-    def perturb(self, x: ArrayLike, eps: ArrayLike) -> jax.Array:
+    def perturb(self, x: jax.Array, eps: jax.Array) -> jax.Array:
         # The tangent part of eps: the gradient is then the Riemannian one, (I − xxᵀ)∇.
         return x + self.project(x, eps)
 
     def flow(
-        self, x: ArrayLike, p: ArrayLike, inverse_mass: ArrayLike, t: ArrayLike
+        self, x: jax.Array, p: jax.Array, inverse_mass: jax.Array, t: ArrayLike
     ) -> tuple[jax.Array, jax.Array]:
         speed = _norm(p, keepdims=True)  # |p|; |v| = m⁻¹|p|
         angle = t * inverse_mass * speed
@@ -404,7 +420,7 @@ class Sphere(Space):
         new_x = new_x / jnp.linalg.norm(new_x, axis=-1, keepdims=True)
         return new_x, new_p
 
-    def log(self, x: ArrayLike, y: ArrayLike) -> jax.Array:
+    def log(self, x: jax.Array, y: jax.Array) -> jax.Array:
         """Tangent vector at ``x`` pointing to ``y`` with length the geodesic distance."""
         c = jnp.clip(jnp.sum(x * y, -1, keepdims=True), -1.0, 1.0)
         w = y - c * x
@@ -467,11 +483,11 @@ class _MatrixGroup(Space):
     mass_shape = (1,)
 
     @property
-    def point_shape(self):
+    def point_shape(self) -> tuple[int, ...]:
         return (self.n, self.n)
 
     @property
-    def momentum_shape(self):
+    def momentum_shape(self) -> tuple[int, ...]:
         return (self.copy_dimension,)
 
     @property
@@ -555,14 +571,14 @@ class SO(_MatrixGroup):
         flip = jnp.ones(self.n, dtype).at[0].set(-1.0)
         return jnp.where((det < 0)[..., None, None], q * flip, q)  # Haar on SO(n)
 
-    def exponential(self, c: ArrayLike) -> jax.Array:
+    def exponential(self, c: jax.Array) -> jax.Array:
         if self.n != 3:
             return super().exponential(c)
         theta = _norm(c)[..., None, None]
         K = self.hat(c)
         return jnp.eye(3, dtype=c.dtype) + _sinc(theta) * K + _versine(theta) * (K @ K)
 
-    def log(self, x: ArrayLike, y: ArrayLike) -> jax.Array:
+    def log(self, x: jax.Array, y: jax.Array) -> jax.Array:
         """Coordinates of ``log(xᵀy)`` for n = 3 (rotation angles below π)."""
         if self.n != 3:
             return super().log(x, y)
@@ -619,13 +635,13 @@ class SU(_MatrixGroup):
         det = jnp.linalg.det(q)
         return q / (det ** (1.0 / self.n))[..., None, None]  # Haar on SU(n)
 
-    def exponential(self, c: ArrayLike) -> jax.Array:
+    def exponential(self, c: jax.Array) -> jax.Array:
         if self.n != 2:
             return super().exponential(c)
         angle = _norm(c)[..., None, None]
         return jnp.cos(angle) * jnp.eye(2) + _sinc(angle) * self.hat(c)
 
-    def log(self, x: ArrayLike, y: ArrayLike) -> jax.Array:
+    def log(self, x: jax.Array, y: jax.Array) -> jax.Array:
         """Coordinates of ``log(x†y)`` for n = 2 (away from ``−I``)."""
         if self.n != 2:
             return super().log(x, y)
@@ -665,7 +681,7 @@ def _map(fn: Callable, space, *trees):
     return jax.tree.map(fn, space, *trees, is_leaf=is_space)
 
 
-def dimension(space: Space | PyTree) -> int:
+def dimension(space: SpaceTree) -> int:
     """Dimension of a space or product of spaces.
 
     Examples
@@ -677,7 +693,7 @@ def dimension(space: Space | PyTree) -> int:
     return sum(s.dimension for s in _spaces(space))
 
 
-def check_position(space: Space | PyTree, position: PyTree, name: str = "position") -> None:
+def check_position(space: SpaceTree, position: PyTree, name: str = "position") -> None:
     """Structure, shape, dtype and manifold constraint of a position (clear errors).
 
     Examples
@@ -691,8 +707,8 @@ def check_position(space: Space | PyTree, position: PyTree, name: str = "positio
     ValueError: position is off Sphere(n=2, shape=()) by 0.414 ... divide by the norm first.
     """
     _spaces(space)
-    space_structure = jax.tree.structure(space, is_leaf=is_space)
-    position_structure = jax.tree.structure(position)
+    space_structure: TreeDef = jax.tree.structure(space, is_leaf=is_space)
+    position_structure: TreeDef = jax.tree.structure(position)
     if space_structure != position_structure:
         raise ValueError(
             f"{name} must have the structure of the space {space_structure}, got "
@@ -703,7 +719,7 @@ def check_position(space: Space | PyTree, position: PyTree, name: str = "positio
         s.check(x, name + jax.tree_util.keystr(path))
 
 
-def uniform(space: Space | PyTree, rng_key: jax.Array, dtype: DTypeLike | None = None) -> PyTree:
+def uniform(space: SpaceTree, rng_key: PRNGKey, dtype: DTypeLike | None = None) -> PyTree:
     """A draw from the uniform (Haar) law of every block (Euclidean blocks have none).
 
     Examples
@@ -777,7 +793,7 @@ def is_dense_inverse_mass(space: Space, inverse_mass: ArrayLike) -> bool:
 
 
 def check_inverse_mass(
-    space: Space | PyTree, inverse_mass: ArrayLike | PyTree | None, dtype: DTypeLike | None = None
+    space: SpaceTree, inverse_mass: PyTree, dtype: DTypeLike | None = None
 ) -> PyTree:
     """``None`` (unit mass), a positive scalar, or a pytree like ``space`` of arrays that
     broadcast to each block's ``mass_array_shape`` → a pytree of arrays of those shapes.
@@ -797,17 +813,20 @@ def check_inverse_mass(
     dtype = dtype or jnp.zeros(()).dtype
     if inverse_mass is None:
         return _map(lambda s: jnp.ones(s.mass_array_shape, dtype), space)
-    if np.ndim(inverse_mass) == 0 and not isinstance(inverse_mass, (dict, list, tuple)):
+    if np.ndim(cast(ArrayLike, inverse_mass)) == 0 and not isinstance(
+        inverse_mass, (dict, list, tuple)
+    ):
         given = _map(lambda s: inverse_mass, space)
     else:
         given = inverse_mass
-        structure = jax.tree.structure(space, is_leaf=is_space)
-        if jax.tree.structure(given) != structure and len(leaves) > 1:
+        structure: TreeDef = jax.tree.structure(space, is_leaf=is_space)
+        given_structure: TreeDef = jax.tree.structure(given)
+        if given_structure != structure and len(leaves) > 1:
             raise ValueError(
                 f"inverse_mass_matrix must be a scalar or a pytree like the space {structure}, "
-                f"got {jax.tree.structure(given)}"
+                f"got {given_structure}"
             )
-        if len(leaves) == 1 and jax.tree.structure(given).num_leaves == 1:
+        if len(leaves) == 1 and given_structure.num_leaves == 1:
             given = _map(lambda s: jax.tree.leaves(inverse_mass)[0], space)
 
     def one(s, m):
@@ -838,7 +857,9 @@ def check_inverse_mass(
 # ---------------------------------------------------------------------- gradients and momenta
 
 
-def trivialised_value_and_grad(logdensity_fn: Callable, space: Space | PyTree) -> Callable:
+def trivialised_value_and_grad(
+    logdensity_fn: Callable[[PyTree], ArrayLike], space: SpaceTree
+) -> Callable[[PyTree], tuple[jax.Array, PyTree]]:
     """``x ↦ (log π(x), ∇ log π(x))`` with the gradient in algebra coordinates: left-trivialised
     on groups (``d/dε log π(g exp(εX_k))``), Riemannian on spheres, ordinary on ``Rᵈ``.
 
@@ -853,8 +874,8 @@ def trivialised_value_and_grad(logdensity_fn: Callable, space: Space | PyTree) -
     (0.0, [0.0, 0.0, 1.0])
     """
 
-    def value_and_grad(position):
-        def along(eps):
+    def value_and_grad(position: PyTree) -> tuple[jax.Array, PyTree]:
+        def along(eps: PyTree) -> ArrayLike:
             return logdensity_fn(_map(lambda s, x, e: s.perturb(x, e), space, position, eps))
 
         zero = zero_momentum(space, position)
@@ -863,7 +884,7 @@ def trivialised_value_and_grad(logdensity_fn: Callable, space: Space | PyTree) -
     return value_and_grad
 
 
-def zero_momentum(space: Space | PyTree, position: PyTree) -> PyTree:
+def zero_momentum(space: SpaceTree, position: PyTree) -> PyTree:
     """The zero momentum of every block (algebra coordinates, in the position's dtype).
 
     Examples
