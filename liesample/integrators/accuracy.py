@@ -124,6 +124,17 @@ class CoupledAverages(_IndependentChains):
         Seconds for the whole run (compilation excluded).
     kept_time : float
         Physical time averaged over per chain.
+
+    Examples
+    --------
+    Two levels, ``h = 0.1`` and ``h/2``, driven by one Brownian path per chain:
+
+    >>> system = liesample.systems.rigid_body(inertia=(1.0, 2.0, 4.0))
+    >>> averages = liesample.accuracy.coupled_ergodic_averages(
+    ...     system, 3.0, lambda mu: mu**2, step_size=0.1, levels=2, rng_key=jax.random.key(0),
+    ...     initial_positions=jnp.array([[1.5, 0.0, 0.0], [0.0, 1.5, 0.0]]), total_time=2.0)
+    >>> averages.step_sizes, averages.chain_means.shape  # (chains, levels, observables)
+    ((0.1, 0.05), (2, 2, 3))
     """
 
     step_sizes: tuple[float, ...]
@@ -310,6 +321,17 @@ def coupled_ergodic_averages(
         One start per chain (all on the orbit to be sampled), at least 2 chains.
     total_time, burn_in : float
         Physical time per chain, and the part of it (at the start) not averaged.
+
+    Examples
+    --------
+    >>> system = liesample.systems.rigid_body(inertia=(1.0, 2.0, 4.0))
+    >>> averages = liesample.accuracy.coupled_ergodic_averages(
+    ...     system, 3.0, lambda mu: mu**2, step_size=0.1, levels=2, rng_key=jax.random.key(0),
+    ...     initial_positions=jnp.array([[1.5, 0.0, 0.0], [0.0, 1.5, 0.0]]), total_time=2.0)
+    >>> extrapolated = liesample.accuracy.richardson_romberg(
+    ...     averages.chain_means[:, 0], averages.chain_means[:, 1], order=2, paired=True)
+    >>> extrapolated.estimate.shape, int(averages.nonfinite_steps.sum())
+    ((3,), 0)
     """
     rng_key = prng_key(rng_key)
     run = _CoupledRun(system, beta, observables, integrator, levels, initial_positions)
@@ -325,6 +347,16 @@ class ChainAverages(_IndependentChains):
     ``chain_means``/``chain_square_means`` have shape ``(chains, k)``; ``info_means`` holds the
     per-chain mean of each numeric ``info`` field (e.g. ``acceptance_rate``), shape
     ``(chains,)``; ``wall_time`` excludes compilation; ``num_steps`` are the averaged steps.
+
+    Examples
+    --------
+    >>> system = liesample.systems.rigid_body(inertia=(1.0, 2.0, 4.0))
+    >>> sampler = liesample.lie_poisson_langevin(system, beta=3.0, step_size=0.05)
+    >>> starts = jnp.array([[1.5, 0.0, 0.0], [0.0, 1.5, 0.0]])
+    >>> averages = liesample.accuracy.ergodic_averages(sampler, jax.random.key(0), starts,
+    ...                                                lambda mu: mu**2, num_steps=100)
+    >>> averages.chain_means.shape, averages.num_steps  # (chains, observables)
+    ((2, 3), 100)
     """
 
     chain_means: np.ndarray
@@ -352,6 +384,16 @@ def ergodic_averages(
     (:mod:`liesample.integrators.chain_loop`). Nothing per step is stored, so long runs of many
     chains fit in memory. The scalar ``info`` fields named in ``info_fields`` (default: all) are
     averaged over the kept steps; fields not asked for are not computed (XLA drops them).
+
+    Examples
+    --------
+    >>> system = liesample.systems.rigid_body(inertia=(1.0, 2.0, 4.0))
+    >>> sampler = liesample.adjusted_lie_poisson(system, beta=3.0, step_size=0.2)
+    >>> starts = jnp.array([[1.5, 0.0, 0.0], [0.0, 1.5, 0.0]])
+    >>> averages = liesample.accuracy.ergodic_averages(sampler, jax.random.key(0), starts,
+    ...                                                lambda mu: mu**2, num_steps=100)
+    >>> bool(jnp.allclose(averages.chain_means.sum(axis=1), 1.5**2))  # |μ|² stays on the orbit
+    True
     """
     num_steps = _positive_int("num_steps", num_steps)
     num_warmup = _positive_int("num_warmup", num_warmup, low=0)
@@ -411,7 +453,18 @@ def ergodic_averages(
 
 @dataclass(frozen=True)
 class RichardsonRomberg:
-    """``(2^p A(h/2) − A(h)) / (2^p − 1)`` per observable, with its MCSE and the inputs."""
+    """``(2^p A(h/2) − A(h)) / (2^p − 1)`` per observable, with its MCSE and the inputs.
+
+    Examples
+    --------
+    A bias ``C h²``: averages 1 at ``h`` and 0.75 at ``h/2`` extrapolate to ``2/3`` at ``h = 0``:
+
+    >>> import numpy as np
+    >>> from liesample.accuracy import richardson_romberg
+    >>> result = richardson_romberg(np.array([[1.0], [1.0]]), np.array([[0.75], [0.75]]), order=2)
+    >>> bool(np.allclose(result.estimate, 2 / 3)), result.order
+    (True, 2.0)
+    """
 
     estimate: np.ndarray
     mcse: np.ndarray
@@ -439,6 +492,16 @@ def richardson_romberg(coarse, fine, order, *, paired: bool = False) -> Richards
         (:func:`coupled_ergodic_averages`): the MCSE then comes from the spread of the per-chain
         combinations (which includes the coupling's correlation). ``False``: the two runs are
         independent and their variances add.
+
+    Examples
+    --------
+    A bias ``C h²``: averages 1 at ``h`` and 0.75 at ``h/2`` extrapolate to ``(4·0.75 − 1)/3``:
+
+    >>> import numpy as np
+    >>> from liesample.accuracy import richardson_romberg
+    >>> result = richardson_romberg(np.array([[1.0], [1.0]]), np.array([[0.75], [0.75]]), order=2)
+    >>> bool(np.allclose(result.estimate, 2 / 3))
+    True
     """
     order = finite_float("order", order, positive=True)
     coarse = np.asarray(coarse, dtype=float)
@@ -483,6 +546,15 @@ def richardson_romberg_run(
     ``order`` defaults to the integrator's declared weak order. ``run_options`` (``step_size``,
     ``initial_positions``, ``rng_key``, ``total_time``, and optionally ``burn_in``, ``sigma``)
     are those of :func:`coupled_ergodic_averages`.
+
+    Examples
+    --------
+    >>> system = liesample.systems.rigid_body(inertia=(1.0, 2.0, 4.0))
+    >>> result = liesample.accuracy.richardson_romberg_run(
+    ...     system, 3.0, lambda mu: mu**2, step_size=0.1, rng_key=jax.random.key(0),
+    ...     initial_positions=jnp.array([[1.5, 0.0, 0.0], [0.0, 1.5, 0.0]]), total_time=2.0)
+    >>> result.estimate.shape, result.order  # the splitting scheme's weak order
+    ((3,), 2.0)
     """
     integrator = get_integrator(integrator)
     averages = coupled_ergodic_averages(
@@ -521,6 +593,13 @@ class StepSizeChoice:
         Per σ tried: its step size, bounds, slopes, τ and cost.
     pilot_wall_time : float
         Seconds spent in pilots (compilation excluded).
+
+    Examples
+    --------
+    >>> system = liesample.systems.rigid_body(inertia=(1.0, 2.0, 4.0))
+    >>> choice = liesample.accuracy.default_step_size(system, 3.0)  # pilots, then the bias model
+    >>> choice.integrator, choice.relative_tolerance, bool(choice.step_size > 0)
+    ('splitting', 0.05, True)
     """
 
     step_size: float
@@ -655,6 +734,19 @@ def choose_step_size(
     Returns
     -------
     StepSizeChoice
+
+    Examples
+    --------
+    A short pilot (a real one runs longer: ``pilot_time=50``) for a bias of at most 0.1
+    posterior sd in each coordinate of ``μ``:
+
+    >>> system = liesample.systems.rigid_body(inertia=(1.0, 2.0, 4.0))
+    >>> choice = liesample.accuracy.choose_step_size(
+    ...     system, 3.0, relative_tolerance=0.1, observables=lambda mu: mu,
+    ...     initial_positions=jnp.array([[1.5, 0.0, 0.0], [0.0, 1.5, 0.0]]),
+    ...     rng_key=jax.random.key(0), pilot_time=2.0, burn_in=0.5)
+    >>> sampler = liesample.lie_poisson_langevin(system, beta=3.0, step_size=choice.step_size,
+    ...                                          sigma=choice.sigma, integrator=choice.integrator)
     """
     if tolerance is not None and relative_tolerance is not None:
         raise ValueError("give tolerance (absolute) or relative_tolerance, not both")
@@ -770,6 +862,14 @@ def default_step_size(
     level of the pilot and the chosen step are stable; the pilot runs ``min(50, 2000 h)`` time units
     (10 % burn-in) on 16 chains started from ``initial_positions`` (cycled; default: the
     system's default position), ``rng_key`` default ``jax.random.key(0)``.
+
+    Examples
+    --------
+    >>> system = liesample.systems.rigid_body(inertia=(1.0, 2.0, 4.0))
+    >>> choice = liesample.accuracy.default_step_size(system, 3.0)
+    >>> sampler = liesample.lie_poisson_langevin(system, beta=3.0, step_size=choice.step_size)
+    >>> choice.relative_tolerance  # the bias bound, in posterior sd
+    0.05
     """
     integrator = get_integrator(integrator)
     sigma, theta, _ = make_dynamics(system, beta=beta, sigma=sigma)
@@ -837,6 +937,17 @@ def linear_sd_bias(integrator, stability_number) -> float | None:
     Returns ``sqrt(ratio) − 1`` (e.g. ``-0.1``: 10 % too small), ``None`` for an integrator
     without a declared linear step (``euler_heun``, user schemes) or ``κ`` outside
     ``[0, stability limit)``; ``0`` for ``κ < 1e-6`` (a flat direction: the isotropic body).
+
+    Examples
+    --------
+    Lie–Euler at ``κ = 1``: the sd ratio is ``√(2/(2 − κ)) = √2``, 41 % too large:
+
+    >>> import numpy as np
+    >>> from liesample.accuracy import linear_sd_bias
+    >>> bool(np.isclose(linear_sd_bias("lie_euler", 1.0), np.sqrt(2) - 1))
+    True
+    >>> linear_sd_bias("splitting", 0.0), linear_sd_bias("euler_heun", 1.0)  # flat; no model
+    (0.0, None)
     """
     integrator = get_integrator(integrator)
     linear = _LINEAR_STEPS.get(integrator.name)
@@ -852,7 +963,15 @@ def linear_sd_bias(integrator, stability_number) -> float | None:
 
 def largest_accurate_stability_number(integrator, tolerance) -> float | None:
     """The largest ``κ`` at which :func:`linear_sd_bias` is within ``tolerance`` (bisection; the
-    error grows with ``κ``), ``None`` where the integrator has no linear model."""
+    error grows with ``κ``), ``None`` where the integrator has no linear model.
+
+    Examples
+    --------
+    >>> from liesample.accuracy import largest_accurate_stability_number, linear_sd_bias
+    >>> kappa = largest_accurate_stability_number("splitting", 0.05)
+    >>> bool(0 < kappa < 2), bool(abs(linear_sd_bias("splitting", kappa)) <= 0.05 + 1e-9)
+    (True, True)
+    """
     integrator = get_integrator(integrator)
     if integrator.name not in _LINEAR_STEPS or integrator.stability_limit is None:
         return None
@@ -872,7 +991,18 @@ def largest_accurate_stability_number(integrator, tolerance) -> float | None:
 
 def warn_given_step(integrator, step_size, stability_number, tolerance) -> float | None:
     """:func:`linear_sd_bias` of a given step, with a ``UserWarning`` naming a step within
-    ``tolerance`` (and the other ways out) when its magnitude exceeds ``tolerance``."""
+    ``tolerance`` (and the other ways out) when its magnitude exceeds ``tolerance``.
+
+    Examples
+    --------
+    >>> import warnings
+    >>> from liesample.accuracy import warn_given_step
+    >>> with warnings.catch_warnings(record=True) as caught:
+    ...     warnings.simplefilter("always")
+    ...     bias = warn_given_step("lie_euler", 0.1, stability_number=1.0, tolerance=0.05)
+    >>> "41% too large" in str(caught[0].message)
+    True
+    """
     bias = linear_sd_bias(integrator, stability_number)
     if bias is None or abs(bias) <= tolerance:
         return bias
