@@ -19,10 +19,13 @@ and draws no random numbers (it is *not* a zero coefficient).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, fields
+from typing import cast
 
 import jax
 import jax.numpy as jnp
+from jax.typing import ArrayLike
 
 from liesample.dynamics.sde import PoissonLangevinSDE
 from liesample.dynamics.system import LiePoissonSystem, checked_beta
@@ -212,7 +215,10 @@ class PoissonLangevin:
         scene = self.scene
         if scene.noise != (dW is not None):
             raise ValueError("dW must be given exactly when the scene has noise")
-        gradient = jax.grad(lambda m: self.system.single_noise_hamiltonian(m, i))(mu)
+        noise = cast(
+            Callable[[jax.Array, ArrayLike], jax.Array], self.system.single_noise_hamiltonian
+        )
+        gradient = jax.grad(lambda m: noise(m, i))(mu)
         coefficient = jnp.zeros((), mu.dtype)
         if scene.dissipation:
             grad_h = jax.grad(self.system.hamiltonian)(mu)

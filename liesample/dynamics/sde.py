@@ -9,11 +9,23 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import Protocol
 
 import jax
 import jax.numpy as jnp
 
 from liesample.geometry.poisson import PoissonStructure
+
+
+class Effects(Protocol):
+    """What :class:`PoissonLangevinSDE` reads of its ``scene``: which effects exist."""
+
+    @property
+    def hamiltonian(self) -> bool: ...
+    @property
+    def dissipation(self) -> bool: ...
+    @property
+    def noise(self) -> bool: ...
 
 
 @dataclass(frozen=True, eq=False)
@@ -42,11 +54,11 @@ class PoissonLangevinSDE:
     """
 
     structure: PoissonStructure
-    hamiltonian: Callable
-    noise_hamiltonians: Callable
+    hamiltonian: Callable[[jax.Array], jax.Array]
+    noise_hamiltonians: Callable[[jax.Array], jax.Array]
     sigma: float
     theta: float
-    scene: object
+    scene: Effects
 
     def brackets_with_noise(self, z, hamiltonian_field=None):
         """``{h, ĥ_i}(z) = −dĥ_i(X_h)`` for every ``i`` (one JVP; ``J`` is antisymmetric)."""

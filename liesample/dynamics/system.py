@@ -13,6 +13,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
 from liesample.dynamics.noise_span import check_noise_reaches_orbit
 from liesample.foundation.compile import evaluate
@@ -124,21 +125,23 @@ class LiePoissonSystem:
 
     name: str
     algebra: LieAlgebra
-    hamiltonian: Callable
-    default_position: Any
-    noise_hamiltonians: Callable = coordinate_noise
+    hamiltonian: Callable[[jax.Array], jax.Array]
+    default_position: ArrayLike
+    noise_hamiltonians: Callable[[jax.Array], jax.Array] = coordinate_noise
     component_names: tuple[str, ...] = ()
-    params: dict = field(default_factory=dict)
-    num_noises: int | None = None
-    event_shape: tuple[int, ...] | None = None
-    reference: Callable | None = None
-    noise_groups: Any = None
+    params: dict[str, Any] = field(default_factory=dict)
+    # Left out (None), these two are derived by __post_init__, so a built system always has
+    # them: typed as what a reader finds.
+    num_noises: int = None  # type: ignore[assignment]
+    event_shape: tuple[int, ...] = None  # type: ignore[assignment]
+    reference: Callable[[float, ArrayLike], Any] | None = None
+    noise_groups: ArrayLike | None = None
     positive_casimirs: tuple[int, ...] | None = None
-    casimir_scale: Callable | None = None
-    check_beta: Callable | None = None
-    hamiltonian_pieces: tuple[Callable, ...] | None = None
+    casimir_scale: Callable[[jax.Array], jax.Array] | None = None
+    check_beta: Callable[[float], None] | None = None
+    hamiltonian_pieces: tuple[Callable[[jax.Array], jax.Array], ...] | None = None
     curvature_bound: bool = True
-    single_noise_hamiltonian: Callable | None = None
+    single_noise_hamiltonian: Callable[[jax.Array, ArrayLike], jax.Array] | None = None
     noise_reach: str = "test"
 
     def __post_init__(self):

@@ -31,6 +31,7 @@ import time
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from typing import cast
 
 import jax
 import jax.numpy as jnp
@@ -83,6 +84,9 @@ class _IndependentChains:
     """Estimates from per-chain time averages ``chain_means`` / ``chain_square_means`` (leading
     axis: independent chains): mean, MCSE from the chains' spread, and ESS (batch means, one
     batch per chain)."""
+
+    chain_means: np.ndarray
+    chain_square_means: np.ndarray
 
     @property
     def num_chains(self) -> int:
@@ -980,7 +984,7 @@ def largest_accurate_stability_number(integrator, tolerance) -> float | None:
         middle = 0.5 * (low + high)
         low, high = (
             (middle, high)
-            if abs(linear_sd_bias(integrator, middle)) <= tolerance
+            if abs(cast(float, linear_sd_bias(integrator, middle))) <= tolerance  # has a model
             else (
                 low,
                 middle,
