@@ -83,7 +83,17 @@ _ORBIT_SEED = 20261122
 
 def noise_curvatures(system, mu, directions=None):
     """``h''_i(μ)``, the second derivative of ``h`` along each noise flow, shape ``(m,)`` (or
-    only for the noise directions listed in ``directions``)."""
+    only for the noise directions listed in ``directions``).
+
+    Examples
+    --------
+    ``h`` is constant along the rotation about ``μ``'s own axis:
+
+    >>> system = liesample.systems.rigid_body(inertia=(1.0, 2.0, 4.0))
+    >>> curvatures = liesample.stability.noise_curvatures(system, jnp.array([1.5, 0.0, 0.0]))
+    >>> curvatures.shape, float(curvatures[0])
+    ((3,), 0.0)
+    """
     mu = jnp.asarray(mu)
     # only the gradients asked for: one pullback each, never the whole (m, dim) Jacobian
     values, pullback = jax.vjp(system.noise_hamiltonians, mu)
@@ -123,6 +133,12 @@ def stiffness(system, theta, position) -> float:
     """``θ · max_i |h''_i|`` estimated on the orbit through ``position`` (module docstring).
 
     Computed once per system and orbit (the result is cached on the system by its Casimirs).
+
+    Examples
+    --------
+    >>> system = liesample.systems.rigid_body(inertia=(1.0, 2.0, 4.0))
+    >>> bool(liesample.stability.stiffness(system, 1.5, jnp.array([1.5, 0.0, 0.0])) > 0)
+    True
     """
     if theta == 0.0:
         return 0.0
@@ -148,7 +164,19 @@ def stiffness(system, theta, position) -> float:
 def stiffness_on_orbits(system, theta, positions) -> np.ndarray:
     """:func:`stiffness` of the orbits through each of ``positions`` (shape ``(n, *event)``),
     the orbits not yet cached computed in one compiled call (a ``lax.map`` over them: bounded
-    memory) and cached as :func:`stiffness` does."""
+    memory) and cached as :func:`stiffness` does.
+
+    Examples
+    --------
+    The rigid body's ``h`` is quadratic: doubling ``|μ|`` quadruples the curvature:
+
+    >>> import numpy as np
+    >>> system = liesample.systems.rigid_body(inertia=(1.0, 2.0, 4.0))
+    >>> orbits = jnp.array([[1.5, 0.0, 0.0], [3.0, 0.0, 0.0]])
+    >>> s = liesample.stability.stiffness_on_orbits(system, 1.5, orbits)
+    >>> s.shape, bool(np.isclose(s[1], 4 * s[0]))
+    ((2,), True)
+    """
     positions = np.asarray(positions, dtype=float)
     if theta == 0.0:
         return np.zeros(len(positions))
@@ -179,7 +207,19 @@ def stiffness_on_orbits(system, theta, positions) -> np.ndarray:
 
 def stability_number(system, step_size, theta, position) -> float:
     """``κ = step_size · |θ| · max_i |h''_i|`` on the orbit through ``position``
-    (θ < 0 at β < 0)."""
+    (θ < 0 at β < 0).
+
+    Examples
+    --------
+    ``κ`` is linear in the step size:
+
+    >>> import numpy as np
+    >>> from liesample.stability import stability_number, stiffness
+    >>> system = liesample.systems.rigid_body(inertia=(1.0, 2.0, 4.0))
+    >>> mu = jnp.array([1.5, 0.0, 0.0])
+    >>> bool(np.isclose(stability_number(system, 0.1, 1.5, mu), 0.1 * stiffness(system, 1.5, mu)))
+    True
+    """
     return step_size * stiffness(system, theta, position)
 
 
@@ -187,7 +227,17 @@ def check_step_size(system, integrator, step_size, theta, position, mode="warn")
     """Warn (``mode="warn"``) or raise ``ValueError`` (``"raise"``) when ``κ`` exceeds the
     integrator's declared ``stability_limit`` (an :class:`~liesample.integrators.Integrator` or
     a built-in's name); ``"off"``, an unknown name or no declared limit: no check.
-    Returns ``κ`` (or ``None`` when not checked)."""
+    Returns ``κ`` (or ``None`` when not checked).
+
+    Examples
+    --------
+    >>> system = liesample.systems.rigid_body(inertia=(1.0, 2.0, 4.0))
+    >>> mu = jnp.array([1.5, 0.0, 0.0])
+    >>> kappa = liesample.stability.check_step_size(system, "splitting", 0.1, 1.5, mu)  # κ ≤ 2
+    >>> liesample.stability.check_step_size(system, "splitting", 10.0, 1.5, mu, mode="raise")
+    Traceback (most recent call last):
+    ValueError: step_size=10 is beyond the stable bound of the 'splitting' integrator ...
+    """
     if not isinstance(integrator, Integrator):
         integrator = INTEGRATORS.get(integrator)
     limit = None if integrator is None else integrator.stability_limit
@@ -214,7 +264,20 @@ def check_step_size(system, integrator, step_size, theta, position, mode="warn")
 def largest_stable_step(system, integrator, theta, position) -> float:
     """The largest ``step_size`` with ``κ ≤`` the integrator's ``stability_limit`` on the orbit
     through ``position`` (``inf`` where there is no bound: no dissipation, flat ``h``, no declared
-    limit, or a system without the curvature bound)."""
+    limit, or a system without the curvature bound).
+
+    Examples
+    --------
+    The largest step puts ``κ`` at the splitting scheme's limit, 2:
+
+    >>> import numpy as np
+    >>> from liesample.stability import largest_stable_step, stability_number
+    >>> system = liesample.systems.rigid_body(inertia=(1.0, 2.0, 4.0))
+    >>> mu = jnp.array([1.5, 0.0, 0.0])
+    >>> step = largest_stable_step(system, "splitting", 1.5, mu)
+    >>> bool(np.isclose(stability_number(system, step, 1.5, mu), 2.0))
+    True
+    """
     if not isinstance(integrator, Integrator):
         integrator = INTEGRATORS.get(integrator)
     limit = None if integrator is None else integrator.stability_limit
@@ -242,7 +305,15 @@ _PRECISION_WARNED: set = set()
 def check_precision(system, beta, theta, position, dtype) -> bool:
     """Warn once per system (``UserWarning``) when a sampler runs in float32 on a problem that
     needs float64, by the two rules :data:`FLOAT32_MIN_STABLE_STEP` and
-    :data:`FLOAT32_MIN_RELATIVE_SPREAD`. Returns whether float32 was judged insufficient."""
+    :data:`FLOAT32_MIN_RELATIVE_SPREAD`. Returns whether float32 was judged insufficient.
+
+    Examples
+    --------
+    >>> system = liesample.systems.rigid_body(inertia=(1.0, 2.0, 4.0))
+    >>> mu = jnp.array([1.5, 0.0, 0.0])
+    >>> liesample.stability.check_precision(system, 3.0, 1.5, mu, jnp.float64)  # float64: enough
+    False
+    """
     if jnp.dtype(dtype) != jnp.float32 or theta == 0.0 or not system.curvature_bound:
         return False
     position = np.asarray(position, dtype=float)

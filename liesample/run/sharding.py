@@ -43,6 +43,14 @@ def chain_sharding(devices, num_chains: int) -> NamedSharding | None:
         A ``NamedSharding`` is used as given (its spec must split axis 0 only).
     num_chains : int
         Must be a multiple of the number of devices (each device runs the same number of chains).
+
+    Examples
+    --------
+    On one device (the doctests' CPU) the chains all stay there; ``None`` is an unsharded run:
+
+    >>> from liesample.sharding import chain_sharding
+    >>> chain_sharding(None, 4) is None, tuple(chain_sharding("all", 4).spec)
+    (True, ('chain',))
     """
     if devices is None:
         return None
@@ -98,14 +106,29 @@ def _axis_names(entry):
 
 
 def shard_chains(tree, sharding: NamedSharding | None):
-    """Place every leaf of ``tree`` (leading axis = chains) with ``sharding`` (or leave it)."""
+    """Place every leaf of ``tree`` (leading axis = chains) with ``sharding`` (or leave it).
+
+    Examples
+    --------
+    >>> from liesample.sharding import chain_sharding, shard_chains
+    >>> starts = shard_chains(jnp.zeros((4, 3)), chain_sharding("all", 4))  # 4 chains
+    >>> starts.shape, tuple(starts.sharding.spec)
+    ((4, 3), ('chain',))
+    """
     if sharding is None:
         return tree
     return jax.device_put(tree, sharding)
 
 
 def to_host(tree):
-    """The leaves of ``tree`` as NumPy arrays on this host (gathered from every process)."""
+    """The leaves of ``tree`` as NumPy arrays on this host (gathered from every process).
+
+    Examples
+    --------
+    >>> from liesample.sharding import to_host
+    >>> to_host({"mu": jnp.ones(2)})
+    {'mu': array([1., 1.])}
+    """
     if jax.process_count() > 1:
         from jax.experimental import multihost_utils
 
@@ -120,6 +143,15 @@ def initialize_distributed(**kwargs) -> bool:
     arguments JAX reads the cluster from the environment (SLURM, Open MPI, Kubernetes, or
     ``JAX_COORDINATOR_ADDRESS``, ``JAX_NUM_PROCESSES``, ``JAX_PROCESS_ID``); pass
     ``coordinator_address=``, ``num_processes=``, ``process_id=`` otherwise.
+
+    Examples
+    --------
+    Skipped in the doctests, which run in one process: the first line of each process of a
+    multi-host run (here its cluster comes from SLURM's environment):
+
+    >>> from liesample.sharding import initialize_distributed
+    >>> initialize_distributed()  # doctest: +SKIP
+    True
     """
     if jax.distributed.is_initialized():
         return False
