@@ -1,4 +1,4 @@
-"""Samplers that know they are outside their validity say so by name (no compilation here)."""
+"""Samplers that know they are outside their validity say so by name."""
 
 import math
 import warnings
@@ -35,3 +35,41 @@ def test_vortex_metropolis_is_silent_where_it_mixes(circulations, beta):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         liesample.vortex_metropolis(point_vortices(circulations), beta=beta)
+
+
+def _box(x):
+    """The uniform law on the unit square: 0 inside, −∞ outside (a bounded support)."""
+    import jax.numpy as jnp
+
+    return jnp.where(jnp.all((x >= 0.0) & (x <= 1.0)), 0.0, -jnp.inf)
+
+
+def test_unadjusted_langevin_on_a_bounded_support_names_the_adjusted_sampler():
+    # magnetic_langevin at a step that crosses the walls: its rejected steps bias the law (its
+    # mean sits near the walls, not at 0.5), and the divergence warning says why and names
+    # magnetic_hmc rather than a smaller step
+    import jax
+    import jax.numpy as jnp
+
+    d = 2
+    sampler = liesample.magnetic_langevin(
+        _box, step_size=0.3, inverse_mass_matrix=jnp.ones(d), friction=1.0,
+        magnetic_field=jnp.zeros((d, d)),
+    )  # fmt: skip
+    starts = jnp.full((2, d), 0.5)
+    with pytest.warns(RuntimeWarning, match="divergent step") as record:
+        liesample.sample(sampler, jax.random.key(0), starts, 20, num_warmup=0, progress_bar=False)
+    divergence = next(str(w.message) for w in record if "divergent step" in str(w.message))
+    assert "unadjusted" in divergence and "liesample.magnetic_hmc" in divergence
+    assert "Reduce step_size" not in divergence
+    # the adjusted sampler keeps the generic advice
+    assert liesample.magnetic_hmc(
+        _box, step_size=0.3, inverse_mass_matrix=jnp.ones(d), num_integration_steps=1,
+        magnetic_field=jnp.zeros((d, d)),
+    ).divergence_advice is None  # fmt: skip
+    assert (
+        "unadjusted"
+        in liesample.geometric_langevin(
+            _box, liesample.spaces.Euclidean((d,)), step_size=0.3
+        ).divergence_advice
+    )

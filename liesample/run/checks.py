@@ -46,6 +46,7 @@ def check_run(
     on_nonfinite,
     min_acceptance_rate,
     stuck_advice=None,
+    divergence_advice=None,
     convergence=True,
     stacklevel=2,
 ):
@@ -57,7 +58,7 @@ def check_run(
     ``groups``: the sampler's law groups (a label per chain, chains with one label sample one
     law), or ``None`` (one law). ``stacklevel`` as for ``warnings.warn`` called here."""
     level = stacklevel + 1
-    report_divergences(info, on_nonfinite, level)
+    report_divergences(info, on_nonfinite, level, advice=divergence_advice)
     report_stuck_chains(info, min_acceptance_rate, stuck_advice, level)
     report_unconverged(info, groups, level)
     report_casimir_drift(info, level)
@@ -106,11 +107,12 @@ def chain_list(chains, limit=10) -> str:
     return shown + (f", … ({len(chains)} in all)" if len(chains) > limit else "")
 
 
-def report_divergences(info, on_nonfinite: str, stacklevel=2):
+def report_divergences(info, on_nonfinite: str, stacklevel=2, advice=None):
     """A ``RuntimeWarning`` (or :class:`NonFiniteStateError` for ``on_nonfinite="raise"``)
     naming the chains whose ``info["is_divergent"]`` flags a step; when the energy recorded at
     such draws is NaN, the message says so (a NaN log-density, treated as −∞, is a fault of the
-    model, not of the step size)."""
+    model, not of the step size); otherwise it quotes the sampler's ``advice``
+    (``Sampler.divergence_advice``) or the generic one."""
     flags = info.get("is_divergent")
     if flags is None or not np.any(flags):
         return
@@ -132,7 +134,7 @@ def report_divergences(info, on_nonfinite: str, stacklevel=2):
             "support, or constrain the parameter."
         )
     else:
-        message += " Reduce step_size or sigma, or let the warm-up adapt it."
+        message += " " + (advice or "Reduce step_size or sigma, or let the warm-up adapt it.")
     raise_or_warn(message, on_nonfinite == "raise", NonFiniteStateError, RuntimeWarning, stacklevel)
 
 

@@ -586,6 +586,7 @@ class _Run:
             on_nonfinite=o.on_nonfinite,
             min_acceptance_rate=o.min_acceptance_rate,
             stuck_advice=self.sampler.stuck_advice,
+            divergence_advice=self.sampler.divergence_advice,
             convergence=convergence,
             stacklevel=5,
         )

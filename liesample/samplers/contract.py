@@ -275,6 +275,12 @@ class Sampler(blackjax.base.SamplingAlgorithm, DeclaresNoiseBlocks):
         What to do when a chain is stuck (its acceptance rate near 0): a call that works for
         this sampler, which the runner's stuck-chain warning quotes. ``None`` (default): the
         runner's generic advice.
+    divergence_advice : str or None
+        What to do when steps diverge and the model is not at fault (no NaN energy), which the
+        runner's divergence warning quotes: an unadjusted sampler names its Metropolis-adjusted
+        sibling, since it cannot sample a density that is −∞ or jumps somewhere (a bounded
+        support, a discontinuity). ``None`` (default): the runner's generic advice (a smaller
+        step).
     energy_name : str or None
         The ``sample_stats`` name of ``info.energy`` (:func:`energy_name`): ``"energy"`` for
         HMC's total energy ``H(q, p)``, ``"hamiltonian"`` for ``h`` of a state. ``None``
@@ -291,6 +297,7 @@ class Sampler(blackjax.base.SamplingAlgorithm, DeclaresNoiseBlocks):
     draw_names: DrawNames | None = None
     law_groups: Callable | None = None
     stuck_advice: str | None = None
+    divergence_advice: str | None = None
     energy_name: str | None = None
     structure: Structure | None = None
 
@@ -313,6 +320,7 @@ HOOKS = {
     "draw_names": None,
     "law_groups": None,
     "stuck_advice": None,
+    "divergence_advice": None,
     "energy_name": None,
     "structure": None,
 }

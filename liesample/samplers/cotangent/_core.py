@@ -368,10 +368,11 @@ def unset_step(sampler: str, arguments: str = "logdensity_fn, space") -> Callabl
 
 
 def space_sampler(logdensity_fn, space, step_fn: Callable, settings: dict,
-                  adaptation=None) -> Sampler:  # fmt: skip
+                  adaptation=None, divergence_advice=None) -> Sampler:  # fmt: skip
     """The :class:`~liesample.samplers.contract.Sampler` of ``step_fn`` on ``space``: keyless
     :func:`init` and :func:`check_starts`; ``adaptation`` its
-    :class:`~liesample.samplers.contract.Tunable`."""
+    :class:`~liesample.samplers.contract.Tunable`; ``divergence_advice`` its
+    ``Sampler.divergence_advice`` (:func:`unadjusted_advice` for an unadjusted step)."""
     check_logdensity_fn(logdensity_fn)
 
     def init_fn(position, rng_key=None):
@@ -389,6 +390,21 @@ def space_sampler(logdensity_fn, space, step_fn: Callable, settings: dict,
         draw_names=names,
         adaptation=adaptation,
         stuck_advice=window_advice(settings["sampler"], "logdensity_fn, space"),
+        divergence_advice=divergence_advice,
+    )
+
+
+def unadjusted_advice(adjusted: str) -> str:
+    """The divergence advice of an unadjusted sampler (``Sampler.divergence_advice``), naming
+    ``adjusted``, the call of its Metropolis-adjusted sibling."""
+    return (
+        "This sampler is unadjusted: it has no Metropolis test, so a step it must reject (a "
+        "proposal where the log-density or its gradient is not finite: a bounded support, a "
+        "discontinuity, a region where the model is undefined) biases its law near there, "
+        "whatever the step size. For such a density use the Metropolis-adjusted "
+        f"{adjusted}, or reparametrise onto an unbounded space (a constrained parameter "
+        "through a bijection); a density that is smooth and finite everywhere needs only a "
+        "smaller step_size."
     )
 
 

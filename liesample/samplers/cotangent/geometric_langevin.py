@@ -52,6 +52,7 @@ from liesample.samplers.cotangent._core import (
     space_sampler,
     space_settings,
     trajectory_cost,
+    unadjusted_advice,
     unadjusted_transition,
     unset_step,
 )
@@ -271,7 +272,15 @@ def as_top_level_api(
         key = step_key(rng_key)
         return transition(key, state, move, friction, adjusted, divergence_threshold)
 
-    return space_sampler(logdensity_fn, space, step_fn, settings, tunable)
+    advice = (
+        None
+        if adjusted
+        else unadjusted_advice(
+            "liesample.geometric_langevin(logdensity_fn, space, adjusted=True) or "
+            "liesample.geometric_hmc(logdensity_fn, space)"
+        )
+    )
+    return space_sampler(logdensity_fn, space, step_fn, settings, tunable, advice)
 
 
 geometric_langevin = sampling_api(

@@ -36,7 +36,12 @@ import jax
 import jax.numpy as jnp
 
 from liesample.samplers.contract import Sampler, sampling_api, setting, step_key
-from liesample.samplers.cotangent._core import check_logdensity_fn, ravelled, scheme_setting
+from liesample.samplers.cotangent._core import (
+    check_logdensity_fn,
+    ravelled,
+    scheme_setting,
+    unadjusted_advice,
+)
 from liesample.samplers.cotangent._euclidean import (
     check_parameters,
     check_starts,
@@ -237,6 +242,7 @@ def as_top_level_api(
             "Give a smaller step_size: an unadjusted step is rejected only where it diverges "
             "(info.metropolis_rate is the rate the step would have as a Metropolis proposal)."
         ),
+        divergence_advice=unadjusted_advice("liesample.magnetic_hmc(logdensity_fn, ...)"),
     )
 
 
