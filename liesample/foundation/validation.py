@@ -64,7 +64,7 @@ def principal_moments(inertia: Sequence[float]) -> tuple[float, float, float]:
     return a, b, c
 
 
-def nonzero_vector3(name: str, value: ArrayLike) -> np.ndarray:
+def nonzero_vector3(name: str, value: ArrayLike | Sequence[float]) -> np.ndarray:
     """A finite, nonzero, read-only float array of shape (3,), or a ``ValueError`` naming it."""
     vector = float_array(value, f"{name} must be a 3-vector of finite reals")
     if vector.shape != (3,):

@@ -31,7 +31,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, cast
 
 import jax
 import jax.numpy as jnp
@@ -95,8 +95,8 @@ class ChargedParticleSystem:
     dimension: int
     mass: float
     charge: float
-    potential_fn: Callable | None
-    logdensity_fn: Callable | None
+    potential_fn: Callable[[jax.Array], jax.Array] | None
+    logdensity_fn: Callable[[jax.Array], jax.Array] | None
     params: dict
 
     num_noises = property(lambda self: self.dimension)
@@ -107,22 +107,23 @@ class ChargedParticleSystem:
     def event_shape(self) -> tuple[int]:
         return (2 * self.dimension,)
 
-    def potential(self, q: ArrayLike, beta: float | None = None) -> jax.Array:
+    def potential(self, q: jax.Array, beta: float | None = None) -> jax.Array:
         """``V(q)``; for a log-density, ``−log π(q)/β`` (``β = 1`` when there is no noise)."""
         if self.potential_fn is not None:
             return self.potential_fn(q)
-        return -self.logdensity_fn(q) / (1.0 if beta is None else beta)
+        logdensity_fn = cast(Callable[[jax.Array], jax.Array], self.logdensity_fn)  # the other
+        return -logdensity_fn(q) / (1.0 if beta is None else beta)
 
-    def hamiltonian_fn(self, beta: float | None = None) -> Callable:
+    def hamiltonian_fn(self, beta: float | None = None) -> Callable[[jax.Array], jax.Array]:
         """``z ↦ h(z) = |p|²/2m + V(q)``."""
 
-        def hamiltonian(z):
+        def hamiltonian(z: jax.Array) -> jax.Array:
             q, p = self.structure.split(z)
             return 0.5 * jnp.sum(p * p) / self.mass + self.potential(q, beta)
 
         return hamiltonian
 
-    def noise_hamiltonians(self, z: ArrayLike) -> jax.Array:
+    def noise_hamiltonians(self, z: jax.Array) -> jax.Array:
         """``ĥ_i = −q_i``: ``X_{ĥ_i} = (0, e_i)``, a random force on every coordinate."""
         return -self.structure.split(z)[0]
 
@@ -139,11 +140,11 @@ class ChargedParticleSystem:
 
 
 def charged_particle(
-    potential_fn: Callable | None = None,
-    logdensity_fn: Callable | None = None,
+    potential_fn: Callable[[jax.Array], jax.Array] | None = None,
+    logdensity_fn: Callable[[jax.Array], jax.Array] | None = None,
     *,
     magnetic_field: ArrayLike | None = None,
-    vector_potential: Callable | None = None,
+    vector_potential: Callable[[jax.Array], jax.Array] | None = None,
     mass: float = 1.0,
     charge: float = 1.0,
     dimension: int | None = None,
@@ -257,7 +258,7 @@ class ChargedParticleDynamics:
 
     @property
     def structure(self) -> CanonicalStructure:
-        return self.sde.structure
+        return cast(CanonicalStructure, self.sde.structure)  # charged_particle_dynamics builds it
 
     def make_step(self, step_size: float) -> Callable:
         """``step(rng_key, z) -> (z', converged)`` for a fixed ``step_size`` (matrices built

@@ -135,7 +135,7 @@ def _bond_sum(s, periodic: bool):
     return total
 
 
-def neighbour_sum(s: ArrayLike, periodic: bool) -> jax.Array:
+def neighbour_sum(s: jax.Array, periodic: bool) -> jax.Array:
     """``Σ_{j ~ k} s_j`` for every site ``k`` (shape of ``s``): the exchange field over ``J``."""
     total = jnp.zeros_like(s)
     for axis in range(s.ndim - 1):
@@ -154,7 +154,7 @@ def neighbour_sum(s: ArrayLike, periodic: bool) -> jax.Array:
     return total
 
 
-def neighbour_table(shape: int | Sequence[int], periodic: bool) -> np.ndarray:
+def neighbour_table(shape: Sequence[int], periodic: bool) -> np.ndarray:
     """``(N, 2·dim)`` flat indices of each site's neighbours, ``N`` where there is none."""
     num_sites = math.prod(shape)
     index = np.arange(num_sites).reshape(shape)
@@ -163,14 +163,14 @@ def neighbour_table(shape: int | Sequence[int], periodic: bool) -> np.ndarray:
         for shift in (1, -1):
             rolled = np.roll(index, shift, axis=axis)
             if not periodic:
-                edge = [slice(None)] * len(shape)
+                edge: list[slice | int] = [slice(None)] * len(shape)
                 edge[axis] = 0 if shift == 1 else n - 1
                 rolled[tuple(edge)] = num_sites
             columns.append(rolled.reshape(-1))
     return np.stack(columns, axis=1)
 
 
-def colouring(shape: int | Sequence[int], periodic: bool) -> tuple[np.ndarray, int]:
+def colouring(shape: Sequence[int], periodic: bool) -> tuple[np.ndarray, int]:
     """A proper colouring of the lattice: ``(colours of shape `shape`, number of colours)``.
 
     Axis colourings ``c_a(i) = i mod 2`` (path or even cycle) or, on an odd cycle, the same with
@@ -184,13 +184,13 @@ def colouring(shape: int | Sequence[int], periodic: bool) -> tuple[np.ndarray, i
         c = np.arange(n) % 2
         if periodic and n % 2:
             c[-1] = 2
-        index = [None] * len(shape)
+        index: list[slice | None] = [None] * len(shape)
         index[axis] = slice(None)
         total = total + c[tuple(index)]
     return total % k, k
 
 
-def noise_groups(shape: int | Sequence[int], periodic: bool) -> np.ndarray:
+def noise_groups(shape: Sequence[int], periodic: bool) -> np.ndarray:
     """Commuting groups of the ``3N`` noise directions, for the splitting integrator.
 
     Direction ``(k, i)`` (flat index ``3k + i``) gets label ``3·colour(k) + i``: one group is

@@ -59,6 +59,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from typing import cast
 
 import jax
 import jax.numpy as jnp
@@ -150,7 +151,7 @@ def vortex_velocity(x: ArrayLike, circulations: ArrayLike, radius: float = 1.0) 
     return cross(weights @ x, x)
 
 
-def angular_momentum(x: ArrayLike, circulations: ArrayLike) -> jax.Array:
+def angular_momentum(x: jax.Array, circulations: ArrayLike) -> jax.Array:
     """``Σ_k Γ_k x_k``, the momentum map of the diagonal rotations (shape ``(3,)``)."""
     return jnp.einsum("k,ki->i", jnp.asarray(circulations, dtype=x.dtype), x)
 
@@ -209,7 +210,7 @@ def unresolved_fraction(
     positions = jnp.asarray(positions)
     flat = positions.reshape(-1, *positions.shape[-2:])
     rates = np.asarray(jax.vmap(lambda x: collision_rate(x, circulations))(flat))
-    limit = 1.0 if max_substeps is None else float(safety) * int(max_substeps)
+    limit = 1.0 if max_substeps is None else float(cast(float, safety)) * int(max_substeps)
     return float(np.mean(rates * float(step_size) > limit))
 
 
@@ -270,7 +271,7 @@ class PointVortexSystem(LiePoissonSystem):
         """Classical velocity of every vortex (:func:`vortex_velocity`)."""
         return vortex_velocity(x, self.circulations, self.radius)
 
-    def angular_momentum(self, x: ArrayLike) -> jax.Array:
+    def angular_momentum(self, x: jax.Array) -> jax.Array:
         """``Σ_k Γ_k x_k``."""
         return angular_momentum(x, self.circulations)
 

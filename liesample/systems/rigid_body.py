@@ -35,7 +35,9 @@ def kinetic_pieces(
     rotations about ``e₃`` (the Lagrange top's symmetry). ``momentum(μ)`` selects ``Π``.
     """
     inverse_inertia = np.asarray(inverse_inertia, dtype=float)
-    pieces = [lambda mu: 0.5 * inverse_inertia[0] * jnp.sum(momentum(mu) ** 2)]
+    pieces: list[Callable[..., jax.Array]] = [
+        lambda mu: 0.5 * inverse_inertia[0] * jnp.sum(momentum(mu) ** 2)
+    ]
     for axis in (1, 2):
         coefficient = float(inverse_inertia[axis] - inverse_inertia[0])
         if coefficient != 0.0:

@@ -27,6 +27,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable, Sequence
+from typing import cast
 
 import jax
 import jax.numpy as jnp
@@ -179,7 +180,7 @@ class WilsonGauge:
         mask = np.ones(self.shape, bool)
         if self.boundary == "open":
             for axis in (mu, nu):
-                index = [slice(None)] * self.dim
+                index: list[slice | int] = [slice(None)] * self.dim
                 index[axis] = -1
                 mask[tuple(index)] = False
         return mask
@@ -240,7 +241,7 @@ class WilsonGauge:
             )
             up_mask, down_mask = mask, self.shift(mask, nu, -1)
             total = total + self._as_matrix(up, up_mask) + self._as_matrix(down, down_mask)
-        return total
+        return cast(jax.Array, total)  # an array: every link has a plane through it
 
     def _as_matrix(self, u, mask):
         if self.abelian:
@@ -256,7 +257,7 @@ class WilsonGauge:
             mask = jnp.asarray(self.plaquette_mask(mu, nu))
             deficit = 1.0 - self.retrace(self.plaquette(links, mu, nu))
             total = total + jnp.sum(jnp.where(mask, deficit, 0.0))
-        return total
+        return cast(jax.Array, total)  # an array: a lattice has at least one plane
 
     def logdensity(self, beta: float) -> Callable[[jax.Array], jax.Array]:
         """``links ↦ −β S/β``: the ``log π`` (Haar measure) of a ``T*G`` sampler.
@@ -443,7 +444,7 @@ def wilson_gauge(group: str, shape: Sequence[int], boundary: str = "periodic") -
     (2, 4, 4, 2, 2)
     >>> sampler = liesample.recommended_sampler(system, beta=2.0)  # heat bath, over-relaxation
     """
-    return WilsonGauge(group, shape, boundary)
+    return WilsonGauge(group, cast(tuple[int, ...], shape), boundary)  # checked as a tuple there
 
 
 jax.tree_util.register_static(WilsonGauge)

@@ -263,7 +263,7 @@ class QuantisedHarmonics:
         c = self.coefficients(x)
         ell = self.degrees
         weights = np.where(ell > 0, 0.5 / np.maximum(ell * (ell + 1), 1), 0.0)
-        per_mode = weights * c**2
+        per_mode = c**2 * weights
         onehot = (ell[:, None] == np.arange(1, self.size)[None, :]).astype(float)
         return per_mode @ jnp.asarray(onehot, dtype=per_mode.dtype)
 
@@ -433,7 +433,7 @@ round-off of the start's dtype sets it: :meth:`ZeitlinSystem.check_position`).""
 class ZeitlinSystem(LiePoissonSystem):
     """A :class:`LiePoissonSystem` whose states must also be trace-free (su(N), not u(N))."""
 
-    def step_casimir_error(self, mu: ArrayLike, reference_casimirs: ArrayLike) -> jax.Array:
+    def step_casimir_error(self, mu: ArrayLike, reference_casimirs: jax.Array) -> jax.Array:
         """Relative drift of the Casimir ``‖W‖² = −tr(W²)`` alone: O(N²), what the adjusted
         sampler reports per step (``casimir_error`` of its Info).
 
