@@ -169,7 +169,18 @@ def log_bessel_iv(order: ArrayLike, kappa: ArrayLike) -> jax.Array:
     """``log I_ν(κ)`` for a fixed order ``ν ≥ 0`` and ``κ ≥ 0`` (module docstring), shaped like
     ``kappa``; the arguments are those of :func:`log_bessel_iv_reduced`. ``−inf`` at ``κ = 0``
     for ``ν > 0``; ``d/dκ log I_ν(κ) = I_{ν+1}(κ)/I_ν(κ) + ν/κ``, and higher derivatives, by
-    ``jax.grad``/``jax.hessian``."""
+    ``jax.grad``/``jax.hessian``.
+
+    Examples
+    --------
+    ``I_{1/2}(κ) = √(2/(πκ)) sinh κ``:
+
+    >>> import numpy as np
+    >>> from liesample.numpyro import log_bessel_iv
+    >>> value = log_bessel_iv(0.5, jnp.array([1.0]))
+    >>> bool(np.allclose(value, np.log(np.sqrt(2 / np.pi) * np.sinh(1.0))))
+    True
+    """
     return _log_iv(_order(order), kappa)
 
 

@@ -71,6 +71,16 @@ class DriftedBrownianMotion(_Driver):
         ``a`` (one value, or one per noise direction); finite.
     scale : float
         ``c > 0``: the martingale part must not vanish.
+
+    Examples
+    --------
+    >>> from liesample.drivers import DriftedBrownianMotion
+    >>> system = liesample.systems.rigid_body(inertia=(1.0, 2.0, 4.0))
+    >>> path = liesample.simulate(system, jax.random.key(0), jnp.array([1.5, 0.0, 0.0]),
+    ...                           step_size=0.01, num_steps=10,
+    ...                           driver=DriftedBrownianMotion(drift=(0.1, 0.0, 0.0)))
+    >>> bool(jnp.allclose(jnp.linalg.norm(path.positions, axis=-1), 1.5))  # still on the orbit
+    True
     """
 
     drift: float | tuple = 0.0
@@ -107,7 +117,17 @@ class DriftedBrownianMotion(_Driver):
 
 @dataclass(frozen=True, init=False)
 class BrownianMotion(DriftedBrownianMotion):
-    """``S^i = c W^i`` (``c = 1``: the standard driver, the only one the dissipation balances)."""
+    """``S^i = c W^i`` (``c = 1``: the standard driver, the only one the dissipation balances).
+
+    Examples
+    --------
+    >>> from liesample.drivers import BrownianMotion
+    >>> system = liesample.systems.rigid_body(inertia=(1.0, 2.0, 4.0))
+    >>> path = liesample.simulate(system, jax.random.key(0), jnp.array([1.5, 0.0, 0.0]),
+    ...                           step_size=0.01, num_steps=10, driver=BrownianMotion(scale=0.5))
+    >>> path.positions.shape
+    (11, 3)
+    """
 
     def __init__(self, scale: float = 1.0):
         super().__init__(drift=0.0, scale=scale)
@@ -127,6 +147,16 @@ class TimeChangedBrownianMotion(_Driver):
         ``t ↦ τ(t)``, traceable by JAX, strictly increasing with ``τ(0) = 0`` (checked on the
         simulation's time grid). E.g. ``lambda t: t**2`` or ``lambda t: t + 0.5*jnp.sin(t)``.
         The increments are ``N(0, τ(t+dt) − τ(t))`` and ``d[S] = τ(t+dt) − τ(t)``.
+
+    Examples
+    --------
+    >>> from liesample.drivers import TimeChangedBrownianMotion
+    >>> system = liesample.systems.rigid_body(inertia=(1.0, 2.0, 4.0))
+    >>> path = liesample.simulate(system, jax.random.key(0), jnp.array([1.5, 0.0, 0.0]),
+    ...                           step_size=0.01, num_steps=10,
+    ...                           driver=TimeChangedBrownianMotion(lambda t: t**2))
+    >>> path.positions.shape
+    (11, 3)
     """
 
     clock: Callable
@@ -154,7 +184,16 @@ class TimeChangedBrownianMotion(_Driver):
 
 class Path(NamedTuple):
     """A simulated path: ``positions[k]`` at ``times[k]`` (the start included), and whether a
-    step produced a non-finite state (the path then keeps its last finite state)."""
+    step produced a non-finite state (the path then keeps its last finite state).
+
+    Examples
+    --------
+    >>> system = liesample.systems.rigid_body(inertia=(1.0, 2.0, 4.0))
+    >>> path = liesample.simulate(system, jax.random.key(0), jnp.array([1.5, 0.0, 0.0]),
+    ...                           step_size=0.01, num_steps=10, save_every=5)
+    >>> path.times.shape, path.positions.shape, bool(path.nonfinite)  # t = 0, 0.05, 0.1
+    ((3,), (3, 3), False)
+    """
 
     times: jax.Array
     positions: jax.Array

@@ -131,7 +131,22 @@ def check_observed_sites(trace) -> None:
 
     NumPyro checks values only where ``log_prob`` sees them concrete; a sampler evaluates the
     likelihood traced, so an observation off the sphere (or a matrix that is not a rotation)
-    would otherwise be sampled against without a word. Traced observations are not checked."""
+    would otherwise be sampled against without a word. Traced observations are not checked.
+
+    Examples
+    --------
+    An observation off the sphere is refused, naming the site:
+
+    >>> import numpyro
+    >>> from numpyro import handlers
+    >>> from liesample.numpyro import VonMisesFisher, check_observed_sites
+    >>> def model():
+    ...     law = VonMisesFisher(jnp.array([0.0, 0.0, 1.0]), 2.0, validate_args=True)
+    ...     numpyro.sample("x", law, obs=jnp.array([1.0, 1.0, 0.0]))
+    >>> check_observed_sites(handlers.trace(handlers.seed(model, 0)).get_trace())
+    Traceback (most recent call last):
+    ValueError: observed site 'x': its value is off the support of VonMisesFisher (Sphere) ...
+    """
     for name, site in trace.items():
         if site["type"] != "sample" or not site["is_observed"] or not _validating(site["fn"]):
             continue
@@ -225,7 +240,16 @@ def _wood_cosine(key, kappa, d):
 
 
 class VonMisesFisher(Distribution):
-    """von Mises–Fisher law on the unit sphere ``S^{d−1}`` (module docstring)."""
+    """von Mises–Fisher law on the unit sphere ``S^{d−1}`` (module docstring).
+
+    Examples
+    --------
+    >>> from liesample.numpyro import VonMisesFisher
+    >>> law = VonMisesFisher(jnp.array([0.0, 0.0, 1.0]), 2.0)
+    >>> x = law.sample(jax.random.key(0), (5,))
+    >>> x.shape, bool(jnp.allclose(jnp.linalg.norm(x, axis=-1), 1.0))
+    ((5, 3), True)
+    """
 
     arg_constraints: ClassVar[dict] = {
         "mean_direction": constraints.sphere,
@@ -300,6 +324,16 @@ class VonMisesFisher(Distribution):
 
 
 class _RotationConstraint(constraints.Constraint):
+    """The support of :class:`MatrixFisher` (``rotation``): ``3 × 3`` matrices with ``RᵀR = I``
+    and ``det R = 1`` (to ``1e-6``).
+
+    Examples
+    --------
+    >>> from liesample.numpyro import rotation
+    >>> bool(rotation(jnp.eye(3))), bool(rotation(2.0 * jnp.eye(3)))
+    (True, False)
+    """
+
     event_dim = 2
 
     def __call__(self, x):
@@ -322,6 +356,14 @@ class Bingham(Distribution):
     ``concentration`` (``..., 3``): ``λ``, any finite reals (only differences matter);
     ``orientation`` (``..., 3, 3``): a rotation whose columns are the axes ``v_i`` (identity by
     default). Antipodally symmetric: the mean is 0; :meth:`second_moment` is ``E[x xᵀ]``.
+
+    Examples
+    --------
+    >>> from liesample.numpyro import Bingham
+    >>> law = Bingham(jnp.array([0.0, 1.0, 4.0]))
+    >>> x = law.sample(jax.random.key(0), (3,))
+    >>> x.shape, bool(jnp.isclose(jnp.trace(law.second_moment()), 1.0))  # E|x|² = 1
+    ((3, 3), True)
     """
 
     arg_constraints: ClassVar[dict] = {
@@ -485,6 +527,13 @@ class MatrixFisher(Distribution):
 
     ``F`` (``..., 3, 3``): any finite real matrices, possibly traced; leading axes are the
     batch.
+
+    Examples
+    --------
+    >>> from liesample.numpyro import MatrixFisher
+    >>> R = MatrixFisher(jnp.eye(3)).sample(jax.random.key(0), (2,))  # two rotations
+    >>> R.shape, bool(jnp.allclose(jnp.linalg.det(R), 1.0))
+    ((2, 3, 3), True)
     """
 
     arg_constraints: ClassVar[dict] = {"F": constraints.independent(constraints.real, 2)}
