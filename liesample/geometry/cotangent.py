@@ -472,7 +472,7 @@ def evaluated(point: PhasePoint, value_and_grad: Callable) -> PhasePoint:
     return point._replace(logdensity=logdensity, logdensity_grad=grad)
 
 
-def kick(value_and_grad: Callable, step_size: ArrayLike) -> Callable:
+def kick(value_and_grad: Callable, step_size: jax.Array | float) -> Callable:
     """``B``: ``p ← p + t ∇log π(g)`` (``ġ = 0``; the Lie–Poisson term vanishes as ``U`` does not
     depend on ``p``). Evaluates the gradient only where a drift has moved the position."""
 

@@ -857,9 +857,9 @@ def check_inverse_mass(
 # ---------------------------------------------------------------------- gradients and momenta
 
 
-def trivialised_value_and_grad(
-    logdensity_fn: Callable[[PyTree], ArrayLike], space: SpaceTree
-) -> Callable[[PyTree], tuple[jax.Array, PyTree]]:
+def trivialised_value_and_grad[P: PyTree](
+    logdensity_fn: Callable[[P], ArrayLike], space: SpaceTree
+) -> Callable[[P], tuple[jax.Array, P]]:
     """``x ↦ (log π(x), ∇ log π(x))`` with the gradient in algebra coordinates: left-trivialised
     on groups (``d/dε log π(g exp(εX_k))``), Riemannian on spheres, ordinary on ``Rᵈ``.
 
@@ -874,8 +874,8 @@ def trivialised_value_and_grad(
     (0.0, [0.0, 0.0, 1.0])
     """
 
-    def value_and_grad(position: PyTree) -> tuple[jax.Array, PyTree]:
-        def along(eps: PyTree) -> ArrayLike:
+    def value_and_grad(position: P) -> tuple[jax.Array, P]:
+        def along(eps: P) -> ArrayLike:
             return logdensity_fn(_map(lambda s, x, e: s.perturb(x, e), space, position, eps))
 
         zero = zero_momentum(space, position)

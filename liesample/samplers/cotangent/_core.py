@@ -33,6 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.flatten_util import ravel_pytree
 
+from liesample.foundation.types import PyTree
 from liesample.foundation.validation import concrete_array
 from liesample.geometry import spaces
 from liesample.geometry.cotangent import (
@@ -89,11 +90,11 @@ class GeometricState(NamedTuple):
         without a field).
     """
 
-    position: object
+    position: PyTree
     logdensity: jax.Array
-    logdensity_grad: object
-    momentum: object
-    magnetic_sign: jax.Array = 1.0
+    logdensity_grad: PyTree
+    momentum: PyTree
+    magnetic_sign: jax.Array | float = 1.0
 
 
 class GeometricInfo(NamedTuple):
@@ -297,7 +298,7 @@ class Move(NamedTuple):
     value_and_grad: Callable
     bundle: CotangentBundle
     flows: Callable
-    step_size: object
+    step_size: jax.Array | float
     scheme: tuple
 
     def effects(self, sign, friction=None):

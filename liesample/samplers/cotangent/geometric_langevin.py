@@ -263,8 +263,8 @@ def as_top_level_api(
     )  # fmt: skip
     tunable = ADAPTATION._replace(given=step_size is not None, rebuild=rebuild)
     if step_size is None:
-        step_fn = unset_step("geometric_langevin")
-        return space_sampler(logdensity_fn, space, step_fn, settings, tunable)
+        unset = unset_step("geometric_langevin")
+        return space_sampler(logdensity_fn, space, unset, settings, tunable)
     check_positive_step_size(step_size)
     move = make_move(logdensity_fn, space, step_size, inverse_mass_matrix, magnetic_field, scheme)
 

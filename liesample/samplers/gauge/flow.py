@@ -26,6 +26,7 @@ smooth one), so :func:`wilson_flow` refuses it and names the ``num_steps`` that 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import jax
 import jax.numpy as jnp
@@ -50,8 +51,11 @@ def max_flow_step(system: WilsonGauge) -> float:
     return RK3_STABILITY / (4 * system.dim)
 
 
-def _velocity(system: WilsonGauge):
-    grad = spaces.trivialised_value_and_grad(lambda u: -system.action(u), system.space)
+def _velocity(system: WilsonGauge) -> Callable[[jax.Array], jax.Array]:
+    def logdensity(links: jax.Array) -> jax.Array:
+        return -system.action(links)
+
+    grad = spaces.trivialised_value_and_grad(logdensity, system.space)
     scale = 0.5 * max(system.n, 2)  # N/2 for SU(N); U(1) flows like U(1) ⊂ SU(2)
     return lambda links: scale * grad(links)[1]
 

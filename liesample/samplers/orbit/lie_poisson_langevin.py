@@ -35,7 +35,7 @@ from liesample.foundation.compile import evaluate
 from liesample.foundation.validation import concrete_array, finite_float
 from liesample.integrators import accuracy
 from liesample.integrators.chain_loop import DEFAULT_NOISE_BLOCK_SIZE, NoiseBlocks, check_block_size
-from liesample.integrators.orbit import DEFAULT_INTEGRATOR, get_integrator
+from liesample.integrators.orbit import DEFAULT_INTEGRATOR, Integrator, get_integrator
 from liesample.integrators.stability import (
     STABILITY_MODES,
     check_precision,
@@ -282,7 +282,7 @@ class _Plan(NamedTuple):
     back to it)."""
 
     system: LiePoissonSystem
-    integrator: object
+    integrator: Integrator
     scene: Scene
     beta: object
     sigma: float
@@ -405,7 +405,7 @@ class _Stepper:
     ``sigma`` and ``theta``, the sampler with ``hooks``."""
 
     system: LiePoissonSystem
-    integrator: object
+    integrator: Integrator
     scene: Scene
     noise_block_size: int
 
