@@ -804,9 +804,9 @@ ROWS = [
     ),
     (
         "wilson_heat_bath beta",
-        lambda: liesample.wilson_heat_bath(systems.wilson_gauge("U1", (4, 4)), beta=-1.0),
+        lambda: liesample.wilson_heat_bath(systems.wilson_gauge("U1", (4, 4)), beta=NAN),
         ValueError,
-        "beta must be >= 0",
+        "beta must be finite",
     ),
     # ---- systems.zeitlin_euler
     ("zeitlin_euler size", lambda: systems.zeitlin_euler(1), ValueError, "N must be an int >= 2"),
