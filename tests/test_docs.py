@@ -235,3 +235,108 @@ def test_the_sampler_and_space_templates_take_one_step():
     assert bool(jnp.all(state.position > 0.0))
     with pytest.raises(ValueError, match="> 0"):
         hmc.init(jnp.array([1.0, -2.0]))
+
+
+# --- every public callable has an example (``make doctest`` runs them) -------------------------
+
+# The modules whose names users call, by the file that holds their ``__all__`` (liesample's own
+# public names are ``_ATTRIBUTES`` of its ``__init__.py``; ``algebras`` has no ``__all__``: its
+# public top-level names).
+PUBLIC_MODULES = [
+    "systems/__init__.py", "geometry/spaces.py", "analysis/diagnostics.py",
+    "integrators/accuracy.py", "targets/__init__.py", "geometry/algebras.py", "run/sharding.py",
+    "integrators/stability.py", "integrators/drivers.py", "numpyro.py",
+]  # fmt: skip
+
+
+def _module_file(module: str) -> Path:
+    path = PACKAGE.parent / module.replace(".", "/")
+    return path / "__init__.py" if path.is_dir() else path.with_suffix(".py")
+
+
+def _public_names(path: Path) -> list[str]:
+    """``__all__`` of the module at ``path`` (or of the module it takes it from), else the
+    public names it defines."""
+    tree = ast.parse(path.read_text())
+    defined = []
+    for node in tree.body:
+        if isinstance(node, ast.ImportFrom) and "__all__" in {a.name for a in node.names}:
+            return _public_names(_module_file(node.module))
+        targets = node.targets if isinstance(node, ast.Assign) else []
+        if any(getattr(target, "id", "") == "__all__" for target in targets):
+            return list(ast.literal_eval(node.value))
+        if isinstance(node, ast.FunctionDef | ast.ClassDef):
+            defined.append(node.name)
+        defined += [target.id for target in targets if isinstance(target, ast.Name)]
+    return [name for name in defined if not name.startswith("_")]
+
+
+def _definition_docstring(path: Path, name: str) -> str | None:
+    """The docstring a user's ``help(name)`` shows, found in the source (nothing imported):
+    a function's or class's own, a sampler's (its ``as_top_level_api``), an object's (its
+    class's); ``None`` for a constant or a type alias (nothing to call)."""
+    tree = ast.parse(path.read_text())
+    for node in reversed(tree.body):  # the last definition wins (after typing.overload stubs)
+        if isinstance(node, ast.FunctionDef | ast.ClassDef) and node.name == name:
+            return ast.get_docstring(node) or ""
+        if isinstance(node, ast.Assign) and any(getattr(t, "id", "") == name for t in node.targets):
+            if not isinstance(node.value, ast.Call) or not isinstance(node.value.func, ast.Name):
+                return None  # a constant
+            call = node.value
+            made_by = call.args[0].id if call.func.id == "sampling_api" else call.func.id
+            return _definition_docstring(path, made_by)
+    for node in tree.body:
+        if (
+            isinstance(node, ast.ImportFrom)
+            and node.level == 0
+            and node.module.startswith("liesample")
+        ):
+            imported = {alias.asname or alias.name for alias in node.names}
+            if name in imported or "*" in imported:
+                found = _definition_docstring(_module_file(node.module), name)
+                if found is not None or name in imported:
+                    return found
+    return None
+
+
+def _public_callables():
+    init = ast.parse((PACKAGE / "__init__.py").read_text())
+    attributes = next(
+        node.value for node in init.body
+        if isinstance(node, ast.Assign) and getattr(node.targets[0], "id", "") == "_ATTRIBUTES"
+    )  # fmt: skip
+    for name, module in ast.literal_eval(attributes).items():
+        yield f"liesample.{name}", _module_file(module), name
+    for relative in PUBLIC_MODULES:
+        path = PACKAGE / relative
+        for name in _public_names(path):
+            module = path.relative_to(PACKAGE.parent).with_suffix("").as_posix().replace("/", ".")
+            yield f"{module.removesuffix('.__init__')}.{name}", path, name
+
+
+def test_every_public_callable_has_an_examples_section():
+    """Each name of the public ``__all__``s (modules aside) documents a call that runs: an
+    ``Examples`` section, run by ``make doctest`` (constants and type aliases have none)."""
+    callables = [
+        (label, _definition_docstring(path, name)) for label, path, name in _public_callables()
+    ]
+    assert len(callables) > 100
+    missing = [
+        label for label, doc in callables if doc is not None and "\nExamples\n--------\n" not in doc
+    ]
+    assert not missing, "no Examples section in the docstring of: " + ", ".join(missing)
+
+
+def test_the_examples_check_reads_each_kind_of_definition(tmp_path):
+    module = tmp_path / "fake.py"
+    module.write_text(
+        "LIMIT = 2.0\n\n\n"
+        "class Law:\n"
+        '    """A law.\n\n    Examples\n    --------\n    >>> Law()\n    """\n\n\n'
+        "def plain():\n"
+        '    """No example."""\n\n\n'
+        "law = Law()\n"
+    )
+    docs = {name: _definition_docstring(module, name) for name in ("LIMIT", "law", "plain")}
+    assert docs["LIMIT"] is None and docs["plain"] == "No example."
+    assert "\nExamples\n--------\n" in docs["law"]  # an object: its class's docstring
