@@ -299,11 +299,10 @@ FLOAT32_MIN_RELATIVE_SPREAD = 1e-3
 ``1/√(|β| max|h''|)``, is below this fraction of the state's size ``max|μ|``: each coadjoint
 step then rounds by ``ε₃₂ max|μ|``, a visible fraction of the fluctuations being sampled."""
 
-_PRECISION_WARNED: set = set()
-
 
 def check_precision(system, beta, theta, position, dtype) -> bool:
-    """Warn once per system (``UserWarning``) when a sampler runs in float32 on a problem that
+    """Warn (``UserWarning``; the same message for the same system, so Python's default warning
+    filter shows it once per calling line) when a sampler runs in float32 on a problem that
     needs float64, by the two rules :data:`FLOAT32_MIN_STABLE_STEP` and
     :data:`FLOAT32_MIN_RELATIVE_SPREAD`. Returns whether float32 was judged insufficient.
 
@@ -333,14 +332,12 @@ def check_precision(system, beta, theta, position, dtype) -> bool:
         )
     if not reasons:
         return False
-    if system.name not in _PRECISION_WARNED:
-        _PRECISION_WARNED.add(system.name)
-        warnings.warn(
-            f"the {system.name} is sampled in float32, but {' and '.join(reasons)}: float32 "
-            "round-off will show in the Casimirs and the averages. Call "
-            'jax.config.update("jax_enable_x64", True) at start-up '
-            "(see liesample.integrators.stability)",
-            UserWarning,
-            stacklevel=4,
-        )
+    warnings.warn(
+        f"the {system.name} is sampled in float32, but {' and '.join(reasons)}: float32 "
+        "round-off will show in the Casimirs and the averages. Call "
+        'jax.config.update("jax_enable_x64", True) at start-up '
+        "(see liesample.integrators.stability)",
+        UserWarning,
+        stacklevel=4,
+    )
     return True
