@@ -52,7 +52,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import Any, NamedTuple, cast
 
 import jax
 import jax.numpy as jnp
@@ -72,6 +72,7 @@ from liesample.tuning.trajectory import (
     DEFAULT_INTEGRATION_TIME,
     MAX_NUM_INTEGRATION_STEPS,
     ChainMove,
+    TrajectoryAdaptation,
     chain_move,
     euclidean_size,
     trajectory_adaptation,
@@ -115,7 +116,7 @@ def window_schedule(num_steps: int) -> tuple[np.ndarray, np.ndarray]:
     ``stage`` 0 in a fast window and 1 in a slow one, ``window_end`` true at the last step of a
     slow window (:func:`liesample.tuning.protocol.schedule`)."""
     rows = schedule(num_steps)
-    return rows.stage, rows.window_end
+    return np.asarray(rows.stage), np.asarray(rows.window_end)  # numpy already: no copy
 
 
 def integration_steps(step_size, integration_time):
@@ -544,7 +545,7 @@ def magnetic_window_adaptation(
 class _MagneticPlan(NamedTuple):
     """What :func:`magnetic_window_adaptation` checked."""
 
-    algorithm: object
+    algorithm: Any  # magnetic_hmc: called for a sampler, with an ``init`` of its own
     logdensity_fn: Callable
     angle: float
     target: float
@@ -552,7 +553,7 @@ class _MagneticPlan(NamedTuple):
     adapt_mass: bool
     max_steps: int
     options: dict  # the sampler's keywords: divergence_threshold and the scheme
-    lengths: object
+    lengths: TrajectoryAdaptation | None
 
 
 def _magnetic_plan(algorithm, logdensity_fn, angle, initial_step_size, target_acceptance_rate,
@@ -701,7 +702,7 @@ def _flat_starts(positions, logdensity_fn):
             "initial_positions must have a leading chain axis of the same size on every leaf, "
             f"got leaf shapes {[np.shape(leaf) for leaf in leaves]}"
         )
-    (num_chains,) = sizes
+    (num_chains,) = cast(set[int], sizes)  # a leaf without a chain axis was refused above
     if num_chains < 2:
         raise ValueError(
             f"magnetic_window_adaptation needs >= 2 chains (leading axis), got {num_chains}: "

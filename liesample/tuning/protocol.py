@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import Any, NamedTuple, cast
 
 import jax
 import jax.numpy as jnp
@@ -71,10 +71,12 @@ class Row(NamedTuple):
     """One transition of the warm-up: its index, stage (0: fast window, 1: slow window),
     whether a slow window ends there, and whether its trajectory length enters the tuned one."""
 
-    index: object
-    stage: object
-    window_end: object
-    average: object
+    # Arrays, numpy for the whole schedule and traced for one row. The field ``index`` shadows
+    # ``tuple.index``, which a checker reports as an incompatible override.
+    index: np.ndarray | jax.Array  # type: ignore[assignment]
+    stage: np.ndarray | jax.Array
+    window_end: np.ndarray | jax.Array
+    average: np.ndarray | jax.Array
 
 
 class Adaptation(NamedTuple):
@@ -188,9 +190,9 @@ def fixed(parameters: dict) -> Adaptation:
 
 
 class _Carry(NamedTuple):
-    chain: object  # this chain's sampler state
-    adaptation: object  # the adaptation state, the same in every chain
-    index: jax.Array  # the transition's index
+    chain: Any  # this chain's sampler state
+    adaptation: Any  # the adaptation state, the same in every chain
+    index: jax.Array  # type: ignore[assignment]  # the transition's index (shadows tuple.index)
 
 
 def _adaptive(adaptation: Adaptation, sampler_at, rows: Row, reference: Sampler):
@@ -203,7 +205,8 @@ def _adaptive(adaptation: Adaptation, sampler_at, rows: Row, reference: Sampler)
         parameters = adaptation.current(carry.adaptation, row)
         chain, info = advance(sampler_at(**parameters), carry.chain)
         gather = lambda tree: jax.lax.all_gather(tree, _CHAINS)
-        state = adaptation.update(
+        update = cast(Callable, adaptation.update)  # an adaptation that learns has one
+        state = update(
             carry.adaptation, row, parameters, gather(carry.chain), gather(chain), gather(info)
         )
         return _Carry(chain, state, carry.index + 1), (parameters, info)

@@ -38,6 +38,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from liesample.foundation.types import TreeDef
 from liesample.geometry import spaces
 
 __all__ = [
@@ -192,7 +193,7 @@ class TrajectoryState(NamedTuple):
     means: jax.Array
     since: jax.Array
     centre: jax.Array
-    count: jax.Array
+    count: jax.Array  # type: ignore[assignment]  # the field shadows tuple.count
     log_sum: jax.Array
     num_averaged: jax.Array
     inverse_mass: jax.Array
@@ -239,7 +240,7 @@ def chain_move(space, before, after, info, inverse_mass, batched: bool) -> Chain
     momentum (so ``(q − c)·D⁻¹q̇`` is the rate of the squared distance; ``p`` itself for a
     diagonal mass)."""
     flat = lambda x: x.reshape((x.shape[0], -1)) if batched else x.reshape((1, -1))
-    parts = {"before": [], "after": [], "momentum": [], "scale": []}
+    parts: dict[str, list[jax.Array]] = {"before": [], "after": [], "momentum": [], "scale": []}
     blocks = zip(
         spaces._spaces(space),
         jax.tree.leaves(before.position),
@@ -276,7 +277,7 @@ def chain_move(space, before, after, info, inverse_mass, batched: bool) -> Chain
 
 def _mass_leaves(space, inverse_mass):
     """``inverse_mass``'s block per space leaf (a dense block is one leaf, an array)."""
-    structure = jax.tree.structure(space, is_leaf=spaces.is_space)
+    structure: TreeDef = jax.tree.structure(space, is_leaf=spaces.is_space)
     return structure.flatten_up_to(inverse_mass)
 
 
@@ -319,7 +320,11 @@ def trajectory_adaptation(
         centre = CHEES_AVERAGING * state.centre + (1.0 - CHEES_AVERAGING) * move.before[0]
         trajectory = jnp.exp(log_time)
         chees, gradient, spread = _chees_terms(
-            *move[:5],
+            move.before,
+            move.after,
+            move.momentum,
+            move.accepted,
+            move.acceptance,
             move.inverse_mass,
             steps * step_size,  # the time integrated (not u T: L >= 1 and ceil)
             centre / weight if single else None,

@@ -30,13 +30,14 @@ from __future__ import annotations
 
 import functools
 import json
+from typing import cast
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from liesample.foundation.compile import jit
-from liesample.samplers.contract import Sampler
+from liesample.samplers.contract import Sampler, Tunable
 from liesample.tuning.adaptation import magnetic_window_adaptation, window_adaptation
 from liesample.tuning.protocol import fixed, run_adaptation, step_size_adaptation
 
@@ -169,8 +170,8 @@ def window_warm_up(sampler: Sampler, rng_key, initial_positions, num_warmup: int
             f"{sampler.settings.get('sampler')} needs num_warmup >= 20 (Stan's windows; a few "
             "hundred is typical), or give step_size and adapt=False"
         )
-    tunable = sampler.adaptation
-    factory = tunable.rebuild
+    tunable = cast(Tunable, sampler.adaptation)  # a T*G sampler built by its API object has one
+    factory = cast(functools.partial, tunable.rebuild)  # its API object, partially applied
     kept = {k: v for k, v in factory.keywords.items() if v is not None and k != "jitter"}
     initial = sampler.settings["step_size"] if tunable.given else INITIAL_STEP_SIZE
     adapt_mass = "inverse_mass_matrix" not in kept

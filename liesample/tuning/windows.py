@@ -27,12 +27,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import NamedTuple, cast
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from liesample.foundation.types import TreeDef
 from liesample.geometry import spaces
 from liesample.tuning.protocol import (
     Adaptation,
@@ -40,7 +41,12 @@ from liesample.tuning.protocol import (
     restart_step_size,
     step_size_adaptation,
 )
-from liesample.tuning.trajectory import MAX_NUM_INTEGRATION_STEPS, halton, jittered_steps
+from liesample.tuning.trajectory import (
+    MAX_NUM_INTEGRATION_STEPS,
+    TrajectoryAdaptation,
+    halton,
+    jittered_steps,
+)
 
 __all__ = [
     "FAR_APART",
@@ -92,7 +98,7 @@ def inverse_mass(space, mean, m2, count):
         if s.mass_shape == (1,):
             squared = jnp.sum(squared, -1, keepdims=True) / s.copy_dimension
         out.append(1.0 / (squared + 1.0))
-    structure = jax.tree.structure(space, is_leaf=spaces.is_space)
+    structure: TreeDef = jax.tree.structure(space, is_leaf=spaces.is_space)
     return structure.unflatten(out)
 
 
@@ -148,7 +154,7 @@ class Windows(NamedTuple):
     statistic: Callable
     mass_from: Callable
     adapt_mass: bool = True
-    lengths: object | None = None
+    lengths: TrajectoryAdaptation | None = None
     move: Callable | None = None
     dimension: int = 0
     fixed_steps: int | None = None
@@ -226,10 +232,10 @@ def windows_adaptation(w: Windows) -> Adaptation:
         return out
 
     def update(state, row, parameters, before, after, infos):
-        new_step = step.update(state.step, row, parameters, before, after, infos)
+        new_step = cast(Callable, step.update)(state.step, row, parameters, before, after, infos)
         length = state.length
         if w.lengths is not None:
-            move = w.move(before, after, infos, parameters["inverse_mass_matrix"])
+            move = cast(Callable, w.move)(before, after, infos, parameters["inverse_mass_matrix"])
             length = w.lengths.update(
                 length, move, parameters["step_size"], parameters["num_integration_steps"],
                 row.average,
