@@ -104,7 +104,9 @@ def demo(args: argparse.Namespace) -> int:
         raise ValueError(f"--time must be > 0, got {args.time}")
     netcdf = _draws_file(args.output)
     system = systems.rigid_body(args.inertia)
-    target = system.reference(args.beta, [args.radius, 0.0, 0.0])
+    reference = system.reference
+    assert reference is not None  # the rigid body declares its exact law
+    target = reference(args.beta, [args.radius, 0.0, 0.0])
     key_start, key_run, key_iso = jax.random.split(jax.random.key(args.seed), 3)
     starts = _random_points_on_sphere(key_start, args.chains, args.radius)  # both runs
     tree = _sample_gibbs_law(args, system, starts, key_run, netcdf)

@@ -11,7 +11,7 @@ import math
 import os
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -296,9 +296,13 @@ def plot_marginals(
     return _save(fig, path)
 
 
-def _sphere_grid(n_points: int, bins) -> tuple[int, int]:
+def _sphere_grid(n_points: int, bins: int | Sequence[int] | None) -> tuple[int, int]:
     if bins is not None:
-        n_lon, n_z = (int(bins), max(1, int(bins) // 2)) if np.isscalar(bins) else map(int, bins)
+        n_lon, n_z = (
+            (int(cast(int, bins)), max(1, int(cast(int, bins)) // 2))
+            if np.isscalar(bins)
+            else map(int, bins)
+        )
     else:
         # about 20 points per bin on average, longitude bins twice the height bins
         n_z = int(np.clip(round(math.sqrt(n_points / 40)), 6, 60))
@@ -595,6 +599,6 @@ def plot_vorticity(
             axes[i].set_title(str(labels[i]), fontsize="small")
     for ax in axes[panels:]:
         ax.set_visible(False)
-    fig.colorbar(image, ax=axes[:panels].tolist(), label="ω")
+    fig.colorbar(cast(Any, image), ax=axes[:panels].tolist(), label="ω")  # panels >= 1
     fig.suptitle(title or "Vorticity")
     return _save(fig, path)

@@ -6,7 +6,7 @@ the concrete systems in :mod:`liesample.systems` build instances of it.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -134,7 +134,7 @@ class LiePoissonSystem:
     # them: typed as what a reader finds.
     num_noises: int = None  # type: ignore[assignment]
     event_shape: tuple[int, ...] = None  # type: ignore[assignment]
-    reference: Callable[[float, ArrayLike], Any] | None = None
+    reference: Callable[[float, ArrayLike | Sequence[float]], Any] | None = None
     noise_groups: ArrayLike | None = None
     positive_casimirs: tuple[int, ...] | None = None
     casimir_scale: Callable[[jax.Array], jax.Array] | None = None

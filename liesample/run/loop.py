@@ -14,8 +14,9 @@ import dataclasses
 import functools
 import time
 import warnings
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import jax
 import jax.numpy as jnp
@@ -23,6 +24,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from liesample.foundation.compile import jit
+from liesample.foundation.types import PyTree
 from liesample.foundation.validation import is_single_array, single_key
 from liesample.integrators.chain_loop import run_draws, run_steps
 from liesample.run import arguments
@@ -34,6 +36,7 @@ from liesample.samplers.contract import (
     HOOKS,
     SAMPLE_STATS_NAMES,
     Sampler,
+    Tunable,
     as_sampler,
     energy_name,
     reduce_over_thinning,
@@ -56,9 +59,9 @@ class ChainsResult:
     info: dict
     wall_time: float
     num_steps: int
-    settings: dict = None
-    observables: object = None
-    log_likelihood: dict = None
+    settings: dict | None = None
+    observables: PyTree = None
+    log_likelihood: dict | None = None
 
 
 @dataclass(frozen=True)
@@ -88,7 +91,7 @@ class TreeSpec:
     :func:`sample_chains`' file)."""
 
     var_name: str | None = None
-    event_dims: object = None
+    event_dims: Sequence[str] | Mapping[str, Sequence[str]] | None = None
     coords: Mapping | None = None
     attrs: Mapping | None = None
     energy_name: str | None = None
@@ -322,7 +325,6 @@ class _Run:
         self.sampler = as_sampler(algorithm)  # its info reduced to scalars in start()
         arguments.check_steps(self.sampler, int(num_draws), o)
         self.positions, self.num_chains = arguments.as_positions(initial_positions)
-        arguments.check_chain_axis(self.sampler, self.positions)
         self.observe, self.observables_key = arguments.as_observables(
             o.observables, o.keep_positions
         )
@@ -387,10 +389,18 @@ class _Run:
         )
         # The step size left unset and not adapted: the sampler's own choice for these starts.
         choosing = not adapting and sampler.adaptation is not None and not sampler.adaptation.given
-        # Concrete checks (shape, orbit, constraints, energy, step size) of every start.
-        arguments.check_starts(
-            sampler, self.positions, self.num_chains, step_size_checks=not (adapting or choosing)
-        )
+        # Concrete checks (shape, orbit, constraints, energy, step size) of every start; where
+        # they fail, a start without its chain axis is named as such (probed only then).
+        try:
+            arguments.check_starts(
+                sampler,
+                self.positions,
+                self.num_chains,
+                step_size_checks=not (adapting or choosing),
+            )
+        except (ValueError, TypeError) as error:
+            arguments.check_chain_axis(sampler, self.positions, error)
+            raise
         if choosing:
             sampler = choose_from_starts(sampler, self.positions)
             arguments.check_starts(sampler, self.positions, self.num_chains)
@@ -398,7 +408,7 @@ class _Run:
             jax.random.split(self.rng_key, self.num_chains), self.sharding
         )
         # A rule's warm-up reads the starts only: the states are those of the sampler it builds.
-        rule = adapting and sampler.adaptation.method == "rule"
+        rule = adapting and cast(Tunable, sampler.adaptation).method == "rule"
         states = None if rule else self._init_states(sampler)
         self.run_warmup = o.num_warmup > 0
         if adapting:
@@ -515,9 +525,7 @@ class _Run:
         while done < self.num_draws:
             count = min(self.chunk, self.num_draws - done)
             first_step = o.num_warmup + done * o.thinning
-            states, recorded = self.executables[count](
-                states, self.chain_keys, first_step, values
-            )
+            states, recorded = self.executables[count](states, self.chain_keys, first_step, values)
             chunks.append(self._split(*to_host(recorded)))
             record_casimir_drift(self.settings, chunks[-1]["info"])  # the file records it
             wall_time = time.perf_counter() - start
@@ -555,7 +563,8 @@ class _Run:
         names = {
             stats_names.get(k, k): [k, np.asarray(v).dtype.str] for k, v in draws["info"].items()
         }
-        self.store.append(first, tree, names, to_host(states), self.fingerprint)
+        store = cast(RunFile, self.store)  # a chunk is stored only when the run has a file
+        store.append(first, tree, names, to_host(states), self.fingerprint)
 
     def finish(self, chunks, wall_time, convergence) -> ChainsResult:
         """The result of the whole run, after the post-run checks (with the convergence checks
