@@ -28,6 +28,9 @@ class _Compiling(Exception):
     """Raised where the run would compile its first program: the arguments passed."""
 
 
+_START = loop._Run.start  # the checks of the starts, then the first compilation
+
+
 @pytest.fixture(autouse=True)
 def _no_compilation(monkeypatch):
     def start(self):
@@ -224,9 +227,16 @@ def test_an_object_that_is_not_a_sampler_is_refused_naming_what_is_expected(algo
 # --------------------------------------------------------------------------- starts
 
 
-def test_a_start_without_a_chain_axis_shows_the_fix():
+def test_a_start_without_a_chain_axis_shows_the_fix(monkeypatch):
     """One start of shape (3,) is read as 3 chains of scalars; the error says so and shows how
-    to add the chain axis (which then passes)."""
+    to add the chain axis (which then passes). The probe runs only when ``_Run.start`` fails (the
+    checks of the starts, before the chains' states are built)."""
+
+    def init_states(self, sampler):
+        raise _Compiling
+
+    monkeypatch.setattr(loop._Run, "start", _START)
+    monkeypatch.setattr(loop._Run, "_init_states", init_states)
     with pytest.raises(ValueError, match=r"needs a leading chain axis.*shape \(3,\)") as e:
         _chains(starts=RIGID.default_position)
     assert "x[None]" in str(e.value) and "jnp.tile(x, (num_chains, 1))" in str(e.value)

@@ -105,10 +105,11 @@ def as_positions(initial_positions):
     return jax.tree.unflatten(treedef, leaves), leaves[0].shape[0]
 
 
-def check_chain_axis(sampler: Sampler, positions) -> None:
+def check_chain_axis(sampler: Sampler, positions, error: Exception | None = None) -> None:
     """A single-array ``positions`` that is one start, not starts with a leading chain axis
-    (its first chain is no start for ``sampler`` but the whole array is), refused with the fix.
-    Shapes only (``jax.eval_shape`` of ``init``): nothing is compiled."""
+    (its first chain is no start for ``sampler`` but the whole array is), refused with the fix
+    (raised from ``error``, the failed check of the starts that calls this probe). Shapes only
+    (``jax.eval_shape`` of ``init``): nothing is compiled."""
     if not is_single_array(positions):
         return  # a pytree's leaves were checked for a shared chain axis (as_positions)
     try:
@@ -126,7 +127,7 @@ def check_chain_axis(sampler: Sampler, positions) -> None:
         f"one start (read as {positions.shape[0]} chains of shape {positions.shape[1:]}); pass "
         f"x[None] for one chain, or jnp.tile(x, (num_chains{ones})) for num_chains chains from "
         "it"
-    )
+    ) from error
 
 
 def take_chain(positions, chain):

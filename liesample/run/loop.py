@@ -389,18 +389,10 @@ class _Run:
         )
         # The step size left unset and not adapted: the sampler's own choice for these starts.
         choosing = not adapting and sampler.adaptation is not None and not sampler.adaptation.given
-        # Concrete checks (shape, orbit, constraints, energy, step size) of every start; where
-        # they fail, a start without its chain axis is named as such (probed only then).
-        try:
-            arguments.check_starts(
-                sampler,
-                self.positions,
-                self.num_chains,
-                step_size_checks=not (adapting or choosing),
-            )
-        except (ValueError, TypeError) as error:
-            arguments.check_chain_axis(sampler, self.positions, error)
-            raise
+        # Concrete checks (shape, orbit, constraints, energy, step size) of every start.
+        arguments.check_starts(
+            sampler, self.positions, self.num_chains, step_size_checks=not (adapting or choosing)
+        )
         if choosing:
             sampler = choose_from_starts(sampler, self.positions)
             arguments.check_starts(sampler, self.positions, self.num_chains)
@@ -625,7 +617,13 @@ def run_chains(algorithm, rng_key, initial_positions, num_draws, options, spec, 
     :func:`liesample.sample_chains` leaves them to its caller)."""
     run = _Run(algorithm, rng_key, initial_positions, num_draws, options, spec)
     try:
-        run.start()
+        try:
+            run.start()
+        except (ValueError, TypeError) as error:
+            # a start without its chain axis fails the checks of the starts: named as such
+            # (probed only then, with the shapes of init)
+            arguments.check_chain_axis(run.sampler, run.positions, error)
+            raise
         done, previous = run.resume()
         run.compile(done)
         chunks, wall_time = run.loop(done, previous)
