@@ -86,7 +86,7 @@ import functools
 import math
 import warnings
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import Any, NamedTuple, cast
 
 try:
     import numpyro
@@ -111,7 +111,7 @@ from liesample.geometry import spaces
 from liesample.geometry.cotangent import cotangent_bundle
 from liesample.interop.numpyro_distributions import check_observed_sites, rotation
 from liesample.samplers.cotangent.geometric_hmc import geometric_hmc
-from liesample.tuning.protocol import restart_step_size, row_at, schedule
+from liesample.tuning.protocol import Adaptation, restart_step_size, row_at, schedule
 from liesample.tuning.trajectory import (
     DEFAULT_INTEGRATION_TIME,
     chain_move,
@@ -193,7 +193,7 @@ def _base_constraint(constraint):
 
 
 class _Site(NamedTuple):
-    space: object
+    space: spaces.Space
     euclidean: bool  # moved in the unconstrained coordinates of its support's bijection
 
 
@@ -561,13 +561,16 @@ class GeometricHMC(MCMCKernel):
         self._target = target
         divergence_threshold = finite_float("divergence_threshold", divergence_threshold)
         self._kernel = geometric_hmc.build_kernel(divergence_threshold, integrator=integrator)
-        self._sites = None
-        self._adaptation = None
-        self._sample_fn = None
+        # None until init sets the kernel up (and init runs before every other use): typed as
+        # what they hold from then on.
+        self._sites: dict[str, _Site] = None  # type: ignore[assignment]
+        self._adaptation: Adaptation = None  # type: ignore[assignment]
+        self._sample_fn: Callable[..., Any] = None  # type: ignore[assignment]
         self._num_warmup = 0
         self._array_params = False
-        self._chain_adaptations = []  # (step size, flat inverse mass) of each chain adapted alone
-        self._reported = set()
+        # (step size, flat inverse mass) of each chain adapted alone
+        self._chain_adaptations: list[tuple[float, np.ndarray]] = []
+        self._reported: set[int] = set()
 
     # ------------------------------------------------------------------ the sites
     def _setup(self, rng_key, model_args, model_kwargs):
@@ -745,7 +748,7 @@ class GeometricHMC(MCMCKernel):
             return lambda z: -self._potential_fn(self._to_user(z))
 
         def logdensity(z):
-            jacobians = {}
+            jacobians: dict[str, jax.Array] = {}
             model = self._constrained_model(z, jacobians)
             log_joint, _ = log_density(model, model_args, model_kwargs, {})
             for name, site in self._sites.items():
@@ -822,7 +825,7 @@ class GeometricHMC(MCMCKernel):
             )
         params = {name: init_params[name] for name in self._sites}
         chains = np.shape(jax.tree.leaves(params)[0])[0] if batched else None
-        for c in range(chains) if batched else (None,):
+        for c in range(cast(int, chains)) if batched else (None,):
             start = params if c is None else jax.tree.map(lambda x, c=c: x[c], params)
             spaces.check_position(
                 self._space, start, "init_params" + ("" if c is None else f"[chain {c}]")
@@ -865,7 +868,8 @@ class GeometricHMC(MCMCKernel):
                 by_key[key] = jnp.ones(n, dtype)
         if by_key is not None and not self._dense_keys and not isinstance(given, dict):
             by_key = given  # a scalar, as before
-        return {**spaces.check_inverse_mass(self._inner_space, by_key, dtype), **matrices}
+        masses = cast(dict, spaces.check_inverse_mass(self._inner_space, by_key, dtype))  # a dict
+        return {**masses, **matrices}
 
     def _adapt_state(self, parameters):
         masses = {self._blocks[key]: m for key, m in parameters["inverse_mass_matrix"].items()}
@@ -1146,7 +1150,8 @@ class GeometricHMC(MCMCKernel):
         ``find_heuristic_step_size`` dual averaging restarts from NumPyro's search at a mass
         window's end. After the warm-up nothing changes."""
         row = row_at(self._rows, i)
-        updated = self._adaptation.update(adaptation, row, parameters, before, inner, info)
+        update = cast(Callable, self._adaptation.update)  # the window adaptation has one
+        updated = update(adaptation, row, parameters, before, inner, info)
         if self._find_heuristic and self._adapt_mass:
 
             def restart(state):  # NumPyro's search, from the first chain
