@@ -13,13 +13,13 @@ array (``jax.random.PRNGKey``): both are ``jax.Array`` values.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import jax
 from jax.typing import ArrayLike
 
-__all__ = ["PRNGKey", "PyTree", "Tree", "TreeDef"]
+__all__ = ["LogDensityFn", "PRNGKey", "PyTree", "Tree", "TreeDef"]
 
 type Tree[Leaf] = Leaf | Sequence[Tree[Leaf]] | Mapping[Any, Tree[Leaf]] | None
 """A pytree with leaves of type ``Leaf``: a leaf, ``None``, or a sequence or mapping of trees."""
@@ -29,6 +29,11 @@ type PyTree = Tree[ArrayLike]
 
 type PRNGKey = jax.Array
 """A JAX random key (``jax.random.key(seed)`` or the legacy ``jax.random.PRNGKey(seed)``)."""
+
+type LogDensityFn = Callable[[Any], ArrayLike]
+"""``position ↦ log π(position)`` (up to a constant), a real scalar, JAX-traceable. The position
+is what the sampler moves: an array, or a pytree of arrays like its space; a function annotated
+for the position it is given (``jax.Array``, a dict, ...) fits."""
 
 TreeDef = Any
 """A ``jax.tree_util.PyTreeDef`` (what ``jax.tree.structure`` returns). jaxlib's compiled

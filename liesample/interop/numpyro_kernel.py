@@ -110,6 +110,7 @@ from liesample.foundation.validation import concrete_array, finite_float
 from liesample.geometry import spaces
 from liesample.geometry.cotangent import cotangent_bundle
 from liesample.interop.numpyro_distributions import check_observed_sites, rotation
+from liesample.samplers.contract import Tunable
 from liesample.samplers.cotangent.geometric_hmc import geometric_hmc
 from liesample.tuning.protocol import Adaptation, restart_step_size, row_at, schedule
 from liesample.tuning.trajectory import (
@@ -549,12 +550,13 @@ class GeometricHMC(MCMCKernel):
             finite_float("inverse_mass_matrix", inverse_mass_matrix, positive=True)  # else a dict
         self._initial_mass = inverse_mass_matrix
         self._dense_mass = _dense_spec(dense_mass)
-        adapted = geometric_hmc.adaptation.adapted
+        declared = cast(Tunable, geometric_hmc.adaptation)  # geometric HMC declares its warm-up
+        adapted = declared.adapted
         self._adapt_step_size = bool(adapt_step_size) and "step_size" in adapted
         self._adapt_mass = bool(adapt_mass_matrix) and "inverse_mass_matrix" in adapted
         self._find_heuristic = bool(find_heuristic_step_size) and self._adapt_step_size
         if target_accept_prob is None:
-            target_accept_prob = geometric_hmc.adaptation.target_acceptance_rate
+            target_accept_prob = declared.target_acceptance_rate
         target = finite_float("target_accept_prob", target_accept_prob)
         if not 0.0 < target < 1.0:
             raise ValueError(f"target_accept_prob must be in (0, 1), got {target}")

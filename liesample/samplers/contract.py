@@ -51,7 +51,7 @@ import functools
 import inspect
 from collections.abc import Callable, Mapping
 from types import MappingProxyType
-from typing import NamedTuple, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, NamedTuple, Protocol, cast, runtime_checkable
 
 import blackjax
 import jax
@@ -291,7 +291,10 @@ class Sampler(blackjax.base.SamplingAlgorithm, DeclaresNoiseBlocks):
         step size chosen per run). ``None`` (default): the runner compiles for this object.
     """
 
-    settings: Mapping = MappingProxyType({})
+    if TYPE_CHECKING:  # a sampler's own dict (the hooks give each one); read-only placeholder
+        settings: dict[str, Any]
+    else:
+        settings = MappingProxyType({})
     check_positions: Callable | None = None
     adaptation: Tunable | None = None
     draw_names: DrawNames | None = None
@@ -403,7 +406,28 @@ Low-level pieces: ``{name}.init``, ``{name}.build_kernel`` (BlackJAX-shaped).
 """
 
 
-def sampling_api(as_top_level_api, init, build_kernel, name: str, module: str, *, adaptation=None):
+class SamplingAPI[**P](Protocol):
+    """What :func:`sampling_api` returns: called as its ``as_top_level_api`` (same parameters)
+    for a :class:`Sampler`, with BlackJAX's low-level ``init`` and ``build_kernel`` and the
+    warm-up's declaration ``adaptation``."""
+
+    init: Callable[..., Any]
+    build_kernel: Callable[..., Any]
+    differentiable: Callable[P, Sampler]
+    adaptation: Tunable | None
+
+    def __call__(self, *args: P.args, **kwargs: P.kwargs) -> Sampler: ...
+
+
+def sampling_api[**P](
+    as_top_level_api: Callable[P, Sampler],
+    init: Callable[..., Any],
+    build_kernel: Callable[..., Any],
+    name: str,
+    module: str,
+    *,
+    adaptation: Tunable | None = None,
+) -> SamplingAPI[P]:
     """``blackjax.GenerateSamplingAPI(as_top_level_api, init, build_kernel)`` whose ``help()``
     and ``__doc__`` are ``as_top_level_api``'s docstring (plus the precision rule) and whose
     call signature is that of ``as_top_level_api``.
@@ -436,7 +460,7 @@ def sampling_api(as_top_level_api, init, build_kernel, name: str, module: str, *
     if adaptation is not None and not isinstance(adaptation, Tunable):
         raise TypeError(f"adaptation must be a Tunable, got {type(adaptation).__name__}")
     api.adaptation = adaptation
-    return api
+    return cast(SamplingAPI[P], api)  # blackjax's class, with the call and attribute above
 
 
 class PositionCheck(NamedTuple):

@@ -62,7 +62,7 @@ from jax.flatten_util import ravel_pytree
 from liesample.foundation.compile import jit
 from liesample.foundation.validation import finite_float, prng_key
 from liesample.geometry import spaces
-from liesample.samplers.contract import Sampler, as_sampler, first_bad_chain
+from liesample.samplers.contract import Sampler, Tunable, as_sampler, first_bad_chain
 from liesample.samplers.cotangent._core import check_logdensity_fn, check_starts
 from liesample.samplers.cotangent._euclidean import default_magnetic_field
 from liesample.samplers.cotangent.magnetic_hmc import magnetic_hmc
@@ -402,7 +402,8 @@ DEFAULT_ANGLE = 0.0
 """Default field of :func:`magnetic_window_adaptation`, as the angle (rad) per step: no field.
 A field helps on some targets (strongly correlated or curved ones) and slows the slowest
 directions of others, so it is opt-in; ``angle > 0`` turns it on, adapted jointly."""
-CHEES_TARGET_ACCEPTANCE_RATE = magnetic_hmc.adaptation.target_acceptance_rate
+_MAGNETIC_HMC_WARMUP = cast(Tunable, magnetic_hmc.adaptation)  # declared with a target rate
+CHEES_TARGET_ACCEPTANCE_RATE = cast(float, _MAGNETIC_HMC_WARMUP.target_acceptance_rate)
 
 
 class MagneticAdaptationInfo(NamedTuple):

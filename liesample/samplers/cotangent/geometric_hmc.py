@@ -26,13 +26,16 @@ rejected or non-finite proposal keeps the state; a non-finite one is flagged ``i
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
+from liesample.foundation.types import LogDensityFn, PyTree
 from liesample.foundation.validation import concrete_array
+from liesample.geometry.spaces import SpaceTree
 from liesample.samplers.contract import Sampler, Tunable, sampling_api, setting, step_key
 from liesample.samplers.cotangent._core import (
     GeometricInfo,
@@ -161,17 +164,17 @@ def build_kernel(
 
 
 def as_top_level_api(
-    logdensity_fn: Callable,
-    space,
-    step_size=None,
-    num_integration_steps: int | None = None,
-    inverse_mass_matrix=None,
-    magnetic_field=None,
+    logdensity_fn: LogDensityFn,
+    space: SpaceTree,
+    step_size: float | jax.Array | None = None,
+    num_integration_steps: int | jax.Array | None = None,
+    inverse_mass_matrix: PyTree = None,
+    magnetic_field: ArrayLike | None = None,
     *,
     divergence_threshold: float = 1000.0,
     momentum_persistence: float = 0.0,
     persistent: bool = True,
-    integrator="leapfrog",
+    integrator: str | Sequence[tuple[str, float]] = "leapfrog",
     jitter: bool = False,
 ) -> Sampler:
     """Geometric HMC on Lie groups, spheres and products with ``Rᵈ`` (Metropolis-adjusted).

@@ -28,13 +28,16 @@ A non-finite step is rejected (state kept) and flagged ``is_divergent`` in both 
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import jax
 import jax.numpy as jnp
+from jax.typing import ArrayLike
 
+from liesample.foundation.types import LogDensityFn, PyTree
 from liesample.foundation.validation import concrete_array, finite_float
 from liesample.geometry.cotangent import check_scheme
+from liesample.geometry.spaces import SpaceTree
 from liesample.samplers.contract import Sampler, Tunable, sampling_api, setting, step_key
 from liesample.samplers.cotangent._core import (
     GeometricInfo,
@@ -195,16 +198,16 @@ def build_kernel(
 
 
 def as_top_level_api(
-    logdensity_fn: Callable,
-    space,
-    step_size=None,
-    friction=1.0,
-    inverse_mass_matrix=None,
-    magnetic_field=None,
+    logdensity_fn: LogDensityFn,
+    space: SpaceTree,
+    step_size: float | jax.Array | None = None,
+    friction: float | jax.Array = 1.0,
+    inverse_mass_matrix: PyTree = None,
+    magnetic_field: ArrayLike | None = None,
     *,
     adjusted: bool = False,
     divergence_threshold: float = 1000.0,
-    integrator="obab",
+    integrator: str | Sequence[tuple[str, float]] = "obab",
 ) -> Sampler:
     """Geometric kinetic Langevin on Lie groups, spheres and products with ``Rᵈ``.
 

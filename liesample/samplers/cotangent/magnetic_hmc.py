@@ -30,13 +30,15 @@ Non-finite energies are rejected and flagged ``is_divergent``; the state is then
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
 import blackjax
 import jax
 import jax.numpy as jnp
+from jax.typing import ArrayLike
 
+from liesample.foundation.types import LogDensityFn
 from liesample.geometry.cotangent import LEAPFROG, PhasePoint, compose, drift, kick
 from liesample.samplers.contract import Sampler, Tunable, sampling_api, setting, step_key
 from liesample.samplers.cotangent._core import (
@@ -234,14 +236,14 @@ def _scheme(integrator) -> tuple:
 
 
 def as_top_level_api(
-    logdensity_fn: Callable,
-    step_size=None,
-    inverse_mass_matrix=None,
-    num_integration_steps: int | None = None,
-    magnetic_field=None,
+    logdensity_fn: LogDensityFn,
+    step_size: float | jax.Array | None = None,
+    inverse_mass_matrix: ArrayLike | None = None,
+    num_integration_steps: int | jax.Array | None = None,
+    magnetic_field: ArrayLike | None = None,
     *,
     divergence_threshold: float = 1000.0,
-    integrator="leapfrog",
+    integrator: str | Sequence[tuple[str, float]] = "leapfrog",
     momentum_persistence: float = 0.0,
     persistent: bool = True,
 ) -> Sampler:

@@ -29,12 +29,14 @@ samplers, :mod:`liesample.samplers.contract`) and the state is kept.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+from jax.typing import ArrayLike
 
+from liesample.foundation.types import LogDensityFn
 from liesample.samplers.contract import Sampler, sampling_api, setting, step_key
 from liesample.samplers.cotangent._core import (
     check_logdensity_fn,
@@ -164,13 +166,13 @@ def build_kernel(integrator="baoab"):
 
 
 def as_top_level_api(
-    logdensity_fn: Callable,
-    step_size,
-    inverse_mass_matrix,
-    friction,
-    magnetic_field,
+    logdensity_fn: LogDensityFn,
+    step_size: float | jax.Array,
+    inverse_mass_matrix: ArrayLike,
+    friction: float | jax.Array,
+    magnetic_field: ArrayLike | None,
     *,
-    integrator="baoab",
+    integrator: str | Sequence[tuple[str, float]] = "baoab",
 ) -> Sampler:
     """Unadjusted magnetic Langevin sampler (weak order 2; bias ``O(ε²)``, not corrected).
 
