@@ -21,6 +21,7 @@ of an effective sample and whether a step-size bias exists at all.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 from liesample.dynamics.system import LiePoissonSystem
 from liesample.samplers.contract import Sampler
@@ -70,7 +71,7 @@ def spin_sampler_name(system: SpinLatticeSystem, beta) -> str:
     return "heisenberg_heat_bath"
 
 
-def recommended_sampler(system: LiePoissonSystem, *, beta, **options) -> Sampler:
+def recommended_sampler(system: LiePoissonSystem, *, beta: float, **options: Any) -> Sampler:
     """The recommended sampler of ``exp(−βh)`` for ``system`` (module table), built with
     ``beta`` and the sampler's own keyword ``options``; ``settings["sampler"]`` names it.
 

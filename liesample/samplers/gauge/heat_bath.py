@@ -177,7 +177,7 @@ def _count(name, value) -> int:
 
 
 def as_top_level_api(
-    system: WilsonGauge, *, beta, heat_bath_sweeps: int = 1, overrelaxation: int = 1
+    system: WilsonGauge, *, beta: float, heat_bath_sweeps: int = 1, overrelaxation: int = 1
 ) -> Sampler:
     """Heat bath with over-relaxation for :func:`liesample.systems.wilson_gauge`.
 

@@ -319,10 +319,10 @@ def _default_step_size(system, beta, sigma, position) -> float:
 def as_top_level_api(
     system: LiePoissonSystem,
     *,
-    beta,
-    sigma=1.0,
-    step_size=None,
-    target_acceptance_rate=DEFAULT_TARGET_ACCEPTANCE_RATE,
+    beta: float,
+    sigma: float = 1.0,
+    step_size: float | None = None,
+    target_acceptance_rate: float = DEFAULT_TARGET_ACCEPTANCE_RATE,
     noise_block_size: int = DEFAULT_NOISE_BLOCK_SIZE,
 ) -> Sampler:
     """Metropolis-adjusted Lie–Poisson sampler of ``exp(−βh)`` on the orbit of the initial

@@ -199,14 +199,14 @@ def _source(choice) -> str:
 def as_top_level_api(
     system: LiePoissonSystem,
     *,
-    beta=None,
-    sigma=1.0,
-    step_size=None,
-    integrator=DEFAULT_INTEGRATOR,
-    theta=None,
+    beta: float | None = None,
+    sigma: float = 1.0,
+    step_size: float | None = None,
+    integrator: str | Integrator = DEFAULT_INTEGRATOR,
+    theta: float | None = None,
     hamiltonian: bool = True,
     stability: str = "raise",
-    bias_tolerance=DEFAULT_BIAS_TOLERANCE,
+    bias_tolerance: float = DEFAULT_BIAS_TOLERANCE,
     noise_block_size: int = DEFAULT_NOISE_BLOCK_SIZE,
 ) -> Sampler:
     """Lie–Poisson–Langevin sampler of ``exp(−βh)`` on the orbit of the initial state.

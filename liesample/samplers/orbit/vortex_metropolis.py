@@ -214,10 +214,10 @@ def build_kernel(system: PointVortexSystem, proposal: str = "rotation"):
 def as_top_level_api(
     system: PointVortexSystem,
     *,
-    beta,
+    beta: float,
     proposal: str = "rotation",
-    proposal_scale=None,
-    target_acceptance_rate=0.4,
+    proposal_scale: float | None = None,
+    target_acceptance_rate: float = 0.4,
 ) -> Sampler:
     """Exact single-vortex Metropolis sampler of ``exp(−βh)`` for point vortices (module notes).
 

@@ -254,7 +254,7 @@ def build_kernel(system: SpinLatticeSystem, clusters: str = "all"):
     return kernel
 
 
-def as_top_level_api(system: SpinLatticeSystem, *, beta, clusters: str = "all") -> Sampler:
+def as_top_level_api(system: SpinLatticeSystem, *, beta: float, clusters: str = "all") -> Sampler:
     """Cluster sampler of ``exp(−βh)`` for the isotropic ferromagnet without field.
 
     Parameters

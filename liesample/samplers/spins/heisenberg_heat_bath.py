@@ -73,10 +73,10 @@ def build_kernel(system: SpinLatticeSystem, heat_bath_sweeps: int = 1, overrelax
 def as_top_level_api(
     system: SpinLatticeSystem,
     *,
-    beta,
+    beta: float,
     overrelaxation: int = 1,
     heat_bath_sweeps: int = 1,
-    precession_angle=math.pi,
+    precession_angle: float = math.pi,
 ) -> Sampler:
     """Heat-bath + over-relaxation sampler of ``exp(−βh)`` for an isotropic :func:`heisenberg`.
 

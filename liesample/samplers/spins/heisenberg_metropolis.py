@@ -85,9 +85,9 @@ def build_kernel(system: SpinLatticeSystem, proposal: str = "uniform"):
 def as_top_level_api(
     system: SpinLatticeSystem,
     *,
-    beta,
+    beta: float,
     proposal: str = "uniform",
-    proposal_scale=0.5,
+    proposal_scale: float = 0.5,
 ) -> Sampler:
     """Checkerboard single-spin Metropolis sampler of ``exp(−βh)`` for a :func:`heisenberg` system.
 

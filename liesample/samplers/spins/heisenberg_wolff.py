@@ -34,7 +34,7 @@ def build_kernel(system: SpinLatticeSystem):
     return _cluster_kernel(system, "seed")
 
 
-def as_top_level_api(system: SpinLatticeSystem, *, beta) -> Sampler:
+def as_top_level_api(system: SpinLatticeSystem, *, beta: float) -> Sampler:
     """Wolff single-cluster sampler of ``exp(−βh)`` for the isotropic ferromagnet, no field.
 
     Parameters
