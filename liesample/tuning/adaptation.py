@@ -51,7 +51,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple, cast
 
 import jax
@@ -60,9 +60,17 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 
 from liesample.foundation.compile import jit
+from liesample.foundation.types import LogDensityFn
 from liesample.foundation.validation import finite_float, prng_key
 from liesample.geometry import spaces
-from liesample.samplers.contract import Sampler, Tunable, as_sampler, first_bad_chain
+from liesample.geometry.spaces import SpaceTree
+from liesample.samplers.contract import (
+    Sampler,
+    SamplingAPI,
+    Tunable,
+    as_sampler,
+    first_bad_chain,
+)
 from liesample.samplers.cotangent._core import check_logdensity_fn, check_starts
 from liesample.samplers.cotangent._euclidean import default_magnetic_field
 from liesample.samplers.cotangent.magnetic_hmc import magnetic_hmc
@@ -142,16 +150,16 @@ def _num_chains(space, position) -> int | None:
 
 
 def window_adaptation(
-    algorithm,
-    logdensity_fn: Callable,
-    space=None,
+    algorithm: SamplingAPI[...],
+    logdensity_fn: LogDensityFn,
+    space: SpaceTree | None = None,
     *,
     initial_step_size: float = 0.1,
     target_acceptance_rate: float | None = None,
     integration_time: float | None = None,
     adapt_mass: bool = True,
     progress_bar: bool = False,
-    **parameters,
+    **parameters: Any,
 ) -> GeometricAdaptation:
     """Tune ``algorithm`` (``liesample.geometric_hmc``, ``liesample.geometric_langevin``, or
     ``liesample.magnetic_hmc``: then :func:`magnetic_window_adaptation`, without ``space``).
@@ -449,7 +457,7 @@ def _field_from(ends) -> int:
 
 
 def magnetic_window_adaptation(
-    logdensity_fn: Callable,
+    logdensity_fn: LogDensityFn,
     *,
     angle: float = DEFAULT_ANGLE,
     initial_step_size: float = 0.1,
@@ -461,8 +469,8 @@ def magnetic_window_adaptation(
     divergence_threshold: float = 1000.0,
     max_num_integration_steps: int = MAX_NUM_INTEGRATION_STEPS,
     progress_bar: bool = False,
-    integrator=None,
-    algorithm=magnetic_hmc,
+    integrator: str | Sequence[tuple[str, float]] | None = None,
+    algorithm: SamplingAPI[...] = magnetic_hmc,
 ) -> GeometricAdaptation:
     """Tune ``liesample.magnetic_hmc`` on several chains at once: step size, diagonal mass, the
     field (jointly with both) and the trajectory length (ChEES).

@@ -37,7 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from liesample.foundation.compile import jit
-from liesample.samplers.contract import Sampler, Tunable
+from liesample.samplers.contract import Sampler, SamplingAPI, Tunable
 from liesample.tuning.adaptation import magnetic_window_adaptation, window_adaptation
 from liesample.tuning.protocol import fixed, run_adaptation, step_size_adaptation
 
@@ -180,8 +180,9 @@ def window_warm_up(sampler: Sampler, rng_key, initial_positions, num_warmup: int
         warm = magnetic_window_adaptation(*factory.args, initial_step_size=initial, **options)
         adapted = list(tunable.adapted)
     else:
+        api = cast(SamplingAPI[...], factory.func)  # the sampler's API object (Tunable.rebuild)
         warm = window_adaptation(
-            factory.func, *factory.args, initial_step_size=initial, adapt_mass=adapt_mass, **kept
+            api, *factory.args, initial_step_size=initial, adapt_mass=adapt_mass, **kept
         )
         adapted = ["step_size"] + ["inverse_mass_matrix"] * adapt_mass
     (states, parameters), _ = warm.run(rng_key, initial_positions, int(num_warmup))

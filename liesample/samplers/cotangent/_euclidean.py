@@ -19,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.flatten_util import ravel_pytree
+from jax.typing import ArrayLike
 
 from liesample.foundation.compile import evaluate, jit
 from liesample.foundation.validation import concrete_array, finite_float
@@ -145,7 +146,9 @@ def check_euclidean_starts(positions, logdensity_fn, dimension=None):
 # --------------------------------------------------------------------------- default field
 
 
-def default_magnetic_field(inverse_mass_matrix, strength, covariance=None):
+def default_magnetic_field(
+    inverse_mass_matrix: ArrayLike, strength: float, covariance: ArrayLike | None = None
+) -> np.ndarray:
     """The default field ``G = strength · M^{1/2} J̃ M^{1/2}`` and its tuning rule.
 
     **Orientation.** In the coordinates whitened by the mass matrix (``x = M^{1/2} q``, where the

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable, Sequence
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import blackjax
 import jax
@@ -380,12 +380,12 @@ magnetic_hmc = sampling_api(
 
 
 def jittered_magnetic_hmc(
-    logdensity_fn: Callable,
-    step_size,
-    inverse_mass_matrix,
-    num_integration_steps: int,
-    magnetic_field,
-    **options,
+    logdensity_fn: LogDensityFn,
+    step_size: float | jax.Array,
+    inverse_mass_matrix: ArrayLike,
+    num_integration_steps: int | jax.Array,
+    magnetic_field: ArrayLike | None,
+    **options: Any,
 ) -> Sampler:
     """``liesample.magnetic_hmc`` whose trajectory has ``L ~ Uniform{1, …, num_integration_steps}``
     steps, drawn afresh at every transition (the jitter ChEES tunes ``T`` for:
