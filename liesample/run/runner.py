@@ -43,7 +43,7 @@ import warnings
 from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
-from liesample.foundation.types import PyTree
+from liesample.foundation.types import PRNGKey, PyTree
 from liesample.run import arguments
 from liesample.run.checks import (
     DEFAULT_MIN_ACCEPTANCE_RATE,
@@ -61,6 +61,7 @@ if TYPE_CHECKING:
     import xarray as xr
     from blackjax.base import SamplingAlgorithm
     from jax.sharding import NamedSharding
+    from jax.typing import ArrayLike
 
 __all__ = [
     "DEFAULT_MIN_ACCEPTANCE_RATE",
@@ -92,7 +93,7 @@ def _progress_bar(progress_bar, progress, stacklevel=3) -> bool:
 
 def sample_chains(
     algorithm: SamplingAlgorithm,
-    rng_key: jax.Array,
+    rng_key: PRNGKey,
     initial_positions: PyTree,
     num_draws: int,
     *,
@@ -106,10 +107,10 @@ def sample_chains(
     resume: bool = False,
     adapt: bool | None = None,
     min_acceptance_rate: float = DEFAULT_MIN_ACCEPTANCE_RATE,
-    observables: Callable | Mapping[str, Callable] | None = None,
+    observables: Callable[[Any], PyTree] | Mapping[str, Callable[[Any], PyTree]] | None = None,
     keep_positions: bool = True,
-    callback: Callable | None = None,
-    log_likelihood: dict | None = None,
+    callback: Callable[[int], object] | None = None,
+    log_likelihood: Mapping[str, Callable[[Any], ArrayLike]] | None = None,
     progress: bool | None = None,
 ) -> ChainsResult:
     """Run ``len(initial_positions)`` chains of ``algorithm`` in parallel (``jax.vmap``).
@@ -210,7 +211,7 @@ def sample_chains(
 
 def sample(
     algorithm: SamplingAlgorithm,
-    rng_key: jax.Array,
+    rng_key: PRNGKey,
     initial_positions: PyTree,
     num_draws: int,
     *,
@@ -218,8 +219,8 @@ def sample(
     exact_starts: bool = False,
     var_name: str | None = None,
     event_dims: Sequence[str] | Mapping[str, Sequence[str]] | None = None,
-    coords: Mapping[str, Sequence] | None = None,
-    attrs: Mapping | None = None,
+    coords: Mapping[str, Sequence[Any]] | None = None,
+    attrs: Mapping[str, Any] | None = None,
     **run_options: Any,
 ) -> xr.DataTree:
     """Run chains with :func:`sample_chains` and return an ArviZ ``DataTree``.
