@@ -258,8 +258,9 @@ def report_unconverged(info, groups, stacklevel=2):
     rhats = [split_rhat(group) for group in chains if _varies(group)]
     rhat = max((r for r in rhats if np.isfinite(r)), default=math.nan)
     if rhat > MAX_ENERGY_RHAT:
+        shown = f"{rhat:.3g}" if float(f"{rhat:.3g}") > MAX_ENERGY_RHAT else f"{rhat:.6g}"
         warnings.warn(
-            f"the chains disagree: the split R-hat of their energy is {rhat:.3g} > "
+            f"the chains disagree: the split R-hat of their energy is {shown} > "
             f"{MAX_ENERGY_RHAT:g}, so they have not forgotten their starts or do not sample one "
             "law. Run longer (num_warmup, num_draws), start the chains from more spread-out "
             "points, or for an unadjusted sampler reduce step_size.",
