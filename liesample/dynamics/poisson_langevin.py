@@ -86,7 +86,10 @@ def make_dynamics(system, *, beta=None, sigma=1.0, theta=None, hamiltonian=True)
     sigma = finite_float("sigma", sigma, nonnegative=True)
     if sigma > 0:
         if beta is None:
-            raise ValueError("beta is required when sigma > 0 (the target is exp(-beta*h))")
+            raise ValueError(
+                "beta is required when sigma > 0 (the noise samples exp(-beta*h)): pass beta=, "
+                "e.g. beta=1.0, or sigma=0 (with theta >= 0) for a noise-free flow"
+            )
         beta = checked_beta(system, beta)
         if system.check_noise is not None:
             system.check_noise()
