@@ -5,6 +5,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from scipy.integrate import quad
+from scipy.special import i0e
 from scipy.stats import gamma, vonmises_fisher
 
 numpyro = pytest.importorskip("numpyro")
@@ -104,6 +106,57 @@ def test_parameters_may_be_traced_under_jit_and_match_the_references():
     vmf = jax.jit(lambda mu, kappa: VonMisesFisher(mu, kappa).log_prob(x))
     mu = np.array([0.0, 0.6, 0.8])
     assert np.allclose(vmf(mu, 3.0), vonmises_fisher(mu, 3.0).logpdf(x), rtol=1e-13)
+
+
+def _matrix_fisher_laplace(s):
+    """log c(F) − Σ s as s → ∞ (Laplace at the mode): −log 8π² + (3/2) log 2π −
+    ½ Σ_{i<j} log(s_i + s_j), with an O(1/s) error."""
+    pairs = [s[0] + s[1], s[0] + s[2], s[1] + s[2]]
+    return 1.5 * np.log(2 * np.pi) - np.log(8 * np.pi**2) - 0.5 * sum(np.log(p) for p in pairs)
+
+
+def test_vmf_log_prob_is_right_for_any_concentration():
+    """Against SciPy where it is exact, and against the closed forms at κ = 1e100…1e300, where
+    log C ≈ −κ and κ μ·x ≈ κ once cancelled to 0 (issue 43): on S², C = κ/(4π sinh κ); on S⁴,
+    I_{3/2}(κ) e^{−κ} = (1 − 1/κ)/√(2πκ) up to e^{−2κ}."""
+    for d in (3, 5):
+        mu = np.eye(d)[-1]
+        x = np.stack([mu, np.eye(d)[0], np.full(d, 1 / np.sqrt(d))])
+        for kappa in (0.5, 30.0, 700.0):
+            expected = vonmises_fisher(mu, kappa).logpdf(x)
+            assert np.allclose(VonMisesFisher(mu, kappa).log_prob(x), expected, rtol=1e-12), d
+        for kappa in (1e100, 1e200, 1e300):
+            law = VonMisesFisher(mu, kappa)
+            if d == 3:
+                at_mode = np.log(kappa) - np.log(2 * np.pi)
+            else:
+                at_mode = 2 * np.log(kappa) - 2.5 * np.log(2 * np.pi) + 0.5 * np.log(2 * np.pi)
+            assert float(law.log_prob(mu)) == pytest.approx(at_mode, rel=1e-14), (d, kappa)
+            assert float(law.log_prob(x[1])) == pytest.approx(at_mode - kappa, rel=1e-14)
+            assert float(law.log_normalizer()) == pytest.approx(at_mode - kappa, rel=1e-14)
+
+
+def test_matrix_fisher_log_prob_is_right_for_large_F():
+    """log c against SciPy's quadrature of its 1-D integral at moderate F, and the Laplace limit
+    where its O(1/s) error is round-off: log_prob at the mode was 0.0 at F = 1e100 I (issue 43)."""
+    s = np.array([3.0, 2.0, -1.0])
+    for scale in (1.0, 1e3):
+        t = s * scale
+
+        def reduced(w, t=t):  # c e^{−Σs}, w = 1 − u, every factor <= 1
+            return (i0e(0.5 * (t[0] - t[1]) * w) * i0e(0.5 * (t[0] + t[1]) * (2 - w))
+                    * np.exp(-(t[1] + t[2]) * w))  # fmt: skip
+
+        expected = t.sum() + np.log(0.5 * quad(reduced, 0, 2, epsabs=0, epsrel=1e-13, limit=200)[0])
+        F = _proper_F(t)
+        assert float(MatrixFisher(F).log_normalizer()) == pytest.approx(expected, rel=1e-13)
+    for scale in (1e15, 1e100, 1e300):
+        F = np.diag(s * scale)  # the mode is I: tr(FᵀI) and Σ s agree to the last bit
+        expected = -_matrix_fisher_laplace(s * scale)
+        assert float(MatrixFisher(F).log_prob(np.eye(3))) == pytest.approx(expected, abs=1e-12)
+    kappa = 1e100  # F = κ I: c ≈ e^{3κ} / (8 √π κ^{3/2})
+    expected = np.log(8 * np.sqrt(np.pi)) + 1.5 * np.log(kappa)
+    assert float(MatrixFisher(kappa * np.eye(3)).log_prob(np.eye(3))) == pytest.approx(expected)
 
 
 def test_a_latent_concentration_inside_a_model():

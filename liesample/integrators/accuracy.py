@@ -29,21 +29,26 @@ import functools
 import math
 import time
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
-from typing import cast
+from typing import TYPE_CHECKING, Any, cast
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
 from liesample.dynamics.poisson_langevin import PoissonLangevin, make_dynamics
 from liesample.dynamics.system import LiePoissonSystem
 from liesample.foundation.compile import jit
+from liesample.foundation.types import PRNGKey, PyTree
 from liesample.foundation.validation import finite_float, prng_key
 from liesample.integrators.chain_loop import run_steps
-from liesample.integrators.orbit import DEFAULT_INTEGRATOR, get_integrator
+from liesample.integrators.orbit import DEFAULT_INTEGRATOR, Integrator, get_integrator
 from liesample.integrators.stability import stiffness
+
+if TYPE_CHECKING:
+    from blackjax.base import SamplingAlgorithm
 
 __all__ = [
     "DEFAULT_RELATIVE_TOLERANCE",
@@ -241,6 +246,14 @@ class _CoupledRun:
         self.integrator = get_integrator(integrator)
         self.levels = _positive_int("levels", levels)
         _, _, self.scene = make_dynamics(system, beta=beta, sigma=1.0)
+        given = getattr(initial_positions, "dtype", None)
+        given = np.asarray(initial_positions).dtype if given is None else given
+        if not (jnp.issubdtype(given, jnp.floating) or jnp.issubdtype(given, jnp.integer)):
+            # bool, complex, str: refused before the cast below would hide them
+            raise TypeError(
+                f"initial_positions must be real floating point, got dtype {given}: pass real "
+                "positions, e.g. np.real(initial_positions) when the imaginary part is 0"
+            )
         starts = jnp.asarray(initial_positions, dtype=jnp.result_type(float))
         if starts.ndim != len(system.event_shape) + 1 or starts.shape[0] < 2:
             raise ValueError(
@@ -297,17 +310,17 @@ class _CoupledRun:
 
 def coupled_ergodic_averages(
     system: LiePoissonSystem,
-    beta,
-    observables: Callable,
+    beta: float,
+    observables: Callable[[jax.Array], jax.Array],
     *,
-    step_size,
+    step_size: float,
     levels: int = 2,
-    integrator=DEFAULT_INTEGRATOR,
-    sigma=1.0,
-    initial_positions,
-    rng_key,
-    total_time,
-    burn_in=0.0,
+    integrator: str | Integrator = DEFAULT_INTEGRATOR,
+    sigma: float = 1.0,
+    initial_positions: ArrayLike,
+    rng_key: PRNGKey,
+    total_time: float,
+    burn_in: float = 0.0,
 ) -> CoupledAverages:
     """Time averages of ``observables`` at ``step_size / 2^l``, ``l < levels``, on coupled paths.
 
@@ -365,20 +378,20 @@ class ChainAverages(_IndependentChains):
 
     chain_means: np.ndarray
     chain_square_means: np.ndarray
-    info_means: dict
+    info_means: dict[str, np.ndarray]
     wall_time: float
     num_steps: int
 
 
 def ergodic_averages(
-    algorithm,
-    rng_key,
-    initial_positions,
-    observables: Callable,
+    algorithm: SamplingAlgorithm,
+    rng_key: PRNGKey,
+    initial_positions: PyTree,
+    observables: Callable[[Any], jax.Array],
     *,
-    num_steps,
-    num_warmup=0,
-    info_fields=None,
+    num_steps: int,
+    num_warmup: int = 0,
+    info_fields: Sequence[str] | None = None,
 ) -> ChainAverages:
     """Run independent vmapped chains of ``algorithm`` and keep only running sums.
 
@@ -481,7 +494,9 @@ class RichardsonRomberg:
     wall_time: float = math.nan
 
 
-def richardson_romberg(coarse, fine, order, *, paired: bool = False) -> RichardsonRomberg:
+def richardson_romberg(
+    coarse: ArrayLike, fine: ArrayLike, order: float, *, paired: bool = False
+) -> RichardsonRomberg:
     """Richardson–Romberg extrapolation of ergodic averages across step sizes ``h`` and ``h/2``.
 
     Parameters
@@ -538,12 +553,12 @@ def richardson_romberg(coarse, fine, order, *, paired: bool = False) -> Richards
 
 def richardson_romberg_run(
     system: LiePoissonSystem,
-    beta,
-    observables: Callable,
+    beta: float,
+    observables: Callable[[jax.Array], jax.Array],
     *,
-    integrator=DEFAULT_INTEGRATOR,
-    order=None,
-    **run_options,
+    integrator: str | Integrator = DEFAULT_INTEGRATOR,
+    order: float | None = None,
+    **run_options: Any,
 ) -> RichardsonRomberg:
     """Run coupled chains at ``step_size`` and ``step_size/2`` and extrapolate.
 
@@ -613,12 +628,12 @@ class StepSizeChoice:
     predicted_bias_bound: np.ndarray
     slope: np.ndarray
     steps_per_effective_sample: float
-    candidates: list = field(default_factory=list)
+    candidates: list[dict[str, Any]] = field(default_factory=list)
     pilot_wall_time: float = 0.0
     relative_tolerance: float | None = None
     tolerances: np.ndarray | None = None
 
-    def sampler_kwargs(self) -> dict:
+    def sampler_kwargs(self) -> dict[str, Any]:
         """Keyword arguments for :func:`liesample.lie_poisson_langevin` (with ``beta``)."""
         return {"step_size": self.step_size, "sigma": self.sigma, "integrator": self.integrator}
 
@@ -682,18 +697,18 @@ def _bias_model(averages: CoupledAverages, weak_order: float, tolerance: float):
 
 def choose_step_size(
     system: LiePoissonSystem,
-    beta,
-    tolerance=None,
+    beta: float,
+    tolerance: float | None = None,
     *,
-    relative_tolerance=None,
-    observables: Callable,
-    initial_positions,
-    rng_key,
-    integrator=DEFAULT_INTEGRATOR,
-    sigmas=(1.0,),
-    pilot_step_size=0.4,
-    pilot_time=50.0,
-    burn_in=5.0,
+    relative_tolerance: float | None = None,
+    observables: Callable[[jax.Array], jax.Array],
+    initial_positions: ArrayLike,
+    rng_key: PRNGKey,
+    integrator: str | Integrator = DEFAULT_INTEGRATOR,
+    sigmas: Sequence[float] = (1.0,),
+    pilot_step_size: float = 0.4,
+    pilot_time: float = 50.0,
+    burn_in: float = 5.0,
     max_refinements: int = 2,
 ) -> StepSizeChoice:
     """Pick the step size (and σ) whose bias on every observable is at most ``tolerance``
@@ -849,13 +864,13 @@ def _coordinates(mu):
 
 def default_step_size(
     system: LiePoissonSystem,
-    beta,
+    beta: float | None,
     *,
-    sigma=1.0,
-    integrator=DEFAULT_INTEGRATOR,
-    initial_positions=None,
-    rng_key=None,
-    relative_tolerance=DEFAULT_RELATIVE_TOLERANCE,
+    sigma: float = 1.0,
+    integrator: str | Integrator = DEFAULT_INTEGRATOR,
+    initial_positions: ArrayLike | None = None,
+    rng_key: PRNGKey | None = None,
+    relative_tolerance: float = DEFAULT_RELATIVE_TOLERANCE,
 ) -> StepSizeChoice:
     """The step size :func:`liesample.lie_poisson_langevin` uses when none is given.
 
@@ -924,7 +939,7 @@ _LINEAR_STEPS = {
 }
 
 
-def linear_sd_bias(integrator, stability_number) -> float | None:
+def linear_sd_bias(integrator: str | Integrator, stability_number: float) -> float | None:
     """The relative error of the stationary sd along the stiffest noise direction, from the
     linearised dynamics at the stability number ``κ = step_size·θ·max|h''|``
     (:mod:`liesample.integrators.stability`): no pilot run, one formula.
@@ -965,7 +980,9 @@ def linear_sd_bias(integrator, stability_number) -> float | None:
     return math.sqrt(2.0 * kappa * b * b / (1.0 - r * r)) - 1.0
 
 
-def largest_accurate_stability_number(integrator, tolerance) -> float | None:
+def largest_accurate_stability_number(
+    integrator: str | Integrator, tolerance: float
+) -> float | None:
     """The largest ``κ`` at which :func:`linear_sd_bias` is within ``tolerance`` (bisection; the
     error grows with ``κ``), ``None`` where the integrator has no linear model.
 
@@ -993,7 +1010,9 @@ def largest_accurate_stability_number(integrator, tolerance) -> float | None:
     return low
 
 
-def warn_given_step(integrator, step_size, stability_number, tolerance) -> float | None:
+def warn_given_step(
+    integrator: str | Integrator, step_size: float, stability_number: float, tolerance: float
+) -> float | None:
     """:func:`linear_sd_bias` of a given step, with a ``UserWarning`` naming a step within
     ``tolerance`` (and the other ways out) when its magnitude exceeds ``tolerance``.
 
@@ -1010,7 +1029,7 @@ def warn_given_step(integrator, step_size, stability_number, tolerance) -> float
     bias = linear_sd_bias(integrator, stability_number)
     if bias is None or abs(bias) <= tolerance:
         return bias
-    accurate = largest_accurate_stability_number(integrator, tolerance)
+    accurate = cast(float, largest_accurate_stability_number(integrator, tolerance))  # has a model
     warnings.warn(
         f"step_size={step_size:.4g} (given) has the stability number κ = "
         f"{stability_number:.3g}: linearised along the stiffest noise direction, the "

@@ -68,7 +68,7 @@ from typing import ClassVar
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.scipy.special import logsumexp
+from jax.scipy.special import i0e, logsumexp
 
 from liesample.foundation.compile import jit
 from liesample.foundation.special import (
@@ -76,8 +76,9 @@ from liesample.foundation.special import (
     log_bessel_i0,
     log_bessel_iv,
     log_bessel_iv_reduced,
+    log_bessel_ive,
 )
-from liesample.foundation.validation import concrete_array
+from liesample.foundation.validation import concrete_array, single_key
 from liesample.geometry.spaces import SO
 from liesample.targets import groups, orbits
 from liesample.targets.spins import von_mises_fisher
@@ -98,6 +99,44 @@ def _check_finite(name, value):
     if concrete is not None and not np.all(np.isfinite(concrete)):
         raise ValueError(f"{name} must be finite, got {concrete}")
     return concrete
+
+
+def _real_array(name: str, value, requirement: str):
+    """``value`` as a real floating JAX array (integers are cast to float; a tracer keeps its
+    floating dtype), or a ``TypeError`` naming ``name``: bool, complex, string and ragged inputs
+    are refused (only the dtype is read, so a traced parameter is checked too)."""
+    if not isinstance(value, jax.Array):
+        try:
+            value = np.asarray(value)
+        except (TypeError, ValueError):  # a ragged list, an object numpy cannot hold
+            raise TypeError(
+                f"{name} must be {requirement} of real numbers, got {value!r}: pass a rectangular "
+                "float array (np.asarray(..., dtype=float) must accept it)"
+            ) from None
+    dtype = value.dtype
+    if not (jnp.issubdtype(dtype, jnp.floating) or jnp.issubdtype(dtype, jnp.integer)):
+        fix = "its real part, np.real(...), when the imaginary part is 0" if jnp.issubdtype(
+            dtype, jnp.complexfloating) else "floats, e.g. 1.0"  # fmt: skip
+        raise TypeError(f"{name} must be {requirement} of real numbers (float or int), got "
+                        f"dtype {dtype}: pass {fix}")  # fmt: skip
+    return jnp.asarray(value, dtype=jnp.result_type(value, float))
+
+
+def _broadcast_batch(**batch_shapes) -> tuple:
+    """The common batch shape of the parameters, or a ``ValueError`` naming them all."""
+    try:
+        return jax.lax.broadcast_shapes(*batch_shapes.values())
+    except ValueError:
+        shapes = ", ".join(f"{name} {shape}" for name, shape in batch_shapes.items())
+        raise ValueError(
+            f"the parameters' batch shapes do not broadcast: {shapes}; give batch shapes that "
+            "broadcast (equal, or 1 / absent along an axis), e.g. one shared scalar parameter"
+        ) from None
+
+
+def _one_key(key):
+    """``key`` of a ``sample`` call as one typed JAX key, or an error that says what to pass."""
+    return single_key(key, "key", batch_fix="draw several samples with sample_shape instead")
 
 
 def _check_value(distribution, value):
@@ -183,8 +222,8 @@ _LOG_SINHC = (1.0 / 6.0, -1.0 / 180.0, 1.0 / 2835.0, -1.0 / 37800.0, 1.0 / 46777
 _SINHC_SWITCH = 0.1  # the first omitted term (κ¹²) is below 1e−18 there
 
 
-def _log_vmf_normalizer_s2(kappa):
-    """``log(κ / (4π sinh κ))``, exact to round-off for every ``κ ≥ 0`` (``−log 4π`` at 0)."""
+def _log_vmf_normalizer_s2_reduced(kappa):
+    """``log(κ / (4π sinh κ)) + κ``, exact to round-off for every ``κ ≥ 0`` (``−log 4π`` at 0)."""
     small = kappa < _SINHC_SWITCH
     k_small = jnp.where(small, kappa, 0.0)
     k_large = jnp.where(small, 1.0, kappa)
@@ -192,20 +231,38 @@ def _log_vmf_normalizer_s2(kappa):
     log_sinhc = jnp.zeros_like(k2)
     for c in reversed(_LOG_SINHC):
         log_sinhc = (log_sinhc + c) * k2
-    series = -math.log(4.0 * math.pi) - log_sinhc
-    closed = (jnp.log(k_large) - math.log(2.0 * math.pi) - k_large
-              - jnp.log(-jnp.expm1(-2.0 * k_large)))  # fmt: skip
+    series = -math.log(4.0 * math.pi) - log_sinhc + k_small
+    closed = jnp.log(k_large) - math.log(2.0 * math.pi) - jnp.log(-jnp.expm1(-2.0 * k_large))
     return jnp.where(small, series, closed)
 
 
-def _log_vmf_normalizer(kappa, d: int):
-    """``log C_d(κ) = log Γ(d/2) + (d/2−1) log 2 − (d/2) log 2π − log[Γ(ν+1)(κ/2)^{−ν} I_ν(κ)]``,
-    ``ν = d/2 − 1``: no ``log κ`` term, so ``κ = 0`` is exact."""
+def _log_ive_any(nu: float, kappa):
+    """``log(I_ν(κ) e^{−κ})`` for ``κ > 0`` up to the largest float: past ``√max / 10⁴`` (where
+    Debye's ``√(ν² + κ²)`` would overflow) Hankel's ``−½ log 2πκ − (4ν² − 1)/(8κ)``, whose next
+    term is below round-off there."""
+    huge = math.sqrt(float(jnp.finfo(kappa.dtype).max)) * 1e-4
+    beyond = kappa > huge
+    k_debye, k_hankel = jnp.where(beyond, huge, kappa), jnp.where(beyond, kappa, huge)
+    hankel = -0.5 * jnp.log(2.0 * math.pi * k_hankel) - (4.0 * nu * nu - 1.0) / (8.0 * k_hankel)
+    return jnp.where(beyond, hankel, log_bessel_ive(nu, k_debye))
+
+
+def _log_vmf_normalizer_reduced(kappa, d: int):
+    """``log C_d(κ) + κ``: ``log_prob`` adds ``κ (μ·x − 1)`` to it, so that ``log C_d(κ) ≈ −κ``
+    and ``κ μ·x ≈ κ`` never cancel (at ``κ = 1e200`` they would leave nothing). With
+    ``ν = d/2 − 1``, ``log C_d(κ) = log Γ(d/2) + ν log 2 − (d/2) log 2π − log[Γ(ν+1)(κ/2)^{−ν}
+    I_ν(κ)]``: below ``κ = 25`` the reduced Bessel function (no ``log κ`` term, so ``κ = 0`` is
+    exact), above it ``log(I_ν(κ) e^{−κ})``, where nothing grows with ``κ``."""
     if d == 3:
-        return _log_vmf_normalizer_s2(kappa)
+        return _log_vmf_normalizer_s2_reduced(kappa)
     nu = d / 2.0 - 1.0
     constant = math.lgamma(d / 2.0) + nu * math.log(2.0) - (d / 2.0) * math.log(2.0 * math.pi)
-    return constant - log_bessel_iv_reduced(nu, kappa)
+    small = kappa <= 25.0
+    k_small, k_large = jnp.where(small, kappa, 0.0), jnp.where(small, 50.0, kappa)
+    series = constant - log_bessel_iv_reduced(nu, k_small) + k_small
+    large = (constant - math.lgamma(nu + 1.0) + nu * jnp.log(0.5 * k_large)
+             - _log_ive_any(nu, k_large))  # fmt: skip
+    return jnp.where(small, series, large)
 
 
 def _householder_to(mean_direction, x):
@@ -258,8 +315,9 @@ class VonMisesFisher(Distribution):
     support = constraints.sphere
 
     def __init__(self, mean_direction, concentration, *, validate_args=None):
-        mean_direction = jnp.asarray(mean_direction)
-        concentration = jnp.asarray(concentration, dtype=jnp.result_type(mean_direction, float))
+        mean_direction = _real_array("mean_direction", mean_direction, "a unit vector")
+        concentration = _real_array("concentration", concentration, "a scalar (or an array)")
+        concentration = concentration.astype(mean_direction.dtype)
         if mean_direction.ndim < 1 or mean_direction.shape[-1] < 2:
             raise ValueError(
                 f"mean_direction must be a unit vector of length d >= 2, got shape "
@@ -274,7 +332,9 @@ class VonMisesFisher(Distribution):
         kappa = _check_finite("concentration", concentration)
         if kappa is not None and np.any(kappa < 0):
             raise ValueError(f"concentration must be >= 0, got {kappa}")
-        batch_shape = jax.lax.broadcast_shapes(mean_direction.shape[:-1], concentration.shape)
+        batch_shape = _broadcast_batch(
+            mean_direction=mean_direction.shape[:-1], concentration=concentration.shape
+        )
         event_shape = mean_direction.shape[-1:]
         self.mean_direction = jnp.broadcast_to(mean_direction, batch_shape + event_shape)
         self.concentration = jnp.broadcast_to(concentration, batch_shape)
@@ -286,7 +346,7 @@ class VonMisesFisher(Distribution):
 
     def log_normalizer(self):
         """``log C_d(κ)`` (surface measure); at ``κ = 0`` the uniform law's ``−log |S^{d−1}|``."""
-        return _log_vmf_normalizer(self.concentration, self.d)
+        return _log_vmf_normalizer_reduced(self.concentration, self.d) - self.concentration
 
     @classmethod
     def infer_shapes(cls, mean_direction=(), concentration=()):
@@ -295,7 +355,10 @@ class VonMisesFisher(Distribution):
 
     def log_prob(self, value):
         _check_value(self, value)
-        return self.log_normalizer() + self.concentration * jnp.sum(self.mean_direction * value, -1)
+        # log C + κ μ·x as (log C + κ) + κ (μ·x − 1): no cancellation of two terms ≈ κ.
+        cosine_gap = jnp.sum(self.mean_direction * value, -1) - 1.0
+        reduced = _log_vmf_normalizer_reduced(self.concentration, self.d)
+        return reduced + self.concentration * cosine_gap
 
     @property
     def mean(self):
@@ -304,6 +367,7 @@ class VonMisesFisher(Distribution):
         return ratio[..., None] * self.mean_direction
 
     def sample(self, key, sample_shape=()):
+        key = _one_key(key)
         shape = tuple(sample_shape) + self.batch_shape
         kappa = jnp.broadcast_to(self.concentration, shape)
         mean = jnp.broadcast_to(self.mean_direction, shape + (self.d,))
@@ -373,7 +437,7 @@ class Bingham(Distribution):
     support = constraints.sphere
 
     def __init__(self, concentration, orientation=None, *, validate_args=None):
-        concentration = jnp.asarray(concentration, dtype=jnp.result_type(concentration, float))
+        concentration = _real_array("concentration", concentration, "a (..., 3) array")
         if concentration.ndim < 1 or concentration.shape[-1] != 3:
             raise ValueError(
                 "concentration must have shape (..., 3) (the three λ_i of a Bingham law on "
@@ -382,7 +446,8 @@ class Bingham(Distribution):
         _check_finite("concentration", concentration)
         if orientation is None:
             orientation = jnp.eye(3, dtype=concentration.dtype)
-        orientation = jnp.asarray(orientation, dtype=concentration.dtype)
+        orientation = _real_array("orientation", orientation, "a (..., 3, 3) rotation matrix")
+        orientation = orientation.astype(concentration.dtype)
         if orientation.ndim < 2 or orientation.shape[-2:] != (3, 3):
             raise ValueError(
                 f"orientation must be a rotation matrix of shape (..., 3, 3), got shape "
@@ -392,7 +457,9 @@ class Bingham(Distribution):
         if frame is not None and not np.all(rotation(frame)):
             raise ValueError(f"orientation must be a rotation matrix (RᵀR = I, det R = 1), "
                              f"got {frame}")  # fmt: skip
-        batch_shape = jax.lax.broadcast_shapes(concentration.shape[:-1], orientation.shape[:-2])
+        batch_shape = _broadcast_batch(
+            concentration=concentration.shape[:-1], orientation=orientation.shape[:-2]
+        )
         self.concentration = jnp.broadcast_to(concentration, batch_shape + (3,))
         self.orientation = jnp.broadcast_to(orientation, batch_shape + (3, 3))
         super().__init__(batch_shape, (3,), validate_args=validate_args)
@@ -423,6 +490,7 @@ class Bingham(Distribution):
         return jnp.einsum("...ik,...k,...jk->...ij", self.orientation, moments, self.orientation)
 
     def sample(self, key, sample_shape=()):
+        key = _one_key(key)
         shape = tuple(sample_shape)
         n = max(int(np.prod(shape)), 1)
         lam = self.concentration.reshape(-1, 3)
@@ -445,10 +513,25 @@ def _tanh_sinh_rule(step: float, half_width: float):
     return one_minus, one_plus, log_weight
 
 
-# Step 1/32 on |t| ≤ 4.5 (289 nodes): log c to ~1e−15 relative and E[R] to ~1e−12 for singular
-# values from 0 to 1e6 at least: the nodes, dense in log(1 ∓ u), come within 1e−60 of the ends,
-# so the boundary layers there (width ~1/max|s|) stay resolved.
+# Step 1/32 on |t| ≤ 4.5 (289 nodes), on each of two pieces of ``[−1, 1]`` (see _log_c_reduced):
+# the nodes, dense in log(1 ∓ u), come within 1e−60 of the ends, so the end points' integrable
+# layers (width ~1/(s₁ ± s₂)) stay resolved.
 _ONE_MINUS_U, _ONE_PLUS_U, _LOG_WEIGHT = _tanh_sinh_rule(1.0 / 32.0, 4.5)
+_LAYER = 45.0  # e^{−45} < 3e−20: past w = 45/(s₂ + s₃) the integrand is below round-off
+
+
+@jax.custom_jvp
+def _log_i0e(y):
+    """``log(I₀(y) e^{−y})`` for ``y ≥ 0`` without the cancellation of ``log I₀(y) − y``; its
+    derivative ``I₁/I₀ − 1`` (``−1`` at ``y = 0``), and the higher ones, from ``log_bessel_i0``."""
+    return jnp.log(i0e(y))
+
+
+@_log_i0e.defjvp
+def _log_i0e_jvp(primals, tangents):
+    (y,), (dy,) = primals, tangents
+    _, ratio = jax.jvp(log_bessel_i0, (y,), (jnp.ones_like(y),))
+    return _log_i0e(y), (ratio - 1.0) * dy
 
 
 def _proper_svd(F):
@@ -461,39 +544,58 @@ def _proper_svd(F):
     return u * flip_u, s * flip_u * flip_v, v * flip_v
 
 
-def _log_c_of_singular_values(s):
-    """``log c(s)`` for proper singular values ``s₁ ≥ s₂ ≥ |s₃|`` (module docstring): the
-    exponent of the integrand, ``s₁ + (s₂ + s₃) u`` after ``I₀``'s own growth, is largest at
-    ``u = 1``; ``logsumexp`` keeps it from overflowing."""
+def _log_c_reduced(s):
+    """``log c(s) − (s₁ + s₂ + s₃)`` for proper singular values ``s₁ ≥ s₂ ≥ |s₃|`` (module
+    docstring), with no cancellation however large ``s`` is.
+
+    In ``w = 1 − u`` the reduced integrand is ``I₀e(½(s₁−s₂)w) I₀e(½(s₁+s₂)(2−w)) e^{−(s₂+s₃)w}``
+    (``I₀e(y) = e^{−y} I₀(y)``; every factor ≤ 1). The exponential's layer at ``w = 0``, of width
+    ``1/(s₂+s₃)``, is too thin for the nodes once ``s₂ + s₃`` is large, so the rule is applied on
+    ``[0, h]`` and on ``[h, 2]``, ``h = min(1, 45/(s₂+s₃))``: the layer then spans the first
+    piece and the second holds round-off."""
     dtype = s.dtype
-    one_minus = jnp.asarray(_ONE_MINUS_U, dtype)
-    log_integrand = (
-        log_bessel_i0(0.5 * (s[0] - s[1]) * one_minus)
-        + log_bessel_i0(0.5 * (s[0] + s[1]) * jnp.asarray(_ONE_PLUS_U, dtype))
-        + s[2] * (1.0 - one_minus)
-    )
-    return logsumexp(jnp.asarray(_LOG_WEIGHT, dtype) + log_integrand) - math.log(2.0)
+    one_minus, one_plus = jnp.asarray(_ONE_MINUS_U, dtype), jnp.asarray(_ONE_PLUS_U, dtype)
+    decay = s[1] + s[2]
+    h = jax.lax.stop_gradient(_LAYER / jnp.maximum(decay, _LAYER))  # the integral's own split
+    # [0, h]: w = h(1−u)/2; [h, 2]: w = h + (2−h)(1−u)/2 and 2 − w = (2−h)(1+u)/2, no cancellation
+    w = jnp.concatenate([0.5 * h * one_minus, h + (1.0 - 0.5 * h) * one_minus])
+    rest = jnp.concatenate([2.0 - 0.5 * h * one_minus, (1.0 - 0.5 * h) * one_plus])
+    log_weight = jnp.asarray(_LOG_WEIGHT, dtype)
+    log_weight = jnp.concatenate([log_weight + jnp.log(0.5 * h), log_weight + jnp.log1p(-0.5 * h)])
+    log_integrand = (_log_i0e(0.5 * (s[0] - s[1]) * w) + _log_i0e(0.5 * (s[0] + s[1]) * rest)
+                     - decay * w)  # fmt: skip
+    return logsumexp(log_weight + log_integrand) - math.log(2.0)
 
 
 @jax.custom_jvp
-def _matrix_fisher_log_normalizer(F):
-    return _log_c_of_singular_values(_proper_svd(F)[1])
+def _matrix_fisher_log_normalizer_parts(F):
+    """``(s₁ + s₂ + s₃, log c(F) − (s₁ + s₂ + s₃))``: ``log_prob`` subtracts the first from
+    ``tr(FᵀR)`` before the second, so that two terms ≈ ``|F|`` never cancel (at ``F = 1e100 I``
+    they would leave nothing)."""
+    s = _proper_svd(F)[1]
+    return jnp.sum(s), _log_c_reduced(s)
 
 
-@_matrix_fisher_log_normalizer.defjvp
-def _matrix_fisher_log_normalizer_jvp(primals, tangents):
-    # d log c = tr(E[R]ᵀ dF) = Σ_k ∂_k log c(s) (Uᵀ dF V)_kk: defined for repeated singular
-    # values too (differentiating the SVD itself is not).
+@_matrix_fisher_log_normalizer_parts.defjvp
+def _matrix_fisher_log_normalizer_parts_jvp(primals, tangents):
+    # ds_k = (Uᵀ dF V)_kk and d log c = tr(E[R]ᵀ dF) = Σ_k ∂_k log c(s) ds_k: defined for
+    # repeated singular values too (differentiating the SVD itself is not).
     (F,), (dF,) = primals, tangents
     u, s, v = _proper_svd(F)
-    value, slope = jax.value_and_grad(_log_c_of_singular_values)(s)
-    return value, jnp.sum(slope * jnp.diagonal(u.T @ dF @ v))
+    value, slope = jax.value_and_grad(_log_c_reduced)(s)
+    ds = jnp.diagonal(u.T @ dF @ v)
+    return (jnp.sum(s), value), (jnp.sum(ds), jnp.sum(slope * ds))
+
+
+def _matrix_fisher_log_normalizer(F):
+    total, reduced = _matrix_fisher_log_normalizer_parts(F)
+    return total + reduced
 
 
 def _matrix_fisher_mean(F):
-    """``E[R] = U diag(∂ log c/∂s) Vᵀ``."""
+    """``E[R] = U diag(∂ log c/∂s) Vᵀ``, ``∂ log c/∂s = 1 + ∂(log c − Σ s)/∂s``."""
     u, s, v = _proper_svd(F)
-    return (u * jax.grad(_log_c_of_singular_values)(s)) @ v.T
+    return (u * (1.0 + jax.grad(_log_c_reduced)(s))) @ v.T
 
 
 def _quaternion_basis() -> np.ndarray:
@@ -540,7 +642,7 @@ class MatrixFisher(Distribution):
     support = rotation
 
     def __init__(self, F, *, validate_args=None):
-        F = jnp.asarray(F, dtype=jnp.result_type(F, float))
+        F = _real_array("F", F, "a 3x3 matrix (or a batch (..., 3, 3))")
         if F.ndim < 2 or F.shape[-2:] != (3, 3):
             raise ValueError(f"F must be a finite 3x3 matrix (or a batch (..., 3, 3)), got "
                              f"shape {F.shape}")  # fmt: skip
@@ -558,7 +660,10 @@ class MatrixFisher(Distribution):
 
     def log_prob(self, value):
         _check_value(self, value)
-        return jnp.sum(self.F * value, axis=(-2, -1)) - self.log_normalizer()
+        total, reduced = jnp.vectorize(
+            _matrix_fisher_log_normalizer_parts, signature="(3,3)->(),()"
+        )(self.F)
+        return (jnp.sum(self.F * value, axis=(-2, -1)) - total) - reduced
 
     @property
     def mean(self):
@@ -567,6 +672,7 @@ class MatrixFisher(Distribution):
 
     def sample(self, key, sample_shape=()):
         """Exact draws: the quaternion's Bingham law on S³ (``targets.groups.MatrixFisherLaw``)."""
+        key = _one_key(key)
         shape = tuple(sample_shape)
         count = int(np.prod(shape))
         n = max(count, 1)
