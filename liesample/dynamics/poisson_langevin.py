@@ -21,14 +21,14 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, fields
-from typing import cast
+from typing import Protocol, cast
 
 import jax
 import jax.numpy as jnp
 from jax.typing import ArrayLike
 
 from liesample.dynamics.sde import PoissonLangevinSDE
-from liesample.dynamics.system import LiePoissonSystem, checked_beta
+from liesample.dynamics.system import DeclaresBeta, LiePoissonSystem, checked_beta
 from liesample.foundation.validation import finite_float
 from liesample.geometry.poisson import LiePoissonStructure
 
@@ -73,7 +73,21 @@ class Scene:
         return tuple(item.name for item in fields(self) if getattr(self, item.name))
 
 
-def make_dynamics(system, *, beta=None, sigma=1.0, theta=None, hamiltonian=True):
+class _Declarations(DeclaresBeta, Protocol):
+    """What :func:`make_dynamics` reads of a system: ``check_beta`` and ``check_noise``."""
+
+    @property
+    def check_noise(self) -> Callable[[], object] | None: ...
+
+
+def make_dynamics(
+    system: _Declarations,
+    *,
+    beta: float | None = None,
+    sigma: float = 1.0,
+    theta: float | None = None,
+    hamiltonian: bool = True,
+) -> tuple[float, float, Scene]:
     """Validate ``(β, σ, θ)`` and return ``(sigma, theta, scene)``.
 
     With noise (``σ > 0``) the dissipation is derived, ``θ = βσ²/2``, so ``β`` is required and

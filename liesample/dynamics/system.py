@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, Protocol
 
 import jax
 import jax.numpy as jnp
@@ -253,7 +253,15 @@ class LiePoissonSystem:
             )
 
 
-def checked_beta(system, beta) -> float:
+class DeclaresBeta(Protocol):
+    """What :func:`checked_beta` reads of a system: its ``check_beta`` (``None`` or
+    ``β ↦ None``, raising where ``exp(−βh)`` is not normalisable)."""
+
+    @property
+    def check_beta(self) -> Callable[[float], None] | None: ...
+
+
+def checked_beta(system: DeclaresBeta, beta: object) -> float:
     """``β`` as a float: finite, and admissible for ``system`` (its ``check_beta``, ``None`` or
     ``β ↦ None`` raising where ``exp(−βh)`` is not normalisable), or a ``ValueError`` that says
     why not. ``system`` is a :class:`LiePoissonSystem` or any declaration with ``check_beta``."""

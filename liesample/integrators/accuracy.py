@@ -864,7 +864,7 @@ def _coordinates(mu):
 
 def default_step_size(
     system: LiePoissonSystem,
-    beta: float | None,
+    beta: float,
     *,
     sigma: float = 1.0,
     integrator: str | Integrator = DEFAULT_INTEGRATOR,

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import NamedTuple, cast
 
 import jax
 import jax.numpy as jnp
@@ -284,7 +284,7 @@ class _Plan(NamedTuple):
     system: LiePoissonSystem
     integrator: Integrator
     scene: Scene
-    beta: object
+    beta: float | None  # None: no noise (the deterministic scene)
     sigma: float
     theta: float
     stability: str
@@ -338,7 +338,7 @@ def _choose(plan: _Plan, positions, rng_key=None):
         positions = positions[np.asarray(orbits)]
     choice = accuracy.default_step_size(
         plan.system,
-        plan.beta,
+        cast(float, plan.beta),  # a step is chosen for the noise, which needs beta
         sigma=plan.sigma,
         integrator=plan.integrator,
         initial_positions=positions,
