@@ -1332,6 +1332,12 @@ ROWS = [
         "initial_positions must have shape",
     ),
     (
+        "choose_step_size positions complex",
+        lambda: _choose(initial_positions=STARTS + 0j),
+        TypeError,
+        "initial_positions must be real floating point, got dtype complex",
+    ),
+    (
         "coupled_ergodic_averages observables",
         lambda: accuracy.coupled_ergodic_averages(
             RIGID, 1.0, 3, step_size=0.1, initial_positions=STARTS, rng_key=KEY, total_time=1.0
@@ -1365,6 +1371,36 @@ ROWS = [
         "concentration must be finite",
     ),
     (
+        "VonMisesFisher concentration string",
+        lambda: lnp.VonMisesFisher(np.array([0.0, 0.0, 1.0]), "a"),
+        TypeError,
+        "concentration must be .* real numbers",
+    ),
+    (
+        "VonMisesFisher concentration complex",
+        lambda: lnp.VonMisesFisher(np.array([0.0, 0.0, 1.0]), 1j),
+        TypeError,
+        "concentration must be .* real numbers.*complex",
+    ),
+    (
+        "VonMisesFisher mean_direction complex",
+        lambda: lnp.VonMisesFisher(np.array([0.0, 0.0, 1.0 + 0j]), 1.0),
+        TypeError,
+        "mean_direction must be a unit vector of real numbers",
+    ),
+    (
+        "VonMisesFisher batch shapes",
+        lambda: lnp.VonMisesFisher(np.tile([0.0, 0.0, 1.0], (2, 1)), np.ones(3)),
+        ValueError,
+        r"batch shapes do not broadcast: mean_direction \(2,\), concentration \(3,\)",
+    ),
+    (
+        "VonMisesFisher sample int key",
+        lambda: lnp.VonMisesFisher(np.array([0.0, 0.0, 1.0]), 1.0).sample(0),
+        TypeError,
+        r"key must be a JAX random key.*jax\.random\.key\(0\)",
+    ),
+    (
         "Bingham concentration shape",
         lambda: lnp.Bingham(np.ones(2)),
         ValueError,
@@ -1383,6 +1419,24 @@ ROWS = [
         "orientation must be a rotation matrix of shape",
     ),
     (
+        "Bingham concentration complex",
+        lambda: lnp.Bingham(np.array([0.0, 1.0, 2j])),
+        TypeError,
+        "concentration must be .* real numbers.*complex",
+    ),
+    (
+        "Bingham concentration string",
+        lambda: lnp.Bingham("abc"),
+        TypeError,
+        "concentration must be .* real numbers",
+    ),
+    (
+        "Bingham orientation complex",
+        lambda: lnp.Bingham(np.ones(3), np.eye(3) + 0j),
+        TypeError,
+        "orientation must be .* real numbers",
+    ),
+    (
         "MatrixFisher F shape",
         lambda: lnp.MatrixFisher(np.ones(3)),
         ValueError,
@@ -1393,6 +1447,24 @@ ROWS = [
         lambda: lnp.MatrixFisher(np.full((3, 3), NAN)),
         ValueError,
         "F must be finite",
+    ),
+    (
+        "MatrixFisher F complex",
+        lambda: lnp.MatrixFisher(np.eye(3) + 0j),
+        TypeError,
+        "F must be a 3x3 matrix .* real numbers.*complex",
+    ),
+    (
+        "MatrixFisher F ragged list",
+        lambda: lnp.MatrixFisher([[1.0, 2.0], [3.0]]),
+        TypeError,
+        "F must be a 3x3 matrix .* real numbers",
+    ),
+    (
+        "MatrixFisher sample int key",
+        lambda: lnp.MatrixFisher(np.eye(3)).sample(0),
+        TypeError,
+        r"key must be a JAX random key",
     ),
     (
         "GeometricHMC adapt_step_size string",
@@ -1536,6 +1608,7 @@ ACCEPTED = [
     ("geometric_hmc inverse mass list", lambda: _ghmc(inverse_mass_matrix=[1.0, 1.0])),
     ("geometric_hmc inverse mass scalar", lambda: _ghmc(inverse_mass_matrix=1.0)),
     ("GeometricHMC step_size float32", lambda: GeometricHMC(_model, step_size=np.float32(0.1))),
+    ("VonMisesFisher mean_direction ints", lambda: lnp.VonMisesFisher([0, 0, 1], 2)),
     (
         "GeometricHMC inverse mass dict",
         lambda: GeometricHMC(_model, inverse_mass_matrix={"x": 1.0}),
