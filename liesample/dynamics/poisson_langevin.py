@@ -25,11 +25,13 @@ from typing import Protocol, cast
 
 import jax
 import jax.numpy as jnp
-from jax.typing import ArrayLike
+from jax.typing import ArrayLike, DTypeLike
 
 from liesample.dynamics.sde import PoissonLangevinSDE
 from liesample.dynamics.system import DeclaresBeta, LiePoissonSystem, checked_beta
+from liesample.foundation.types import PRNGKey
 from liesample.foundation.validation import finite_float
+from liesample.geometry.algebras import LieAlgebra
 from liesample.geometry.poisson import LiePoissonStructure
 
 
@@ -160,7 +162,7 @@ class PoissonLangevin:
     scene: Scene
 
     @property
-    def algebra(self):
+    def algebra(self) -> LieAlgebra:
         return self.system.algebra
 
     @property
@@ -181,11 +183,17 @@ class PoissonLangevin:
             self.scene,
         )
 
-    def brackets_with_noise(self, mu, grad_h):
+    def brackets_with_noise(self, mu: jax.Array, grad_h: jax.Array) -> jax.Array:
         """``{h, ĥ_i}(μ) = −dĥ_i(ad*_{∇h} μ)`` for every ``i``, shape ``(m,)`` (one JVP)."""
         return self.sde.brackets_with_noise(mu, self.algebra.ad_star(grad_h, mu))
 
-    def noise_coefficients(self, mu, dt, dW=None, grad_h=None):
+    def noise_coefficients(
+        self,
+        mu: jax.Array,
+        dt: jax.Array | float,
+        dW: jax.Array | None = None,
+        grad_h: jax.Array | None = None,
+    ) -> jax.Array:
         """``c_i = −θ {h, ĥ_i} dt + σ dW_i`` (only the scene's terms), shape ``(m,)``.
 
         ``{h, ĥ_i} = −dĥ_i(X_h)``: one JVP of the noise Hamiltonians, no Jacobian formed.
@@ -193,12 +201,14 @@ class PoissonLangevin:
         coefficients = self.sde.noise_coefficients(mu, dt, dW, grad_h)
         return jnp.broadcast_to(coefficients, (self.num_noises,))
 
-    def noise_generator(self, mu, coefficients):
+    def noise_generator(self, mu: jax.Array, coefficients: jax.Array) -> jax.Array:
         """``Σ_i c_i ∇ĥ_i(μ)``: one VJP of the noise Hamiltonians (no Jacobian is formed)."""
         _, pullback = jax.vjp(self.system.noise_hamiltonians, mu)
         return pullback(coefficients)[0]
 
-    def generator(self, mu, dt, dW=None):
+    def generator(
+        self, mu: jax.Array, dt: jax.Array | float, dW: jax.Array | None = None
+    ) -> jax.Array:
         """The generator ``ζ ∈ g`` of one step of length ``dt`` with Brownian increments ``dW``:
         ``∇h dt + Σ_i c_i ∇ĥ_i`` (the SDE's covector; the increment is ``ad*_ζ μ``).
 
@@ -207,7 +217,13 @@ class PoissonLangevin:
         """
         return self.sde.covector(mu, dt, dW)
 
-    def group_generator(self, mu, group, dt, dW=None):
+    def group_generator(
+        self,
+        mu: jax.Array,
+        group: int | jax.Array,
+        dt: jax.Array | float,
+        dW: jax.Array | None = None,
+    ) -> jax.Array:
         """The generator of one group of noise directions alone: ``Σ_{i∈group} c_i ∇ĥ_i``.
 
         Along one direction the SDE is a one-dimensional Langevin equation with additive noise
@@ -245,11 +261,13 @@ class PoissonLangevin:
             coefficient = coefficient + self.sigma * dW[i]
         return coefficient * gradient
 
-    def vector_field(self, mu, dt, dW=None):
+    def vector_field(
+        self, mu: jax.Array, dt: jax.Array | float, dW: jax.Array | None = None
+    ) -> jax.Array:
         """The ambient increment ``ad*_ζ μ`` (what a non-geometric integrator adds to ``μ``)."""
         return self.algebra.ad_star(self.generator(mu, dt, dW), mu)
 
-    def ito_correction(self, mu, quadratic_variation):
+    def ito_correction(self, mu: jax.Array, quadratic_variation: jax.Array | float) -> jax.Array:
         """``½ σ² Σ_i d[S^i] (DX_i · X_i)(μ)``, ``X_i = X_{ĥ_i}``: the drift that turns the
         Stratonovich noise into Itô form (paper, the Itô-form proposition of ``sec:stoch-ham``).
         ``quadratic_variation`` holds ``d[S^i]`` over the step, shape ``(m,)`` or a
@@ -267,7 +285,9 @@ class PoissonLangevin:
         second_order = jax.vmap(along_itself)(directions)
         return 0.5 * self.sigma**2 * jnp.tensordot(weights, second_order, axes=1)
 
-    def brownian_increments(self, rng_key, dt, dtype):
+    def brownian_increments(
+        self, rng_key: PRNGKey, dt: jax.Array | float, dtype: DTypeLike
+    ) -> jax.Array | None:
         """``dW ~ N(0, dt I_m)`` when the scene has noise, else ``None`` (no draw at all)."""
         if not self.scene.noise:
             return None

@@ -25,7 +25,7 @@ __all__ = ["NOISE_REACH", "LiePoissonSystem", "checked_beta", "coordinate_noise"
 NOISE_REACH = ("test", "orbit", "level_set")
 
 
-def coordinate_noise(mu):
+def coordinate_noise(mu: jax.Array) -> jax.Array:
     """The linear noise ``ĥ_i(μ) = μ_i``, one per coordinate of the state (flattened): on a
     dual Lie algebra, the noise along every basis direction (paper, ``eq:poisson-langevin-eq``
     with ``Φ_i = e_i``)."""
@@ -169,7 +169,11 @@ class LiePoissonSystem:
                 raise ValueError("noise_groups labels must be 0, 1, …, G−1 with none missing")
 
     def with_noise(
-        self, noise_hamiltonians: Callable, noise_groups=None, *, noise_reach: str = "test"
+        self,
+        noise_hamiltonians: Callable[[jax.Array], jax.Array],
+        noise_groups: ArrayLike | None = None,
+        *,
+        noise_reach: str = "test",
     ) -> LiePoissonSystem:
         """The same system driven by other unit-strength noise Hamiltonians ``μ ↦ (ĥ_1, …, ĥ_m)``.
 
@@ -199,7 +203,7 @@ class LiePoissonSystem:
             check_noise_reaches_orbit(self)
 
     @property
-    def noise_group_labels(self):
+    def noise_group_labels(self) -> np.ndarray:
         """Group label of each noise direction, shape ``(m,)``."""
         if self.noise_groups is None:
             return np.arange(self.num_noises)
@@ -209,10 +213,10 @@ class LiePoissonSystem:
     def num_noise_groups(self) -> int:
         return int(np.max(self.noise_group_labels)) + 1
 
-    def casimirs(self, mu):
+    def casimirs(self, mu: ArrayLike) -> jax.Array:
         return self.algebra.casimirs(mu)
 
-    def casimir_error(self, mu, reference_casimirs):
+    def casimir_error(self, mu: jax.Array, reference_casimirs: jax.Array) -> jax.Array:
         """Largest relative drift ``max_k |C_k(μ) − C₀_k| / scale_k`` of the Casimirs (a scalar).
 
         ``scale = |C₀|``, or ``max(|C₀|, casimir_scale(μ))`` when the system declares a scale,
@@ -225,12 +229,12 @@ class LiePoissonSystem:
         drift = jnp.abs(self.casimirs(mu) - reference_casimirs) / scale
         return jnp.max(drift, initial=0.0)
 
-    def step_casimir_error(self, mu, reference_casimirs):
+    def step_casimir_error(self, mu: jax.Array, reference_casimirs: jax.Array) -> jax.Array:
         """The Casimir drift a sampler reports at every step: :meth:`casimir_error`, unless a
         system overrides it with a cheaper invariant (Zeitlin's ``‖W‖²``)."""
         return self.casimir_error(mu, reference_casimirs)
 
-    def check_position(self, position, name: str = "position"):
+    def check_position(self, position: ArrayLike, name: str = "position") -> None:
         """Reject a state of the wrong shape, non-finite, or on a degenerate orbit (one of the
         ``positive_casimirs`` is ``≤ 0``)."""
         shape = tuple(jnp.shape(position))
