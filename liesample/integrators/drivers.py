@@ -31,12 +31,14 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike, DTypeLike
 
 from liesample.dynamics.poisson_langevin import PoissonLangevin, Scene
 from liesample.dynamics.system import LiePoissonSystem, checked_beta
 from liesample.foundation.compile import evaluate, jit
+from liesample.foundation.types import PRNGKey
 from liesample.foundation.validation import finite_float
-from liesample.integrators.orbit import DEFAULT_INTEGRATOR, get_integrator
+from liesample.integrators.orbit import DEFAULT_INTEGRATOR, Integrator, get_integrator
 
 __all__ = [
     "BrownianMotion",
@@ -50,14 +52,23 @@ __all__ = [
 class _Driver:
     """Increments ``dS^i`` over ``[t, t + dt]`` for ``m`` independent directions."""
 
-    def increments(self, rng_key, t, dt, num_noises: int, dtype):  # pragma: no cover - interface
+    def increments(
+        self,
+        rng_key: PRNGKey,
+        t: jax.Array | float,
+        dt: jax.Array | float,
+        num_noises: int,
+        dtype: DTypeLike,
+    ) -> jax.Array:  # pragma: no cover - interface
         raise NotImplementedError
 
-    def quadratic_variation(self, t, dt):  # pragma: no cover - interface
+    def quadratic_variation(
+        self, t: jax.Array | float, dt: jax.Array | float
+    ) -> jax.Array | float:  # pragma: no cover - interface
         """``d[S^i]`` over ``[t, t + dt]`` (deterministic for these drivers)."""
         raise NotImplementedError
 
-    def check_times(self, times) -> None:
+    def check_times(self, times: ArrayLike) -> None:
         """Reject a time grid on which the driver is not a valid semimartingale."""
 
 
@@ -105,12 +116,19 @@ class DriftedBrownianMotion(_Driver):
             )
         return drift
 
-    def increments(self, rng_key, t, dt, num_noises: int, dtype):
+    def increments(
+        self,
+        rng_key: PRNGKey,
+        t: jax.Array | float,
+        dt: jax.Array | float,
+        num_noises: int,
+        dtype: DTypeLike,
+    ) -> jax.Array:
         del t
         normal = jax.random.normal(rng_key, (num_noises,), dtype=dtype)
         return self._drift(num_noises) * dt + self.scale * jnp.sqrt(dt) * normal
 
-    def quadratic_variation(self, t, dt):
+    def quadratic_variation(self, t: jax.Array | float, dt: jax.Array | float) -> jax.Array | float:
         del t
         return self.scale**2 * dt
 
@@ -159,20 +177,27 @@ class TimeChangedBrownianMotion(_Driver):
     (11, 3)
     """
 
-    clock: Callable
+    clock: Callable[[jax.Array | float], jax.Array | float]
 
     def __post_init__(self):
         if not callable(self.clock):
             raise TypeError(f"clock must be a callable t ↦ τ(t), got {self.clock!r}")
 
-    def quadratic_variation(self, t, dt):
+    def quadratic_variation(self, t: jax.Array | float, dt: jax.Array | float) -> jax.Array | float:
         return self.clock(t + dt) - self.clock(t)
 
-    def increments(self, rng_key, t, dt, num_noises: int, dtype):
+    def increments(
+        self,
+        rng_key: PRNGKey,
+        t: jax.Array | float,
+        dt: jax.Array | float,
+        num_noises: int,
+        dtype: DTypeLike,
+    ) -> jax.Array:
         normal = jax.random.normal(rng_key, (num_noises,), dtype=dtype)
         return jnp.sqrt(self.quadratic_variation(t, dt)) * normal
 
-    def check_times(self, times) -> None:
+    def check_times(self, times: ArrayLike) -> None:
         tau = np.asarray(evaluate(jax.vmap(self.clock), np.asarray(times)), dtype=float)
         if not np.all(np.isfinite(tau)):
             raise ValueError("clock returned a non-finite value on the time grid")
@@ -215,16 +240,16 @@ def ito_euler_maruyama(dynamics: PoissonLangevin, mu, dt, dS, quadratic_variatio
 
 def simulate(
     system: LiePoissonSystem,
-    rng_key,
-    position=None,
+    rng_key: PRNGKey,
+    position: ArrayLike | None = None,
     *,
-    step_size,
+    step_size: float,
     num_steps: int,
-    sigma=1.0,
-    driver=None,
-    beta=None,
+    sigma: float = 1.0,
+    driver: _Driver | None = None,
+    beta: float | None = None,
     hamiltonian: bool = True,
-    integrator=DEFAULT_INTEGRATOR,
+    integrator: str | Integrator = DEFAULT_INTEGRATOR,
     form: str = "stratonovich",
     save_every: int = 1,
 ) -> Path:
