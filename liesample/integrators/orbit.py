@@ -218,7 +218,7 @@ INTEGRATORS: dict[str, Integrator] = {
 DEFAULT_INTEGRATOR = "splitting"
 
 
-def get_integrator(integrator) -> Integrator:
+def get_integrator(integrator: str | Integrator) -> Integrator:
     """Look up an integrator by name (or pass an :class:`Integrator` through)."""
     if isinstance(integrator, Integrator):
         return integrator

@@ -50,7 +50,9 @@ import warnings
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike, DTypeLike
 
+from liesample.dynamics.system import LiePoissonSystem
 from liesample.foundation.compile import evaluate, jit
 from liesample.foundation.validation import raise_or_warn
 from liesample.integrators.orbit import INTEGRATORS, Integrator
@@ -81,7 +83,9 @@ _MAX_DIRECTIONS = 12
 _ORBIT_SEED = 20261122
 
 
-def noise_curvatures(system, mu, directions=None):
+def noise_curvatures(
+    system: LiePoissonSystem, mu: ArrayLike, directions: ArrayLike | None = None
+) -> jax.Array:
     """``h''_i(μ)``, the second derivative of ``h`` along each noise flow, shape ``(m,)`` (or
     only for the noise directions listed in ``directions``).
 
@@ -129,7 +133,7 @@ def _orbit_points(system, position):
     return jnp.concatenate([position[None], move(jnp.asarray(zetas, position.dtype), position)])
 
 
-def stiffness(system, theta, position) -> float:
+def stiffness(system: LiePoissonSystem, theta: float, position: ArrayLike) -> float:
     """``θ · max_i |h''_i|`` estimated on the orbit through ``position`` (module docstring).
 
     Computed once per system and orbit (the result is cached on the system by its Casimirs).
@@ -161,7 +165,7 @@ def stiffness(system, theta, position) -> float:
     return abs(theta) * cache[cache_key]
 
 
-def stiffness_on_orbits(system, theta, positions) -> np.ndarray:
+def stiffness_on_orbits(system: LiePoissonSystem, theta: float, positions: ArrayLike) -> np.ndarray:
     """:func:`stiffness` of the orbits through each of ``positions`` (shape ``(n, *event)``),
     the orbits not yet cached computed in one compiled call (a ``lax.map`` over them: bounded
     memory) and cached as :func:`stiffness` does.
@@ -205,7 +209,9 @@ def stiffness_on_orbits(system, theta, positions) -> np.ndarray:
     return abs(theta) * np.array([cache[key] for key in keys])
 
 
-def stability_number(system, step_size, theta, position) -> float:
+def stability_number(
+    system: LiePoissonSystem, step_size: float, theta: float, position: ArrayLike
+) -> float:
     """``κ = step_size · |θ| · max_i |h''_i|`` on the orbit through ``position``
     (θ < 0 at β < 0).
 
@@ -223,7 +229,14 @@ def stability_number(system, step_size, theta, position) -> float:
     return step_size * stiffness(system, theta, position)
 
 
-def check_step_size(system, integrator, step_size, theta, position, mode="warn"):
+def check_step_size(
+    system: LiePoissonSystem,
+    integrator: str | Integrator,
+    step_size: float,
+    theta: float,
+    position: ArrayLike,
+    mode: str = "warn",
+) -> float | None:
     """Warn (``mode="warn"``) or raise ``ValueError`` (``"raise"``) when ``κ`` exceeds the
     integrator's declared ``stability_limit`` (an :class:`~liesample.integrators.Integrator` or
     a built-in's name); ``"off"``, an unknown name or no declared limit: no check.
@@ -261,7 +274,9 @@ def check_step_size(system, integrator, step_size, theta, position, mode="warn")
     return kappa
 
 
-def largest_stable_step(system, integrator, theta, position) -> float:
+def largest_stable_step(
+    system: LiePoissonSystem, integrator: str | Integrator, theta: float, position: ArrayLike
+) -> float:
     """The largest ``step_size`` with ``κ ≤`` the integrator's ``stability_limit`` on the orbit
     through ``position`` (``inf`` where there is no bound: no dissipation, flat ``h``, no declared
     limit, or a system without the curvature bound).
@@ -300,7 +315,13 @@ FLOAT32_MIN_RELATIVE_SPREAD = 1e-3
 step then rounds by ``ε₃₂ max|μ|``, a visible fraction of the fluctuations being sampled."""
 
 
-def check_precision(system, beta, theta, position, dtype) -> bool:
+def check_precision(
+    system: LiePoissonSystem,
+    beta: float | None,
+    theta: float,
+    position: ArrayLike,
+    dtype: DTypeLike,
+) -> bool:
     """Warn (``UserWarning``; the same message for the same system, so Python's default warning
     filter shows it once per calling line) when a sampler runs in float32 on a problem that
     needs float64, by the two rules :data:`FLOAT32_MIN_STABLE_STEP` and

@@ -518,7 +518,7 @@ class _Run:
             count = min(self.chunk, self.num_draws - done)
             first_step = o.num_warmup + done * o.thinning
             states, recorded = self.executables[count](states, self.chain_keys, first_step, values)
-            chunks.append(self._split(*to_host(recorded)))
+            chunks.append(self._split(*cast(tuple, to_host(recorded))))
             record_casimir_drift(self.settings, chunks[-1]["info"])  # the file records it
             wall_time = time.perf_counter() - start
             done += count

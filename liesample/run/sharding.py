@@ -21,10 +21,14 @@ e.g. ``output=path if jax.process_index() == 0 else None``. Multi-host runs are 
 from __future__ import annotations
 
 import operator
+from collections.abc import Sequence
+from typing import Any, cast
 
 import jax
 import numpy as np
 from jax.sharding import NamedSharding, PartitionSpec
+
+from liesample.foundation.types import PyTree
 
 __all__ = ["CHAIN_AXIS", "chain_sharding", "initialize_distributed", "shard_chains", "to_host"]
 
@@ -32,7 +36,9 @@ CHAIN_AXIS = "chain"
 """Name of the mesh axis over which chains are split."""
 
 
-def chain_sharding(devices, num_chains: int) -> NamedSharding | None:
+def chain_sharding(
+    devices: str | int | Sequence[jax.Device] | NamedSharding | None, num_chains: int
+) -> NamedSharding | None:
     """The sharding of the chain axis, or ``None`` for an unsharded run.
 
     Parameters
@@ -75,7 +81,7 @@ def chain_sharding(devices, num_chains: int) -> NamedSharding | None:
             chosen = available[:count]
         else:
             try:
-                chosen = list(devices)
+                chosen = list(cast(Sequence[jax.Device], devices))  # else the TypeError below
             except TypeError:
                 raise TypeError(
                     f"devices must be None, 'all', a positive int, a sequence of jax devices or "
@@ -105,7 +111,7 @@ def _axis_names(entry):
     return (entry,) if isinstance(entry, str) else tuple(entry)
 
 
-def shard_chains(tree, sharding: NamedSharding | None):
+def shard_chains[T: PyTree](tree: T, sharding: NamedSharding | None) -> T:
     """Place every leaf of ``tree`` (leading axis = chains) with ``sharding`` (or leave it).
 
     Examples
@@ -120,7 +126,7 @@ def shard_chains(tree, sharding: NamedSharding | None):
     return jax.device_put(tree, sharding)
 
 
-def to_host(tree):
+def to_host(tree: PyTree) -> PyTree:
     """The leaves of ``tree`` as NumPy arrays on this host (gathered from every process).
 
     Examples
@@ -136,7 +142,7 @@ def to_host(tree):
     return jax.tree.map(np.asarray, tree)
 
 
-def initialize_distributed(**kwargs) -> bool:
+def initialize_distributed(**kwargs: Any) -> bool:
     """``jax.distributed.initialize(**kwargs)`` once; ``False`` if it was already initialised.
 
     Call it at the top of every process of a multi-host run, before any other JAX call. Without
