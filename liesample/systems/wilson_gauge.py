@@ -32,7 +32,9 @@ from typing import cast
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike, DTypeLike
 
+from liesample.foundation.types import PRNGKey
 from liesample.foundation.validation import finite_float, prng_key
 from liesample.geometry import spaces
 
@@ -146,7 +148,7 @@ class WilsonGauge:
     def planes(self) -> tuple[tuple[int, int], ...]:
         return tuple((mu, nu) for mu in range(self.dim) for nu in range(mu + 1, self.dim))
 
-    def check_links(self, links, name: str = "links") -> None:
+    def check_links(self, links: ArrayLike, name: str = "links") -> None:
         """Raise unless ``links`` has the shape and dtype of this system's links (cheap: shape
         and dtype only, so it costs nothing under ``jit``; ``system.space.check`` also checks
         that a concrete field lies on the group)."""
@@ -164,11 +166,11 @@ class WilsonGauge:
             wanted = "real floating (angles)" if self.abelian else "complex (SU(N) matrices)"
             raise TypeError(f"{name} must be a {wanted} array for {self.group}, got {dtype}")
 
-    def check_axis(self, name: str, value) -> int:
+    def check_axis(self, name: str, value: object) -> int:
         """``value`` as a lattice direction ``0 … d−1``, or an error naming ``name``."""
         return _index(name, value, self.dim, "a lattice direction")
 
-    def check_plane(self, mu, nu) -> tuple[int, int]:
+    def check_plane(self, mu: object, nu: object) -> tuple[int, int]:
         """Two distinct lattice directions, or an error naming ``mu`` and ``nu``."""
         mu, nu = self.check_axis("mu", mu), self.check_axis("nu", nu)
         if mu == nu:
@@ -268,12 +270,12 @@ class WilsonGauge:
         return lambda links: -beta * self.action(links)
 
     # ------------------------------------------------------------------ starts
-    def hot_start(self, rng_key: jax.Array, dtype=None) -> jax.Array:
+    def hot_start(self, rng_key: PRNGKey, dtype: DTypeLike | None = None) -> jax.Array:
         """Haar-random links (pure JAX: vmaps over keys); ``dtype`` real floating (the
         precision; SU(N) links are complex of it)."""
         return self.space.uniform(prng_key(rng_key), _real_dtype(dtype, "dtype"))
 
-    def cold_start(self, dtype=None) -> jax.Array:
+    def cold_start(self, dtype: DTypeLike | None = None) -> jax.Array:
         """Every link the identity (``dtype`` as for :meth:`hot_start`)."""
         dtype = _real_dtype(dtype, "dtype")
         if self.abelian:

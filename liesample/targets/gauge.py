@@ -19,6 +19,8 @@ are integrals over the eigenphases (Weyl's integration formula).
 
 from __future__ import annotations
 
+from typing import cast
+
 import numpy as np
 from scipy import special
 
@@ -49,7 +51,7 @@ def _plaquettes(num_plaquettes) -> int:
     return int(num_plaquettes)
 
 
-def u1_torus_plaquette_mean(beta, num_plaquettes) -> float:
+def u1_torus_plaquette_mean(beta: float, num_plaquettes: int) -> float:
     """``E[cos θ_P]`` of 2-D U(1) on a torus of ``V`` plaquettes: ``(1/V) ∂_β log Σ_k I_k^V``.
 
     Any finite ``β`` (the law is normalisable on the compact links): at ``β < 0``,
@@ -78,7 +80,7 @@ def u1_torus_plaquette_mean(beta, num_plaquettes) -> float:
     return float(-np.sum(w * derivative) / np.sum(w))
 
 
-def su2_torus_plaquette_mean(beta, num_plaquettes) -> float:
+def su2_torus_plaquette_mean(beta: float, num_plaquettes: int) -> float:
     """``E[½ tr U_P]`` of 2-D SU(2) on a torus of ``V`` plaquettes:
     ``(1/V) ∂_β log Σ_{n≥1} ((2/β) I_n(β))^V``.
 
@@ -104,7 +106,9 @@ def _highest_weights(n: int, max_row: int) -> np.ndarray:
     return np.array(sorted(rows), dtype=int)
 
 
-def sun_character_coefficients(beta, n: int, max_row: int = 40, windings: int = 40):
+def sun_character_coefficients(
+    beta: float, n: int, max_row: int = 40, windings: int = 40
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The character expansion ``e^{(β/N) Re tr U} = Σ_λ c_λ(β) χ_λ(U)`` on SU(N).
 
     Returns ``(λ, c, dc, d)``: the highest weights ``λ`` (rows ``λ_1 ≥ … ≥ λ_N = 0``, ``λ_1 ≤
@@ -147,10 +151,10 @@ def sun_character_coefficients(beta, n: int, max_row: int = 40, windings: int = 
     for p in range(n):
         for q in range(p + 1, n):
             d = d * (shifted[:, p] - shifted[:, q]) / (q - p)
-    return lam, c, dc, d
+    return lam, c, cast(np.ndarray, dc), d  # an array: SU(N) has N >= 2 columns
 
 
-def sun_torus_plaquette_mean(beta, num_plaquettes, n: int) -> float:
+def sun_torus_plaquette_mean(beta: float, num_plaquettes: int, n: int) -> float:
     """``E[Re tr U_P / N]`` of 2-D SU(N) on a torus of ``V`` plaquettes:
     ``(1/V) ∂_β log Σ_λ (c_λ/d_λ)^V`` (:func:`sun_character_coefficients`).
 
@@ -178,7 +182,7 @@ def sun_torus_plaquette_mean(beta, num_plaquettes, n: int) -> float:
     return _weighted_mean(log_w, dc[keep] / c[keep])
 
 
-def su3_torus_plaquette_mean(beta, num_plaquettes) -> float:
+def su3_torus_plaquette_mean(beta: float, num_plaquettes: int) -> float:
     """``E[Re tr U_P / 3]`` of 2-D SU(3) on a torus of ``V`` plaquettes
     (:func:`sun_torus_plaquette_mean` with ``n = 3``).
 
@@ -191,7 +195,7 @@ def su3_torus_plaquette_mean(beta, num_plaquettes) -> float:
     return sun_torus_plaquette_mean(beta, num_plaquettes, 3)
 
 
-def u1_torus_charge_law(beta, num_plaquettes, max_charge: int = 10) -> np.ndarray:
+def u1_torus_charge_law(beta: float, num_plaquettes: int, max_charge: int = 10) -> np.ndarray:
     """``P(Q = q)`` for ``q = −max_charge … max_charge`` (2-D U(1) torus, geometric charge).
 
     Examples
@@ -217,7 +221,7 @@ def u1_torus_charge_law(beta, num_plaquettes, max_charge: int = 10) -> np.ndarra
     return law / np.sum(law)
 
 
-def single_plaquette_mean(beta, n: int) -> float:
+def single_plaquette_mean(beta: float, n: int) -> float:
     """``E[Re tr U / N]`` under ``exp((β/N) Re tr U) dHaar`` on U(1) (``n = 1``), SU(2), SU(3)
     (Weyl's integration formula over the eigenphases).
 
