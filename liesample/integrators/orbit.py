@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -21,6 +22,10 @@ import jax.numpy as jnp
 from liesample.dynamics.poisson_langevin import PoissonLangevin, Scene
 
 FORMS = ("stratonovich", "ito")
+
+
+type Step = Callable[[PoissonLangevin, jax.Array, jax.Array | float, jax.Array | None], jax.Array]
+"""A one-step map ``(dynamics, μ, dt, dW) ↦ μ'`` (``dW`` is ``None`` without noise)."""
 
 
 @dataclass(frozen=True)
@@ -67,7 +72,7 @@ class Integrator:
     name: str
     weak_order: int
     preserves_orbit: bool
-    step: Callable
+    step: Step
     description: str
     linear_noise_only: bool = False
     stability_limit: float | None = None
@@ -81,10 +86,16 @@ class Integrator:
         if self.stability_limit is not None and not self.stability_limit > 0:
             raise ValueError(f"stability_limit must be > 0 or None, got {self.stability_limit!r}")
 
-    def __call__(self, dynamics: PoissonLangevin, mu, dt, dW=None):
+    def __call__(
+        self,
+        dynamics: PoissonLangevin,
+        mu: jax.Array,
+        dt: jax.Array | float,
+        dW: jax.Array | None = None,
+    ) -> jax.Array:
         return self.step(dynamics, mu, dt, dW)
 
-    def wrapping(self, step: Callable, name: str, description: str, **changes) -> Integrator:
+    def wrapping(self, step: Step, name: str, description: str, **changes: Any) -> Integrator:
         """An integrator built on this one (substeps, another dissipation, …): it inherits this
         one's declarations unless ``changes`` overrides them."""
         return replace(self, name=name, step=step, description=description, **changes)

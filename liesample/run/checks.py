@@ -15,6 +15,7 @@ import warnings
 
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
 from liesample.analysis.convergence import convergence_warnings
 from liesample.foundation.precision import (
@@ -159,7 +160,7 @@ def report_stuck_chains(info, threshold: float, advice=None, stacklevel=2):
     )
 
 
-def split_rhat(values) -> float:
+def split_rhat(values: ArrayLike) -> float:
     """Split R-hat (Gelman et al.) of ``values (chains, draws)``: NaN where it is undefined (one
     chain, few draws, or no spread within chains)."""
     values = np.asarray(values, dtype=float)

@@ -56,7 +56,7 @@ class ChainsResult:
     ``log_likelihood`` (name -> ``(chains, draws, *shape)``; ``None`` without that option)."""
 
     positions: np.ndarray
-    info: dict
+    info: dict[str, np.ndarray]
     wall_time: float
     num_steps: int
     settings: dict | None = None

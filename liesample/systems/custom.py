@@ -18,8 +18,8 @@ __all__ = ["LiePoissonSystem", "lie_poisson_system"]
 
 def lie_poisson_system(
     algebra: LieAlgebra,
-    hamiltonian: Callable,
-    noise_hamiltonians: Callable,
+    hamiltonian: Callable[[jax.Array], jax.Array],
+    noise_hamiltonians: Callable[[jax.Array], jax.Array],
     position: ArrayLike,
     *,
     name: str = "Lie–Poisson system",

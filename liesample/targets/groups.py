@@ -350,7 +350,7 @@ class VonMisesFisherPosterior:
         prior = -0.5 * ((eta - self.prior_mean) / self.prior_sd) ** 2
         return self.data.shape[0] * _log_vmf_normalizer_s2(kappa) + log_sinhc + prior
 
-    def expectations(self) -> dict:
+    def expectations(self) -> dict[str, float | np.ndarray]:
         """``E[η]``, ``Var[η]``, ``E[μ]`` (vector) by adaptive quadrature over ``η``."""
         # Locate the bulk of the η-marginal (much narrower than the prior) on a fine grid.
         half_width = 12.0 * self.prior_sd

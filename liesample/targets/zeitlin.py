@@ -89,7 +89,7 @@ class UnitaryOrbitLaw:
     ((1,), (1,))
     """
 
-    hamiltonian: Callable
+    hamiltonian: Callable[[np.ndarray], npt.ArrayLike]
     position: np.ndarray
     beta: float
 
@@ -107,7 +107,11 @@ class UnitaryOrbitLaw:
         return _from_matrix(w)
 
     def expectations(
-        self, functions: Callable, num_samples: int = 200_000, seed: int = 0, batch: int = 20_000
+        self,
+        functions: Callable[[np.ndarray], npt.ArrayLike],
+        num_samples: int = 200_000,
+        seed: int = 0,
+        batch: int = 20_000,
     ) -> tuple[np.ndarray, np.ndarray, float]:
         """``(E_π[f], standard error)`` for ``f = functions(x)`` of shape ``(K, p)`` on a stack.
 
