@@ -28,7 +28,7 @@ class OutputLock:
     def __init__(self, path: str):
         self.path = os.fspath(path)
         self.lock_path = self.path + ".lock"
-        self._fd = None
+        self._fd: int | None = None
 
     def acquire(self):
         """Take the lock, or raise :class:`OutputLockedError` naming the holder (no waiting)."""

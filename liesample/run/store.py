@@ -36,6 +36,7 @@ import hashlib
 import json
 import os
 import re
+from typing import TYPE_CHECKING, Any, cast
 
 import jax
 import jax.numpy as jnp
@@ -44,6 +45,9 @@ import numpy as np
 from liesample.run import atomic
 from liesample.run.lock import OutputLock
 from liesample.run.provenance import FORMAT, differences
+
+if TYPE_CHECKING:
+    import xarray as xr
 
 RUN_GROUP = "liesample_run"
 """The group of a run file that holds its fingerprint, states and checksums."""
@@ -275,7 +279,7 @@ def _check_attributes(f, path, commit) -> dict[str, bytes]:
     )
 
 
-def _header(path):
+def _header(path: str) -> tuple[dict[str, Any], dict[str, Any]]:
     """``(fingerprint, info_names)`` of the run file at ``path``, after checking its format,
     its commit record and its attributes (not yet its draws: :func:`verify`)."""
     with _open(path) as (f, _):
@@ -347,7 +351,10 @@ def _state_arrays(h5, slot):
     """The saved state's leaves in slot ``slot``, read from the h5py file ``h5``."""
     group = h5[RUN_GROUP]
     leaf = re.compile(rf"state_{int(slot)}_(\d+)")  # not the dimensions state_<i>_dim_<j>
-    names = sorted((n for n in group if leaf.fullmatch(n)), key=lambda n: int(leaf.fullmatch(n)[1]))
+    names = sorted(
+        (n for n in group if leaf.fullmatch(n)),
+        key=lambda n: int(cast(re.Match[str], leaf.fullmatch(n))[1]),  # matched: filtered
+    )
     return [(name, np.asarray(group[name][...])) for name in names]
 
 
@@ -426,7 +433,7 @@ def _read_back(work, chunk, states, first, commit):
         raise OSError(errno.EIO, "its new version does not read back as it was written")
 
 
-def load_chains(path):
+def load_chains(path: str | os.PathLike[str]) -> xr.DataTree:
     """The run saved by ``sample_chains(..., output=path)`` or ``sample(..., output=path)``
     (complete or interrupted) as an ArviZ ``DataTree``: the groups, variables and attributes of
     the tree :func:`liesample.sample` returns, up to the last saved draw.
@@ -523,10 +530,13 @@ class RunFile:
         self.lock = lock
         self.exists = os.path.exists(path)
         # what a resume adopts and checks, read (format, commit, attributes checked) at once
-        self.header = _header(path) if self.exists else None
+        self.header: tuple[dict[str, Any], dict[str, Any]] | None = (
+            _header(path) if self.exists else None
+        )
         self.chunks = 0
         self.state_slot = 1  # the slot the next state goes to is the other one
-        self.fields = None  # the attributes of the file as committed (_attribute_fields)
+        # the attributes of the file as committed (_attribute_fields)
+        self.fields: dict[str, Any] | None = None
 
     @classmethod
     def open(cls, output, resume: bool) -> RunFile:
@@ -554,7 +564,7 @@ class RunFile:
 
         if not self.exists:
             return spec
-        saved, info_names = self.header
+        saved, info_names = cast(tuple[dict, dict], self.header)  # it exists: read
         energy = [name for name, (key, _) in info_names.items() if key == "energy"]
         var_name, event_dims = json.loads(saved.get("names", "[null, null]"))
         if isinstance(event_dims, list):
@@ -574,7 +584,8 @@ class RunFile:
         refused if it is ``required`` (:func:`liesample.run.provenance.differences`)."""
         if not self.exists:
             return
-        found = differences(self.header[0], json.loads(json.dumps(fingerprint)), required)
+        saved = cast(tuple[dict, dict], self.header)[0]  # it exists: read in __init__
+        found = differences(saved, json.loads(json.dumps(fingerprint)), required)
         if found:
             raise RunFileError(
                 f"cannot resume from {self.path!r}: it was saved by another run: "
@@ -747,7 +758,7 @@ class Layout:
                 dtype = np.asarray(tree).dtype
                 parts = [f"{single}.real", f"{single}.imag"] if dtype.kind == "c" else [single]
                 return jax.tree.structure(tree), [parts], [dtype]
-            grouped = {}
+            grouped: dict[Any, list[str]] = {}
             for var, (_, leaf) in pytree_variables(tree).items():
                 grouped.setdefault(leaf, []).append(var)
             dtypes = [np.asarray(leaf).dtype for leaf in jax.tree.leaves(tree)]
