@@ -109,6 +109,7 @@ from liesample.foundation.compile import jit
 from liesample.foundation.validation import concrete_array, finite_float
 from liesample.geometry import spaces
 from liesample.geometry.cotangent import cotangent_bundle
+from liesample.interop.numpyro_checks import RunChecks, latent_values
 from liesample.interop.numpyro_distributions import check_observed_sites, rotation
 from liesample.samplers.contract import Tunable
 from liesample.samplers.cotangent.geometric_hmc import geometric_hmc
@@ -254,11 +255,18 @@ def _is_manifold(support) -> bool:
 
 def _nearest_point(space, x):
     """The point of a manifold site nearest to ``x`` (what an ``init_strategy`` gave): unit
-    vectors on spheres, the polar factor on SO(3); angles as they are."""
+    vectors on spheres, the polar factor on SO(3); angles as they are. A point with no nearest
+    one (``init_to_feasible`` gives zeros: the unconstrained origin of the manifold's identity
+    view) or a non-finite one is taken to the first basis vector, or the identity on SO(3)."""
     x = jnp.asarray(x)
     if isinstance(space, spaces.Sphere):
-        return x / jnp.linalg.norm(x, axis=-1, keepdims=True)
+        norm = jnp.linalg.norm(x, axis=-1, keepdims=True)
+        ok = jnp.isfinite(norm) & (norm > jnp.finfo(x.dtype).tiny)
+        pole = jnp.zeros_like(x).at[..., 0].set(1.0)
+        return jnp.where(ok, x / jnp.where(ok, norm, 1.0), pole)
     if isinstance(space, spaces.SO):
+        finite = jnp.all(jnp.isfinite(x), axis=(-2, -1), keepdims=True)
+        x = jnp.where(finite, x, jnp.eye(x.shape[-1], dtype=x.dtype))
         u, _, vt = jnp.linalg.svd(x)
         sign = jnp.sign(jnp.linalg.det(u @ vt))
         u = u.at[..., :, -1].multiply(sign[..., None])
@@ -522,6 +530,7 @@ class GeometricHMC(MCMCKernel):
         divergence_threshold: float = 1000.0,
         integrator="leapfrog",
         jitter: bool = True,
+        check_convergence: bool = True,
         kinetic_fn=None,
         forward_mode_differentiation: bool = False,
         regularize_mass_matrix: bool = True,
@@ -540,7 +549,8 @@ class GeometricHMC(MCMCKernel):
         self._lengths = trajectory_adaptation(time, learn=learn)
         flags = {"jitter": jitter, "adapt_step_size": adapt_step_size,
                  "adapt_mass_matrix": adapt_mass_matrix,
-                 "find_heuristic_step_size": find_heuristic_step_size}  # fmt: skip
+                 "find_heuristic_step_size": find_heuristic_step_size,
+                 "check_convergence": check_convergence}  # fmt: skip
         for name, flag in flags.items():  # bool("no") would be True
             if not isinstance(flag, (bool, np.bool_)):
                 raise TypeError(f"{name} must be a bool (True or False), got {flag!r}")
@@ -573,6 +583,9 @@ class GeometricHMC(MCMCKernel):
         # (step size, flat inverse mass) of each chain adapted alone
         self._chain_adaptations: list[tuple[float, np.ndarray]] = []
         self._reported: set[int] = set()
+        self._check_convergence = bool(check_convergence)
+        # The post-run checks of the MCMC running this kernel (set by init; None: unchecked).
+        self.run_checks: RunChecks | None = None
 
     # ------------------------------------------------------------------ the sites
     def _setup(self, rng_key, model_args, model_kwargs):
@@ -930,6 +943,7 @@ class GeometricHMC(MCMCKernel):
                 init_params = self._check_init_params(init_params, batched)
         if self._num_warmup == 0:
             self._warn_unadapted()
+        self.run_checks = RunChecks.find(self, num_warmup) if self._check_convergence else None
         if self._num_warmup > 0:
             self._rows = schedule(self._num_warmup)  # constants, also under jit
         dtype = jnp.zeros(()).dtype
@@ -1111,7 +1125,7 @@ class GeometricHMC(MCMCKernel):
         adaptation = adaptation._replace(
             step=adaptation.step._replace(smoothed=smoothed[:, None])
         )
-        return GeometricHMCState(
+        new_state = GeometricHMCState(
             state.i + 1,
             jax.vmap(lambda p: self._to_user(self._unpack(p)))(inner.position),
             -inner.logdensity,
@@ -1127,6 +1141,12 @@ class GeometricHMC(MCMCKernel):
             adaptation,
             rng_key,
         )
+        if self.run_checks is not None:  # the draw, to the post-run checks (module docstring)
+            fields = {"diverging": info.is_divergent, "accept_prob": info.acceptance_rate,
+                      "energy": energy}  # fmt: skip
+            latent = latent_values(self.postprocess_fn(model_args, model_kwargs), self._sites)
+            self.run_checks.trace(i, state.rng_key, rng_key, latent, new_state.z, fields)
+        return new_state
 
     def _parameters(self, adaptation, i):
         """The parameters of transition ``i``: the adaptation's ``current`` in the warm-up, its

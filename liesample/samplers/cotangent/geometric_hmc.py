@@ -140,6 +140,14 @@ def build_kernel(
     """``kernel(rng_key, state, logdensity_fn, space, step_size, num_integration_steps,
     inverse_mass_matrix=None, magnetic_field=None) -> (state, info)``; parameters may be
     traced (adaptation): the kinetic–magnetic exponential is then computed per transition."""
+    if callable(divergence_threshold):  # BlackJAX's warm-ups pass their integrator first
+        raise TypeError(
+            "geometric_hmc.build_kernel got a function for divergence_threshold: "
+            "blackjax.window_adaptation(liesample.geometric_hmc, …) passes its Euclidean "
+            "integrator there, and its Euclidean mass cannot move a sphere or a group. Tune with "
+            "liesample.window_adaptation(liesample.geometric_hmc, logdensity_fn, space) instead "
+            "(the same Stan windows, with the mass in algebra coordinates)."
+        )
     scheme = hamiltonian_scheme(integrator)
     options = check_options(momentum_persistence, divergence_threshold, persistent)
 
