@@ -130,3 +130,16 @@ def test_vmf_log_prob_has_a_hessian_in_kappa_and_no_callback():
     jaxpr = str(jax.make_jaxpr(lambda k: VonMisesFisher(d5, k).log_prob(d5))(2.5))
     assert "callback" not in jaxpr
     assert "pure_callback" not in inspect.getsource(numpyro_distributions)
+
+
+@pytest.mark.parametrize("order", [0.5, 49.0])
+def test_huge_concentrations_stay_finite_and_right(order):
+    """Beyond κ ≈ 1e154, κ² overflows float64: the ratio is 1 and log(I_ν(κ)e^{−κ}) is
+    −½ log(2πκ) to round-off (the leading term of the asymptotic series; the next is ~1/κ)."""
+    kappa = jnp.array([1e160, 1e200, 1e300])
+    assert np.all(np.asarray(bessel_iv_ratio(order, kappa)) == 1.0)
+    np.testing.assert_allclose(
+        log_bessel_ive(order, kappa), -0.5 * np.log(2.0 * np.pi * np.asarray(kappa)), rtol=1e-15
+    )
+    grad = jax.vmap(jax.grad(lambda x: log_bessel_ive(order, x)))(kappa)
+    assert np.all(np.isfinite(np.asarray(grad)))

@@ -98,9 +98,20 @@ def _log_series(order, kappa):
     return jnp.log1p(jnp.sum(_powers(z, _SERIES_TERMS)[..., 1:] * coefficients, axis=-1))
 
 
+_HUGE_KAPPA = 1e150
+"""Above this ``κ``, Debye's ``√(ν²+κ²)`` is computed as ``κ√(1+(ν/κ)²)`` (``κ²`` would overflow
+float64 near ``1e154``)."""
+
+
 def _log_ive_debye(order, kappa):
     """``log(I_ν(κ) e^{−κ})`` by Debye's expansion (valid for ``√(ν²+κ²) > 25``)."""
-    r = jnp.sqrt(order * order + kappa * kappa)
+    # √(ν²+κ²) without overflow in κ² (κ above ~1e154 in float64): scaled by κ there only, so
+    # smaller κ keep their rounding; the safe κ keeps the unused branch's gradient finite
+    huge = kappa > _HUGE_KAPPA
+    tame = jnp.where(huge, 1.0, kappa)
+    r = jnp.where(
+        huge, kappa * jnp.sqrt(1.0 + (order / kappa) ** 2), jnp.sqrt(order * order + tame * tame)
+    )
     p2 = (order / r) ** 2
     matrix = jnp.asarray(_debye_matrix(), kappa.dtype)
     inner = _powers(p2, _DEBYE_TERMS) @ matrix.T  # U_k(p)/p^k, k = 1…K

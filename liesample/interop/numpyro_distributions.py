@@ -222,8 +222,9 @@ _LOG_SINHC = (1.0 / 6.0, -1.0 / 180.0, 1.0 / 2835.0, -1.0 / 37800.0, 1.0 / 46777
 _SINHC_SWITCH = 0.1  # the first omitted term (κ¹²) is below 1e−18 there
 
 
-def _log_vmf_normalizer_s2_reduced(kappa):
-    """``log(κ / (4π sinh κ)) + κ``, exact to round-off for every ``κ ≥ 0`` (``−log 4π`` at 0)."""
+def _log_vmf_normalizer_s2(kappa, reduced: bool):
+    """``log(κ / (4π sinh κ))`` (``+ κ`` if ``reduced``), exact to round-off for every ``κ ≥ 0``
+    (``−log 4π`` at 0)."""
     small = kappa < _SINHC_SWITCH
     k_small = jnp.where(small, kappa, 0.0)
     k_large = jnp.where(small, 1.0, kappa)
@@ -231,38 +232,29 @@ def _log_vmf_normalizer_s2_reduced(kappa):
     log_sinhc = jnp.zeros_like(k2)
     for c in reversed(_LOG_SINHC):
         log_sinhc = (log_sinhc + c) * k2
-    series = -math.log(4.0 * math.pi) - log_sinhc + k_small
+    series = -math.log(4.0 * math.pi) - log_sinhc + (k_small if reduced else 0.0)
     closed = jnp.log(k_large) - math.log(2.0 * math.pi) - jnp.log(-jnp.expm1(-2.0 * k_large))
-    return jnp.where(small, series, closed)
+    return jnp.where(small, series, closed if reduced else closed - k_large)
 
 
-def _log_ive_any(nu: float, kappa):
-    """``log(I_ν(κ) e^{−κ})`` for ``κ > 0`` up to the largest float: past ``√max / 10⁴`` (where
-    Debye's ``√(ν² + κ²)`` would overflow) Hankel's ``−½ log 2πκ − (4ν² − 1)/(8κ)``, whose next
-    term is below round-off there."""
-    huge = math.sqrt(float(jnp.finfo(kappa.dtype).max)) * 1e-4
-    beyond = kappa > huge
-    k_debye, k_hankel = jnp.where(beyond, huge, kappa), jnp.where(beyond, kappa, huge)
-    hankel = -0.5 * jnp.log(2.0 * math.pi * k_hankel) - (4.0 * nu * nu - 1.0) / (8.0 * k_hankel)
-    return jnp.where(beyond, hankel, log_bessel_ive(nu, k_debye))
-
-
-def _log_vmf_normalizer_reduced(kappa, d: int):
-    """``log C_d(κ) + κ``: ``log_prob`` adds ``κ (μ·x − 1)`` to it, so that ``log C_d(κ) ≈ −κ``
-    and ``κ μ·x ≈ κ`` never cancel (at ``κ = 1e200`` they would leave nothing). With
-    ``ν = d/2 − 1``, ``log C_d(κ) = log Γ(d/2) + ν log 2 − (d/2) log 2π − log[Γ(ν+1)(κ/2)^{−ν}
-    I_ν(κ)]``: below ``κ = 25`` the reduced Bessel function (no ``log κ`` term, so ``κ = 0`` is
-    exact), above it ``log(I_ν(κ) e^{−κ})``, where nothing grows with ``κ``."""
+def _log_vmf_normalizer(kappa, d: int, reduced: bool = False):
+    """``log C_d(κ)``, or with ``reduced`` ``log C_d(κ) + κ``: ``log_prob`` adds ``κ (μ·x − 1)``
+    to the latter, so that ``log C_d(κ) ≈ −κ`` and ``κ μ·x ≈ κ`` never cancel (at ``κ = 1e200``
+    they would leave nothing), and ``log_normalizer`` takes the former, so that its slope
+    ``−A_d(κ)`` keeps its digits at small ``κ``. With ``ν = d/2 − 1``, ``log C_d(κ) = log Γ(d/2)
+    + ν log 2 − (d/2) log 2π − log[Γ(ν+1)(κ/2)^{−ν} I_ν(κ)]``: below ``κ = 25`` the reduced
+    Bessel function (no ``log κ`` term, so ``κ = 0`` is exact), above it
+    ``log(I_ν(κ) e^{−κ})``, where nothing grows with ``κ``."""
     if d == 3:
-        return _log_vmf_normalizer_s2_reduced(kappa)
+        return _log_vmf_normalizer_s2(kappa, reduced)
     nu = d / 2.0 - 1.0
     constant = math.lgamma(d / 2.0) + nu * math.log(2.0) - (d / 2.0) * math.log(2.0 * math.pi)
     small = kappa <= 25.0
     k_small, k_large = jnp.where(small, kappa, 0.0), jnp.where(small, 50.0, kappa)
-    series = constant - log_bessel_iv_reduced(nu, k_small) + k_small
+    series = constant - log_bessel_iv_reduced(nu, k_small) + (k_small if reduced else 0.0)
     large = (constant - math.lgamma(nu + 1.0) + nu * jnp.log(0.5 * k_large)
-             - _log_ive_any(nu, k_large))  # fmt: skip
-    return jnp.where(small, series, large)
+             - log_bessel_ive(nu, k_large))  # fmt: skip
+    return jnp.where(small, series, large if reduced else large - k_large)
 
 
 def _householder_to(mean_direction, x):
@@ -346,7 +338,7 @@ class VonMisesFisher(Distribution):
 
     def log_normalizer(self):
         """``log C_d(κ)`` (surface measure); at ``κ = 0`` the uniform law's ``−log |S^{d−1}|``."""
-        return _log_vmf_normalizer_reduced(self.concentration, self.d) - self.concentration
+        return _log_vmf_normalizer(self.concentration, self.d)
 
     @classmethod
     def infer_shapes(cls, mean_direction=(), concentration=()):
@@ -357,7 +349,7 @@ class VonMisesFisher(Distribution):
         _check_value(self, value)
         # log C + κ μ·x as (log C + κ) + κ (μ·x − 1): no cancellation of two terms ≈ κ.
         cosine_gap = jnp.sum(self.mean_direction * value, -1) - 1.0
-        reduced = _log_vmf_normalizer_reduced(self.concentration, self.d)
+        reduced = _log_vmf_normalizer(self.concentration, self.d, reduced=True)
         return reduced + self.concentration * cosine_gap
 
     @property
