@@ -37,6 +37,21 @@ def float32_unit_vectors(shape, seed=0):
 # ---------------------------------------------------------------------------- Zeitlin
 
 
+@pytest.fixture(autouse=True)
+def _zeitlin_programs_of_this_mode():
+    """A process picks its precision once, at start-up (README); the suite switches it. The
+    Zeitlin harmonics and their jitted transform are cached per size, and a program JAX traced
+    under x64 is not retraced cleanly without it: these tests start and end with none cached."""
+    from liesample.systems import zeitlin
+
+    caches = (zeitlin.quantised_harmonics, zeitlin._compiled_from_coefficients)
+    for cache in caches:
+        cache.cache_clear()
+    yield
+    for cache in caches:
+        cache.cache_clear()
+
+
 @pytest.mark.parametrize(
     "size", [3] + [pytest.param(n, marks=pytest.mark.slow) for n in range(4, 13)]
 )
