@@ -100,11 +100,7 @@ def _measure_here(quick: bool) -> dict:
                 batched = np.asarray(compiled(states, keys, check_steps))
                 alone = np.stack(
                     [
-                        np.asarray(
-                            liesample.jit(single)(
-                                _chain(states, c), keys[c], check_steps
-                            )
-                        )
+                        np.asarray(liesample.jit(single)(_chain(states, c), keys[c], check_steps))
                         for c in sorted({0, num_chains - 1})
                     ]
                 )

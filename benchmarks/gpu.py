@@ -272,8 +272,11 @@ def _flow_lines(data: dict, short: str) -> list[str]:
             if np.isfinite(scale["t0"])
             else f"t₀ not reached: the mean t²E(t) stays below 0.3 up to t = {t[-1]:g}"
         )
-        lines += ["", f"On {size}⁴, over every row's configurations: {found} (t²E = "
-                  f"{y[len(y) // 4]:.3f} at t = {t[len(t) // 4]:g}, {y[-1]:.3f} at t = {t[-1]:g})."]
+        lines += [
+            "",
+            f"On {size}⁴, over every row's configurations: {found} (t²E = "
+            f"{y[len(y) // 4]:.3f} at t = {t[len(t) // 4]:g}, {y[-1]:.3f} at t = {t[-1]:g}).",
+        ]
     return lines
 
 

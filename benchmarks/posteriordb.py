@@ -482,9 +482,7 @@ def run(out_dir: Path, quick: bool, log=print, names=None) -> None:
             "num_warmup": num_warmup,
             "num_draws": num_draws,
         }
-        outs = run_pair(
-            setup, jax.random.fold_in(pkey, 10), num_warmup, num_draws, index % 2, log
-        )
+        outs = run_pair(setup, jax.random.fold_in(pkey, 10), num_warmup, num_draws, index % 2, log)
         if not quick:
             for j, (label, fn) in enumerate(extra_samplers().items()):
                 try:

@@ -255,8 +255,13 @@ def user_path(log):
     start = time.perf_counter()
     algorithm = liesample.recommended_sampler(system, beta=BETA_C)
     tree = liesample.sample(
-        algorithm, jax.random.key(8), starts, draws, observables=functions,
-        keep_positions=False, progress=False,
+        algorithm,
+        jax.random.key(8),
+        starts,
+        draws,
+        observables=functions,
+        keep_positions=False,
+        progress=False,
     )
     seconds = time.perf_counter() - start
     values = {q: np.asarray(tree.posterior[name]) for q, name in zip(QUANTITIES, functions)}
@@ -339,8 +344,11 @@ def run(out_dir: Path, quick: bool, log=print) -> None:
 
 def _row(rows, size, sampler, quantity):
     return next(
-        (r for r in rows if r["size"] == size and r["sampler"] == sampler
-         and r["quantity"] == quantity),
+        (
+            r
+            for r in rows
+            if r["size"] == size and r["sampler"] == sampler and r["quantity"] == quantity
+        ),
         None,
     )
 
@@ -417,9 +425,7 @@ def report_section(results) -> str:
         for sampler in dict.fromkeys(r["sampler"] for r in rows):
             taus = [_row(rows, s, sampler, "abs_magnetisation")["tau_int"] for s in sizes]
             z = np.log(taus[-1] / taus[-2]) / np.log(sizes[-1] / sizes[-2])
-            lines.append(
-                f"| {sampler} | " + " | ".join(f"{t:.2f}" for t in taus) + f" | {z:.2f} |"
-            )
+            lines.append(f"| {sampler} | " + " | ".join(f"{t:.2f}" for t in taus) + f" | {z:.2f} |")
     lines += [
         "",
         "Which library sampler wins (ESS/s of |m| and E; `liesample.recommended_sampler` "
@@ -433,8 +439,12 @@ def report_section(results) -> str:
         for quantity in QUANTITIES:
             heat, cluster = (
                 next(
-                    r for r in choice if r["size"] == size and r["beta"] == beta
-                    and r["sampler"] == s and r["quantity"] == quantity
+                    r
+                    for r in choice
+                    if r["size"] == size
+                    and r["beta"] == beta
+                    and r["sampler"] == s
+                    and r["quantity"] == quantity
                 )
                 for s in SAMPLERS
             )

@@ -99,8 +99,9 @@ def tune_and_warm_up(sampler, betas, starts, keys, num_warmup):
     def one_beta(beta, chain_keys, chain_starts):
         states = jax.vmap(sampler.init)(chain_starts)
         sampler_at = lambda step_size: tunable.at(step_size, sigma=SIGMA, beta=beta)
-        states, tuned, _ = run_adaptation(adaptation, sampler_at, chain_keys, states, initial,
-                                          num_warmup)
+        states, tuned, _ = run_adaptation(
+            adaptation, sampler_at, chain_keys, states, initial, num_warmup
+        )
         return states, tuned["step_size"]
 
     run = liesample.jit(jax.vmap(one_beta))
@@ -140,14 +141,26 @@ def rhat(x):
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--size", type=int, default=8, help="N (default 8)")
-    parser.add_argument("--noise-degree", type=int, default=None,
-                        help="L (default N − 1: every degree, which mixes fastest)")
+    parser.add_argument(
+        "--noise-degree",
+        type=int,
+        default=None,
+        help="L (default N − 1: every degree, which mixes fastest)",
+    )
     parser.add_argument("--chains", type=int, default=4, help="chains per β (default 4)")
-    parser.add_argument("--draws", type=int, default=400,
-                        help="draws per chain, after as many warm-up steps (default 400)")
-    parser.add_argument("--b", type=parse_b, default=parse_b(DEFAULT_B),
-                        help="values of b = β‖W‖²/(N² − 1), comma-separated, written "
-                             f"--b=-4,-1,0,1 (default {DEFAULT_B})")
+    parser.add_argument(
+        "--draws",
+        type=int,
+        default=400,
+        help="draws per chain, after as many warm-up steps (default 400)",
+    )
+    parser.add_argument(
+        "--b",
+        type=parse_b,
+        default=parse_b(DEFAULT_B),
+        help="values of b = β‖W‖²/(N² − 1), comma-separated, written "
+        f"--b=-4,-1,0,1 (default {DEFAULT_B})",
+    )
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--output", "--out", type=Path, default=Path("condensation-output"))
     args = parser.parse_args(argv)
@@ -159,8 +172,9 @@ def main(argv=None) -> int:
     started = time.perf_counter()
 
     # -- one orbit, chains spread uniformly over it ------------------------------------------
-    start = spectral_vorticity(size, lambda ell: ell**SPECTRAL_SLOPE, seed=args.seed,
-                               enstrophy=0.5)  # ‖W‖² = 2 · enstrophy = 1
+    start = spectral_vorticity(
+        size, lambda ell: ell**SPECTRAL_SLOPE, seed=args.seed, enstrophy=0.5
+    )  # ‖W‖² = 2 · enstrophy = 1
     squared_norm = float(np.sum(start**2))
     system = zeitlin_euler(size, noise_degree=noise_degree, position=start)
     orbit = UnitaryOrbitLaw(system.hamiltonian, start, 0.0)
@@ -173,11 +187,13 @@ def main(argv=None) -> int:
     draw_keys = jax.random.split(draw_key, (len(b), chains))
 
     # -- warm-up: one step per β by dual averaging (β = 0 borrows the smallest |β|'s) -------
-    sampler = liesample.adjusted_lie_poisson(system, beta=float(betas[0]), sigma=SIGMA,
-                                             step_size=INITIAL_STEP)
+    sampler = liesample.adjusted_lie_poisson(
+        system, beta=float(betas[0]), sigma=SIGMA, step_size=INITIAL_STEP
+    )
     tuned = b != 0
-    warm_states, warm_steps = tune_and_warm_up(sampler, betas[tuned], starts[tuned],
-                                               warmup_keys[tuned], draws)
+    warm_states, warm_steps = tune_and_warm_up(
+        sampler, betas[tuned], starts[tuned], warmup_keys[tuned], draws
+    )
     step_sizes = np.empty(len(b))
     step_sizes[tuned] = np.asarray(warm_steps)
     step_sizes[~tuned] = step_sizes[tuned][np.argmin(np.abs(b[tuned]))]
@@ -198,43 +214,63 @@ def main(argv=None) -> int:
         # linearised draws (ε₁ − r h)/E[h] (delta method)
         fraction = float(spectra[i, ..., 0].mean() / energy[i].mean())
         linearised = (spectra[i, ..., 0] - fraction * energy[i]) / energy[i].mean()
-        rows.append({
-            "b": float(b[i]),
-            "beta": float(betas[i]),
-            "mean_h": float(energy[i].mean()),
-            "mcse_h": mcse(energy[i]),
-            "fraction_l1": fraction,
-            "mcse_fraction_l1": mcse(linearised),
-            "r_hat": max(rhat(energy[i]), rhat(spectra[i, ..., 0])),
-            "acceptance": float(np.mean(acceptance[i])),
-            "step_size": float(step_sizes[i]),
-            "spectrum": spectra[i].mean(axis=(0, 1)).tolist(),
-            "mcse_spectrum": [mcse(spectra[i, ..., ell]) for ell in range(size - 1)],
-        })
-    print(f"Zeitlin su({size}), noise_degree {noise_degree}, one orbit (‖W‖² = "
-          f"{squared_norm:.3g}), {chains} chains × {draws} draws (+{draws} warm-up) per β, "
-          f"adjusted sampler, {seconds:.1f} s")
-    print(f"exact at β = 0: E[h] = {exact.sum():.5f}, ℓ = 1 share E[ε₁]/E[h] = "
-          f"{exact[0] / exact.sum():.4f}")
-    print(f"{'b':>6} {'β':>9} {'E[h] ± MCSE':>20} {'ℓ=1 share ± MCSE':>20} "
-          f"{'R-hat':>6} {'accept':>6} {'step':>8}")
+        rows.append(
+            {
+                "b": float(b[i]),
+                "beta": float(betas[i]),
+                "mean_h": float(energy[i].mean()),
+                "mcse_h": mcse(energy[i]),
+                "fraction_l1": fraction,
+                "mcse_fraction_l1": mcse(linearised),
+                "r_hat": max(rhat(energy[i]), rhat(spectra[i, ..., 0])),
+                "acceptance": float(np.mean(acceptance[i])),
+                "step_size": float(step_sizes[i]),
+                "spectrum": spectra[i].mean(axis=(0, 1)).tolist(),
+                "mcse_spectrum": [mcse(spectra[i, ..., ell]) for ell in range(size - 1)],
+            }
+        )
+    print(
+        f"Zeitlin su({size}), noise_degree {noise_degree}, one orbit (‖W‖² = "
+        f"{squared_norm:.3g}), {chains} chains × {draws} draws (+{draws} warm-up) per β, "
+        f"adjusted sampler, {seconds:.1f} s"
+    )
+    print(
+        f"exact at β = 0: E[h] = {exact.sum():.5f}, ℓ = 1 share E[ε₁]/E[h] = "
+        f"{exact[0] / exact.sum():.4f}"
+    )
+    print(
+        f"{'b':>6} {'β':>9} {'E[h] ± MCSE':>20} {'ℓ=1 share ± MCSE':>20} "
+        f"{'R-hat':>6} {'accept':>6} {'step':>8}"
+    )
     for row in rows:
-        print(f"{row['b']:+6.2f} {row['beta']:+9.2f} "
-              f"{row['mean_h']:>10.5f} ± {row['mcse_h']:<7.5f} "
-              f"{row['fraction_l1']:>10.4f} ± {row['mcse_fraction_l1']:<7.4f} "
-              f"{row['r_hat']:6.3f} {row['acceptance']:6.2f} {row['step_size']:8.3g}")
+        print(
+            f"{row['b']:+6.2f} {row['beta']:+9.2f} "
+            f"{row['mean_h']:>10.5f} ± {row['mcse_h']:<7.5f} "
+            f"{row['fraction_l1']:>10.4f} ± {row['mcse_fraction_l1']:<7.4f} "
+            f"{row['r_hat']:6.3f} {row['acceptance']:6.2f} {row['step_size']:8.3g}"
+        )
 
     # -- figures ------------------------------------------------------------------------------
     labels = [f"b = {row['b']:+g} (β = {row['beta']:+.3g})" for row in rows]
-    plot_spectra([row["spectrum"] for row in rows], args.output / "condensation_spectra.png",
-                 labels=labels, errors=[row["mcse_spectrum"] for row in rows], exact=exact,
-                 title=f"Mean energy spectrum on one su({size}) orbit (dashed: exact at β = 0)")
+    plot_spectra(
+        [row["spectrum"] for row in rows],
+        args.output / "condensation_spectra.png",
+        labels=labels,
+        errors=[row["mcse_spectrum"] for row in rows],
+        exact=exact,
+        title=f"Mean energy spectrum on one su({size}) orbit (dashed: exact at β = 0)",
+    )
 
     fig = Figure(figsize=(5.5, 4), layout="constrained")
     ax = fig.subplots()
-    ax.errorbar(b, [r["fraction_l1"] for r in rows],
-                yerr=[2 * r["mcse_fraction_l1"] for r in rows], fmt="o-", capsize=3,
-                label="sampled (±2 MCSE)")
+    ax.errorbar(
+        b,
+        [r["fraction_l1"] for r in rows],
+        yerr=[2 * r["mcse_fraction_l1"] for r in rows],
+        fmt="o-",
+        capsize=3,
+        label="sampled (±2 MCSE)",
+    )
     ax.axhline(exact[0] / exact.sum(), color="k", ls="--", lw=1, label="exact, β = 0")
     ax.set_xlabel("b = β‖W‖² / (N² − 1)")
     ax.set_ylabel("E[ε₁] / E[h]: ℓ = 1 share of the energy")
@@ -252,15 +288,30 @@ def main(argv=None) -> int:
         for c in range(shown):
             panels.append(vorticity_on_grid(last[i, c], theta, num_phi))
             titles.append(f"b = {b[i]:+g}, chain {c}, last draw")
-    plot_vorticity(np.stack(panels), theta, phi, args.output / "condensation_vorticity.png",
-                   labels=titles, title=f"Gibbs draws on one su({size}) orbit")
+    plot_vorticity(
+        np.stack(panels),
+        theta,
+        phi,
+        args.output / "condensation_vorticity.png",
+        labels=titles,
+        title=f"Gibbs draws on one su({size}) orbit",
+    )
 
-    summary = {"size": size, "noise_degree": noise_degree, "chains": chains, "draws": draws,
-               "squared_norm": squared_norm, "exact_spectrum_beta0": exact.tolist(),
-               "seconds": seconds, "rows": rows}
+    summary = {
+        "size": size,
+        "noise_degree": noise_degree,
+        "chains": chains,
+        "draws": draws,
+        "squared_norm": squared_norm,
+        "exact_spectrum_beta0": exact.tolist(),
+        "seconds": seconds,
+        "rows": rows,
+    }
     (args.output / "condensation_summary.json").write_text(json.dumps(summary, indent=1))
-    print(f"wrote {', '.join(p.name for p in sorted(args.output.glob('condensation_*')))} "
-          f"into {args.output}")
+    print(
+        f"wrote {', '.join(p.name for p in sorted(args.output.glob('condensation_*')))} "
+        f"into {args.output}"
+    )
     return 0
 
 

@@ -79,8 +79,13 @@ def draw_map(fig, spec, harmonics, x, title, limit):
     order = np.argsort(lon)
     ax = fig.add_subplot(spec, projection="mollweide")
     mesh = ax.pcolormesh(
-        lon[order], np.pi / 2 - theta, np.asarray(values)[:, order], cmap="RdBu_r",
-        vmin=-limit, vmax=limit, shading="nearest",
+        lon[order],
+        np.pi / 2 - theta,
+        np.asarray(values)[:, order],
+        cmap="RdBu_r",
+        vmin=-limit,
+        vmax=limit,
+        shading="nearest",
     )
     ax.set_xticklabels([])
     ax.set_yticklabels([])
@@ -113,30 +118,34 @@ def main(argv=None) -> int:
 
     euler = liesample.lie_poisson_langevin(system, sigma=0.0, theta=0.0, step_size=STEP_SIZE)
     euler_path, euler_energy = run_chains(euler, start[None], steps, key, record)
-    descent = liesample.lie_poisson_langevin(
-        system, sigma=0.0, theta=THETA, step_size=STEP_SIZE
-    )
+    descent = liesample.lie_poisson_langevin(system, sigma=0.0, theta=THETA, step_size=STEP_SIZE)
     descent_path, descent_energy = run_chains(descent, start[None], steps, key, record)
     gibbs = {}  # β -> (positions (C, D, N, N), h (C, D), energy spectra (C, D, N − 1))
     starts = np.repeat(start[None], gibbs_chains, axis=0)
     for index, beta in enumerate(BETAS):
         sampler = liesample.recommended_sampler(gibbs_system, beta=beta)
         tree = liesample.sample(
-            sampler, jax.random.key(index + 1), starts, gibbs_draws,
+            sampler,
+            jax.random.key(index + 1),
+            starts,
+            gibbs_draws,
             observables={"h": gibbs_system.hamiltonian, "spectrum": energy_spectrum},
         )
         posterior = tree.posterior
         (position_name,) = set(posterior.data_vars) - {"h", "spectrum"}
         h = np.asarray(posterior["h"])
-        gibbs[beta] = (np.asarray(posterior[position_name]), h,
-                       np.asarray(posterior["spectrum"]))
+        gibbs[beta] = (np.asarray(posterior[position_name]), h, np.asarray(posterior["spectrum"]))
         row = expectation_table({"h": h}).loc["h"]
-        print(f"β = {beta:+g} ({tree.attrs['sampler']}): E[h] = {row['estimate']:.4f} ± "
-              f"{row['mcse']:.4f} (MCSE), R-hat {row['r_hat']:.3f}, acceptance "
-              f"{float(tree.sample_stats['acceptance_rate'].mean()):.2f}, tuned step "
-              f"{tree.attrs['step_size']:.3g}")
-    print(f"h: start {float(system.hamiltonian(jnp.asarray(start))):.4f}, Euler end "
-          f"{euler_energy[0, -1]:.4f}, descent end {descent_energy[0, -1]:.4f}")
+        print(
+            f"β = {beta:+g} ({tree.attrs['sampler']}): E[h] = {row['estimate']:.4f} ± "
+            f"{row['mcse']:.4f} (MCSE), R-hat {row['r_hat']:.3f}, acceptance "
+            f"{float(tree.sample_stats['acceptance_rate'].mean()):.2f}, tuned step "
+            f"{tree.attrs['step_size']:.3g}"
+        )
+    print(
+        f"h: start {float(system.hamiltonian(jnp.asarray(start))):.4f}, Euler end "
+        f"{euler_energy[0, -1]:.4f}, descent end {descent_energy[0, -1]:.4f}"
+    )
 
     # -- vorticity maps ---------------------------------------------------------------------
     limit = float(np.max(np.abs(harmonics.grid(start, 48, 96)[2])))
@@ -147,13 +156,26 @@ def main(argv=None) -> int:
     descent_states = [start, *descent_path[0]]
     for col, t in enumerate(times):
         draw_map(fig, grid[0, col], harmonics, euler_states[col], f"Euler, t = {t:g}", limit)
-        draw_map(fig, grid[1, col], harmonics, descent_states[col],
-                 f"energy descent (θ = {THETA:g}), t = {t:g}", limit)
+        draw_map(
+            fig,
+            grid[1, col],
+            harmonics,
+            descent_states[col],
+            f"energy descent (θ = {THETA:g}), t = {t:g}",
+            limit,
+        )
     for col, beta in enumerate(BETAS):
-        draw_map(fig, grid[2, col], harmonics, gibbs[beta][0][0, -1],
-                 f"Gibbs draw, β = {beta:+g}", limit)
-    mesh = draw_map(fig, grid[2, 2], harmonics, gibbs[BETAS[0]][0][-1, -1],
-                    f"another chain, β = {BETAS[0]:+g}", limit)
+        draw_map(
+            fig, grid[2, col], harmonics, gibbs[beta][0][0, -1], f"Gibbs draw, β = {beta:+g}", limit
+        )
+    mesh = draw_map(
+        fig,
+        grid[2, 2],
+        harmonics,
+        gibbs[BETAS[0]][0][-1, -1],
+        f"another chain, β = {BETAS[0]:+g}",
+        limit,
+    )
     fig.colorbar(mesh, ax=fig.axes, shrink=0.5, label="vorticity ω")
     fig.suptitle(f"Zeitlin su({size}) Euler on the sphere: one isospectral orbit, three scenes")
     fig.savefig(args.out / "salt_euler_scenes.png", dpi=110)
@@ -169,10 +191,15 @@ def main(argv=None) -> int:
     ax_t.legend(fontsize=8)
     for beta in BETAS:
         for chain, trace in enumerate(gibbs[beta][1]):
-            ax_g.plot(trace, lw=0.6, color="C3" if beta < 0 else "C0",
-                      label=f"β = {beta:+g}" if chain == 0 else None)
-    ax_g.axhline(float(system.hamiltonian(jnp.asarray(start))), color="k", ls="--", lw=1,
-                 label="start")
+            ax_g.plot(
+                trace,
+                lw=0.6,
+                color="C3" if beta < 0 else "C0",
+                label=f"β = {beta:+g}" if chain == 0 else None,
+            )
+    ax_g.axhline(
+        float(system.hamiltonian(jnp.asarray(start))), color="k", ls="--", lw=1, label="start"
+    )
     ax_g.set_xlabel("draw (after warm-up)")
     ax_g.set_ylabel("h")
     ax_g.set_title("Gibbs chains (adjusted sampler)", fontsize=9)
@@ -182,8 +209,9 @@ def main(argv=None) -> int:
     ax_l.semilogy(ell, spectrum(jnp.asarray(start)), "k.-", label="start")
     ax_l.semilogy(ell, spectrum(jnp.asarray(descent_path[0, -1])), ".-", label="after descent")
     for beta in BETAS:
-        ax_l.semilogy(ell, gibbs[beta][2].mean(axis=(0, 1)), ".-",
-                      label=f"Gibbs mean, β = {beta:+g}")
+        ax_l.semilogy(
+            ell, gibbs[beta][2].mean(axis=(0, 1)), ".-", label=f"Gibbs mean, β = {beta:+g}"
+        )
     ax_l.set_xlabel("degree ℓ")
     ax_l.set_ylabel("energy ε_ℓ")
     ax_l.legend(fontsize=8)

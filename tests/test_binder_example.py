@@ -1,14 +1,14 @@
 """``examples/binder_3d.py``: the crossing of two fitted lines, and the example end to end with
 tiny settings (two small lattices, two temperatures)."""
 
-
 import numpy as np
 import pytest
+
 from conftest import load_example
 
 
 def example():
-    return load_example('binder_3d')
+    return load_example("binder_3d")
 
 
 def test_crossing_of_two_exact_lines():

@@ -12,7 +12,6 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from arviz_stats.base import array_stats
-from liesample.spaces import Euclidean, Sphere
 
 import liesample
 from liesample.analysis.convergence import (
@@ -20,6 +19,7 @@ from liesample.analysis.convergence import (
     convergence_warnings,
     rank_diagnostics,
 )
+from liesample.spaces import Euclidean, Sphere
 
 
 def _convergence_messages(record):

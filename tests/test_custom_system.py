@@ -4,9 +4,9 @@
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from conftest import load_example
 
 import liesample
+from conftest import load_example
 from liesample.dynamics.system import LiePoissonSystem, checked_beta, coordinate_noise
 from liesample.geometry.algebras import so3
 from liesample.systems import lie_poisson_system

@@ -33,6 +33,7 @@ import cases
 import jaxlib
 import numpy as np
 import pytest
+
 from conftest import USER_XLA_FLAGS
 
 REFERENCE = Path(__file__).parent / "data" / "reference_draws.npz"

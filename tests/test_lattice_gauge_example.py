@@ -6,11 +6,12 @@ import json
 
 import numpy as np
 import pytest
+
 from conftest import load_example
 
 
 def load():
-    return load_example('lattice_gauge')
+    return load_example("lattice_gauge")
 
 
 @pytest.mark.slow

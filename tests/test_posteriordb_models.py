@@ -135,9 +135,7 @@ def stan_low_dim_gauss_mix(d, p):
         np.log(theta) + stats.norm.logpdf(d["y"], mu[0], sigma[0]),
         np.log1p(-theta) + stats.norm.logpdf(d["y"], mu[1], sigma[1]),
     )
-    return (
-        _normal(sigma, 0, 2) + _normal(mu, 0, 2) + stats.beta.logpdf(theta, 5, 5) + mix.sum()
-    )
+    return _normal(sigma, 0, 2) + _normal(mu, 0, 2) + stats.beta.logpdf(theta, 5, 5) + mix.sum()
 
 
 def stan_hmm_example(d, p):

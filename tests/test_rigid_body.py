@@ -188,8 +188,7 @@ def stochastic_runner(integrator, beta, sigma=1.0, step_size=0.05):
 
 @pytest.mark.parametrize(
     ("integrator", "num_chunks"),
-    [("splitting", 4)]
-    + [pytest.param(i, 40, marks=pytest.mark.slow) for i in ORBIT_PRESERVING],
+    [("splitting", 4)] + [pytest.param(i, 40, marks=pytest.mark.slow) for i in ORBIT_PRESERVING],
 )
 def test_many_steps_stay_on_the_orbit(integrator, num_chunks):
     """``num_chunks × 25 000`` steps (β = 3, σ = 1, dt = 0.05): 10⁵ by default, 10⁶ for every

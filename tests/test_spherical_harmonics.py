@@ -121,10 +121,12 @@ def test_synthesis_is_the_sum_of_the_harmonics():
     coefficients = rng.normal(size=(2, num_harmonics(MAX_DEGREE)))
     theta = rng.uniform(0.0, np.pi, size=7)
     values = harmonic_synthesis(coefficients, theta, 19)
-    harmonics = np.asarray(real_spherical_harmonics(_grid_points(theta, 2 * np.pi *
-                                                                 np.arange(19) / 19), MAX_DEGREE))
-    np.testing.assert_allclose(values, np.einsum("tpk,bk->btp", harmonics, coefficients),
-                               atol=1e-13)
+    harmonics = np.asarray(
+        real_spherical_harmonics(_grid_points(theta, 2 * np.pi * np.arange(19) / 19), MAX_DEGREE)
+    )
+    np.testing.assert_allclose(
+        values, np.einsum("tpk,bk->btp", harmonics, coefficients), atol=1e-13
+    )
 
 
 @pytest.mark.parametrize("grid", ["gauss_legendre", "equiangular"])
@@ -141,16 +143,19 @@ def test_analysis_inverts_synthesis_for_band_limited_fields(grid):
         recovered = harmonic_analysis(values, theta, MAX_DEGREE, weights)
         np.testing.assert_allclose(recovered, coefficients, atol=1e-13)
         # without the weights, least squares on the same grid gives the same answer
-        np.testing.assert_allclose(harmonic_analysis(values, theta, MAX_DEGREE), coefficients,
-                                   atol=1e-13)
+        np.testing.assert_allclose(
+            harmonic_analysis(values, theta, MAX_DEGREE), coefficients, atol=1e-13
+        )
     else:
         theta = (np.arange(24) + 0.5) * np.pi / 24
         values = harmonic_synthesis(coefficients, theta, 48)
-        np.testing.assert_allclose(harmonic_analysis(values, theta, MAX_DEGREE), coefficients,
-                                   atol=1e-12)
+        np.testing.assert_allclose(
+            harmonic_analysis(values, theta, MAX_DEGREE), coefficients, atol=1e-12
+        )
     # back again: the grid values are recovered too
-    np.testing.assert_allclose(harmonic_synthesis(coefficients, theta, values.shape[-1]), values,
-                               atol=1e-13)
+    np.testing.assert_allclose(
+        harmonic_synthesis(coefficients, theta, values.shape[-1]), values, atol=1e-13
+    )
 
 
 def test_quadrature_analysis_is_the_l2_projection():
@@ -164,8 +169,12 @@ def test_quadrature_analysis_is_the_l2_projection():
     ell, m = degrees_and_orders(MAX_DEGREE)
     for degree in range(MAX_DEGREE + 1):
         norm = math.sqrt((2 * degree + 1) / (4 * math.pi))
-        exact = quad(lambda z, d=degree, c=norm: 2 * math.pi * c * math.exp(2 * z) *
-                     eval_legendre(d, z), -1, 1, epsabs=1e-14)[0]
+        exact = quad(
+            lambda z, d=degree, c=norm: 2 * math.pi * c * math.exp(2 * z) * eval_legendre(d, z),
+            -1,
+            1,
+            epsabs=1e-14,
+        )[0]
         assert abs(coefficients[(ell == degree) & (m == 0)][0] - exact) < 1e-12
     assert np.max(np.abs(coefficients[m != 0])) < 1e-13
 

@@ -18,8 +18,10 @@ def test_salt_euler_example_runs(tmp_path, capsys, run_example):
     # Euler keeps h; the descent lowers it (the example prints both)
     printed = capsys.readouterr().out
     line = next(x for x in printed.splitlines() if x.startswith("h: start"))
-    start, euler, descent = (float(x.split()[-1].rstrip(",")) for x in
-                             (line.split(",")[0], line.split(",")[1], line.split(",")[2]))
+    start, euler, descent = (
+        float(x.split()[-1].rstrip(","))
+        for x in (line.split(",")[0], line.split(",")[1], line.split(",")[2])
+    )
     assert abs(euler - start) < 1e-6 * start and descent < start
     # the Gibbs scene uses the recommended (Metropolis-adjusted) sampler; β > 0 lowers h from
     # the start, β < 0 raises it

@@ -43,8 +43,9 @@ from liesample.targets.zeitlin import (
 
 
 def _coefficient(harmonics, coefficients, degree, order):
-    return coefficients[..., np.flatnonzero((harmonics.degrees == degree)
-                                            & (harmonics.orders == order))[0]]
+    return coefficients[
+        ..., np.flatnonzero((harmonics.degrees == degree) & (harmonics.orders == order))[0]
+    ]
 
 
 def _squared_integral(x, size):
@@ -68,8 +69,7 @@ def test_grid_round_trips_to_round_off():
     np.testing.assert_allclose(vorticity_from_grid(values, theta, size, weights), x, atol=1e-13)
     # least squares on the cell-centred grid of QuantisedHarmonics.grid
     theta, phi, values = quantised_harmonics(size).grid(x, num_theta=12, num_phi=16)
-    np.testing.assert_allclose(vorticity_from_grid(np.asarray(values), theta, size), x,
-                               atol=1e-12)
+    np.testing.assert_allclose(vorticity_from_grid(np.asarray(values), theta, size), x, atol=1e-12)
     np.testing.assert_allclose(vorticity_on_grid(x, theta, phi.size), values, atol=1e-12)
     # batches, and the mean (ℓ = 0) is dropped: the state stays in su(N)
     batch = np.stack([values, np.asarray(values) + 3.0])
@@ -88,7 +88,7 @@ def test_random_vorticity_enstrophy_is_half_the_squared_vorticity():
         assert abs(0.5 * integral - enstrophy) < 1e-12 * enstrophy
         assert abs(float(np.sum(enstrophy_spectrum(x))) - enstrophy) < 1e-12 * enstrophy
     # the default start of zeitlin_euler is unchanged: ‖W‖² = 1
-    assert abs(float(np.sum(zeitlin_euler(3).default_position**2)) - 1.0) < 1e-12
+    assert abs(float(np.sum(zeitlin_euler(3).default_position ** 2)) - 1.0) < 1e-12
 
 
 # ---------------------------------------------------------------------------------------------
@@ -105,9 +105,14 @@ def test_vortex_blob_at_the_pole_has_its_legendre_coefficients():
     coefficients = np.asarray(harmonics.coefficients(jnp.asarray(x)))
     for degree in range(1, size):
         norm = math.sqrt((2 * degree + 1) / (4 * math.pi))
-        exact = quad(lambda z, d=degree, c=norm: 2 * math.pi * strength
-                     * math.exp((z - 1) / width**2) * c * eval_legendre(d, z), -1, 1,
-                     epsabs=1e-14)[0]
+        exact = quad(
+            lambda z, d=degree, c=norm: (
+                2 * math.pi * strength * math.exp((z - 1) / width**2) * c * eval_legendre(d, z)
+            ),
+            -1,
+            1,
+            epsabs=1e-14,
+        )[0]
         assert abs(_coefficient(harmonics, coefficients, degree, 0) - exact) < 1e-11
     assert np.max(np.abs(coefficients[harmonics.orders != 0])) < 1e-12
     assert abs(coefficients[0]) < 1e-14 and abs(np.trace(x)) < 1e-12
@@ -154,12 +159,14 @@ def test_spectral_vorticity_has_its_spectrum_and_totals():
     x = spectral_vorticity(size, target, seed=1)
     np.testing.assert_allclose(np.asarray(energy_spectrum(x)), target, rtol=1e-12)
     method_spectrum, energy = liesample.jit(
-        lambda x: (harmonics.energy_spectrum(x), harmonics.energy(x)))(jnp.asarray(x))
+        lambda x: (harmonics.energy_spectrum(x), harmonics.energy(x))
+    )(jnp.asarray(x))
     np.testing.assert_allclose(np.asarray(method_spectrum), target, rtol=1e-12)
     assert abs(float(energy) - target.sum()) < 1e-12
     ell = np.arange(1, size)
-    np.testing.assert_allclose(np.asarray(enstrophy_spectrum(x)), ell * (ell + 1) * target,
-                               rtol=1e-12)
+    np.testing.assert_allclose(
+        np.asarray(enstrophy_spectrum(x)), ell * (ell + 1) * target, rtol=1e-12
+    )
     by_energy = spectral_vorticity(size, lambda degrees: degrees**-3.0, seed=1, energy=2.0)
     assert abs(float(np.sum(energy_spectrum(by_energy))) - 2.0) < 1e-12
     by_enstrophy = spectral_vorticity(size, target, seed=1, enstrophy=5.0)
@@ -191,15 +198,22 @@ def test_spectra_plots_write_pngs(tmp_path):
 
     x = np.stack([random_vorticity(6, seed=s) for s in range(3)])
     spectra = np.asarray(energy_spectrum(x))
-    path = plots.plot_spectra(spectra, tmp_path / "e.png", labels=["a", "b", "c"],
-                              errors=0.1 * spectra, exact=uniform_orbit_energy_spectrum(6, 1.0))
+    path = plots.plot_spectra(
+        spectra,
+        tmp_path / "e.png",
+        labels=["a", "b", "c"],
+        errors=0.1 * spectra,
+        exact=uniform_orbit_energy_spectrum(6, 1.0),
+    )
     assert path.exists() and path.stat().st_size > 1000
-    path = plots.plot_spectra(np.asarray(enstrophy_spectrum(x[0])), tmp_path / "z.png",
-                              kind="enstrophy")
+    path = plots.plot_spectra(
+        np.asarray(enstrophy_spectrum(x[0])), tmp_path / "z.png", kind="enstrophy"
+    )
     assert path.exists()
     theta, phi, _ = gauss_legendre_grid(5, 12, 24)
-    path = plots.plot_vorticity(vorticity_on_grid(x[:2], theta, 24), theta, phi,
-                                tmp_path / "w.png", labels=["0", "1"])
+    path = plots.plot_vorticity(
+        vorticity_on_grid(x[:2], theta, 24), theta, phi, tmp_path / "w.png", labels=["0", "1"]
+    )
     assert path.exists()
     assert "matplotlib" in sys.modules  # imported by the plot functions themselves
     with pytest.raises(ValueError, match="kind"):
@@ -217,8 +231,14 @@ def test_noise_fields_keep_the_axes_of_matrix_states():
     size = 3
     system = zeitlin_euler(size, noise_degree=2)
     algebra = Unitary(size)
-    sde = PoissonLangevinSDE(LiePoissonStructure(algebra), system.hamiltonian,
-                             system.noise_hamiltonians, 0.7, 0.0, Scene())
+    sde = PoissonLangevinSDE(
+        LiePoissonStructure(algebra),
+        system.hamiltonian,
+        system.noise_hamiltonians,
+        0.7,
+        0.0,
+        Scene(),
+    )
     z = jnp.asarray(random_vorticity(size, seed=4))
     fields = np.asarray(liesample.jit(sde.noise_fields)(z))
     assert fields.shape == (size, size, system.num_noises)
@@ -260,8 +280,7 @@ def test_dipole_moments_match_the_hciz_determinant(size):
         m1, m2 = np.outer(a, b) * m, np.outer(a, b) ** 2 * m
         inverse = np.linalg.inv(m)
         first = np.trace(inverse @ m1) - pairs / t
-        second = (np.trace(inverse @ m2) - np.trace(inverse @ m1 @ inverse @ m1)
-                  + pairs / t**2)
+        second = np.trace(inverse @ m2) - np.trace(inverse @ m1 @ inverse @ m1) + pairs / t**2
         mean, variance = dipole_gibbs_moments(b, beta, coupling=kappa)
         assert abs(mean - first) < 1e-10 * max(1.0, abs(first))
         assert abs(variance - second) < 1e-8 * max(1.0, abs(second))
@@ -276,8 +295,9 @@ def test_dipole_moments_match_haar_importance_sampling(size, beta):
         return np.sum(x * dipole, axis=(-2, -1))
 
     law = UnitaryOrbitLaw(h, x0, beta)
-    estimate, error, _ = law.expectations(lambda x: np.stack([h(x), h(x) ** 2], -1),
-                                          num_samples=100_000, seed=3)
+    estimate, error, _ = law.expectations(
+        lambda x: np.stack([h(x), h(x) ** 2], -1), num_samples=100_000, seed=3
+    )
     mean, variance = dipole_gibbs_moments(_spectrum(x0), beta)
     exact = np.array([mean, variance + mean**2])
     assert np.all(np.abs(estimate - exact) < 4.5 * error), (estimate, exact, error)
@@ -304,8 +324,7 @@ def test_uniform_orbit_energy_spectrum_matches_haar_monte_carlo():
     harmonics = quantised_harmonics(size)
     spectrum = jax.jit(harmonics.energy_spectrum)
     law = UnitaryOrbitLaw(lambda x: np.zeros(len(x)), x0, 0.0)
-    samples = np.asarray(spectrum(jnp.asarray(law.orbit_samples(np.random.default_rng(0),
-                                                                20_000))))
+    samples = np.asarray(spectrum(jnp.asarray(law.orbit_samples(np.random.default_rng(0), 20_000))))
     exact = uniform_orbit_energy_spectrum(size, float(np.sum(x0**2)))
     error = samples.std(0, ddof=1) / math.sqrt(len(samples))
     assert np.all(np.abs(samples.mean(0) - exact) < 4.5 * error)
@@ -339,15 +358,17 @@ def _check_dipole_law(size, beta, enstrophy, step_size, num_chains, num_steps, b
     algorithm = liesample.adjusted_lie_poisson(system, beta=beta, sigma=1.0, step_size=step_size)
     start = system.default_position
     starts = UnitaryOrbitLaw(lambda x: np.zeros(len(x)), start, 0.0).orbit_samples(
-        np.random.default_rng(size), num_chains)  # uniform on the orbit, not the Gibbs law
+        np.random.default_rng(size), num_chains
+    )  # uniform on the orbit, not the Gibbs law
 
     def chain(position, key):
         def body(state, k):
             state, info = algorithm.step(k, state)
             return state, (info.energy, info.casimir_error)
 
-        _, (h, drift) = jax.lax.scan(body, algorithm.init(position),
-                                     jax.random.split(key, num_steps))
+        _, (h, drift) = jax.lax.scan(
+            body, algorithm.init(position), jax.random.split(key, num_steps)
+        )
         h = h[burn_in:]
         return jnp.stack([jnp.mean(h), jnp.mean(h**2)]), jnp.max(drift)
 
@@ -370,14 +391,16 @@ def _check_dipole_law(size, beta, enstrophy, step_size, num_chains, num_steps, b
 # The N = 3 orbit law runs by default (test_zeitlin); the exact laws themselves are tested here.
 @pytest.mark.slow
 def test_adjusted_sampler_matches_the_exact_dipole_law_n8():
-    _check_dipole_law(8, beta=-6.0, enstrophy=12.0, step_size=1.0, num_chains=16,
-                      num_steps=1000, burn_in=200)
+    _check_dipole_law(
+        8, beta=-6.0, enstrophy=12.0, step_size=1.0, num_chains=16, num_steps=1000, burn_in=200
+    )
 
 
 @pytest.mark.slow  # ~20 s at N = 16; the N = 8 sibling above runs by default
 def test_adjusted_sampler_matches_the_exact_dipole_law_n16():
-    _check_dipole_law(16, beta=12.0, enstrophy=50.0, step_size=1.0, num_chains=16,
-                      num_steps=2000, burn_in=300)
+    _check_dipole_law(
+        16, beta=12.0, enstrophy=50.0, step_size=1.0, num_chains=16, num_steps=2000, burn_in=300
+    )
 
 
 @pytest.mark.slow  # ~20 s at N = 16; default siblings: the Haar check of the exact spectrum

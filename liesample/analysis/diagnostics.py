@@ -431,7 +431,7 @@ def _sample_stats(info, sample_shape, energy_name: str) -> dict[str, np.ndarray]
     ``sample_shape``."""
     if not isinstance(energy_name, str) or not energy_name:
         raise ValueError(
-            f"energy_name must be a non-empty string (\"energy\" or \"hamiltonian\"), got "
+            f'energy_name must be a non-empty string ("energy" or "hamiltonian"), got '
             f"{energy_name!r}"
         )
     names = {**_SAMPLE_STATS_NAMES, "energy": energy_name}

@@ -110,18 +110,22 @@ class RunChecks:
         self._by_key: dict[bytes, _Chain] = {}
 
     @classmethod
-    def find(cls, kernel, num_warmup) -> RunChecks | None:
-        """The checks for the ``MCMC`` calling ``kernel.init``, or ``None`` when there is none
-        (or its ``chain_method`` is a callable); ``kernel.run_checks`` is kept when its
-        settings are the same (sequential chains call ``init`` once each)."""
+    def find(cls, kernel, num_warmup, batched) -> RunChecks | None:
+        """The checks for the ``MCMC`` calling ``kernel.init`` (``batched``: with every chain
+        at once), or ``None`` when there is none (or its ``chain_method`` is a callable).
+        ``kernel.run_checks`` is kept when its settings are the same, as sequential chains
+        call ``init`` once each; what it holds is dropped when it can only be left from an
+        interrupted run (a chain part way, or any chain when all chains start at once)."""
         mcmc = calling_mcmc(kernel)
         if mcmc is None or mcmc.chain_method not in CHAIN_METHODS:
             return None
         settings = (int(num_warmup), mcmc.num_samples, mcmc.num_chains, mcmc.thinning)
         current = getattr(kernel, "run_checks", None)
-        if isinstance(current, RunChecks) and current.settings == settings:
-            return current
-        return cls(*settings)
+        if not isinstance(current, RunChecks) or current.settings != settings:
+            return cls(*settings)
+        if batched or current._by_key:
+            current._chains, current._by_key = [], {}
+        return current
 
     def trace(self, i, keys_before, keys_after, latent_fn, z, fields: dict[str, Any]):
         """In the transition of draw ``i`` (chains on the leading axis): after the warm-up,

@@ -103,7 +103,6 @@ __all__ = [
 ]
 
 
-
 class GeometricAdaptation(NamedTuple):
     """What ``window_adaptation`` returns: ``run(rng_key, initial_position, num_steps)``."""
 
@@ -363,9 +362,12 @@ def _window_run(plan, algorithm, logdensity_fn, space, initial_step_size, adapt_
     states, tuned, info = warmup(chain_keys, states, start)
     info = AdaptationInfo(*_steps_first(info[:2]), *(x[0] for x in info[2:]))
     if not batched:
-        states, info = jax.tree.map(lambda leaf: leaf[0], states), info._replace(
-            state=jax.tree.map(lambda x: x[:, 0], info.state),
-            info=jax.tree.map(lambda x: x[:, 0], info.info),
+        states, info = (
+            jax.tree.map(lambda leaf: leaf[0], states),
+            info._replace(
+                state=jax.tree.map(lambda x: x[:, 0], info.state),
+                info=jax.tree.map(lambda x: x[:, 0], info.info),
+            ),
         )
     step_size = float(tuned["step_size"])
     parameters = {**plan.parameters, "step_size": step_size,
