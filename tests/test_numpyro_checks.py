@@ -116,9 +116,32 @@ def test_the_host_side_tells_chains_apart_by_their_keys_and_keeps_mcmcs_thinning
             fields = {"diverging": np.array([False])}
             checks.receive(keys[chain][step], keys[chain][step + 1], value, fields)
     ((variables, fields),) = seen
-    # MCMC keeps draws 1 and 3 of 5 with thinning 2 (the first num_samples % thinning skipped)
-    np.testing.assert_array_equal(variables["x"], [[1.0, 3.0], [11.0, 13.0]])
+    # Of 5 draws thinned by 2 MCMC keeps draws 2 and 4: it skips the first num_samples % 2,
+    # then keeps the last of each pair.
+    np.testing.assert_array_equal(variables["x"], [[2.0, 4.0], [12.0, 14.0]])
     assert fields["diverging"].shape == (2, 2)
+
+
+@pytest.mark.slow  # the run's own checks run by default (tests above)
+def test_warmup_then_run_and_a_continued_run_are_each_checked_on_the_kept_draws(monkeypatch):
+    seen = []
+    monkeypatch.setattr(numpyro_checks, "check_draws", lambda *run: seen.append(run))
+
+    def model():
+        numpyro.sample("theta", dist.Normal(jnp.zeros(2), 1.0).to_event(1))
+
+    mcmc = MCMC(GeometricHMC(model), num_warmup=50, num_samples=30, num_chains=2, thinning=3,
+                chain_method="vectorized", progress_bar=False)  # fmt: skip
+    mcmc.warmup(jax.random.key(0))
+    assert not seen  # the warm-up alone is not a run
+    mcmc.run(jax.random.key(1))
+    mcmc.post_warmup_state = mcmc.last_state
+    mcmc.run(mcmc.post_warmup_state.rng_key)
+    assert len(seen) == 2
+    np.testing.assert_array_equal(
+        seen[1][0]["theta"], mcmc.get_samples(group_by_chain=True)["theta"]
+    )
+    assert seen[1][1]["diverging"].shape == (2, 10)
 
 
 def test_check_convergence_must_be_a_bool():

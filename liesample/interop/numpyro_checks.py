@@ -150,13 +150,14 @@ class RunChecks:
         values = {k: np.asarray(v) for k, v in values.items()}  # indexed on the host below
         fields = {k: np.asarray(v) for k, v in fields.items()}
         _, num_samples, num_chains, thinning = self.settings
-        offset = num_samples % thinning  # MCMC keeps draws offset, offset + thinning, …
+        # MCMC keeps the last draw of each group of `thinning` after the first `offset` draws
+        offset = num_samples % thinning
         for c in range(len(before)):
             chain = self._by_key.pop(before[c].tobytes(), None)
             if chain is None:
                 chain = _Chain()
                 self._chains.append(chain)
-            if chain.count >= offset and (chain.count - offset) % thinning == 0:
+            if chain.count >= offset and (chain.count - offset) % thinning == thinning - 1:
                 chain.values.append({k: v[c] for k, v in values.items()})
                 chain.fields.append({k: v[c] for k, v in fields.items()})
             chain.count += 1

@@ -73,6 +73,13 @@ for ``arviz.plot_energy``), ``potential_energy``, ``accept_prob``, ``mean_accept
 keyed by tuples of site names, and ``trajectory_length``, the adapted ``T``).
 ``arviz.from_numpyro`` names some of them ``lp``, ``acceptance_rate`` and ``n_steps``.
 
+**Checks after the run.** ``MCMC.run`` ends with the checks :func:`liesample.sample` runs:
+divergences, stuck chains, and the rank-normalised split R-hat and bulk/tail ESS of every
+element of every latent site, as warnings naming them (``check_convergence=False`` turns them
+off). NumPyro does not tell a kernel how many draws follow its warm-up, so ``init`` finds the
+calling ``MCMC`` on the call stack; the mechanism and its limits are in
+:mod:`liesample.interop.numpyro_checks`.
+
 **Chains.** ``chain_method="vectorized"`` vmaps init and transition over chains;
 ``"sequential"`` works as well. NumPyro compiles its loop with plain ``jax.jit``, not
 :func:`liesample.jit`; the vmapped chains were checked against the same chains run alone (equal
@@ -483,7 +490,8 @@ class GeometricHMC(MCMCKernel):
     init_strategy : callable, optional
         A NumPyro initialisation strategy (``init_to_median()``, ``init_to_value(values=
         …)``, ``init_to_sample``, ``init_to_uniform``, …), retried with new keys until the
-        log-density and its gradient are finite (at most 100 times). By default: uniform
+        log-density and its gradient are finite (at most 100 times); on sphere and SO(3)
+        sites its value is taken to the nearest point. By default: uniform
         on manifold sites and in ``(−2, 2)`` in the unconstrained coordinates of the others
         (NumPyro's ``init_to_uniform``). ``init_params`` given to ``MCMC.run`` win.
     divergence_threshold : float
@@ -495,6 +503,9 @@ class GeometricHMC(MCMCKernel):
         Integrate ``u T`` with ``u`` from the base-2 Halton sequence (default): a fixed
         ``T`` can sit at a resonance of the target (a direction whose half period is
         ``T``, whose chain then barely moves). ``False`` integrates ``T`` itself.
+    check_convergence : bool
+        Run :func:`liesample.sample`'s post-run checks at the end of ``MCMC.run`` (default;
+        module docstring); ``False`` turns them off.
     kinetic_fn, forward_mode_differentiation, regularize_mass_matrix
         NumPyro's, accepted at their defaults only (``None``, ``False``, ``True``): the
         kinetic energy is ``½ pᵀM⁻¹p`` in algebra coordinates, gradients are taken in
@@ -943,7 +954,8 @@ class GeometricHMC(MCMCKernel):
                 init_params = self._check_init_params(init_params, batched)
         if self._num_warmup == 0:
             self._warn_unadapted()
-        self.run_checks = RunChecks.find(self, num_warmup) if self._check_convergence else None
+        checks = self._check_convergence
+        self.run_checks = RunChecks.find(self, num_warmup, batched) if checks else None
         if self._num_warmup > 0:
             self._rows = schedule(self._num_warmup)  # constants, also under jit
         dtype = jnp.zeros(()).dtype
