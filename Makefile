@@ -32,12 +32,14 @@ $(BIN)/.installed-test: $(BIN)/.installed
 demo: $(BIN)/.installed
 	$(BIN)/liesample demo
 
-# The lint first (a second or two), with the rule set of pyproject.toml [tool.ruff.lint].
+# The lint and the format check first (a second or two), with the rule set of pyproject.toml
+# [tool.ruff.lint] and ruff's formatter on the Python files ([tool.ruff.format]).
 # Each test file runs on one worker (--dist loadfile): a file's module-scoped samplers and runs,
 # and the programs its tests share, are built and compiled once, not once per worker.
 TEST_DIST := --dist loadfile
 test: $(BIN)/.installed-test
 	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
 	$(BIN)/python -m pytest -n $(JOBS) $(TEST_DIST) -q
 
 test-slow: $(BIN)/.installed-test

@@ -53,8 +53,8 @@ def _user_warnings(record):
 def vectorized():
     """One MCMC for both runs (``jit_model_args``: ``a`` is traced, the loop compiles once)."""
     return MCMC(
-        GeometricHMC(two_modes), num_warmup=300, num_samples=1000, num_chains=2,
-        chain_method="vectorized", progress_bar=False, jit_model_args=True,
+        GeometricHMC(two_modes, check_convergence=True), num_warmup=300, num_samples=1000,
+        num_chains=2, chain_method="vectorized", progress_bar=False, jit_model_args=True,
     )  # fmt: skip
 
 
@@ -81,8 +81,9 @@ def test_sequential_chains_of_20_unadapted_draws_warn():
     def model():
         numpyro.sample("theta", dist.Normal(jnp.zeros(2), jnp.array([1.0, 3.0])).to_event(1))
 
-    mcmc = MCMC(GeometricHMC(model), num_warmup=0, num_samples=20, num_chains=2,
-                chain_method="sequential", progress_bar=False)  # fmt: skip
+    kernel = GeometricHMC(model, check_convergence=True)
+    mcmc = MCMC(kernel, num_warmup=0, num_samples=20, num_chains=2, chain_method="sequential",
+                progress_bar=False)  # fmt: skip
     with warnings.catch_warnings(record=True) as record:
         warnings.simplefilter("always")
         mcmc.run(jax.random.key(1))
@@ -97,8 +98,9 @@ def test_parallel_chains_warn():  # pragma: no cover - one CPU device here
     def model():
         numpyro.sample("theta", dist.Normal(0.0, 1.0))
 
-    mcmc = MCMC(GeometricHMC(model), num_warmup=0, num_samples=20, num_chains=2,
-                chain_method="parallel", progress_bar=False)  # fmt: skip
+    kernel = GeometricHMC(model, check_convergence=True)
+    mcmc = MCMC(kernel, num_warmup=0, num_samples=20, num_chains=2, chain_method="parallel",
+                progress_bar=False)  # fmt: skip
     with pytest.warns(UserWarning, match="theta"):
         mcmc.run(jax.random.key(1))
 
@@ -130,7 +132,8 @@ def test_warmup_then_run_and_a_continued_run_are_each_checked_on_the_kept_draws(
     def model():
         numpyro.sample("theta", dist.Normal(jnp.zeros(2), 1.0).to_event(1))
 
-    mcmc = MCMC(GeometricHMC(model), num_warmup=50, num_samples=30, num_chains=2, thinning=3,
+    kernel = GeometricHMC(model, check_convergence=True)
+    mcmc = MCMC(kernel, num_warmup=50, num_samples=30, num_chains=2, thinning=3,
                 chain_method="vectorized", progress_bar=False)  # fmt: skip
     mcmc.warmup(jax.random.key(0))
     assert not seen  # the warm-up alone is not a run

@@ -9,7 +9,9 @@ R-hat of the energies, and one ``UserWarning`` with the rank-normalised split R-
 and tail ESS of every element of every latent site
 (:func:`liesample.analysis.convergence.convergence_warnings`), on the constrained values
 ``mcmc.get_samples()`` holds, thinned as MCMC keeps them. A well-mixed run is quiet.
-``GeometricHMC(model, check_convergence=False)`` turns the checks off.
+They run by themselves with ``GeometricHMC(model, check_convergence=True)``; by default
+(``False``) call :func:`check_mcmc` on the finished run, which costs nothing while the chains
+run, whereas the automatic checks send every kept draw to the host (below).
 
 **The mechanism and its limits.** NumPyro's ``MCMCKernel`` interface tells a kernel
 ``num_warmup`` (an argument of ``init``) but not how many draws follow, and calls nothing on it
@@ -66,7 +68,7 @@ STUCK_ADVICE = (
     "Give a longer num_warmup so the step size adapts, a smaller step_size with "
     "adapt_step_size=False, or init_params near the posterior."
 )
-SILENCE = "GeometricHMC(..., check_convergence=False) turns these checks off"
+SILENCE = "GeometricHMC(..., check_convergence=False) (the default) turns these checks off"
 
 
 def calling_mcmc(kernel) -> MCMC | None:

@@ -73,12 +73,14 @@ for ``arviz.plot_energy``), ``potential_energy``, ``accept_prob``, ``mean_accept
 keyed by tuples of site names, and ``trajectory_length``, the adapted ``T``).
 ``arviz.from_numpyro`` names some of them ``lp``, ``acceptance_rate`` and ``n_steps``.
 
-**Checks after the run.** ``MCMC.run`` ends with the checks :func:`liesample.sample` runs:
-divergences, stuck chains, and the rank-normalised split R-hat and bulk/tail ESS of every
-element of every latent site, as warnings naming them (``check_convergence=False`` turns them
-off). NumPyro does not tell a kernel how many draws follow its warm-up, so ``init`` finds the
-calling ``MCMC`` on the call stack; the mechanism and its limits are in
-:mod:`liesample.interop.numpyro_checks`.
+**Checks after the run.** :func:`liesample.interop.numpyro_checks.check_mcmc` runs on a
+finished ``MCMC`` the checks :func:`liesample.sample` runs: divergences, stuck chains, and the
+rank-normalised split R-hat and bulk/tail ESS of every element of every latent site, as warnings
+naming them; it costs nothing while the chains run. ``check_convergence=True`` runs the same
+checks at the end of ``MCMC.run`` with no extra call, at the price of a host round trip per
+kept draw (several times the sampling time of a cheap model): NumPyro does not tell a kernel
+how many draws follow its warm-up, so ``init`` finds the calling ``MCMC`` on the call stack; the
+mechanism and its limits are in :mod:`liesample.interop.numpyro_checks`.
 
 **Chains.** ``chain_method="vectorized"`` vmaps init and transition over chains;
 ``"sequential"`` works as well. NumPyro compiles its loop with plain ``jax.jit``, not
@@ -504,8 +506,11 @@ class GeometricHMC(MCMCKernel):
         ``T`` can sit at a resonance of the target (a direction whose half period is
         ``T``, whose chain then barely moves). ``False`` integrates ``T`` itself.
     check_convergence : bool
-        Run :func:`liesample.sample`'s post-run checks at the end of ``MCMC.run`` (default;
-        module docstring); ``False`` turns them off.
+        Run :func:`liesample.sample`'s post-run checks at the end of ``MCMC.run`` with no extra
+        call (module docstring). ``False`` (default): each kept draw would otherwise go to the
+        host during the run, a round trip per transition; call
+        ``liesample.interop.numpyro_checks.check_mcmc(mcmc)`` after the run instead, which
+        costs nothing while the chains run.
     kinetic_fn, forward_mode_differentiation, regularize_mass_matrix
         NumPyro's, accepted at their defaults only (``None``, ``False``, ``True``): the
         kinetic energy is ``½ pᵀM⁻¹p`` in algebra coordinates, gradients are taken in
@@ -541,7 +546,7 @@ class GeometricHMC(MCMCKernel):
         divergence_threshold: float = 1000.0,
         integrator="leapfrog",
         jitter: bool = True,
-        check_convergence: bool = True,
+        check_convergence: bool = False,
         kinetic_fn=None,
         forward_mode_differentiation: bool = False,
         regularize_mass_matrix: bool = True,
@@ -1134,9 +1139,7 @@ class GeometricHMC(MCMCKernel):
         )
         smoothed = new.step.smoothed
         adaptation = share(new._replace(step=new.step._replace(smoothed=smoothed[:1])))
-        adaptation = adaptation._replace(
-            step=adaptation.step._replace(smoothed=smoothed[:, None])
-        )
+        adaptation = adaptation._replace(step=adaptation.step._replace(smoothed=smoothed[:, None]))
         new_state = GeometricHMCState(
             state.i + 1,
             jax.vmap(lambda p: self._to_user(self._unpack(p)))(inner.position),
