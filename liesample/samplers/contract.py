@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import functools
 import inspect
+import warnings
 from collections.abc import Callable, Mapping
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, NamedTuple, Protocol, cast, runtime_checkable
@@ -331,10 +332,19 @@ HOOKS = {
 the default is ``None``); keyword arguments of ``Sampler(init, step, **hooks)``."""
 
 
+class ValidityWarning(UserWarning):
+    """A sampler built where it is known not to sample its target reliably (the message says
+    why and what to do instead); given once, when the user builds it, not again when the
+    warm-up rebuilds it with a tuned step (:func:`rebuilt`)."""
+
+
 def rebuilt(build: Callable, source: str, *args, **kwargs) -> Sampler:
     """``build(*args, **kwargs)`` recording ``source`` as its ``step_size_source`` setting (what a
-    :class:`Tunable`'s ``rebuild`` returns)."""
-    sampler = build(*args, **kwargs)
+    :class:`Tunable`'s ``rebuild`` returns); a :class:`ValidityWarning` was given when the user
+    built the sampler, so the rebuild gives none."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ValidityWarning)
+        sampler = build(*args, **kwargs)
     sampler.settings["step_size_source"] = source
     return sampler
 

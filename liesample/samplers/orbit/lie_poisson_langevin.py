@@ -51,6 +51,7 @@ from liesample.samplers.contract import (
     step_key,
 )
 from liesample.samplers.orbit import _starts
+from liesample.samplers.orbit.vortex_metropolis import warn_if_unmixing
 
 __all__ = [
     "DEFAULT_BIAS_TOLERANCE",
@@ -306,6 +307,7 @@ def _plan(system, beta, sigma, step_size, integrator, theta, hamiltonian, stabil
     sigma, theta, scene = make_dynamics(
         system, beta=beta, sigma=sigma, theta=theta, hamiltonian=hamiltonian
     )
+    warn_if_unmixing(system, beta if sigma > 0.0 else None, "lie_poisson_langevin")
     if step_size is None and sigma == 0.0:
         raise ValueError(
             "step_size is required when sigma = 0: the automatic choice bounds the bias of a "

@@ -59,6 +59,7 @@ from liesample.samplers.contract import (
     Sampler,
     Structure,
     Tunable,
+    ValidityWarning,
     rebuilt,
     sampling_api,
     step_key,
@@ -118,8 +119,16 @@ MIXING_EXPONENT = -0.5
 grows without bound under the Gibbs law (module notes, "Where it mixes")."""
 
 
-def mixing_warning(system: PointVortexSystem, beta: float) -> str | None:
-    """Why the sweeps do not mix at ``beta`` (module notes, "Where it mixes"), or ``None``."""
+_MOVES = {"vortex_metropolis": "The sweeps mix"}
+_OTHER_MOVES = "Its steps are local too: vortex_metropolis's sweeps, whose bound this is, mix"
+
+
+def mixing_warning(
+    system: PointVortexSystem, beta: float, sampler: str = "vortex_metropolis"
+) -> str | None:
+    """Why ``sampler``'s local moves do not mix at ``beta`` (module notes, "Where it mixes"), or
+    ``None``. The bound is derived for this module's sweeps; the orbit samplers' steps are local
+    too, and a collapsed pair holds them as well (:func:`warn_if_unmixing`)."""
     gamma = np.asarray(system.circulations, dtype=float)
     if gamma.size < 2:
         return None
@@ -130,11 +139,11 @@ def mixing_warning(system: PointVortexSystem, beta: float) -> str | None:
     bound = MIXING_EXPONENT * 4.0 * math.pi / (gamma[j] * gamma[k])
     side = ">" if bound < 0 else "<"
     message = (
-        f"vortex_metropolis at beta = {beta:g}: the pair of vortices ({j}, {k}) has the exponent "
+        f"{sampler} at beta = {beta:g}: the pair of vortices ({j}, {k}) has the exponent "
         f"p = beta*Γ_jΓ_k/(4π) = {p[j, k]:.3g} < -1/2. The Gibbs law is normalisable (p > -1), "
         "but a collapsed pair holds the chain for a time whose mean under that law is infinite, "
         "so chain averages converge more slowly than 1/sqrt(n) and their MCSE, ESS and R-hat "
-        f"are unreliable. The sweeps mix for beta {side}= {bound:.6g}"
+        f"are unreliable. {_MOVES.get(sampler, _OTHER_MOVES)} for beta {side}= {bound:.6g}"
     )
     if gamma.size == 2:
         return message + (
@@ -142,6 +151,17 @@ def mixing_warning(system: PointVortexSystem, beta: float) -> str | None:
             "system.reference(beta).sample(rng_key, num_samples) (the law of x1·x2)"
         )
     return message + "; at this beta run far more sweeps and compare independent runs"
+
+
+def warn_if_unmixing(system, beta: float | None, sampler: str) -> None:
+    """A :class:`~liesample.samplers.contract.ValidityWarning` at the caller's line when
+    ``system`` is a point-vortex system and ``beta`` beyond where local moves mix
+    (:func:`mixing_warning`); nothing otherwise."""
+    if beta is None or not isinstance(system, PointVortexSystem):
+        return
+    message = mixing_warning(system, beta, sampler)
+    if message is not None:
+        warnings.warn(message, ValidityWarning, skip_file_prefixes=(_PACKAGE,))
 
 
 def init(position, system: PointVortexSystem, rng_key=None) -> VortexState:
@@ -259,9 +279,7 @@ def as_top_level_api(
     """
     _check_system(system)
     beta = checked_beta(system, beta)
-    message = mixing_warning(system, beta)
-    if message is not None:
-        warnings.warn(message, UserWarning, skip_file_prefixes=(_PACKAGE,))
+    warn_if_unmixing(system, beta, "vortex_metropolis")
     return _build(system, beta, proposal, proposal_scale, target_acceptance_rate)
 
 
