@@ -428,6 +428,24 @@ ROWS = [
         TypeError,
         "casimirs must be a callable",
     ),
+    (
+        "so3 casimirs of a 2-vector",
+        lambda: algebras.so3.casimirs(np.ones(2)),
+        ValueError,
+        r"mu must be an so\(3\).*shape \(\.\.\., 3\); got shape \(2,\)",
+    ),
+    (
+        "so3 coadjoint_exp 4-vector",
+        lambda: algebras.so3.coadjoint_exp(np.ones(4), np.ones(3)),
+        ValueError,
+        r"zeta must be an so\(3\)",
+    ),
+    (
+        "so3 bracket 2-vector",
+        lambda: algebras.so3.bracket(np.ones(3), np.ones(2)),
+        ValueError,
+        r"b must be an so\(3\)",
+    ),
     # ---- samplers: lie_poisson_langevin, adjusted_lie_poisson
     ("langevin sigma string", lambda: _langevin(sigma="1"), TypeError, "sigma.*scalar"),
     (

@@ -87,7 +87,18 @@ def cross(a: ArrayLike, b: ArrayLike) -> jax.Array:
     >>> cross(jnp.array([1.0, 0.0, 0.0]), jnp.array([0.0, 1.0, 0.0]))
     Array([0., 0., 1.], dtype=float64)
     """
-    return jnp.cross(a, b)
+    return jnp.cross(_last_axis_3("a", a), _last_axis_3("b", b))
+
+
+def _last_axis_3(name: str, x: ArrayLike) -> ArrayLike:
+    """``x``, refused unless its last axis has length 3 (a shape check: free under ``jit``)."""
+    shape = jnp.shape(x)
+    if shape[-1:] != (3,):
+        raise ValueError(
+            f"{name} must be an so(3) or so(3)* vector or a stack of them, shape (..., 3); got "
+            f"shape {shape}"
+        )
+    return x
 
 
 # Below this θ² the Taylor series (to θ⁴) is exact in float64 and smooth for autodiff.
@@ -148,6 +159,7 @@ class SO3(LieAlgebra):
         ``μ + (sin θ/θ) μ×ζ + ((1 − cos θ)/θ²) ζ×(ζ×μ)`` with ``θ = |ζ|``; norm-preserving to
         round-off, and smooth (derivatives included) at ``ζ = 0``.
         """
+        zeta = jnp.asarray(_last_axis_3("zeta", zeta))
         theta_sq = jnp.sum(zeta * zeta, axis=-1, keepdims=True)
         sin_over_theta, one_minus_cos_over_theta_sq = _rodrigues_coefficients(theta_sq)
         zeta_cross_mu = cross(zeta, mu)
@@ -159,6 +171,7 @@ class SO3(LieAlgebra):
 
     def casimirs(self, mu: ArrayLike) -> jax.Array:
         """``|μ_k|²`` for each copy (shape ``mu.shape[:-1]``)."""
+        mu = jnp.asarray(_last_axis_3("mu", mu))
         return jnp.sum(mu * mu, axis=-1)
 
 
