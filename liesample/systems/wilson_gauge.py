@@ -370,7 +370,8 @@ class WilsonGauge:
 
     def energy_density(self, links: jax.Array) -> jax.Array:
         """``E = 2 Σ_{μ<ν} Re tr(1 − U_μν) / V`` per site in Lüscher's normalisation
-        (``t² E`` defines ``t₀``: ``t₀² ⟨E(t₀)⟩ = 0.3``); for SU(N) only."""
+        (``t² E`` defines ``t₀``: ``t₀² ⟨E(t₀)⟩ = 0.3``, the reference chosen for SU(3)); the
+        same sum for every group, U(1) included (``N = 1``: ``2 Σ (1 − cos θ_μν) / V``)."""
         return 2.0 * self.n * self.action(links) / math.prod(self.shape)
 
 
