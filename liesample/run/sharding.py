@@ -123,7 +123,23 @@ def shard_chains[T: PyTree](tree: T, sharding: NamedSharding | None) -> T:
     """
     if sharding is None:
         return tree
-    return jax.device_put(tree, sharding)
+    if sharding.is_fully_addressable:  # one process: its own devices
+        return jax.device_put(tree, sharding)
+    return jax.tree.map(lambda leaf: _global_array(leaf, sharding), tree)
+
+
+def _global_array(leaf, sharding: NamedSharding) -> jax.Array:
+    """``leaf`` (the whole chain axis, equal on every process) as one array over the devices of
+    every process, each process placing the shards of its own devices
+    (``jax.make_array_from_callback``); an array already spread over several processes is
+    resharded by a compiled identity. Typed PRNG keys travel as their key data."""
+    if isinstance(leaf, jax.Array) and not leaf.is_fully_addressable:
+        return jax.jit(lambda x: x, out_shardings=sharding)(leaf)
+    if isinstance(leaf, jax.Array) and jax.dtypes.issubdtype(leaf.dtype, jax.dtypes.prng_key):
+        data = _global_array(jax.random.key_data(leaf), sharding)
+        return jax.random.wrap_key_data(data, impl=jax.random.key_impl(leaf))
+    host = np.asarray(leaf)
+    return jax.make_array_from_callback(host.shape, sharding, lambda index: host[index])
 
 
 def to_host(tree: PyTree) -> PyTree:
@@ -161,5 +177,8 @@ def initialize_distributed(**kwargs: Any) -> bool:
     """
     if jax.distributed.is_initialized():
         return False
+    if jax.config.jax_cpu_collectives_implementation in (None, "", "none"):
+        # CPU devices of several processes exchange the draws through gloo (TCP)
+        jax.config.update("jax_cpu_collectives_implementation", "gloo")
     jax.distributed.initialize(**kwargs)
     return True
