@@ -139,11 +139,13 @@ def warm_up(sampler: Sampler, rng_key, chain_keys, states, initial_positions, nu
     )  # fmt: skip
     step_size = float(parameters["step_size"])
     target = tunable.target_acceptance_rate
-    kept = np.asarray(rates)[:, num_warmup // 2 :]
+    kept = rates[:, num_warmup // 2 :]
+    # chains spread over several processes: their mean is computed on the devices
+    mean = np.mean(np.asarray(kept)) if kept.is_fully_addressable else jnp.mean(kept)
     source = (
         f"warm-up dual averaging to mean acceptance {target:g} over chains, from "
         f"{initial:.4g}; mean acceptance in the second half of the warm-up "
-        f"{float(np.mean(kept)):.3f}"
+        f"{float(mean):.3f}"
     )
     return tunable.rebuild(step_size, source), moved
 
