@@ -30,7 +30,7 @@ from liesample.integrators.chain_loop import run_draws, run_steps
 from liesample.run import arguments
 from liesample.run.checks import DEFAULT_MIN_ACCEPTANCE_RATE, check_run, record_casimir_drift
 from liesample.run.provenance import adapted_fingerprint, run_fingerprint
-from liesample.run.sharding import chain_sharding, shard_chains, to_host
+from liesample.run.sharding import chain_sharding, check_output, shard_chains, to_host
 from liesample.run.store import Layout, RunFile
 from liesample.samplers.contract import (
     HOOKS,
@@ -341,6 +341,7 @@ class _Run:
         )
         arguments.check_finite_starts(self.positions, self.num_chains)
         self.sharding = chain_sharding(o.devices, self.num_chains)
+        check_output(o.output, self.sharding)
         self._check_memory(algorithm, int(num_draws), o)
         self.algorithm, self.num_draws, self.options = algorithm, int(num_draws), o
         self.spec, self.store = spec, None

@@ -30,7 +30,14 @@ from jax.sharding import NamedSharding, PartitionSpec
 
 from liesample.foundation.types import PyTree
 
-__all__ = ["CHAIN_AXIS", "chain_sharding", "initialize_distributed", "shard_chains", "to_host"]
+__all__ = [
+    "CHAIN_AXIS",
+    "chain_sharding",
+    "check_output",
+    "initialize_distributed",
+    "shard_chains",
+    "to_host",
+]
 
 CHAIN_AXIS = "chain"
 """Name of the mesh axis over which chains are split."""
@@ -103,6 +110,21 @@ def chain_sharding(
             f"({count}) it is split over"
         )
     return sharding
+
+
+def check_output(output, sharding: NamedSharding | None) -> None:
+    """Refuse ``output=`` for chains spread over several processes: a run file is written by
+    one process, and its resume needs every chain's state there."""
+    if output is None or sharding is None or sharding.is_fully_addressable:
+        return
+    processes = len({device.process_index for device in sharding.device_set})
+    raise ValueError(
+        f"output={output!r}: a run file is not written for chains spread over {processes} "
+        "processes (devices of jax.distributed); pass output=None and save the tree that "
+        "liesample.sample returns on every process from one of them, e.g. "
+        "`if jax.process_index() == 0: tree.to_netcdf(path)` (a run over several processes "
+        "is not resumed: run it again whole)"
+    )
 
 
 def _axis_names(entry):
