@@ -22,10 +22,11 @@ import liesample
 
 SYSTEM_ARGS = (1.0, 2.0, 4.0)
 STARTS = np.array([[0.6, 1.0, 0.8], [1.0, 0.0, 0.0], [0.0, -2.0, 0.5], [0.3, 0.3, 0.3]])
-RUN = dict(num_warmup=3, progress_bar=False)
+RUN = {"num_warmup": 3, "progress_bar": False}
 
-WORKER = textwrap.dedent(
-    """
+WORKER = (
+    textwrap.dedent(
+        """
     import sys
     import warnings
 
@@ -57,8 +58,10 @@ WORKER = textwrap.dedent(
     with open(out + ".txt", "w") as f:
         f.write(message)
     """
-).replace("SYSTEM_ARGS", repr(SYSTEM_ARGS)).replace("STARTS", repr(STARTS.tolist())).replace(
-    "**RUN", "num_warmup=3, progress_bar=False"
+    )
+    .replace("SYSTEM_ARGS", repr(SYSTEM_ARGS))
+    .replace("STARTS", repr(STARTS.tolist()))
+    .replace("**RUN", "num_warmup=3, progress_bar=False")
 )
 
 

@@ -6,16 +6,26 @@ step (GSPMD): no chain ever talks to another, so there is no communication until
 copied back to the host. Each chain runs the same operations on the same key
 ``fold_in(key_c, step)`` as in the unsharded run, so the draws agree (bitwise on CPU).
 
-Several hosts (``jax.distributed``)
------------------------------------
-Start every process with the same script and call :func:`initialize_distributed` (a guarded
-``jax.distributed.initialize``) before anything else touches JAX; then ``jax.devices()`` lists
-the devices of all hosts and ``devices="all"`` spreads the chains over all of them. Every
-process passes the same ``rng_key`` and the same ``initial_positions`` (the global array; each
-process only computes its own chains' shards); the draws are gathered to every host
-(``multihost_utils.process_allgather``). Write the draws (``output=``) from one process only,
-e.g. ``output=path if jax.process_index() == 0 else None``. Multi-host runs are not tested here
-(one machine); the single-host path is.
+Several processes (``jax.distributed``)
+---------------------------------------
+Start every process with the same script; right after ``import liesample`` (which starts no XLA
+backend, nor does reading ``liesample.sharding``; reading ``liesample.sample`` or a sampler
+imports BlackJAX, whose import does), call :func:`initialize_distributed` (a guarded
+``jax.distributed.initialize``, which reads a SLURM, Open MPI or Kubernetes job from the
+environment and selects gloo CPU collectives), before any other JAX call. Then
+``jax.devices()`` lists the devices of every process and ``devices="all"`` spreads the chains
+over all of them. Every process passes the same ``rng_key`` and ``initial_positions`` (the
+whole chain axis); :func:`shard_chains` builds global arrays from them
+(``jax.make_array_from_callback``: each process places the shards of its own devices), each
+process computes its own chains, and :func:`to_host` gathers every chain's draws to every
+process (``multihost_utils.process_allgather``): every process returns the whole tree, the
+draws of one process running every chain. A run file (``output=``) is refused for such a run
+(:func:`check_output`): save the returned tree from one process.
+
+The test suite runs one process with several (forced host) CPU devices, bitwise equal to the
+unsharded run, and two processes on the loopback interface with one CPU device each, bitwise
+equal to one process (and the refusal of ``output=``). Several machines, GPUs over several
+processes, and the window warm-ups across processes are not tested.
 """
 
 from __future__ import annotations
