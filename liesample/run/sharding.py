@@ -127,7 +127,7 @@ def check_output(output, sharding: NamedSharding | None) -> None:
     one process, and its resume needs every chain's state there."""
     if output is None or sharding is None or sharding.is_fully_addressable:
         return
-    processes = len({device.process_index for device in sharding.device_set})
+    processes = len({getattr(device, "process_index", 0) for device in sharding.device_set})
     raise ValueError(
         f"output={output!r}: a run file is not written for chains spread over {processes} "
         "processes (devices of jax.distributed); pass output=None and save the tree that "
