@@ -124,7 +124,14 @@ def chain_sharding(
 
 def check_output(output, sharding: NamedSharding | None) -> None:
     """Refuse ``output=`` for chains spread over several processes: a run file is written by
-    one process, and its resume needs every chain's state there."""
+    one process, and its resume needs every chain's state there.
+
+    Examples
+    --------
+    Chains in one process (no sharding, or devices of this process only) may write a file:
+
+    >>> liesample.sharding.check_output("run.nc", None)
+    """
     if output is None or sharding is None or sharding.is_fully_addressable:
         return
     processes = len({getattr(device, "process_index", 0) for device in sharding.device_set})
