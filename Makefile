@@ -66,8 +66,10 @@ $(BIN)/.installed-bench: $(BIN)/.installed
 	$(INSTALL) -e '.[bench]'
 	touch $@
 
+# Cold compiles, as a first run on a new machine sees them: no persistent compilation cache
+# (liesample.foundation.cache; a suite that measures the cache turns it on itself).
 bench: $(BIN)/.installed-bench
-	$(BIN)/python benchmarks/run.py
+	LIESAMPLE_COMPILATION_CACHE=0 $(BIN)/python benchmarks/run.py
 
 # The guides in docs/ and the API reference from the docstrings, rendered into site/ by MkDocs
 # with mkdocstrings; --strict: a warning (a broken link, a docstring the parser cannot read)
