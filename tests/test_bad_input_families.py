@@ -1356,6 +1356,12 @@ ROWS = [
         "initial_positions must be real floating point, got dtype complex",
     ),
     (
+        "ergodic_averages positions complex",
+        lambda: accuracy.ergodic_averages(_langevin(), KEY, STARTS + 0j, _identity, num_steps=2),
+        TypeError,
+        "initial_positions must be real floating point, got dtype complex",
+    ),
+    (
         "coupled_ergodic_averages observables",
         lambda: accuracy.coupled_ergodic_averages(
             RIGID, 1.0, 3, step_size=0.1, initial_positions=STARTS, rng_key=KEY, total_time=1.0

@@ -79,6 +79,19 @@ observable (about 1/20 of the spread: well below the MCSE of runs with fewer tha
 draws)."""
 
 
+def _real_starts(initial_positions) -> jax.Array:
+    """``initial_positions`` as a float array; bool, complex and string starts are refused
+    before the cast would hide them."""
+    given = getattr(initial_positions, "dtype", None)
+    given = np.asarray(initial_positions).dtype if given is None else given
+    if not (jnp.issubdtype(given, jnp.floating) or jnp.issubdtype(given, jnp.integer)):
+        raise TypeError(
+            f"initial_positions must be real floating point, got dtype {given}: pass real "
+            "positions, e.g. np.real(initial_positions) when the imaginary part is 0"
+        )
+    return jnp.asarray(initial_positions, dtype=jnp.result_type(float))
+
+
 def _positive_int(name, value, low=1):
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
         raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
@@ -246,15 +259,7 @@ class _CoupledRun:
         self.integrator = get_integrator(integrator)
         self.levels = _positive_int("levels", levels)
         _, _, self.scene = make_dynamics(system, beta=beta, sigma=1.0)
-        given = getattr(initial_positions, "dtype", None)
-        given = np.asarray(initial_positions).dtype if given is None else given
-        if not (jnp.issubdtype(given, jnp.floating) or jnp.issubdtype(given, jnp.integer)):
-            # bool, complex, str: refused before the cast below would hide them
-            raise TypeError(
-                f"initial_positions must be real floating point, got dtype {given}: pass real "
-                "positions, e.g. np.real(initial_positions) when the imaginary part is 0"
-            )
-        starts = jnp.asarray(initial_positions, dtype=jnp.result_type(float))
+        starts = _real_starts(initial_positions)
         if starts.ndim != len(system.event_shape) + 1 or starts.shape[0] < 2:
             raise ValueError(
                 f"initial_positions must have shape (chains, *{system.event_shape}) with chains "
@@ -414,7 +419,7 @@ def ergodic_averages(
     """
     num_steps = _positive_int("num_steps", num_steps)
     num_warmup = _positive_int("num_warmup", num_warmup, low=0)
-    starts = jnp.asarray(initial_positions, dtype=jnp.result_type(float))
+    starts = _real_starts(initial_positions)
     if starts.ndim < 1 or starts.shape[0] < 2:
         raise ValueError(
             f"initial_positions must have a leading chain axis with >= 2 chains, got "
