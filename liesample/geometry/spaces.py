@@ -60,6 +60,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.typing import ArrayLike, DTypeLike
 
+from liesample.foundation.precision import roundoff_tolerance
 from liesample.foundation.types import PRNGKey, PyTree, Tree, TreeDef
 from liesample.foundation.validation import concrete_array, prng_key
 
@@ -81,8 +82,6 @@ __all__ = [
     "zero_momentum",
 ]
 
-ROUNDOFF_FACTOR = 1000  # a start may be off the manifold by this many ulps of its dtype
-
 
 def _shape(name, shape) -> tuple[int, ...]:
     if isinstance(shape, (int, np.integer)) and not isinstance(shape, bool):
@@ -102,10 +101,6 @@ def _order(name, n, minimum) -> int:
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < minimum:
         raise ValueError(f"{name} must be an integer >= {minimum}, got {n!r}")
     return int(n)
-
-
-def _tolerance(dtype) -> float:
-    return ROUNDOFF_FACTOR * float(np.finfo(dtype).eps)
 
 
 def _sinc(x):
@@ -223,7 +218,7 @@ class Space:
         if not np.all(np.isfinite(value)):
             raise ValueError(f"{name} must be finite for {self!r}, got non-finite entries")
         error = self.constraint_error(value)
-        tolerance = _tolerance(np.finfo(dtype).dtype)
+        tolerance = roundoff_tolerance(np.finfo(dtype).dtype)
         if error > tolerance:
             raise ValueError(
                 f"{name} is off {self!r} by {error:.3g} (allowed: round-off, {tolerance:.1g}). "

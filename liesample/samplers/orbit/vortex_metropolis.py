@@ -119,10 +119,6 @@ MIXING_EXPONENT = -0.5
 grows without bound under the Gibbs law (module notes, "Where it mixes")."""
 
 
-_MOVES = {"vortex_metropolis": "The sweeps mix"}
-_OTHER_MOVES = "Its steps are local too: vortex_metropolis's sweeps, whose bound this is, mix"
-
-
 def mixing_warning(
     system: PointVortexSystem, beta: float, sampler: str = "vortex_metropolis"
 ) -> str | None:
@@ -137,13 +133,18 @@ def mixing_warning(
     if p[j, k] >= MIXING_EXPONENT:
         return None
     bound = MIXING_EXPONENT * 4.0 * math.pi / (gamma[j] * gamma[k])
+    moves = (
+        "The sweeps mix"
+        if sampler == "vortex_metropolis"
+        else "Its steps are local too: vortex_metropolis's sweeps, whose bound this is, mix"
+    )
     side = ">" if bound < 0 else "<"
     message = (
         f"{sampler} at beta = {beta:g}: the pair of vortices ({j}, {k}) has the exponent "
         f"p = beta*Γ_jΓ_k/(4π) = {p[j, k]:.3g} < -1/2. The Gibbs law is normalisable (p > -1), "
         "but a collapsed pair holds the chain for a time whose mean under that law is infinite, "
         "so chain averages converge more slowly than 1/sqrt(n) and their MCSE, ESS and R-hat "
-        f"are unreliable. {_MOVES.get(sampler, _OTHER_MOVES)} for beta {side}= {bound:.6g}"
+        f"are unreliable. {moves} for beta {side}= {bound:.6g}"
     )
     if gamma.size == 2:
         return message + (
