@@ -70,10 +70,17 @@ def test_the_structure_rebuilds_the_sampler_it_declares():
     np.testing.assert_array_equal(
         rebuilt.step(key, state)[0].position, sampler.step(key, state)[0].position
     )
-    # another system or integrator is another structure
+    # a system rebuilt from equal arguments is the same structure; another system or
+    # integrator is another one
     assert (
         liesample.lie_poisson_langevin(
             liesample.systems.rigid_body((1.0, 2.0, 4.0)), beta=2.0, step_size=0.05
+        ).structure.build
+        == structure.build
+    )
+    assert (
+        liesample.lie_poisson_langevin(
+            liesample.systems.rigid_body((1.0, 2.0, 5.0)), beta=2.0, step_size=0.05
         ).structure.build
         != structure.build
     )

@@ -17,6 +17,7 @@ from jax.typing import ArrayLike
 
 from liesample.dynamics.noise_span import check_noise_reaches_orbit
 from liesample.foundation.compile import evaluate
+from liesample.foundation.identity import ValueIdentity
 from liesample.foundation.validation import concrete_array, finite_float
 from liesample.geometry.algebras import LieAlgebra
 
@@ -33,7 +34,7 @@ def coordinate_noise(mu: jax.Array) -> jax.Array:
 
 
 @dataclass(frozen=True, eq=False)
-class LiePoissonSystem:
+class LiePoissonSystem(ValueIdentity):
     """A system on a dual Lie algebra ``g*``, declared and never integrated by hand.
 
     Parameters

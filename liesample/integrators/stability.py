@@ -44,6 +44,7 @@ over long runs.
 
 from __future__ import annotations
 
+import functools
 import math
 import warnings
 
@@ -133,6 +134,23 @@ def _orbit_points(system, position):
     return jnp.concatenate([position[None], move(jnp.asarray(zetas, position.dtype), position)])
 
 
+@functools.partial(jit, static_argnames="system")
+def _worst_curvatures(positions, *, system):
+    """The largest ``|h''_i|`` on the orbit through each of ``positions`` (a ``lax.map`` over
+    them and over points of each orbit: bounded memory); one program for every system equal to
+    ``system`` (:mod:`liesample.foundation.identity`) and every number of orbits of a padded
+    size."""
+    chosen = _chosen_directions(system.num_noises)
+
+    def worst(position):
+        curvatures = jax.lax.map(
+            lambda m: noise_curvatures(system, m, chosen), _orbit_points(system, position)
+        )
+        return jnp.max(jnp.abs(curvatures))
+
+    return jax.lax.map(worst, positions)
+
+
 def stiffness(system: LiePoissonSystem, theta: float, position: ArrayLike) -> float:
     """``θ · max_i |h''_i|`` estimated on the orbit through ``position`` (module docstring).
 
@@ -151,17 +169,8 @@ def stiffness(system: LiePoissonSystem, theta: float, position: ArrayLike) -> fl
     cache_key = (position.shape, tuple(np.round(casimirs, 12).reshape(-1)))
     cache = system.__dict__.setdefault("_stiffness_cache", {})
     if cache_key not in cache:
-        curvatures_on = system.__dict__.get("_curvatures_on_orbit")
-        if curvatures_on is None:  # one compilation per system, reused for every orbit
-            chosen = _chosen_directions(system.num_noises)
-            curvatures_on = jit(
-                lambda position: jax.lax.map(
-                    lambda m: noise_curvatures(system, m, chosen), _orbit_points(system, position)
-                )
-            )
-            system.__dict__["_curvatures_on_orbit"] = curvatures_on
-        curvatures = evaluate(curvatures_on, position)
-        cache[cache_key] = float(np.max(np.abs(np.asarray(curvatures))))
+        worst = evaluate(functools.partial(_worst_curvatures, system=system), position[None])
+        cache[cache_key] = float(np.asarray(worst)[0])
     return abs(theta) * cache[cache_key]
 
 
@@ -189,18 +198,7 @@ def stiffness_on_orbits(system: LiePoissonSystem, theta: float, positions: Array
     cache = system.__dict__.setdefault("_stiffness_cache", {})
     missing = sorted({i for i, key in enumerate(keys) if key not in cache})
     if missing:
-        batched = system.__dict__.get("_curvatures_on_orbits")
-        if batched is None:
-            chosen = _chosen_directions(system.num_noises)
-
-            def worst(position):
-                curvatures = jax.lax.map(
-                    lambda m: noise_curvatures(system, m, chosen), _orbit_points(system, position)
-                )
-                return jnp.max(jnp.abs(curvatures))
-
-            batched = jit(lambda p: jax.lax.map(worst, p))
-            system.__dict__["_curvatures_on_orbits"] = batched
+        batched = functools.partial(_worst_curvatures, system=system)
         # Padded to a power of two: a few compiled shapes serve every number of orbits.
         padded = missing + [missing[-1]] * (2 ** math.ceil(math.log2(len(missing))) - len(missing))
         values = np.asarray(evaluate(batched, positions[padded]))[: len(missing)]

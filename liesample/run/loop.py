@@ -238,6 +238,8 @@ def program(sampler: Sampler, positions):
     if structure is None:
         return sampler, None
     dtype = jnp.result_type(*jax.tree.leaves(positions))
+    if jnp.issubdtype(dtype, jnp.complexfloating):  # a gauge field's links: real parameters
+        dtype = jnp.finfo(dtype).dtype
     if not jnp.issubdtype(dtype, jnp.floating):
         return sampler, None
     return structure.build, {k: jnp.asarray(v, dtype) for k, v in structure.values.items()}

@@ -27,7 +27,10 @@ Steps for your own system:
    there), else ``reference=None``.
 4. Validate every argument with :mod:`liesample.foundation.validation` so that a bad input
    fails at construction, naming the parameter.
-5. Export the constructor from :mod:`liesample.systems` (its ``__init__``) if it is public.
+5. Keep the ``@by_value`` decorator (:mod:`liesample.foundation.identity`): two systems built
+   from equal arguments are then equal, and every compiled program serves both (a user's
+   ``def run(beta): system = moment_in_field(...)`` compiles once, not once per call).
+6. Export the constructor from :mod:`liesample.systems` (its ``__init__``) if it is public.
 
 Imports may only point down the layers: ``foundation``, ``geometry``, ``targets``,
 ``dynamics`` and ``integrators`` (never ``samplers`` or above).
@@ -41,6 +44,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from liesample.dynamics.system import LiePoissonSystem
+from liesample.foundation.identity import by_value
 from liesample.foundation.validation import nonzero_vector3
 from liesample.geometry.algebras import so3
 from liesample.targets.groups import VonMisesFisherLaw
@@ -48,6 +52,7 @@ from liesample.targets.groups import VonMisesFisherLaw
 __all__ = ["moment_in_field"]
 
 
+@by_value
 def moment_in_field(field: Sequence[float] = (0.0, 0.0, 1.0)) -> LiePoissonSystem:
     """A magnetic moment on so(3)* precessing in the constant field ``field``.
 

@@ -41,6 +41,7 @@ from jax.typing import ArrayLike
 from liesample.dynamics.poisson_langevin import Scene, make_dynamics
 from liesample.dynamics.sde import PoissonLangevinSDE, stratonovich_heun_step
 from liesample.foundation.compile import evaluate, jit
+from liesample.foundation.identity import ValueIdentity, by_value
 from liesample.foundation.validation import concrete_array, finite_float, float_array
 from liesample.geometry.cotangent import (
     BAOAB,
@@ -76,7 +77,7 @@ class MagneticScene(Scene):
 
 
 @dataclass(frozen=True, eq=False)
-class ChargedParticleSystem:
+class ChargedParticleSystem(ValueIdentity):
     """What :func:`charged_particle` declares: the structure, ``h`` and the noise.
 
     Attributes
@@ -139,6 +140,7 @@ class ChargedParticleSystem:
             raise ValueError(f"{name} must be finite, got {value}")
 
 
+@by_value
 def charged_particle(
     potential_fn: Callable[[jax.Array], jax.Array] | None = None,
     logdensity_fn: Callable[[jax.Array], jax.Array] | None = None,

@@ -11,11 +11,13 @@ import numpy as np
 from jax.typing import ArrayLike
 
 from liesample.dynamics.system import LiePoissonSystem
+from liesample.foundation.identity import by_value
 from liesample.geometry.algebras import LieAlgebra
 
 __all__ = ["LiePoissonSystem", "lie_poisson_system"]
 
 
+@by_value
 def lie_poisson_system(
     algebra: LieAlgebra,
     hamiltonian: Callable[[jax.Array], jax.Array],

@@ -21,12 +21,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from liesample.dynamics.system import LiePoissonSystem
+from liesample.foundation.identity import by_value
 from liesample.foundation.validation import finite_float, nonzero_vector3, principal_moments
 from liesample.geometry.algebras import se3
 from liesample.systems.rigid_body import kinetic_pieces
 from liesample.targets import HeavyTopGibbs
 
 
+@by_value
 def heavy_top(
     inertia: Sequence[float] = (1.0, 2.0, 4.0),
     mgl: float = 1.0,

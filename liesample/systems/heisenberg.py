@@ -40,6 +40,7 @@ import numpy as np
 from jax.typing import ArrayLike
 
 from liesample.dynamics.system import LiePoissonSystem
+from liesample.foundation.identity import by_value
 from liesample.foundation.precision import check_dtype, float64_hint, roundoff_tolerance
 from liesample.foundation.validation import concrete_array, finite_float
 from liesample.geometry.algebras import so3
@@ -203,6 +204,7 @@ def noise_groups(shape: Sequence[int], periodic: bool) -> np.ndarray:
     return (3 * colours.reshape(-1, 1) + np.arange(3)).reshape(-1)
 
 
+@by_value
 def heisenberg(
     shape: int | Sequence[int],
     coupling: float = 1.0,

@@ -68,6 +68,7 @@ from jax.typing import ArrayLike
 
 from liesample.dynamics.poisson_langevin import Scene
 from liesample.dynamics.system import LiePoissonSystem
+from liesample.foundation.identity import by_value
 from liesample.foundation.precision import check_dtype, float64_hint, roundoff_tolerance
 from liesample.foundation.validation import concrete_array, finite_float, nonzero_circulations
 from liesample.geometry.algebras import LieAlgebra, cross, so3
@@ -280,6 +281,7 @@ class PointVortexSystem(LiePoissonSystem):
         return collision_rate(x, self.circulations)
 
 
+@by_value
 def point_vortices(
     circulations: ArrayLike, max_degree: int = 2, radius: float = 1.0
 ) -> PointVortexSystem:

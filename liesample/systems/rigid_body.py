@@ -19,6 +19,7 @@ import numpy as np
 import numpy.typing as npt
 
 from liesample.dynamics.system import LiePoissonSystem
+from liesample.foundation.identity import by_value
 from liesample.foundation.validation import principal_moments
 from liesample.geometry.algebras import so3
 from liesample.targets import RestrictedGaussian
@@ -45,6 +46,7 @@ def kinetic_pieces(
     return tuple(pieces)
 
 
+@by_value
 def rigid_body(
     inertia: Sequence[float] = (1.0, 2.0, 4.0), split_hamiltonian: bool = False
 ) -> LiePoissonSystem:

@@ -57,6 +57,7 @@ import scipy.linalg
 from jax.typing import ArrayLike
 
 from liesample.dynamics.system import LiePoissonSystem
+from liesample.foundation.identity import by_value
 from liesample.foundation.precision import check_dtype, float64_hint, roundoff_tolerance
 from liesample.foundation.validation import concrete_array, float_array
 from liesample.geometry.algebras import Unitary
@@ -463,6 +464,7 @@ class ZeitlinSystem(LiePoissonSystem):
                 )
 
 
+@by_value
 def zeitlin_euler(
     size: int,
     noise_degree: int | None = None,

@@ -83,12 +83,14 @@ def orbit_init_fn(init, system: LiePoissonSystem, check_orbits):
 
 
 def _start_values(system):
-    """``jit(vmap(μ ↦ (C(μ), h(μ))))``, compiled once per system."""
-    values = system.__dict__.get("_start_values")
-    if values is None:
-        values = jit(jax.vmap(lambda mu: (system.casimirs(mu), system.hamiltonian(mu))))
-        system.__dict__["_start_values"] = values
-    return values
+    """``positions ↦ (C(μ), h(μ))`` for every start, compiled once for every system equal to
+    ``system`` (:mod:`liesample.foundation.identity`)."""
+    return functools.partial(_casimirs_and_energies, system=system)
+
+
+@functools.partial(jit, static_argnames="system")
+def _casimirs_and_energies(positions, *, system):
+    return jax.vmap(lambda mu: (system.casimirs(mu), system.hamiltonian(mu)))(positions)
 
 
 def check_start_energy(system, position, energy) -> None:
