@@ -15,7 +15,7 @@ Scenarios:
   process, with the cache on).
 
 Each call is timed whole (``time.perf_counter``), with the XLA backend compilations it caused
-(count and seconds, from JAX's monitoring events), the tracing and lowering seconds, the
+(count and seconds, from JAX's monitoring events), the seconds spent tracing and lowering, the
 programs loaded from the persistent cache instead, and the tree's ``sampling_time`` attribute
 (compilation excluded).
 
@@ -57,35 +57,53 @@ LOWER_EVENT = "/jax/core/compile/jaxpr_to_mlir_module_duration"
 CACHE_HIT_EVENT = "/jax/compilation_cache/cache_hits"
 
 
+def covered_seconds(spans) -> float:
+    """The length of the union of ``(start, end)`` intervals (nested spans counted once)."""
+    total, reach = 0.0, -float("inf")
+    for start, end in sorted(spans):
+        if end > reach:
+            total += end - max(start, reach)
+            reach = end
+    return total
+
+
 class Events:
     """Counts and sums JAX's compile events while registered (:func:`measure`): ``compiles``
-    are XLA compilations, ``cache_loads`` programs read from the persistent cache instead."""
+    are XLA compilations, ``cache_loads`` programs read from the persistent cache instead;
+    ``trace_lower_seconds`` is the time spent tracing or lowering and not compiling (a jit
+    traced inside another's trace reports its own span, and a trace may compile the eager
+    operations it runs, so the spans are united, not summed)."""
 
     def __init__(self):
         self.compiles, self.compile_seconds = 0, 0.0
         self.cache_loads, self.cache_load_seconds = 0, 0.0
-        self.trace_seconds, self.lower_seconds = 0.0, 0.0
-        self._hit = False  # a cache hit was announced: the next compile event is its load
+        self.spans, self.compile_spans = [], []
+        self.hit = False  # a cache hit was announced: the next compile event is its load
 
     def duration(self, event, seconds, **kwargs):
-        if event == COMPILE_EVENT and self._hit:
+        if event == COMPILE_EVENT and self.hit:
             self.cache_loads += 1
             self.cache_load_seconds += seconds
-            self._hit = False
+            self.hit = False
         elif event == COMPILE_EVENT:
             self.compiles += 1
             self.compile_seconds += seconds
-        elif event == TRACE_EVENT:
-            self.trace_seconds += seconds
-        elif event == LOWER_EVENT:
-            self.lower_seconds += seconds
+
+    def span(self, event, start, end, **kwargs):
+        if event in (TRACE_EVENT, LOWER_EVENT):
+            self.spans.append((start, end))
+        elif event == COMPILE_EVENT:
+            self.compile_spans.append((start, end))
 
     def event(self, event, **kwargs):
         if event == CACHE_HIT_EVENT:
-            self._hit = True
+            self.hit = True
 
     def as_json(self) -> dict:
-        return {k: v for k, v in vars(self).items() if not k.startswith("_")}
+        return {"compiles": self.compiles, "compile_seconds": self.compile_seconds,
+                "cache_loads": self.cache_loads, "cache_load_seconds": self.cache_load_seconds,
+                "trace_lower_seconds": covered_seconds(self.spans + self.compile_spans)
+                - covered_seconds(self.compile_spans)}  # fmt: skip
 
 
 def measure(call) -> dict:
@@ -94,6 +112,7 @@ def measure(call) -> dict:
 
     events = Events()
     jax.monitoring.register_event_duration_secs_listener(events.duration)
+    jax.monitoring.register_event_time_span_listener(events.span)
     jax.monitoring.register_event_listener(events.event)
     try:
         with warnings.catch_warnings():
@@ -103,6 +122,7 @@ def measure(call) -> dict:
             wall = time.perf_counter() - begin
     finally:
         jax.monitoring.unregister_event_duration_listener(events.duration)
+        jax.monitoring.unregister_event_time_span_listener(events.span)
         jax.monitoring.unregister_event_listener(events.event)
     sampling = tree.attrs.get("sampling_time")
     return {"wall_seconds": wall, **events.as_json(),

@@ -34,6 +34,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -125,8 +126,15 @@ def _driver(family: str, scenario: str, quick: bool, cache_home: str | None = No
         return {"error": f"timed out after {PROCESS_TIMEOUT} s"}
     seconds = time.perf_counter() - begin
     if out.returncode != 0:
-        return {"error": out.stderr.strip().splitlines()[-1] if out.stderr.strip() else "failed"}
+        return {"error": _exception_line(out.stderr)}
     return json.loads(out.stdout.strip().splitlines()[-1]) | {"process_seconds": seconds}
+
+
+def _exception_line(stderr: str) -> str:
+    """The exception a failed driver raised: the last line of its traceback that names one."""
+    lines = [line.strip() for line in stderr.splitlines() if line.strip()]
+    named = [line for line in lines if re.match(r"^[\w.]+(Error|Exception|Interrupt)\b", line)]
+    return (named or lines or ["failed without a message"])[-1]
 
 
 def _cache_entries(cache_home: str) -> int:
@@ -228,7 +236,7 @@ def _segments(row: dict, scenario: str) -> tuple[float, float, float]:
         calls = [] if call is None else [call]
     wall = sum(c["wall_seconds"] for c in calls)
     compile_ = sum(c["compile_seconds"] for c in calls)
-    trace = sum(c["trace_seconds"] + c["lower_seconds"] for c in calls)
+    trace = sum(c["trace_lower_seconds"] for c in calls)
     return compile_, trace, max(0.0, wall - compile_ - trace)
 
 
@@ -307,7 +315,7 @@ def _call_rows(data: dict, scenario: str) -> list[str]:
         lines.append(
             f"| `{family}` | {model} | {_s(call['wall_seconds'])} | {call['compiles']} | "
             f"{_s(call['compile_seconds'])} | "
-            f"{_s(call['trace_seconds'] + call['lower_seconds'])} | "
+            f"{_s(call['trace_lower_seconds'])} | "
             f"{_s(call['sampling_seconds'])} |{imported} {target} | {_mark(met)} |"
         )
     return lines
