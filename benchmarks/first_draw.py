@@ -50,7 +50,7 @@ SUITE = {"order": 7, "title": "Time to a first draw: compile once, by call"}
 
 ROOT = Path(__file__).resolve().parents[1]
 DRIVER = "benchmarks._first_draw_driver"
-PROCESS_TIMEOUT = 600  # seconds one driver process may take before it is recorded as failed
+PROCESS_TIMEOUT = 300  # seconds one driver process may take before it is recorded as failed
 
 # family -> (model, how the README builds it, the swept constant)
 FAMILIES = {
