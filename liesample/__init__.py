@@ -31,6 +31,7 @@ if TYPE_CHECKING:  # what the lazy names below resolve to, for type checkers and
     from liesample.integrators import accuracy, drivers, stability
     from liesample.integrators.drivers import simulate
     from liesample.run import sharding
+    from liesample.run.ildg import load_ildg, save_ildg
     from liesample.run.runner import load_chains, sample, sample_chains
     from liesample.samplers.cotangent._euclidean import default_magnetic_field
     from liesample.samplers.cotangent.geometric_hmc import geometric_hmc
@@ -77,6 +78,7 @@ _ATTRIBUTES = {
     "jittered_magnetic_hmc": "liesample.samplers.cotangent.magnetic_hmc",
     "lie_poisson_langevin": "liesample.samplers.orbit.lie_poisson_langevin",
     "load_chains": "liesample.run.runner",
+    "load_ildg": "liesample.run.ildg",
     "magnetic_hmc": "liesample.samplers.cotangent.magnetic_hmc",
     "magnetic_langevin": "liesample.samplers.cotangent.magnetic_langevin",
     "magnetic_window_adaptation": "liesample.tuning.adaptation",
@@ -84,6 +86,7 @@ _ATTRIBUTES = {
     "safe_compiler_options": "liesample.foundation.compile",
     "sample": "liesample.run.runner",
     "sample_chains": "liesample.run.runner",
+    "save_ildg": "liesample.run.ildg",
     "simulate": "liesample.integrators.drivers",
     "vortex_metropolis": "liesample.samplers.orbit.vortex_metropolis",
     "wilson_heat_bath": "liesample.samplers.gauge.heat_bath",
@@ -114,6 +117,7 @@ __all__ = [
     "jittered_magnetic_hmc",
     "lie_poisson_langevin",
     "load_chains",
+    "load_ildg",
     "magnetic_hmc",
     "magnetic_langevin",
     "magnetic_window_adaptation",
@@ -121,6 +125,7 @@ __all__ = [
     "safe_compiler_options",
     "sample",
     "sample_chains",
+    "save_ildg",
     "sharding",
     "simulate",
     "spaces",
