@@ -115,10 +115,15 @@ def test_a_truncated_file_is_refused(tmp_path):
     path = tmp_path / "config.lime"
     save_ildg(path, LINKS, SU3)
     blob = path.read_bytes()
-    for cut in (len(blob) // 2, 100):  # inside the binary data; inside the first header
+    checksum_record = blob.index(b"scidac-checksum") - 16  # its header starts 16 bytes earlier
+    # inside the binary data; inside the first header; the checksum record cut off whole
+    for cut in (len(blob) // 2, 100, checksum_record):
         path.write_bytes(blob[:cut])
         with pytest.raises(IldgFileError, match="truncated"):
             load_ildg(path, SU3)
+    path.write_bytes(b"")
+    with pytest.raises(IldgFileError, match="empty"):
+        load_ildg(path, SU3)
 
 
 def test_a_wrong_lattice_is_refused_by_name(tmp_path):

@@ -279,7 +279,9 @@ def _records(path: str) -> dict[str, bytes]:
     """The LIME records of ``path`` by type (the first of each type), or an
     :class:`IldgFileError`."""
     found: dict[str, bytes] = {}
-    size = os.path.getsize(path)
+    size, flags, name = os.path.getsize(path), 0, ""
+    if size == 0:
+        raise IldgFileError(f"{path!r} is empty: not an ILDG gauge configuration")
     with open(path, "rb") as f:
         while f.tell() < size:
             start = f.tell()
@@ -289,7 +291,7 @@ def _records(path: str) -> dict[str, bytes]:
                     f"{path!r} is truncated: a LIME record header at byte {start} has "
                     f"{len(raw)} of its {_HEADER.size} bytes"
                 )
-            magic, version, _, length, kind = _HEADER.unpack(raw)
+            magic, version, flags, length, kind = _HEADER.unpack(raw)
             if magic != LIME_MAGIC:
                 raise IldgFileError(
                     f"{path!r} is not a LIME file: the record at byte {start} starts with "
@@ -311,6 +313,11 @@ def _records(path: str) -> dict[str, bytes]:
                 data = b""
             found.setdefault(name, data)
             f.seek(min(size, f.tell() + (-length % 8)))  # the padding (absent at the very end)
+    if not flags & _END:  # the file's last record must end its message
+        raise IldgFileError(
+            f"{path!r} is truncated: its last record, {name!r}, does not end a LIME message "
+            "(the records after it are missing)"
+        )
     return found
 
 
