@@ -5,6 +5,7 @@ from liesample.systems.charged_particle import charged_particle, charged_particl
 from liesample.systems.custom import lie_poisson_system
 from liesample.systems.heavy_top import heavy_top
 from liesample.systems.heisenberg import heisenberg
+from liesample.systems.n_vector import NVectorSystem, n_vector
 from liesample.systems.point_vortices import point_vortex_integrator, point_vortices
 from liesample.systems.rigid_body import rigid_body
 from liesample.systems.stochastic_pendulum import stochastic_pendulum
@@ -13,6 +14,7 @@ from liesample.systems.zeitlin import isospectral_midpoint, zeitlin_euler
 
 __all__ = [
     "LiePoissonSystem",
+    "NVectorSystem",
     "WilsonGauge",
     "charged_particle",
     "charged_particle_path",
@@ -20,6 +22,7 @@ __all__ = [
     "heisenberg",
     "isospectral_midpoint",
     "lie_poisson_system",
+    "n_vector",
     "point_vortex_integrator",
     "point_vortices",
     "rigid_body",

@@ -26,6 +26,10 @@ instead of ``3N`` single directions.
 Each spin must be a unit vector: the system's ``check_position`` (which the sampler's
 ``init`` calls) adds that check to the base class's shape/finiteness checks; the default
 position has every spin along ``e_z``.
+
+The lattice code here (shapes, bond and neighbour sums, neighbour tables, colourings) serves
+every O(n) lattice: :func:`liesample.systems.n_vector` builds its ``n ≠ 3`` systems from it, and
+for ``n = 3`` returns :func:`heisenberg` itself (the model without anisotropy).
 """
 
 from __future__ import annotations
@@ -48,8 +52,14 @@ from liesample.targets.spins import HeisenbergChainReference, HeisenbergRingRefe
 
 __all__ = [
     "SpinLatticeSystem",
+    "bond_sum",
+    "check_unit_spins",
     "colouring",
+    "exchange_energy",
     "heisenberg",
+    "lattice_arguments",
+    "lattice_field",
+    "lattice_name",
     "lattice_shape",
     "neighbour_sum",
     "neighbour_table",
@@ -71,20 +81,27 @@ class SpinLatticeSystem(LiePoissonSystem):
 
     def check_position(self, position: ArrayLike, name: str = "position") -> None:
         super().check_position(position, name)
-        value = concrete_array(position)
-        if value is None:  # traced: value checks happen outside jit
-            return
-        dtype = check_dtype(value)
-        tolerance = roundoff_tolerance(dtype, floor=UNIT_NORM_TOLERANCE)
-        norms = np.linalg.norm(np.asarray(value, dtype=float), axis=-1)
-        bad = np.abs(norms - 1.0) > tolerance
-        if np.any(bad):
-            site = tuple(int(i) for i in np.argwhere(bad)[0])
-            raise ValueError(
-                f"{name} must hold unit spins (|s_k| = 1 to {tolerance:.2g}); the spin at "
-                f"site {site} has norm {float(norms[site]):.12g} "
-                f"({int(np.sum(bad))} bad spin(s) in all)." + float64_hint(dtype)
-            )
+        check_unit_spins(position, name)
+
+
+def check_unit_spins(position: ArrayLike, name: str = "position") -> None:
+    """Raise ``ValueError`` unless every spin (last axis) of a concrete ``position`` is a unit
+    vector to ``UNIT_NORM_TOLERANCE`` (float32: its round-off), naming the first bad site; a
+    traced ``position`` passes (value checks happen outside ``jit``)."""
+    value = concrete_array(position)
+    if value is None:  # traced: value checks happen outside jit
+        return
+    dtype = check_dtype(value)
+    tolerance = roundoff_tolerance(dtype, floor=UNIT_NORM_TOLERANCE)
+    norms = np.linalg.norm(np.asarray(value, dtype=float), axis=-1)
+    bad = np.abs(norms - 1.0) > tolerance
+    if np.any(bad):
+        site = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise ValueError(
+            f"{name} must hold unit spins (|s_k| = 1 to {tolerance:.2g}); the spin at "
+            f"site {site} has norm {float(norms[site]):.12g} "
+            f"({int(np.sum(bad))} bad spin(s) in all)." + float64_hint(dtype)
+        )
 
 
 def lattice_shape(shape: int | Sequence[int]) -> tuple[int, ...]:
@@ -114,15 +131,49 @@ def lattice_shape(shape: int | Sequence[int]) -> tuple[int, ...]:
     return tuple(out)
 
 
-def _field(field) -> np.ndarray:
-    if np.ndim(field) != 1 or len(field) != 3:
-        raise ValueError(
-            f"field must be a sequence of 3 finite floats (B_x, B_y, B_z), got {field!r}"
-        )
+def lattice_field(field, n: int = 3) -> np.ndarray:
+    """``field`` as an array of ``n`` finite floats (one per spin component), or a
+    ``ValueError`` naming ``field``."""
+    if np.ndim(field) != 1 or len(field) != n:
+        what = "(B_x, B_y, B_z)" if n == 3 else "(one per spin component)"
+        raise ValueError(f"field must be a sequence of {n} finite floats {what}, got {field!r}")
     return np.array([finite_float(f"field[{i}]", b) for i, b in enumerate(field)])
 
 
-def _bond_sum(s, periodic: bool):
+def lattice_arguments(shape, coupling, periodic) -> tuple[tuple[int, ...], float, bool]:
+    """``(shape, coupling, periodic)`` of a spin lattice, checked: :func:`lattice_shape`, a
+    finite ``coupling`` and a bool ``periodic`` (every extent then ``≥ 3``)."""
+    shape = lattice_shape(shape)
+    coupling = finite_float("coupling", coupling)
+    if not isinstance(periodic, (bool, np.bool_)):
+        raise TypeError(f"periodic must be a bool, got {periodic!r}")
+    periodic = bool(periodic)
+    if periodic and min(shape) < 3:
+        raise ValueError(
+            f"periodic boundaries need every extent of shape to be >= 3 (a bond would join a site "
+            f"to itself or be counted twice); got shape {shape}"
+        )
+    return shape, coupling, periodic
+
+
+def lattice_name(shape: Sequence[int]) -> str:
+    """``"chain 8"``, ``"square lattice 4x4"``, ``"cubic lattice 4x4x4"``, ``"4-d lattice …"``."""
+    geometry = {1: "chain", 2: "square lattice", 3: "cubic lattice"}.get(
+        len(shape), f"{len(shape)}-d lattice"
+    )
+    return f"{geometry} {'x'.join(map(str, shape))}"
+
+
+def exchange_energy(s, coupling: float, periodic: bool, field: np.ndarray | None):
+    """``−J Σ_⟨jk⟩ s_j·s_k − B·Σ_k s_k`` of spins ``s`` (``(*shape, n)``, any ``n``); ``field``
+    ``None`` (or all zero) leaves the Zeeman term out."""
+    h = -coupling * bond_sum(s, periodic)
+    if field is not None and bool(np.any(field != 0.0)):
+        h = h - jnp.sum(s * field)
+    return h
+
+
+def bond_sum(s, periodic: bool):
     """``Σ_⟨jk⟩ s_j·s_k`` over nearest-neighbour bonds along every lattice axis (no loops)."""
     total = jnp.zeros((), s.dtype)
     for axis in range(s.ndim - 1):  # lattice axes only
@@ -249,24 +300,13 @@ def heisenberg(
     >>> bool(0 < system.reference(1.0).correlation(1) < 1)
     True
     """
-    shape = lattice_shape(shape)
-    coupling = finite_float("coupling", coupling)
-    if not isinstance(periodic, (bool, np.bool_)):
-        raise TypeError(f"periodic must be a bool, got {periodic!r}")
-    periodic = bool(periodic)
-    if periodic and min(shape) < 3:
-        raise ValueError(
-            f"periodic boundaries need every extent of shape to be >= 3 (a bond would join a site "
-            f"to itself or be counted twice); got shape {shape}"
-        )
-    field = _field(field)
+    shape, coupling, periodic = lattice_arguments(shape, coupling, periodic)
+    field = lattice_field(field)
     anisotropy = finite_float("anisotropy", anisotropy)
     has_field = bool(np.any(field != 0.0))
 
     def hamiltonian(s):
-        h = -coupling * _bond_sum(s, periodic)
-        if has_field:
-            h = h - jnp.sum(s * field)
+        h = exchange_energy(s, coupling, periodic, field)
         if anisotropy != 0.0:
             h = h - anisotropy * jnp.sum(s[..., 2] ** 2)
         return h
@@ -282,11 +322,8 @@ def heisenberg(
 
     default_position = np.zeros((*shape, 3))
     default_position[..., 2] = 1.0
-    geometry = {1: "chain", 2: "square lattice", 3: "cubic lattice"}.get(
-        len(shape), f"{len(shape)}-d lattice"
-    )
     return SpinLatticeSystem(
-        name=f"Heisenberg {geometry} {'x'.join(map(str, shape))}",
+        name=f"Heisenberg {lattice_name(shape)}",
         algebra=so3,
         hamiltonian=hamiltonian,
         default_position=default_position,  # noise ĥ_{k,i} = e_i·s_k, index 3k + i

@@ -29,6 +29,12 @@ from liesample.targets.groups import (
     u1_plaquette_mean,
     vmf_mean_resultant_length,
 )
+from liesample.targets.n_vector import (
+    NVectorChainReference,
+    n_vector_bond_mean,
+    n_vector_bond_variance,
+    von_mises_fisher_sphere,
+)
 from liesample.targets.orbits import (
     HeavyTopGibbs,
     RestrictedGaussian,
@@ -61,6 +67,7 @@ __all__ = [
     "HeavyTopGibbs",
     "HeisenbergChainReference",
     "MatrixFisherLaw",
+    "NVectorChainReference",
     "RestrictedGaussian",
     "UnitaryOrbitLaw",
     "VonMisesFisherLaw",
@@ -79,6 +86,8 @@ __all__ = [
     "isotropic_autocorrelation",
     "langevin_function",
     "linear_step_moments",
+    "n_vector_bond_mean",
+    "n_vector_bond_variance",
     "ou_cross_covariance",
     "ou_drift",
     "ou_stationary_covariance",
@@ -95,4 +104,5 @@ __all__ = [
     "u1_torus_plaquette_mean",
     "uniform_orbit_energy_spectrum",
     "vmf_mean_resultant_length",
+    "von_mises_fisher_sphere",
 ]

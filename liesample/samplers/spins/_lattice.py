@@ -3,9 +3,11 @@
 The samplers (:mod:`~liesample.samplers.spins.heisenberg_heat_bath`,
 :mod:`~liesample.samplers.spins.heisenberg_metropolis`,
 :mod:`~liesample.samplers.spins.heisenberg_cluster`) act on a :func:`liesample.systems.heisenberg`
-system. Spins of one colour class of the lattice's proper colouring
-(:func:`liesample.systems.heisenberg.colouring`) are never neighbours, so given the other classes
-each feels a fixed local field
+system, or on any O(n) lattice of :func:`liesample.systems.n_vector` (spins in ``S^{n−1}``,
+``n ≥ 2``; the moves below are written for ``S²`` and hold on every sphere, except the
+precession by an angle other than ``π``, which needs ``n = 3``). Spins of one colour class of
+the lattice's proper colouring (:func:`liesample.systems.heisenberg.colouring`) are never
+neighbours, so given the other classes each feels a fixed local field
 
     ``F_k = J Σ_{j~k} s_j + B``      (``h = −s_k·F_k + …`` in ``s_k``, when ``D = 0``),
 
@@ -17,7 +19,8 @@ and the stochastic Landau–Lifshitz–Gilbert equation of that spin alone (pape
   and the area on ``S²``, hence ``exp(−βh)``, exactly, for any angle;
 - its **noise–dissipation part**, a diffusion on ``S²`` whose law at infinite time is the exact
   conditional law ``∝ exp(β s_k·F_k)``, a von Mises–Fisher law of concentration ``β|F_k|``
-  (:func:`heat_bath`).
+  (:func:`heat_bath`; on ``S^{n−1}`` the same conditional law, drawn by
+  :func:`liesample.targets.n_vector.von_mises_fisher_sphere`).
 
 Every sampler's info follows the package's one contract: ``is_divergent`` (the new state or
 its energy was non-finite; the chain then kept its state), ``acceptance_rate`` (the Metropolis
@@ -45,13 +48,17 @@ from liesample.systems.heisenberg import (
     neighbour_sum,
     neighbour_table,
 )
+from liesample.systems.n_vector import NVectorSystem
+from liesample.targets.n_vector import von_mises_fisher_sphere
 from liesample.targets.spins import von_mises_fisher
 
 __all__ = [
     "SpinInfo",
     "SpinState",
+    "SpinSystem",
     "Sublattice",
     "check_beta",
+    "check_precession_angle",
     "check_spin_system",
     "check_sweeps",
     "energy_change",
@@ -62,14 +69,20 @@ __all__ = [
     "local_field",
     "precess",
     "require_isotropic",
+    "spin_components",
     "spin_sampler",
     "sublattice_field",
     "sublattices",
 ]
 
 
+SpinSystem = SpinLatticeSystem | NVectorSystem
+"""What the spin samplers take: :func:`liesample.systems.heisenberg` or
+:func:`liesample.systems.n_vector` lattices."""
+
+
 class SpinState(NamedTuple):
-    """The spins (``position``, shape ``(*shape, 3)``, unit vectors)."""
+    """The spins (``position``, shape ``(*shape, n)``, unit vectors)."""
 
     position: jax.Array
 
@@ -79,12 +92,19 @@ SpinInfo = BasicInfo
 
 
 def check_spin_system(system) -> dict:
-    """``system.params`` of a :func:`heisenberg` system, or a ``TypeError``."""
-    if not isinstance(system, SpinLatticeSystem):
+    """``system.params`` of a :func:`heisenberg` or :func:`n_vector` system, or a
+    ``TypeError``."""
+    if not isinstance(system, (SpinLatticeSystem, NVectorSystem)):
         raise TypeError(
-            f"system must be a heisenberg(...) SpinLatticeSystem, got {type(system).__name__}"
+            "system must be a heisenberg(...) SpinLatticeSystem or an n_vector(...) "
+            f"NVectorSystem (liesample.systems), got {type(system).__name__}"
         )
     return system.params
+
+
+def spin_components(system: SpinSystem) -> int:
+    """``n``: the components of one spin (3 for :func:`heisenberg`)."""
+    return system.event_shape[-1]
 
 
 def require_isotropic(system, sampler: str) -> None:
@@ -99,7 +119,7 @@ def require_isotropic(system, sampler: str) -> None:
         )
 
 
-def init(position, system: SpinLatticeSystem, rng_key=None) -> SpinState:
+def init(position, system: SpinSystem, rng_key=None) -> SpinState:
     """Initial state (unit spins are checked; ``rng_key`` is ignored)."""
     del rng_key
     system.check_position(position)
@@ -107,20 +127,22 @@ def init(position, system: SpinLatticeSystem, rng_key=None) -> SpinState:
 
 
 def spin_sampler(
-    name: str, build_kernel, structural: tuple, system: SpinLatticeSystem, beta, *parameters,
+    name: str, build_kernel, structural: tuple, system: SpinSystem, beta, *parameters,
     **settings,
 ):  # fmt: skip
     """The :class:`~liesample.samplers.contract.Sampler` of ``kernel(rng_key, state, beta,
     *parameters)``, ``kernel = build_kernel(system, *structural)``, on ``system`` (keyless
     :func:`init`); its settings are ``name``, the system, ``beta``, then ``settings`` in order.
     It declares its :class:`~liesample.samplers.contract.Structure`: ``β`` and the numeric
-    ``parameters`` are traced, so a sweep over them compiles once."""
+    ``parameters`` are traced, so a sweep over them compiles once. Chains of a
+    :func:`heisenberg` system are grouped by orbit (unit spins: one group); those of an
+    :func:`n_vector` system sample one law."""
     at = _SpinStepper(build_kernel, system, tuple(structural), len(parameters))
     values = {"beta": beta} | {f"parameter_{i}": value for i, value in enumerate(parameters)}
     return at(
         **values,
         settings=orbit_settings(name, system, beta, **settings),
-        law_groups=orbit_groups(system),
+        law_groups=orbit_groups(system) if isinstance(system, SpinLatticeSystem) else None,
         structure=Structure(at, values),
     )
 
@@ -133,7 +155,7 @@ class _SpinStepper:
     ``hooks``."""
 
     build_kernel: Callable
-    system: SpinLatticeSystem
+    system: SpinSystem
     structural: tuple
     num_parameters: int
 
@@ -155,7 +177,7 @@ class Sublattice(NamedTuple):
     neighbours: jax.Array
 
 
-def sublattices(system: SpinLatticeSystem) -> list[Sublattice]:
+def sublattices(system: SpinSystem) -> list[Sublattice]:
     """The colour classes of the lattice's proper colouring, as gather indices (static)."""
     params = system.params
     colours, num_colours = colouring(params["shape"], params["periodic"])
@@ -167,16 +189,16 @@ def sublattices(system: SpinLatticeSystem) -> list[Sublattice]:
     return out
 
 
-def sublattice_field(system: SpinLatticeSystem, flat, sublattice: Sublattice):
-    """``F_k = J Σ_{j~k} s_j + B`` at the sites of ``sublattice`` (``flat``: spins ``(N, 3)``)."""
-    padded = jnp.concatenate([flat, jnp.zeros((1, 3), flat.dtype)])
+def sublattice_field(system: SpinSystem, flat, sublattice: Sublattice):
+    """``F_k = J Σ_{j~k} s_j + B`` at the sites of ``sublattice`` (``flat``: spins ``(N, n)``)."""
+    padded = jnp.concatenate([flat, jnp.zeros((1, flat.shape[-1]), flat.dtype)])
     params = system.params
     return params["coupling"] * jnp.sum(padded[sublattice.neighbours], axis=1) + jnp.asarray(
         params["field"], dtype=flat.dtype
     )
 
 
-def local_field(system: SpinLatticeSystem, s):
+def local_field(system: SpinSystem, s):
     """``F_k = J Σ_{j~k} s_j + B`` for every site (shape of ``s``)."""
     params = system.params
     return params["coupling"] * neighbour_sum(s, params["periodic"]) + jnp.asarray(
@@ -184,8 +206,8 @@ def local_field(system: SpinLatticeSystem, s):
     )
 
 
-def energy_change(system: SpinLatticeSystem, old, new, field):
-    """``Δh`` of moving single spins ``old → new`` in their local fields ``field`` (…, 3):
+def energy_change(system: SpinSystem, old, new, field):
+    """``Δh`` of moving single spins ``old → new`` in their local fields ``field`` (…, n):
     ``−(new − old)·F − D((new·e_z)² − (old·e_z)²)``; exact, as ``h`` has no self-interaction
     (every bond joins two distinct sites)."""
     delta = -jnp.sum((new - old) * field, axis=-1)
@@ -195,7 +217,7 @@ def energy_change(system: SpinLatticeSystem, old, new, field):
     return delta
 
 
-def local_energy_change(system: SpinLatticeSystem, s, new):
+def local_energy_change(system: SpinSystem, s, new):
     """``Δh_k = h(s with s_k → new_k) − h(s)`` for every site ``k`` at once (lattice shape)."""
     return energy_change(system, s, new, local_field(system, s))
 
@@ -207,12 +229,15 @@ def _unit(field):
     return jnp.where((norm > 0.0)[..., None], field / safe[..., None], 0.0), norm
 
 
-def precess(system: SpinLatticeSystem, flat, sublattice: Sublattice, angle):
+def precess(system: SpinSystem, flat, sublattice: Sublattice, angle):
     """The spins of ``sublattice`` precess about their local fields by ``angle``: the exact
     Hamiltonian flow of each (``ṡ_k = F_k × s_k``, run for time ``angle/|F_k|``), which keeps
     ``h`` to round-off; spins with ``F_k = 0`` do not move. ``angle = π`` is over-relaxation,
     ``s ↦ 2(s·F̂)F̂ − s`` (computed so, without trigonometry, when ``angle`` is the float π).
-    ``flat``: spins ``(N, 3)``."""
+    ``flat``: spins ``(N, n)``; for ``n ≠ 3`` only the reflection (``angle`` the float π) is
+    defined (a rotation about one axis exists on ``S²`` only), any other angle a ``ValueError``.
+    """
+    check_precession_angle(system, angle)
     direction, _ = _unit(sublattice_field(system, flat, sublattice))
     s = flat[sublattice.sites]
     if isinstance(angle, float) and angle == math.pi:
@@ -224,17 +249,19 @@ def precess(system: SpinLatticeSystem, flat, sublattice: Sublattice, angle):
     return flat.at[sublattice.sites].set(moved)
 
 
-def heat_bath(system: SpinLatticeSystem, rng_key, flat, sublattice: Sublattice, beta):
+def heat_bath(system: SpinSystem, rng_key, flat, sublattice: Sublattice, beta):
     """The spins of ``sublattice`` are redrawn from their exact conditional law
     ``∝ exp(β s·F_k)``: the infinite-time limit of each spin's noise–dissipation dynamics in the
-    frozen field ``F_k``, a von Mises–Fisher law
-    (:func:`liesample.targets.spins.von_mises_fisher`); ``F_k = 0`` gives a uniform draw.
-    ``flat``: spins ``(N, 3)``."""
+    frozen field ``F_k``, a von Mises–Fisher law (on ``S²``
+    :func:`liesample.targets.spins.von_mises_fisher`, on ``S^{n−1}``
+    :func:`liesample.targets.n_vector.von_mises_fisher_sphere`); ``F_k = 0`` gives a uniform
+    draw. ``flat``: spins ``(N, n)``."""
     direction, norm = _unit(sublattice_field(system, flat, sublattice))
-    return flat.at[sublattice.sites].set(von_mises_fisher(rng_key, direction, beta * norm))
+    draw = von_mises_fisher if flat.shape[-1] == 3 else von_mises_fisher_sphere
+    return flat.at[sublattice.sites].set(draw(rng_key, direction, beta * norm))
 
 
-def finish_step(system: SpinLatticeSystem, old, new, acceptance_rate, info_class=SpinInfo, **extra):
+def finish_step(system: SpinSystem, old, new, acceptance_rate, info_class=SpinInfo, **extra):
     """``(SpinState, info)`` after a step; a non-finite state or energy keeps ``old`` (and
     reports ``acceptance_rate = 0``)."""
     energy = system.hamiltonian(new)
@@ -243,6 +270,18 @@ def finish_step(system: SpinLatticeSystem, old, new, acceptance_rate, info_class
     energy = jnp.where(divergent, system.hamiltonian(old), energy)
     rate = jnp.where(divergent, 0.0, jnp.asarray(acceptance_rate, dtype=position.dtype))
     return SpinState(position), info_class(divergent, rate, energy, **extra)
+
+
+def check_precession_angle(system: SpinSystem, angle) -> None:
+    """Refuse a precession angle other than the float ``π`` for ``n ≠ 3`` (on ``S^{n−1}`` the
+    energy-keeping move of a spin in its field is the reflection about the field only)."""
+    n = spin_components(system)
+    if n != 3 and not (isinstance(angle, float) and angle == math.pi):
+        raise ValueError(
+            f"precession_angle must be math.pi for an O({n}) system (a precession about the "
+            f"local field by another angle exists on S^2 only, n = 3); got {angle!r}. Leave "
+            "precession_angle at its default (over-relaxation, the reflection about the field)"
+        )
 
 
 def check_beta(beta) -> float:

@@ -4,7 +4,8 @@ Wolff's embedding, vectorised in any dimension.
 A BlackJAX-shaped module (``init``, ``build_kernel``, ``as_top_level_api``). One step (Wolff
 1989, embedded Ising spins ``σ_k = sign(r·s_k)``):
 
-1. draw a uniform reflection direction ``r ∈ S²``;
+1. draw a uniform reflection direction ``r ∈ S²`` (``S^{n−1}`` for an O(n) lattice of
+   :func:`liesample.systems.n_vector`: the embedding and everything below hold for every ``n``);
 2. open every nearest-neighbour bond ``⟨ij⟩`` independently with probability
 
    ``p_ij = 1 − exp(min(0, −2βJ (r·s_i)(r·s_j)))``
@@ -45,13 +46,14 @@ import numpy as np
 from liesample.samplers.contract import Sampler, sampling_api
 from liesample.samplers.spins._lattice import (
     SpinState,
+    SpinSystem,
     check_beta,
     check_spin_system,
     finish_step,
     init,
     spin_sampler,
 )
-from liesample.systems.heisenberg import SpinLatticeSystem, neighbour_table
+from liesample.systems.heisenberg import neighbour_table
 from liesample.targets.spins import von_mises_fisher
 
 __all__ = [
@@ -81,7 +83,7 @@ class ClusterInfo(NamedTuple):
     cluster_size: jax.Array
 
 
-def check_cluster_system(system: SpinLatticeSystem, sampler: str) -> None:
+def check_cluster_system(system: SpinSystem, sampler: str) -> None:
     """Refuse what reflections do not sample: ``J ≤ 0``, a field, an anisotropy."""
     params = check_spin_system(system)
     problems = []
@@ -201,7 +203,16 @@ def _components_batched(axis_size, in_batched, bond_open):
     return roots.reshape(axis_size, -1, roots.shape[-1]), True
 
 
-def build_kernel(system: SpinLatticeSystem, clusters: str = "all"):
+def _uniform_direction(rng_key, n: int, dtype):
+    """A uniform ``r ∈ S^{n−1}``: on ``S²`` the von Mises–Fisher draw at ``κ = 0`` (as the O(3)
+    draws were always made), else a normalised Gaussian vector."""
+    if n == 3:
+        return von_mises_fisher(rng_key, jnp.array([0.0, 0.0, 1.0], dtype), 0.0)
+    g = jax.random.normal(rng_key, (n,), dtype=dtype)
+    return g / jnp.linalg.norm(g)
+
+
+def build_kernel(system: SpinSystem, clusters: str = "all"):
     """``kernel(rng_key, state, beta) -> (state, ClusterInfo)``: one cluster step.
 
     ``clusters`` (structural) is ``"all"`` (Swendsen–Wang) or ``"seed"`` (Wolff); ``beta`` may
@@ -224,9 +235,9 @@ def build_kernel(system: SpinLatticeSystem, clusters: str = "all"):
     bond_ids, exists = jnp.asarray(up, jnp.int32), jnp.asarray(up < num_bonds)
 
     def kernel(rng_key, state: SpinState, beta):
-        s = state.position.reshape(num_sites, 3)
+        s = state.position.reshape(num_sites, state.position.shape[-1])
         key_r, key_seed, key_bonds = jax.random.split(rng_key, 3)
-        r = von_mises_fisher(key_r, jnp.array([0.0, 0.0, 1.0], s.dtype), 0.0)  # uniform on S²
+        r = _uniform_direction(key_r, s.shape[-1], s.dtype)
         projection = s @ r
         grid = projection.reshape(shape)
         product = jnp.stack([grid * jnp.roll(grid, -1, a) for a in range(len(shape))])
@@ -254,13 +265,14 @@ def build_kernel(system: SpinLatticeSystem, clusters: str = "all"):
     return kernel
 
 
-def as_top_level_api(system: SpinLatticeSystem, *, beta: float, clusters: str = "all") -> Sampler:
+def as_top_level_api(system: SpinSystem, *, beta: float, clusters: str = "all") -> Sampler:
     """Cluster sampler of ``exp(−βh)`` for the isotropic ferromagnet without field.
 
     Parameters
     ----------
-    system : SpinLatticeSystem
-        From :func:`liesample.systems.heisenberg`, any dimension, open or periodic, with
+    system : SpinLatticeSystem or NVectorSystem
+        From :func:`liesample.systems.heisenberg` or :func:`liesample.systems.n_vector` (any
+        ``n``), any dimension, open or periodic, with
         ``coupling > 0``, zero ``field`` and ``anisotropy = 0`` (a ``ValueError`` names what is
         not allowed and the sampler to use instead).
     beta : float

@@ -16,6 +16,11 @@ their composition does: there is no step size and no discretisation bias. Heat b
 ergodic; over-relaxation alone is microcanonical (it never changes ``h``), and the pair is the
 physicists' standard sampler for O(3) models. Isotropic systems only (``anisotropy = 0``); any
 coupling sign, field, boundary and finite ``β``.
+
+The same step samples every O(n) lattice of :func:`liesample.systems.n_vector`: the heat bath
+draws the von Mises–Fisher law on ``S^{n−1}`` and over-relaxation is the reflection about the
+local field (for ``n ≠ 3`` the only energy-keeping precession, so ``precession_angle`` must be
+``π`` there).
 """
 
 from __future__ import annotations
@@ -29,7 +34,9 @@ from liesample.samplers.contract import Sampler, sampling_api
 from liesample.samplers.spins._lattice import (
     SpinInfo,
     SpinState,
+    SpinSystem,
     check_beta,
+    check_precession_angle,
     check_spin_system,
     check_sweeps,
     finish_step,
@@ -40,15 +47,15 @@ from liesample.samplers.spins._lattice import (
     spin_sampler,
     sublattices,
 )
-from liesample.systems.heisenberg import SpinLatticeSystem
 
 __all__ = ["SpinInfo", "SpinState", "as_top_level_api", "build_kernel", "init"]
 
 
-def build_kernel(system: SpinLatticeSystem, heat_bath_sweeps: int = 1, overrelaxation: int = 1):
+def build_kernel(system: SpinSystem, heat_bath_sweeps: int = 1, overrelaxation: int = 1):
     """``kernel(rng_key, state, beta, precession_angle) -> (state, SpinInfo)``.
 
-    The sweep counts are structural (unrolled); ``beta`` and ``precession_angle`` may be traced.
+    The sweep counts are structural (unrolled); ``beta`` and ``precession_angle`` may be traced
+    (for ``n ≠ 3`` the angle must be the float ``π``).
     """
     check_spin_system(system)
     require_isotropic(system, "heisenberg_heat_bath")
@@ -57,7 +64,7 @@ def build_kernel(system: SpinLatticeSystem, heat_bath_sweeps: int = 1, overrelax
     classes = sublattices(system)
 
     def kernel(rng_key, state: SpinState, beta, precession_angle):
-        flat = state.position.reshape(-1, 3)
+        flat = state.position.reshape(-1, state.position.shape[-1])
         keys = jax.random.split(rng_key, max(1, heat_bath_sweeps * len(classes)))
         for sweep in range(heat_bath_sweeps):
             for c, sublattice in enumerate(classes):
@@ -71,20 +78,21 @@ def build_kernel(system: SpinLatticeSystem, heat_bath_sweeps: int = 1, overrelax
 
 
 def as_top_level_api(
-    system: SpinLatticeSystem,
+    system: SpinSystem,
     *,
     beta: float,
     overrelaxation: int = 1,
     heat_bath_sweeps: int = 1,
     precession_angle: float = math.pi,
 ) -> Sampler:
-    """Heat-bath + over-relaxation sampler of ``exp(−βh)`` for an isotropic :func:`heisenberg`.
+    """Heat-bath + over-relaxation sampler of ``exp(−βh)`` for an isotropic :func:`heisenberg` or
+    any :func:`n_vector` lattice.
 
     Parameters
     ----------
-    system : SpinLatticeSystem
+    system : SpinLatticeSystem or NVectorSystem
         From :func:`liesample.systems.heisenberg` with ``anisotropy = 0`` (a ``ValueError``
-        otherwise).
+        otherwise), or from :func:`liesample.systems.n_vector` (any ``n ≥ 2``).
     beta : float
         Inverse temperature (finite, any sign).
     overrelaxation : int
@@ -94,7 +102,7 @@ def as_top_level_api(
         so it samples ``exp(−βh)`` only from exact starting draws.
     precession_angle : float
         Angle of each precession about the local field (radians, finite); ``π`` is
-        over-relaxation.
+        over-relaxation, and the only angle allowed for ``n ≠ 3``.
 
     Returns
     -------
@@ -113,6 +121,8 @@ def as_top_level_api(
     """
     beta = check_beta(beta)
     precession_angle = finite_float("precession_angle", precession_angle)
+    check_spin_system(system)
+    check_precession_angle(system, precession_angle)
     heat_bath_sweeps = check_sweeps("heat_bath_sweeps", heat_bath_sweeps)
     overrelaxation = check_sweeps("overrelaxation", overrelaxation)
     if heat_bath_sweeps + overrelaxation == 0:

@@ -13,7 +13,9 @@ Proposals (both symmetric, so the acceptance probability is ``min(1, exp(−βΔ
   ``s·s'`` (isotropy), with tunable size ``ε = proposal_scale``.
 
 ``Δh`` at site ``k`` is :func:`liesample.samplers.spins._lattice.energy_change` in the local field
-``F_k = J Σ_{j~k} s_j + B`` (any coupling, field and anisotropy).
+``F_k = J Σ_{j~k} s_j + B`` (any coupling, field and anisotropy). Both proposals, written here
+for ``S²``, are the same on every sphere, so the sampler takes the O(n) lattices of
+:func:`liesample.systems.n_vector` as well (``g ~ N(0, Iₙ)``).
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from liesample.samplers.contract import Sampler, sampling_api
 from liesample.samplers.spins._lattice import (
     SpinInfo,
     SpinState,
+    SpinSystem,
     check_beta,
     check_spin_system,
     energy_change,
@@ -35,19 +38,18 @@ from liesample.samplers.spins._lattice import (
     sublattice_field,
     sublattices,
 )
-from liesample.systems.heisenberg import SpinLatticeSystem
 
 __all__ = ["PROPOSALS", "SpinInfo", "SpinState", "as_top_level_api", "build_kernel", "init"]
 
 PROPOSALS = ("uniform", "rotation")
 
 
-def _random_directions(key, shape, dtype):
-    g = jax.random.normal(key, (*shape, 3), dtype=dtype)
+def _random_directions(key, shape, n, dtype):
+    g = jax.random.normal(key, (*shape, n), dtype=dtype)
     return g / jnp.linalg.norm(g, axis=-1, keepdims=True)
 
 
-def build_kernel(system: SpinLatticeSystem, proposal: str = "uniform"):
+def build_kernel(system: SpinSystem, proposal: str = "uniform"):
     """``kernel(rng_key, state, beta, proposal_scale) -> (state, SpinInfo)``, one sweep.
 
     ``proposal`` is structural; ``beta`` and ``proposal_scale`` may be traced.
@@ -59,12 +61,12 @@ def build_kernel(system: SpinLatticeSystem, proposal: str = "uniform"):
 
     def propose(key, s, scale):
         if proposal == "uniform":
-            return _random_directions(key, s.shape[:-1], s.dtype)
+            return _random_directions(key, s.shape[:-1], s.shape[-1], s.dtype)
         moved = s + scale * jax.random.normal(key, s.shape, dtype=s.dtype)
         return moved / jnp.linalg.norm(moved, axis=-1, keepdims=True)
 
     def kernel(rng_key, state: SpinState, beta, proposal_scale):
-        flat = state.position.reshape(-1, 3)
+        flat = state.position.reshape(-1, state.position.shape[-1])
         keys = jax.random.split(rng_key, len(classes))
         accepted = jnp.zeros((), jnp.int32)
         for key, sublattice in zip(keys, classes):  # a handful of colour classes, unrolled
@@ -83,7 +85,7 @@ def build_kernel(system: SpinLatticeSystem, proposal: str = "uniform"):
 
 
 def as_top_level_api(
-    system: SpinLatticeSystem,
+    system: SpinSystem,
     *,
     beta: float,
     proposal: str = "uniform",
@@ -93,8 +95,9 @@ def as_top_level_api(
 
     Parameters
     ----------
-    system : SpinLatticeSystem
-        From :func:`liesample.systems.heisenberg` (any coupling, field, anisotropy, boundary).
+    system : SpinLatticeSystem or NVectorSystem
+        From :func:`liesample.systems.heisenberg` (any coupling, field, anisotropy, boundary) or
+        :func:`liesample.systems.n_vector` (any ``n ≥ 2``).
     beta : float
         Inverse temperature (finite).
     proposal : {"uniform", "rotation"}

@@ -12,7 +12,7 @@ with probability 1/2 and makes one step one sweep.
 from __future__ import annotations
 
 from liesample.samplers.contract import Sampler, sampling_api
-from liesample.samplers.spins._lattice import SpinState, init, spin_sampler
+from liesample.samplers.spins._lattice import SpinState, SpinSystem, init, spin_sampler
 from liesample.samplers.spins.heisenberg_cluster import (
     ClusterInfo,
     bond_table,
@@ -20,7 +20,6 @@ from liesample.samplers.spins.heisenberg_cluster import (
     check_cluster_system,
 )
 from liesample.samplers.spins.heisenberg_cluster import build_kernel as _cluster_kernel
-from liesample.systems.heisenberg import SpinLatticeSystem
 
 __all__ = ["SpinState", "WolffInfo", "as_top_level_api", "bond_table", "build_kernel", "init"]
 
@@ -28,20 +27,21 @@ WolffInfo = ClusterInfo
 """What one Wolff move did (:class:`~liesample.samplers.spins.heisenberg_cluster.ClusterInfo`)."""
 
 
-def build_kernel(system: SpinLatticeSystem):
+def build_kernel(system: SpinSystem):
     """``kernel(rng_key, state, beta) -> (state, WolffInfo)``: one cluster reflection."""
     check_cluster_system(system, "heisenberg_wolff")
     return _cluster_kernel(system, "seed")
 
 
-def as_top_level_api(system: SpinLatticeSystem, *, beta: float) -> Sampler:
+def as_top_level_api(system: SpinSystem, *, beta: float) -> Sampler:
     """Wolff single-cluster sampler of ``exp(−βh)`` for the isotropic ferromagnet, no field.
 
     Parameters
     ----------
-    system : SpinLatticeSystem
-        From :func:`liesample.systems.heisenberg` (any dimension) with ``coupling > 0``, zero
-        ``field`` and ``anisotropy = 0``, open or periodic (a ``ValueError`` names what is not
+    system : SpinLatticeSystem or NVectorSystem
+        From :func:`liesample.systems.heisenberg` or :func:`liesample.systems.n_vector` (any
+        dimension, any ``n``) with ``coupling > 0``, zero ``field`` and ``anisotropy = 0``, open
+        or periodic (a ``ValueError`` names what is not
         allowed).
     beta : float
         Inverse temperature, finite and ``≥ 0``.
