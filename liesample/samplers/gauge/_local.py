@@ -55,6 +55,13 @@ def _unit(key, shape, dtype):
     return 1.0 - jax.random.uniform(key, shape, dtype)
 
 
+def _units(key, count, shape, dtype):
+    """``_unit`` of each of ``split(key, count)``, drawn by one ``vmap`` over the keys: the
+    same numbers as ``count`` separate draws, with one random-bits computation to compile."""
+    keys = jax.random.split(key, count)
+    return jax.vmap(lambda sub: _unit(sub, shape, dtype))(keys)
+
+
 @_flat
 def von_mises(rng_key, kappa):
     """Angles ``φ ∈ (−π, π]`` with density ``∝ exp(κ cos φ)`` (``κ ≥ 0``; ``κ = 0``: uniform)."""
@@ -66,7 +73,7 @@ def von_mises(rng_key, kappa):
     r = (1.0 + rho**2) / (2.0 * rho)
 
     def propose(key):
-        u1, u2, u3 = (_unit(s, kappa.shape, dtype) for s in jax.random.split(key, 3))
+        u1, u2, u3 = _units(key, 3, kappa.shape, dtype)
         z = jnp.cos(jnp.pi * u1)
         f = (1.0 + r * z) / (r + z)
         c = k * (r - f)
@@ -84,8 +91,7 @@ def su2_heat_bath_a0(rng_key, alpha):
     a = jnp.maximum(alpha, 1e-12)
 
     def propose(key):
-        k1, k2, k3, k4 = jax.random.split(key, 4)
-        x1, x2, x3, x4 = (_unit(s, alpha.shape, dtype) for s in (k1, k2, k3, k4))
+        x1, x2, x3, x4 = _units(key, 4, alpha.shape, dtype)
         # Kennedy–Pendleton: X = 1 − a₀ from a Gamma(3/2)-like draw, accepted with √(1 − X/2)
         big_x = -(jnp.log(x1) + jnp.cos(2.0 * jnp.pi * x2) ** 2 * jnp.log(x3)) / a
         kp = (x4**2 <= 1.0 - 0.5 * big_x, 1.0 - big_x)

@@ -127,22 +127,31 @@ def _update_sun(system, key, u, staple, beta, heat):
 
 
 def sweep(system: WilsonGauge, rng_key, links, beta, heat: bool):
-    """One sweep over the ``2d`` classes (direction × parity): heat bath or over-relaxation."""
+    """One sweep over the ``2d`` classes (direction × parity): heat bath or over-relaxation.
+
+    The classes are the iterations of one ``lax.scan`` (direction-major, class ``2μ + p``
+    drawing ``split(rng_key, 2d)[2μ + p]``), so the update is compiled once whatever ``d``;
+    only the staples, whose shifts depend on ``μ``, are a ``lax.switch`` over directions."""
     parity = jnp.asarray(_parity(system))
     update = _update_u1 if system.abelian else _update_sun
-    keys = jax.random.split(rng_key, 2 * system.dim).reshape(system.dim, 2)
-    for mu in range(system.dim):
+    keys = jax.random.split(rng_key, 2 * system.dim)
+    staples = [functools.partial(_staples, system, mu) for mu in range(system.dim)]
 
-        def one_parity(links, inputs, mu=mu):
-            p, key = inputs
-            staple = system.staples(links, mu)
-            new = update(system, key, links[mu], staple, beta, heat)
-            mask = parity == p
-            mask = mask if system.abelian else mask[..., None, None]
-            return links.at[mu].set(jnp.where(mask, new, links[mu])), None
+    def one_class(links, inputs):
+        index, key = inputs
+        mu, p = index // 2, index % 2
+        staple = jax.lax.switch(mu, staples, links)
+        old = links[mu]
+        new = update(system, key, old, staple, beta, heat)
+        mask = parity == p
+        mask = mask if system.abelian else mask[..., None, None]
+        return links.at[mu].set(jnp.where(mask, new, old)), None
 
-        links = jax.lax.scan(one_parity, links, (jnp.arange(2), keys[mu]))[0]
-    return links
+    return jax.lax.scan(one_class, links, (jnp.arange(2 * system.dim), keys))[0]
+
+
+def _staples(system: WilsonGauge, mu: int, links):
+    return system.staples(links, mu)
 
 
 def build_kernel(system: WilsonGauge, heat_bath_sweeps: int = 1, overrelaxation: int = 1):
