@@ -226,18 +226,18 @@ def verdict(family: str, row: dict, scenario: str) -> tuple[str, bool | None]:
 # --------------------------------------------------------------------------- the plot
 
 
-def _segments(row: dict, scenario: str) -> tuple[float, float, float]:
-    """``(XLA compile, tracing + lowering, the rest)`` seconds of one bar."""
+def _segments(row: dict, scenario: str) -> tuple[float, float, float, float]:
+    """``(XLA compile, tracing + lowering, sampling, the rest)`` seconds of one bar."""
     if scenario == "sweep":
-        points = row["sweep"].get("calls", {}).get("points") or []
-        calls = points
+        calls = row["sweep"].get("calls", {}).get("points") or []
     else:
         call = _call(row, scenario)
         calls = [] if call is None else [call]
     wall = sum(c["wall_seconds"] for c in calls)
     compile_ = sum(c["compile_seconds"] for c in calls)
     trace = sum(c["trace_lower_seconds"] for c in calls)
-    return compile_, trace, max(0.0, wall - compile_ - trace)
+    sampling = sum(c["sampling_seconds"] or 0.0 for c in calls)
+    return compile_, trace, sampling, max(0.0, wall - compile_ - trace - sampling)
 
 
 PANELS = (("first", "1. first call"), ("repeated", "2. repeated call"),
@@ -247,7 +247,7 @@ PANELS = (("first", "1. first call"), ("repeated", "2. repeated call"),
 
 def plot(data: dict, path: Path) -> Path:
     """Stacked horizontal bars per family, one panel per scenario: XLA compilation, tracing
-    and lowering, and the rest of the call's wall time (log scale where the bars span more
+    and lowering, sampling, and the rest of the call's wall time (log scale where the bars span more
     than a factor 30)."""
     from matplotlib.figure import Figure
 
@@ -261,7 +261,7 @@ def plot(data: dict, path: Path) -> Path:
         log_scale = bool(positive) and max(positive) > 30 * min(positive)
         left = [1e-3 if log_scale else 0.0] * len(names)
         for part, (label, colour) in enumerate(
-            (("XLA compile", "C3"), ("trace + lower", "C1"), ("rest", "C0"))
+            (("XLA compile", "C3"), ("trace + lower", "C1"), ("sampling", "C2"), ("rest", "C0"))
         ):
             widths = [s[part] for s in segments]
             ax.barh(range(len(names)), widths, left=left, color=colour, label=label)
