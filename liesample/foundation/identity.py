@@ -24,7 +24,9 @@ from collections.abc import Callable, Mapping
 import jax
 import numpy as np
 
-__all__ = ["ValueIdentity", "by_value", "canonical", "recipe"]
+from liesample.foundation.compile import jit
+
+__all__ = ["Program", "ValueIdentity", "by_value", "canonical", "recipe", "run_program"]
 
 RECIPE = "_liesample_recipe"
 """The attribute holding an object's recipe (set once, by :func:`by_value`)."""
@@ -46,7 +48,9 @@ def canonical(value):
         raise TypeError(str(error)) from None
 
 
-def _canonical(value):
+def _canonical(value, held: bool = False):
+    """:func:`canonical`; ``held``: the caller keeps ``value`` alive, so an unhashable object
+    may stand as its identity (an ``id`` is unique while its object lives)."""
     if value is None or isinstance(value, (bool, int, float, complex, str, bytes)):
         return (type(value).__name__, value)
     if isinstance(value, (np.ndarray, np.generic, jax.Array)):
@@ -56,12 +60,15 @@ def _canonical(value):
             raise _NotCanonical("a traced array has no value to compare") from None
         return ("array", array.dtype.str, array.shape, array.tobytes())
     if isinstance(value, (list, tuple)):
-        return (type(value).__name__, tuple(_canonical(v) for v in value))
+        return (type(value).__name__, tuple(_canonical(v, held) for v in value))
     if isinstance(value, Mapping):
-        return ("mapping", tuple(sorted((repr(k), _canonical(v)) for k, v in value.items())))
+        items = ((repr(k), _canonical(v, held)) for k, v in value.items())
+        return ("mapping", tuple(sorted(items)))
     try:
         hash(value)
     except TypeError:
+        if held:
+            return ("id", id(value))
         raise _NotCanonical(f"an unhashable {type(value).__name__}") from None
     return ("object", value)
 
@@ -107,3 +114,47 @@ class ValueIdentity:
     def __hash__(self):
         mine = recipe(self)
         return object.__hash__(self) if mine is None else hash((type(self), mine))
+
+
+class Program:
+    """A computation that closures would rebuild on every call, as a value: ``make(*static)``
+    returns the function of the traced arguments, and two programs of equal ``make`` (a module
+    level function) and canonically equal ``static`` (:func:`canonical`; an unhashable object,
+    such as a sampler's API object, by identity) are equal, so :func:`run_program` compiles one
+    program for both. A traced ``static`` makes the program equal only to itself."""
+
+    __slots__ = ("_key", "make", "static")
+
+    def __init__(self, make: Callable, *static):
+        self.make, self.static = make, static
+        try:  # the program holds its callables: an unhashable one stands as its identity
+            self._key = _canonical((make, static), held=True)
+        except _NotCanonical:
+            self._key = None
+
+    @property
+    def by_value(self) -> bool:
+        """Whether the program compares by value (its ``static`` has a canonical form)."""
+        return self._key is not None
+
+    def __eq__(self, other):
+        if self is other:
+            return True
+        return isinstance(other, Program) and self._key is not None and self._key == other._key
+
+    def __hash__(self):
+        return object.__hash__(self) if self._key is None else hash(self._key)
+
+    def __call__(self, *traced):
+        return self.make(*self.static)(*traced)
+
+
+def run_program(program: Program, *traced):
+    """``program(*traced)`` compiled once per equal program and argument shapes
+    (``liesample.jit`` with ``program`` static)."""
+    return _run(*traced, program=program)
+
+
+@functools.partial(jit, static_argnames="program")
+def _run(*traced, program):
+    return program(*traced)

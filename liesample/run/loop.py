@@ -242,7 +242,19 @@ def program(sampler: Sampler, positions):
         dtype = jnp.finfo(dtype).dtype
     if not jnp.issubdtype(dtype, jnp.floating):
         return sampler, None
-    return structure.build, {k: jnp.asarray(v, dtype) for k, v in structure.values.items()}
+    return structure.build, {k: _traced(v, dtype) for k, v in structure.values.items()}
+
+
+def _traced(value, dtype):
+    """A structure's value as the array the program traces: a Python number or a real 0-d
+    array (``β``, a step size) in the positions' dtype; NumPy integers (a step count), arrays
+    and pytrees of them (a mass, a field, a model's data) in their own dtype."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return jnp.asarray(value, dtype)
+    if isinstance(value, (np.floating, np.ndarray, jax.Array)) and np.ndim(value) == 0:
+        if jnp.issubdtype(jnp.result_type(value), jnp.floating):
+            return jnp.asarray(value, dtype)
+    return jax.tree.map(jnp.asarray, value)
 
 
 def _stepper(sampler, values):

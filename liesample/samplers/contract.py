@@ -59,6 +59,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from liesample.foundation.identity import Program
 from liesample.foundation.validation import single_key
 from liesample.integrators.chain_loop import DeclaresNoiseBlocks
 
@@ -68,6 +69,7 @@ __all__ = [
     "SAMPLE_STATS_NAMES",
     "BasicInfo",
     "DrawNames",
+    "Rebuild",
     "Sampler",
     "SamplerInfo",
     "Structure",
@@ -76,6 +78,7 @@ __all__ = [
     "check_info",
     "energy_name",
     "first_bad_chain",
+    "rebuild_structure",
     "sampling_api",
     "setting",
     "step_key",
@@ -242,6 +245,38 @@ class Structure(NamedTuple):
 
     build: Callable
     values: Mapping
+
+
+class Rebuild(Program):
+    """A :class:`Structure`'s ``build`` for a sampler built by one call of its factory:
+    ``build(**values)`` is ``factory(*args, **options, **values)`` (without the
+    :class:`ValidityWarning` its first build gave), and two are equal when their factories are
+    and their ``args`` and ``options`` are canonically equal
+    (:class:`liesample.foundation.identity.Program`): the same log density and space, the same
+    scheme and options, whatever the numbers in ``values``."""
+
+    __slots__ = ()
+
+    def __init__(self, factory: Callable, args: tuple, options: Mapping):
+        super().__init__(factory, tuple(args), dict(options))
+
+    def __call__(self, **values):  # type: ignore[override]
+        args, options = self.static
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ValidityWarning)
+            return self.make(*args, **options, **values)
+
+
+def rebuild_structure(factory: Callable, args: tuple, options: Mapping, values: Mapping):
+    """The :class:`Structure` of the sampler ``factory(*args, **options, **values)``, or ``None``
+    where ``args`` or ``options`` have no canonical form (the sampler is then compiled for its
+    own object). ``values`` left ``None`` are options (a program's shape), not numbers."""
+    numbers = {k: v for k, v in values.items() if v is not None}
+    options = {**options, **{k: v for k, v in values.items() if v is None}}
+    build = Rebuild(factory, args, options)
+    if not build.by_value:
+        return None
+    return Structure(build, numbers)
 
 
 class Sampler(blackjax.base.SamplingAlgorithm, DeclaresNoiseBlocks):

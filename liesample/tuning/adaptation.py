@@ -59,7 +59,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.flatten_util import ravel_pytree
 
-from liesample.foundation.compile import jit
+from liesample.foundation.identity import Program, run_program
 from liesample.foundation.types import LogDensityFn
 from liesample.foundation.validation import finite_float, prng_key
 from liesample.geometry import spaces
@@ -71,7 +71,11 @@ from liesample.samplers.contract import (
     as_sampler,
     first_bad_chain,
 )
-from liesample.samplers.cotangent._core import check_logdensity_fn, check_starts
+from liesample.samplers.cotangent._core import (
+    check_logdensity_fn,
+    check_starts,
+    with_model_arguments,
+)
 from liesample.samplers.cotangent._euclidean import default_magnetic_field
 from liesample.samplers.cotangent.magnetic_hmc import magnetic_hmc
 from liesample.tuning.protocol import run_adaptation, schedule
@@ -158,6 +162,8 @@ def window_adaptation(
     integration_time: float | None = None,
     adapt_mass: bool = True,
     progress_bar: bool = False,
+    model_args: tuple = (),
+    model_kwargs: dict | None = None,
     **parameters: Any,
 ) -> GeometricAdaptation:
     """Tune ``algorithm`` (``liesample.geometric_hmc``, ``liesample.geometric_langevin``, or
@@ -181,6 +187,10 @@ def window_adaptation(
         given.
     adapt_mass : bool
         Adapt the inverse mass (else keep ``inverse_mass_matrix`` or unit mass).
+    model_args, model_kwargs : tuple, dict
+        Arguments of ``logdensity_fn`` after the position, as for the sampler
+        (:func:`liesample.geometric_hmc`): numbers of the compiled warm-up, so the same
+        ``logdensity_fn`` at other data compiles nothing new. ``magnetic_hmc`` takes none here.
     parameters
         The sampler's other arguments: ``num_integration_steps`` (HMC, fixes ``L``),
         ``friction`` (Langevin, default 1), ``inverse_mass_matrix`` (the starting mass),
@@ -223,14 +233,15 @@ def window_adaptation(
         )
     if space is None:
         raise TypeError(f"window_adaptation({name}, logdensity_fn, space): give the space")
-    check_logdensity_fn(logdensity_fn)
+    with_model_arguments(logdensity_fn, model_args, model_kwargs)  # each argument checked
+    model = (tuple(model_args), dict(model_kwargs or {}))
     _check_flags(adapt_mass=adapt_mass, progress_bar=progress_bar)
     del progress_bar  # accepted for BlackJAX compatibility; the warm-up runs in one compiled loop
     spaces._spaces(space)
     finite_float("initial_step_size", initial_step_size, positive=True)
     plan = _window_plan(algorithm, declared, target_acceptance_rate, integration_time, parameters)
     warm_up = functools.partial(
-        _window_run, plan, algorithm, logdensity_fn, space, initial_step_size, adapt_mass
+        _window_run, plan, algorithm, logdensity_fn, model, space, initial_step_size, adapt_mass
     )
 
     def run(rng_key, initial_position, num_steps: int = 1000):
@@ -255,25 +266,32 @@ def _check_flags(**flags) -> None:
 
 
 class _WindowPlan(NamedTuple):
-    """What :func:`window_adaptation` checked: the kernel and its options, the sampler's other
-    parameters, the target rate, the starting mass, a fixed ``L`` (or ``None``) and the rule
-    for ``T`` (HMC with ``L`` unset: jittered)."""
+    """What :func:`window_adaptation` checked: the sampler's API object and its kernel's
+    options, the sampler's other parameters, the target rate, the starting mass, a fixed ``L``
+    (or ``None``) and the rule for ``T`` (HMC with ``L`` unset: jittered): its initial time and
+    whether it learns. Values only, so that equal plans share one compiled warm-up."""
 
-    kernel: Callable
+    algorithm: Any
     build_options: dict
     parameters: dict
     target: float
     initial_mass: object
     is_hmc: bool
     fixed_steps: int | None
-    lengths: object
+    time: float
+    learn: bool
+
+    @property
+    def lengths(self):
+        """The trajectory rule (:func:`liesample.tuning.trajectory.trajectory_adaptation`)."""
+        return trajectory_adaptation(self.time, learn=self.learn)
 
 
 def _window_plan(algorithm, declared, target_acceptance_rate, integration_time, parameters):
     """Validate ``window_adaptation``'s arguments against the sampler's declaration."""
     name = type(algorithm).__name__
     build_options = {k: parameters.pop(k) for k in declared.options if k in parameters}
-    kernel = algorithm.build_kernel(**build_options)
+    algorithm.build_kernel(**build_options)  # its options checked now, by name
     is_hmc = "num_integration_steps" in declared.adapted
     fixed_steps = parameters.pop("num_integration_steps", None)
     if not is_hmc and (fixed_steps is not None or integration_time is not None):
@@ -302,13 +320,12 @@ def _window_plan(algorithm, declared, target_acceptance_rate, integration_time, 
         )
     initial_mass = parameters.pop("inverse_mass_matrix", None)
     fixed = None if fixed_steps is None else int(fixed_steps)
-    lengths = trajectory_adaptation(time, learn=learn)
     return _WindowPlan(
-        kernel, build_options, parameters, target, initial_mass, is_hmc, fixed, lengths
+        algorithm, build_options, parameters, target, initial_mass, is_hmc, fixed, time, learn
     )
 
 
-def _window_run(plan, algorithm, logdensity_fn, space, initial_step_size, adapt_mass,
+def _window_run(plan, algorithm, logdensity_fn, model, space, initial_step_size, adapt_mass,
                 rng_key, initial_position, num_steps):  # fmt: skip
     """``run`` of :func:`window_adaptation`: the chains' states, the warm-up (the adaptation of
     :func:`_window_windows` run by :func:`liesample.tuning.protocol.run_adaptation`) and the
@@ -318,13 +335,14 @@ def _window_run(plan, algorithm, logdensity_fn, space, initial_step_size, adapt_
     rng_key = prng_key(rng_key)
     num_chains = _num_chains(space, initial_position)
     batched = num_chains is not None
-    init = lambda x: algorithm.init(x, logdensity_fn, space)
+    init = Program(_init_program, algorithm, logdensity_fn, space)  # compiled once per value
     if batched:
         check_starts(space)(initial_position)
-        states = jit(jax.vmap(init))(initial_position)  # one compilation, not one per operation
+        states = run_program(init, initial_position, model)
     else:
         spaces.check_position(space, initial_position, "initial_position")
-        states = jax.tree.map(lambda leaf: leaf[None], jit(init)(initial_position))
+        one = jax.tree.map(lambda leaf: leaf[None], initial_position)
+        states = run_program(init, one, model)
     chain = first_bad_chain(np.isfinite(np.asarray(states.logdensity)))
     if chain is not None:  # under jit, init does not check log π
         raise ValueError(
@@ -336,30 +354,12 @@ def _window_run(plan, algorithm, logdensity_fn, space, initial_step_size, adapt_
         "step_size": jnp.asarray(initial_step_size, dtype),
         "inverse_mass_matrix": spaces.check_inverse_mass(space, plan.initial_mass, dtype),
     }
-    adaptation = windows_adaptation(_window_windows(plan, space, adapt_mass))
-
-    def sampler_at(step_size, inverse_mass_matrix, num_integration_steps=None,
-                   integration_time=None):  # fmt: skip
-        del integration_time
-        extra = {"step_size": step_size, "inverse_mass_matrix": inverse_mass_matrix}
-        if num_integration_steps is not None:
-            extra["num_integration_steps"] = num_integration_steps
-
-        def step(key, state):
-            return plan.kernel(key, state, logdensity_fn, space, **extra, **plan.parameters)
-
-        return Sampler(init, step)
-
-    def record(parameters, state, info):
-        steps = parameters.get("num_integration_steps", jnp.asarray(plan.fixed_steps or 1))
-        return AdaptationInfo(state, info, parameters["step_size"], steps)
-
-    @jit
-    def warmup(chain_keys, states, start):
-        return run_adaptation(adaptation, sampler_at, chain_keys, states, start, num_steps, record)
-
+    warmup = Program(
+        _window_program, plan._replace(initial_mass=None), logdensity_fn, space, adapt_mass,
+        int(num_steps),
+    )  # fmt: skip
     chain_keys = jax.random.split(rng_key, num_chains or 1)
-    states, tuned, info = warmup(chain_keys, states, start)
+    states, tuned, info = run_program(warmup, chain_keys, states, start, model)
     info = AdaptationInfo(*_steps_first(info[:2]), *(x[0] for x in info[2:]))
     if not batched:
         states, info = (
@@ -380,6 +380,50 @@ def _window_run(plan, algorithm, logdensity_fn, space, initial_step_size, adapt_
         parameters["jitter"] = True
     parameters.update(plan.build_options)
     return (states, parameters), info
+
+
+def _init_program(algorithm, logdensity_fn, space):
+    """Every chain's initial state, for the model's arguments ``model``
+    (:class:`liesample.foundation.identity.Program`)."""
+
+    def init(positions, model):
+        density = with_model_arguments(logdensity_fn, *model)
+        return jax.vmap(lambda x: algorithm.init(x, density, space))(positions)
+
+    return init
+
+
+def _window_program(plan, logdensity_fn, space, adapt_mass, num_steps):
+    """The warm-up of :func:`_window_run` as a function of the chains' keys, states and start
+    (:class:`liesample.foundation.identity.Program`: one compilation for equal plans)."""
+    kernel = plan.algorithm.build_kernel(**plan.build_options)
+    adaptation = windows_adaptation(_window_windows(plan, space, adapt_mass))
+
+    def warmup(chain_keys, states, start, model):
+        density = with_model_arguments(logdensity_fn, *model)
+
+        def init(position):
+            return plan.algorithm.init(position, density, space)
+
+        def sampler_at(step_size, inverse_mass_matrix, num_integration_steps=None,
+                       integration_time=None):  # fmt: skip
+            del integration_time
+            extra = {"step_size": step_size, "inverse_mass_matrix": inverse_mass_matrix}
+            if num_integration_steps is not None:
+                extra["num_integration_steps"] = num_integration_steps
+
+            def step(key, state):
+                return kernel(key, state, density, space, **extra, **plan.parameters)
+
+            return Sampler(init, step)
+
+        def record(parameters, state, info):
+            steps = parameters.get("num_integration_steps", jnp.asarray(plan.fixed_steps or 1))
+            return AdaptationInfo(state, info, parameters["step_size"], steps)
+
+        return run_adaptation(adaptation, sampler_at, chain_keys, states, start, num_steps, record)
+
+    return warmup
 
 
 def _steps_first(records):
@@ -473,6 +517,8 @@ def magnetic_window_adaptation(
     progress_bar: bool = False,
     integrator: str | Sequence[tuple[str, float]] | None = None,
     algorithm: SamplingAPI[...] = magnetic_hmc,
+    model_args: tuple = (),
+    model_kwargs: dict | None = None,
 ) -> GeometricAdaptation:
     """Tune ``liesample.magnetic_hmc`` on several chains at once: step size, diagonal mass, the
     field (jointly with both) and the trajectory length (ChEES).
@@ -540,6 +586,8 @@ def magnetic_window_adaptation(
     """
     _check_flags(progress_bar=progress_bar)
     del progress_bar  # accepted for BlackJAX compatibility; the warm-up is one compiled loop
+    with_model_arguments(logdensity_fn, model_args, model_kwargs)  # each argument checked
+    model = (tuple(model_args), dict(model_kwargs or {}))
     plan = _magnetic_plan(
         algorithm, logdensity_fn, angle, initial_step_size, target_acceptance_rate,
         integration_time, initial_integration_time, learning_rate, adapt_mass,
@@ -548,7 +596,7 @@ def magnetic_window_adaptation(
 
     def run(rng_key, initial_positions, num_steps: int = 1000):
         """Warm up ``C`` chains for ``num_steps`` transitions; ``((states, parameters), info)``."""
-        return _magnetic_run(plan, rng_key, initial_positions, num_steps)
+        return _magnetic_run(plan, model, rng_key, initial_positions, num_steps)
 
     return GeometricAdaptation(run)
 
@@ -564,7 +612,13 @@ class _MagneticPlan(NamedTuple):
     adapt_mass: bool
     max_steps: int
     options: dict  # the sampler's keywords: divergence_threshold and the scheme
-    lengths: TrajectoryAdaptation | None
+    trajectory: tuple  # trajectory_adaptation's arguments (values: equal plans, one program)
+
+    @property
+    def lengths(self) -> TrajectoryAdaptation:
+        """The trajectory rule (:func:`liesample.tuning.trajectory.trajectory_adaptation`)."""
+        time, learning_rate, max_steps, learn = self.trajectory
+        return trajectory_adaptation(time, learning_rate, max_steps, learn=learn)
 
 
 def _magnetic_plan(algorithm, logdensity_fn, angle, initial_step_size, target_acceptance_rate,
@@ -594,50 +648,39 @@ def _magnetic_plan(algorithm, logdensity_fn, angle, initial_step_size, target_ac
         raise ValueError(f"max_num_integration_steps must be an integer >= 1, got {max_steps!r}")
     max_steps = int(max_steps)
     divergence_threshold = finite_float("divergence_threshold", divergence_threshold, positive=True)
-    lengths = trajectory_adaptation(
+    trajectory = (
         initial_time if integration_time is None else integration_time,
         learning_rate,
         max_steps,
-        learn=integration_time is None,
+        integration_time is None,
     )
+    trajectory_adaptation(*trajectory[:3])  # its arguments checked now, by name
     options = {"divergence_threshold": divergence_threshold, **scheme}
     return _MagneticPlan(
         algorithm, logdensity_fn, angle, target, initial_step_size, adapt_mass, max_steps,
-        options, lengths,
+        options, trajectory,
     )  # fmt: skip
 
 
-def _magnetic_run(plan: _MagneticPlan, rng_key, initial_positions, num_steps):
+def _magnetic_run(plan: _MagneticPlan, model, rng_key, initial_positions, num_steps):
     """``run`` of :func:`magnetic_window_adaptation`: the adaptation of
     :func:`_magnetic_windows` run by :func:`liesample.tuning.protocol.run_adaptation`."""
     if isinstance(num_steps, bool) or int(num_steps) != num_steps or num_steps < 20:
         raise ValueError(f"num_steps must be an integer >= 20, got {num_steps!r}")
     num_steps = int(num_steps)
     rng_key = prng_key(rng_key)
-    flat = _flat_starts(initial_positions, plan.logdensity_fn)
+    density = with_model_arguments(plan.logdensity_fn, *model)
+    flat = _flat_starts(initial_positions, density)
     num_chains, dimension = flat.shape
-    states = jax.vmap(lambda x: plan.algorithm.init(x, plan.logdensity_fn))(initial_positions)
+    states = jax.vmap(lambda x: plan.algorithm.init(x, density))(initial_positions)
     start = {"step_size": jnp.asarray(plan.initial_step_size, flat.dtype),
              "inverse_mass_matrix": jnp.ones(dimension, flat.dtype)}  # fmt: skip
-    adaptation = windows_adaptation(_magnetic_windows(plan, num_steps, dimension, flat.dtype))
-
-    def sampler_at(step_size, inverse_mass_matrix, num_integration_steps, integration_time,
-                   magnetic_field, strength):  # fmt: skip
-        del integration_time, strength
-        # the top-level API: the flows e^{±εGM⁻¹} are computed once per step for all chains
-        sampler = plan.algorithm(plan.logdensity_fn, step_size, inverse_mass_matrix,
-                                 num_integration_steps, magnetic_field, **plan.options)  # fmt: skip
-        return as_sampler(sampler)
-
-    def record(p, state, info):
-        return MagneticAdaptationInfo(state, info, p["step_size"], p["num_integration_steps"],
-                                      p["integration_time"], p["strength"])  # fmt: skip
-
-    @jit
-    def warmup(chain_keys, states, start):
-        return run_adaptation(adaptation, sampler_at, chain_keys, states, start, num_steps, record)
-
-    states, tuned, info = warmup(jax.random.split(rng_key, num_chains), states, start)
+    warmup = Program(
+        _magnetic_program, plan._replace(initial_step_size=None), num_steps, dimension,
+        np.dtype(flat.dtype).name,
+    )  # fmt: skip
+    keys = jax.random.split(rng_key, num_chains)
+    states, tuned, info = run_program(warmup, keys, states, start, model)
     step_size = float(tuned["step_size"])
     trajectory = float(tuned["integration_time"])
     inverse_mass = np.asarray(tuned["inverse_mass_matrix"])
@@ -658,6 +701,33 @@ def _magnetic_run(plan: _MagneticPlan, rng_key, initial_positions, num_steps):
     times = info.trajectory_length  # the T of each transition, then the tuned one last
     info = info._replace(trajectory_length=times.at[-1].set(trajectory))
     return (states, parameters), info
+
+
+def _magnetic_program(plan: _MagneticPlan, num_steps, dimension, dtype):
+    """The warm-up of :func:`_magnetic_run` as a function of the chains' keys, states and start
+    (:class:`liesample.foundation.identity.Program`: one compilation for equal plans)."""
+    adaptation = windows_adaptation(_magnetic_windows(plan, num_steps, dimension, dtype))
+
+    def record(p, state, info):
+        return MagneticAdaptationInfo(state, info, p["step_size"], p["num_integration_steps"],
+                                      p["integration_time"], p["strength"])  # fmt: skip
+
+    def warmup(chain_keys, states, start, model):
+        args, kwargs = model
+        options = {**plan.options, **({"model_args": args} if args else {}),
+                   **({"model_kwargs": kwargs} if kwargs else {})}  # fmt: skip
+
+        def sampler_at(step_size, inverse_mass_matrix, num_integration_steps, integration_time,
+                       magnetic_field, strength):  # fmt: skip
+            del integration_time, strength
+            # the top-level API: the flows e^{±εGM⁻¹} are computed once per step for all chains
+            sampler = plan.algorithm(plan.logdensity_fn, step_size, inverse_mass_matrix,
+                                     num_integration_steps, magnetic_field, **options)  # fmt: skip
+            return as_sampler(sampler)
+
+        return run_adaptation(adaptation, sampler_at, chain_keys, states, start, num_steps, record)
+
+    return warmup
 
 
 def _magnetic_windows(plan: _MagneticPlan, num_steps, dimension, dtype) -> Windows:

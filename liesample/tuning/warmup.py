@@ -150,6 +150,10 @@ def warm_up(sampler: Sampler, rng_key, chain_keys, states, initial_positions, nu
     return tunable.rebuild(step_size, source), moved
 
 
+MODEL = ("model_args", "model_kwargs")
+"""The keywords of a log-density sampler that carry its model's arguments (the warm-up passes
+them on as numbers of its program)."""
+
 INITIAL_STEP_SIZE = 0.1
 """Where dual averaging starts for a T*G sampler built without a step
 (:func:`liesample.window_adaptation`'s ``initial_step_size``)."""
@@ -178,7 +182,7 @@ def window_warm_up(sampler: Sampler, rng_key, initial_positions, num_warmup: int
     initial = sampler.settings["step_size"] if tunable.given else INITIAL_STEP_SIZE
     adapt_mass = "inverse_mass_matrix" not in kept
     if tunable.method == "chees":  # magnetic HMC: every parameter, then the jittered sampler
-        options = {k: kept[k] for k in tunable.options if k in kept}
+        options = {k: kept[k] for k in (*tunable.options, *MODEL) if k in kept}
         warm = magnetic_window_adaptation(*factory.args, initial_step_size=initial, **options)
         adapted = list(tunable.adapted)
     else:

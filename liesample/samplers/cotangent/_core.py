@@ -25,7 +25,7 @@ argument, a name of :data:`liesample.geometry.cotangent.SCHEMES` or a coefficien
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import NamedTuple
 
 import jax
@@ -67,6 +67,7 @@ __all__ = [
     "kernel_move",
     "make_move",
     "metropolis",
+    "model_values",
     "ravelled",
     "scheme_setting",
     "scheme_step",
@@ -75,6 +76,7 @@ __all__ = [
     "space_settings",
     "trajectory_cost",
     "unadjusted_transition",
+    "with_model_arguments",
 ]
 
 
@@ -134,6 +136,39 @@ def check_logdensity_fn(logdensity_fn) -> Callable:
             f"got {logdensity_fn!r}"
         )
     return logdensity_fn
+
+
+def with_model_arguments(logdensity_fn: Callable, model_args=(), model_kwargs=None) -> Callable:
+    """``position ↦ logdensity_fn(position, *model_args, **model_kwargs)``: the log density of
+    a model at its data and constants (NumPyro's ``model_args`` / ``model_kwargs``), which a
+    sampler passes as numbers of its compiled program, so that the same ``logdensity_fn`` at
+    other data or constants reuses it. ``logdensity_fn`` itself without arguments."""
+    check_logdensity_fn(logdensity_fn)
+    if not isinstance(model_args, (tuple, list)):
+        raise TypeError(
+            f"model_args must be a tuple of the log density's arguments after the position, "
+            f"got {type(model_args).__name__}; e.g. model_args=(data,)"
+        )
+    if model_kwargs is not None and not isinstance(model_kwargs, Mapping):
+        raise TypeError(
+            f"model_kwargs must be a dict of the log density's keyword arguments, got "
+            f"{type(model_kwargs).__name__}; e.g. model_kwargs={{'scale': 2.0}}"
+        )
+    if not model_args and not model_kwargs:
+        return logdensity_fn
+    args, kwargs = tuple(model_args), dict(model_kwargs or {})
+    return lambda position: logdensity_fn(position, *args, **kwargs)
+
+
+def model_values(model_args, model_kwargs) -> dict:
+    """The model's arguments as a structure's values (numbers of the compiled program; none
+    when the model takes none)."""
+    values = {}
+    if model_args:
+        values["model_args"] = tuple(model_args)
+    if model_kwargs:
+        values["model_kwargs"] = dict(model_kwargs)
+    return values
 
 
 def check_logdensity_value(logdensity_fn: Callable, position) -> None:
@@ -369,11 +404,12 @@ def unset_step(sampler: str, arguments: str = "logdensity_fn, space") -> Callabl
 
 
 def space_sampler(logdensity_fn, space, step_fn: Callable, settings: dict,
-                  adaptation=None, divergence_advice=None) -> Sampler:  # fmt: skip
+                  adaptation=None, divergence_advice=None, structure=None) -> Sampler:  # fmt: skip
     """The :class:`~liesample.samplers.contract.Sampler` of ``step_fn`` on ``space``: keyless
     :func:`init` and :func:`check_starts`; ``adaptation`` its
     :class:`~liesample.samplers.contract.Tunable`; ``divergence_advice`` its
-    ``Sampler.divergence_advice`` (:func:`unadjusted_advice` for an unadjusted step)."""
+    ``Sampler.divergence_advice`` (:func:`unadjusted_advice` for an unadjusted step);
+    ``structure`` its :class:`~liesample.samplers.contract.Structure`."""
     check_logdensity_fn(logdensity_fn)
 
     def init_fn(position, rng_key=None):
@@ -392,6 +428,7 @@ def space_sampler(logdensity_fn, space, step_fn: Callable, settings: dict,
         adaptation=adaptation,
         stuck_advice=window_advice(settings["sampler"], "logdensity_fn, space"),
         divergence_advice=divergence_advice,
+        structure=structure,
     )
 
 

@@ -21,7 +21,8 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 from jax.typing import ArrayLike
 
-from liesample.foundation.compile import evaluate, jit
+from liesample.foundation.compile import evaluate
+from liesample.foundation.identity import Program, run_program
 from liesample.foundation.validation import concrete_array, finite_float
 from liesample.geometry.cotangent import (
     KineticMagneticFlow,
@@ -36,6 +37,7 @@ from liesample.samplers.cotangent._core import (
     check_logdensity_value,
     check_positive_step_size,
     make_move,
+    with_model_arguments,
 )
 
 __all__ = [
@@ -108,24 +110,37 @@ def initial_values(position, logdensity_fn):
     return logdensity, grad, jnp.zeros_like(ravel(position), dtype=flat_grad.dtype)
 
 
-def check_starts(logdensity_fn, dimension=None):
+def check_starts(logdensity_fn, dimension=None, model=((), None)):
     """The runner's ``check_positions`` hook of a sampler on ``dimension`` raveled coordinates
-    (:func:`check_euclidean_starts`)."""
+    (:func:`check_euclidean_starts`); ``model``: the log density's ``(model_args,
+    model_kwargs)``."""
 
     def check_positions(positions, **_):
-        check_euclidean_starts(positions, logdensity_fn, dimension)
+        check_euclidean_starts(positions, logdensity_fn, dimension, model)
 
     return check_positions
 
 
-def check_euclidean_starts(positions, logdensity_fn, dimension=None):
-    """Check every start (a pytree whose leaves have a leading chain axis) in one vectorised
-    call: ``log π`` and its gradient finite, ``dimension`` coordinates; the error names the
-    first bad chain."""
+def _finite_program(logdensity_fn):
+    """``(positions, model) ↦`` whether ``log π`` and its gradient are finite at each start
+    (a :class:`liesample.foundation.identity.Program`: one compilation per log density)."""
 
-    def finite(position):
-        logdensity, grad = jax.value_and_grad(logdensity_fn)(position)
-        return jnp.isfinite(logdensity) & jnp.all(jnp.isfinite(ravel(grad)))
+    def finite_at(positions, model):
+        density = with_model_arguments(logdensity_fn, *model)
+
+        def finite(position):
+            logdensity, grad = jax.value_and_grad(density)(position)
+            return jnp.isfinite(logdensity) & jnp.all(jnp.isfinite(ravel(grad)))
+
+        return jax.vmap(finite)(positions)
+
+    return finite_at
+
+
+def check_euclidean_starts(positions, logdensity_fn, dimension=None, model=((), None)):
+    """Check every start (a pytree whose leaves have a leading chain axis) in one vectorised
+    call: ``log π`` (``logdensity_fn`` at the model's arguments ``model``) and its gradient
+    finite, ``dimension`` coordinates; the error names the first bad chain."""
 
     first = jax.tree.map(lambda leaf: leaf[0], positions)
     size = ravel(first).shape[0]
@@ -134,7 +149,9 @@ def check_euclidean_starts(positions, logdensity_fn, dimension=None):
             f"initial_positions[0] has {size} coordinates but inverse_mass_matrix and "
             f"magnetic_field are for {dimension}"
         )
-    ok = np.asarray(evaluate(jit(jax.vmap(finite)), positions))
+    args, kwargs = model
+    program = Program(_finite_program, logdensity_fn)
+    ok = np.asarray(evaluate(run_program, program, positions, (tuple(args), dict(kwargs or {}))))
     chain = first_bad_chain(ok)
     if chain is not None:
         raise ValueError(

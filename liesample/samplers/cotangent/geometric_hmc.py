@@ -36,7 +36,14 @@ from jax.typing import ArrayLike
 from liesample.foundation.types import LogDensityFn, PyTree
 from liesample.foundation.validation import concrete_array
 from liesample.geometry.spaces import SpaceTree
-from liesample.samplers.contract import Sampler, Tunable, sampling_api, setting, step_key
+from liesample.samplers.contract import (
+    Sampler,
+    Tunable,
+    rebuild_structure,
+    sampling_api,
+    setting,
+    step_key,
+)
 from liesample.samplers.cotangent._core import (
     GeometricInfo,
     GeometricState,
@@ -48,12 +55,14 @@ from liesample.samplers.cotangent._core import (
     init,
     kernel_move,
     make_move,
+    model_values,
     partial_refresh,
     scheme_setting,
     space_sampler,
     space_settings,
     trajectory_cost,
     unset_step,
+    with_model_arguments,
 )
 
 __all__ = ["ADAPTATION", "as_top_level_api", "build_kernel", "geometric_hmc", "init"]
@@ -184,6 +193,8 @@ def as_top_level_api(
     persistent: bool = True,
     integrator: str | Sequence[tuple[str, float]] = "leapfrog",
     jitter: bool = False,
+    model_args: tuple = (),
+    model_kwargs: dict | None = None,
 ) -> Sampler:
     """Geometric HMC on Lie groups, spheres and products with ``Rᵈ`` (Metropolis-adjusted).
 
@@ -236,6 +247,11 @@ def as_top_level_api(
         ``u ~ Uniform(0, 1)`` (what :func:`liesample.window_adaptation` returns, with the
         ``T`` its ChEES rule learnt): a fixed length can sit at a resonance of the target (a
         direction whose half period is ``L ε`` barely moves). ``False`` (default): ``L`` steps.
+    model_args, model_kwargs : tuple, dict
+        Arguments of ``logdensity_fn`` after the position (its data and constants, as in
+        NumPyro): ``log π(x) = logdensity_fn(x, *model_args, **model_kwargs)``. They are numbers
+        of the compiled program, so :func:`liesample.sample` of the same ``logdensity_fn`` at
+        other data or constants compiles nothing new (a closure per value would).
 
     Examples
     --------
@@ -250,6 +266,7 @@ def as_top_level_api(
     """
     options = check_options(momentum_persistence, divergence_threshold, persistent)
     scheme = hamiltonian_scheme(integrator)
+    density = with_model_arguments(logdensity_fn, model_args, model_kwargs)
     if not isinstance(jitter, bool):
         raise TypeError(f"jitter must be a bool, got {jitter!r}")
     if num_integration_steps is not None:
@@ -268,15 +285,28 @@ def as_top_level_api(
         geometric_hmc, logdensity_fn, space, num_integration_steps=num_integration_steps,
         inverse_mass_matrix=inverse_mass_matrix, magnetic_field=magnetic_field,
         divergence_threshold=divergence_threshold, momentum_persistence=momentum_persistence,
-        persistent=persistent, integrator=integrator, jitter=jitter,
+        persistent=persistent, integrator=integrator, jitter=jitter, model_args=model_args,
+        model_kwargs=model_kwargs,
     )  # fmt: skip
     tunable = ADAPTATION._replace(given=step_size is not None, rebuild=rebuild)
+    fixed = {"divergence_threshold": divergence_threshold, "integrator": integrator,
+             "momentum_persistence": momentum_persistence, "persistent": persistent,
+             "jitter": jitter}  # fmt: skip
+    numbers = {"step_size": step_size, "inverse_mass_matrix": inverse_mass_matrix,
+               "magnetic_field": magnetic_field}  # fmt: skip
+    numbers.update(model_values(model_args, model_kwargs))
+    if jitter and num_integration_steps is not None:  # drawn per transition: a number
+        numbers["num_integration_steps"] = jnp.asarray(num_integration_steps)
+    else:
+        fixed["num_integration_steps"] = num_integration_steps
+    structure = rebuild_structure(geometric_hmc, (logdensity_fn, space), fixed, numbers)
     if step_size is None:
-        return space_sampler(logdensity_fn, space, unset_step("geometric_hmc"), settings, tunable)
+        unset = unset_step("geometric_hmc")
+        return space_sampler(density, space, unset, settings, tunable, structure=structure)
     check_positive_step_size(step_size)
-    move = make_move(logdensity_fn, space, step_size, inverse_mass_matrix, magnetic_field, scheme)
+    move = make_move(density, space, step_size, inverse_mass_matrix, magnetic_field, scheme)
     step_fn = functools.partial(_step, move, num_integration_steps, jitter, options)
-    return space_sampler(logdensity_fn, space, step_fn, settings, tunable)
+    return space_sampler(density, space, step_fn, settings, tunable, structure=structure)
 
 
 def _settings(space, step_size, num_integration_steps, divergence_threshold, magnetic_field,

@@ -38,7 +38,14 @@ from liesample.foundation.types import LogDensityFn, PyTree
 from liesample.foundation.validation import concrete_array, finite_float
 from liesample.geometry.cotangent import check_scheme
 from liesample.geometry.spaces import SpaceTree
-from liesample.samplers.contract import Sampler, Tunable, sampling_api, setting, step_key
+from liesample.samplers.contract import (
+    Sampler,
+    Tunable,
+    rebuild_structure,
+    sampling_api,
+    setting,
+    step_key,
+)
 from liesample.samplers.cotangent._core import (
     GeometricInfo,
     GeometricState,
@@ -51,6 +58,7 @@ from liesample.samplers.cotangent._core import (
     init,
     kernel_move,
     make_move,
+    model_values,
     scheme_setting,
     space_sampler,
     space_settings,
@@ -58,6 +66,7 @@ from liesample.samplers.cotangent._core import (
     unadjusted_advice,
     unadjusted_transition,
     unset_step,
+    with_model_arguments,
 )
 
 __all__ = ["ADAPTATION", "as_top_level_api", "build_kernel", "geometric_langevin", "init"]
@@ -208,6 +217,8 @@ def as_top_level_api(
     adjusted: bool = False,
     divergence_threshold: float = 1000.0,
     integrator: str | Sequence[tuple[str, float]] = "obab",
+    model_args: tuple = (),
+    model_kwargs: dict | None = None,
 ) -> Sampler:
     """Geometric kinetic Langevin on Lie groups, spheres and products with ``Rᵈ``.
 
@@ -233,6 +244,9 @@ def as_top_level_api(
         coefficient list of kicks ``"B"``, drifts ``"A"`` and OU steps ``"O"``, the fractions
         of each summing to 1 (:mod:`liesample.geometry.cotangent`). With ``adjusted=True`` the
         ``O`` steps must stand at the ends, around a palindromic ``B``/``A`` core.
+    model_args, model_kwargs : tuple, dict
+        Arguments of ``logdensity_fn`` after the position, numbers of the compiled program
+        (:func:`liesample.geometric_hmc`).
 
     Examples
     --------
@@ -247,6 +261,7 @@ def as_top_level_api(
     """
     check_friction(friction)
     scheme = check_options(adjusted, divergence_threshold, integrator)
+    density = with_model_arguments(logdensity_fn, model_args, model_kwargs)
     settings = space_settings(
         "geometric_langevin",
         space,
@@ -263,13 +278,20 @@ def as_top_level_api(
         geometric_langevin, logdensity_fn, space, friction=friction,
         inverse_mass_matrix=inverse_mass_matrix, magnetic_field=magnetic_field,
         adjusted=adjusted, divergence_threshold=divergence_threshold, integrator=integrator,
+        model_args=model_args, model_kwargs=model_kwargs,
     )  # fmt: skip
     tunable = ADAPTATION._replace(given=step_size is not None, rebuild=rebuild)
+    fixed = {"adjusted": adjusted, "divergence_threshold": divergence_threshold,
+             "integrator": integrator}  # fmt: skip
+    numbers = {"step_size": step_size, "friction": friction, "magnetic_field": magnetic_field,
+               "inverse_mass_matrix": inverse_mass_matrix}  # fmt: skip
+    numbers.update(model_values(model_args, model_kwargs))
+    structure = rebuild_structure(geometric_langevin, (logdensity_fn, space), fixed, numbers)
     if step_size is None:
         unset = unset_step("geometric_langevin")
-        return space_sampler(logdensity_fn, space, unset, settings, tunable)
+        return space_sampler(density, space, unset, settings, tunable, structure=structure)
     check_positive_step_size(step_size)
-    move = make_move(logdensity_fn, space, step_size, inverse_mass_matrix, magnetic_field, scheme)
+    move = make_move(density, space, step_size, inverse_mass_matrix, magnetic_field, scheme)
 
     def step_fn(rng_key, state):
         key = step_key(rng_key)
@@ -283,7 +305,7 @@ def as_top_level_api(
             "liesample.geometric_hmc(logdensity_fn, space)"
         )
     )
-    return space_sampler(logdensity_fn, space, step_fn, settings, tunable, advice)
+    return space_sampler(density, space, step_fn, settings, tunable, advice, structure)
 
 
 geometric_langevin = sampling_api(

@@ -40,14 +40,22 @@ from jax.typing import ArrayLike
 
 from liesample.foundation.types import LogDensityFn
 from liesample.geometry.cotangent import LEAPFROG, PhasePoint, compose, drift, kick
-from liesample.samplers.contract import Sampler, Tunable, sampling_api, setting, step_key
+from liesample.samplers.contract import (
+    Sampler,
+    Tunable,
+    rebuild_structure,
+    sampling_api,
+    setting,
+    step_key,
+)
 from liesample.samplers.cotangent._core import (
     UNSET,
-    check_logdensity_fn,
     hamiltonian_scheme,
+    model_values,
     ravelled,
     scheme_setting,
     unset_step,
+    with_model_arguments,
 )
 from liesample.samplers.cotangent._euclidean import (
     MagneticFlow,
@@ -246,6 +254,8 @@ def as_top_level_api(
     integrator: str | Sequence[tuple[str, float]] = "leapfrog",
     momentum_persistence: float = 0.0,
     persistent: bool = True,
+    model_args: tuple = (),
+    model_kwargs: dict | None = None,
 ) -> Sampler:
     """Magnetic HMC: the arguments of ``blackjax.hmc`` (in its order) plus ``magnetic_field``,
     ``momentum_persistence`` and ``persistent``.
@@ -279,6 +289,11 @@ def as_top_level_api(
         Apply the ``(p, s) ↦ (−p, −s)`` flip after each Metropolis step (default ``True``; see
         the module docstring).
 
+    model_args, model_kwargs : tuple, dict
+        Arguments of ``logdensity_fn`` after the position (its data and constants, as in
+        NumPyro): numbers of the compiled program, so the same ``logdensity_fn`` at other data
+        compiles nothing new (:func:`liesample.geometric_hmc`).
+
     Returns
     -------
     liesample.samplers.contract.Sampler
@@ -298,13 +313,15 @@ def as_top_level_api(
     >>> state.position.shape, bool(info.is_divergent)
     ((4,), False)
     """
-    check_logdensity_fn(logdensity_fn)
+    density = with_model_arguments(logdensity_fn, model_args, model_kwargs)
     options = check_options(momentum_persistence, divergence_threshold, persistent)
     scheme = _scheme(integrator)
     tuned = (step_size, inverse_mass_matrix, num_integration_steps, magnetic_field)
+    fixed = {"divergence_threshold": divergence_threshold, "integrator": integrator,
+             "momentum_persistence": momentum_persistence, "persistent": persistent}  # fmt: skip
+    model = model_values(model_args, model_kwargs)
     if all(value is None for value in tuned):
-        return _unset(logdensity_fn, divergence_threshold, integrator, momentum_persistence,
-                      persistent)  # fmt: skip
+        return _unset(logdensity_fn, fixed, model)
     if any(value is None for value in tuned):
         raise ValueError(
             "magnetic_hmc takes step_size, inverse_mass_matrix, num_integration_steps and "
@@ -316,13 +333,13 @@ def as_top_level_api(
     move = euclidean_move(step_size, inverse_mass_matrix, magnetic_field, scheme)
 
     def init_fn(position, rng_key=None):
-        state = init(position, logdensity_fn, rng_key)
+        state = init(position, density, rng_key)
         check_parameters(step_size, inverse_mass_matrix, magnetic_field, ravel(position).shape[0])
         return state
 
     def step_fn(rng_key, state):
         key = step_key(rng_key)
-        return _transition(key, state, logdensity_fn, move, num_integration_steps, options)
+        return _transition(key, state, density, move, num_integration_steps, options)
 
     settings = {
         "sampler": "magnetic_hmc",
@@ -335,34 +352,42 @@ def as_top_level_api(
     }
     if not callable(integrator):
         settings.update(scheme_setting(integrator))
-    check_positions = check_starts(logdensity_fn, d)
+    check_positions = check_starts(logdensity_fn, d, (model_args, model_kwargs))
+    numbers = {"step_size": step_size, "inverse_mass_matrix": inverse_mass_matrix,
+               "magnetic_field": magnetic_field, **model}  # fmt: skip
+    fixed["num_integration_steps"] = num_integration_steps
     return Sampler(
         init_fn,
         step_fn,
         settings=settings,
         check_positions=check_positions,
         stuck_advice=STUCK_ADVICE,
+        structure=rebuild_structure(magnetic_hmc, (logdensity_fn,), fixed, numbers),
     )
 
 
-def _unset(logdensity_fn, divergence_threshold, integrator, momentum_persistence,
-           persistent) -> Sampler:  # fmt: skip
+def _unset(logdensity_fn, fixed: dict, model: dict) -> Sampler:
     """``magnetic_hmc(logdensity_fn)``: a sampler that cannot step, declaring how
     :func:`liesample.sample`'s warm-up tunes it (``"chees"``) and rebuilds it
-    (:func:`jittered_magnetic_hmc` with the other arguments)."""
-    rebuild = functools.partial(
-        jittered_magnetic_hmc, logdensity_fn, divergence_threshold=divergence_threshold,
-        integrator=integrator, momentum_persistence=momentum_persistence, persistent=persistent,
-    )  # fmt: skip
+    (:func:`jittered_magnetic_hmc` with the other arguments, ``fixed``, and the model's
+    arguments ``model``)."""
+    rebuild = functools.partial(jittered_magnetic_hmc, logdensity_fn, **fixed, **model)
     settings = {"sampler": "magnetic_hmc", "step_size": None, "step_size_source": UNSET}
+    density = with_model_arguments(logdensity_fn, *_model_arguments(model))
     return Sampler(
-        lambda position, rng_key=None: init(position, logdensity_fn, rng_key),
+        lambda position, rng_key=None: init(position, density, rng_key),
         unset_step("magnetic_hmc", "logdensity_fn"),
         settings=settings,
-        check_positions=check_starts(logdensity_fn),
+        check_positions=check_starts(logdensity_fn, None, _model_arguments(model)),
         adaptation=ADAPTATION._replace(rebuild=rebuild),
         stuck_advice=STUCK_ADVICE,
+        structure=rebuild_structure(magnetic_hmc, (logdensity_fn,), fixed, model),
     )
+
+
+def _model_arguments(model: dict) -> tuple:
+    """``(model_args, model_kwargs)`` of :func:`liesample.samplers.cotangent._core.model_values`."""
+    return model.get("model_args", ()), model.get("model_kwargs")
 
 
 STUCK_ADVICE = (
@@ -407,6 +432,7 @@ def jittered_magnetic_hmc(
     >>> 1 <= int(info.num_integration_steps) <= 5  # L drawn from {1, …, 5}
     True
     """
+    model = model_values(options.pop("model_args", ()), options.pop("model_kwargs", None))
     base = magnetic_hmc(
         logdensity_fn,
         step_size,
@@ -414,6 +440,7 @@ def jittered_magnetic_hmc(
         num_integration_steps,
         magnetic_field,
         **options,
+        **model,
     )
 
     def step_fn(rng_key, state):
@@ -427,16 +454,22 @@ def jittered_magnetic_hmc(
             steps.astype(int),
             magnetic_field,
             **options,
+            **model,
         )
         return sampler.step(key_step, state)
 
     settings = dict(base.settings)
     settings["sampler"] = "jittered_magnetic_hmc"
     settings["max_num_integration_steps"] = settings.pop("num_integration_steps")
+    numbers = {"step_size": step_size, "inverse_mass_matrix": inverse_mass_matrix,
+               "num_integration_steps": jnp.asarray(num_integration_steps),
+               "magnetic_field": magnetic_field}  # fmt: skip
+    numbers.update(model)
     return Sampler(
         base.init,
         step_fn,
         settings=settings,
         check_positions=base.check_positions,
         stuck_advice=STUCK_ADVICE,
+        structure=rebuild_structure(jittered_magnetic_hmc, (logdensity_fn,), options, numbers),
     )

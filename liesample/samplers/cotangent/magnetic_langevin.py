@@ -37,12 +37,19 @@ import jax.numpy as jnp
 from jax.typing import ArrayLike
 
 from liesample.foundation.types import LogDensityFn
-from liesample.samplers.contract import Sampler, sampling_api, setting, step_key
+from liesample.samplers.contract import (
+    Sampler,
+    rebuild_structure,
+    sampling_api,
+    setting,
+    step_key,
+)
 from liesample.samplers.cotangent._core import (
-    check_logdensity_fn,
+    model_values,
     ravelled,
     scheme_setting,
     unadjusted_advice,
+    with_model_arguments,
 )
 from liesample.samplers.cotangent._euclidean import (
     check_parameters,
@@ -173,6 +180,8 @@ def as_top_level_api(
     magnetic_field: ArrayLike | None,
     *,
     integrator: str | Sequence[tuple[str, float]] = "baoab",
+    model_args: tuple = (),
+    model_kwargs: dict | None = None,
 ) -> Sampler:
     """Unadjusted magnetic Langevin sampler (weak order 2; bias ``O(ε²)``, not corrected).
 
@@ -193,6 +202,9 @@ def as_top_level_api(
         The splitting of one step: ``"baoab"`` (default), ``"obabo"``, ``"obab"``, or a
         coefficient list of ``"B"``, ``"A"`` and ``"O"`` as for
         :func:`liesample.geometric_langevin`.
+    model_args, model_kwargs : tuple, dict
+        Arguments of ``logdensity_fn`` after the position, numbers of the compiled program
+        (:func:`liesample.geometric_hmc`).
 
     Returns
     -------
@@ -209,7 +221,7 @@ def as_top_level_api(
     >>> state.position.shape, float(info.acceptance_rate)  # unadjusted: reported as 1
     ((4,), 1.0)
     """
-    check_logdensity_fn(logdensity_fn)
+    density = with_model_arguments(logdensity_fn, model_args, model_kwargs)
     d = check_parameters(step_size, inverse_mass_matrix, magnetic_field)
     check_friction(friction)
     scheme = langevin_scheme(integrator)
@@ -222,10 +234,10 @@ def as_top_level_api(
                 f"position has {dimension} coordinates but inverse_mass_matrix and "
                 f"magnetic_field are for {d}"
             )
-        return init(position, logdensity_fn, rng_key)
+        return init(position, density, rng_key)
 
     def step_fn(rng_key, state):
-        return _step(step_key(rng_key), state, logdensity_fn, move, friction)
+        return _step(step_key(rng_key), state, density, move, friction)
 
     settings = {
         "sampler": "magnetic_langevin",
@@ -234,7 +246,11 @@ def as_top_level_api(
         "friction": setting(friction),
         **scheme_setting(integrator, "baoab"),
     }
-    check_positions = check_starts(logdensity_fn, d)
+    check_positions = check_starts(logdensity_fn, d, (model_args, model_kwargs))
+    numbers = {"step_size": step_size, "inverse_mass_matrix": inverse_mass_matrix,
+               "friction": friction, "magnetic_field": magnetic_field}  # fmt: skip
+    numbers.update(model_values(model_args, model_kwargs))
+    fixed = {"integrator": integrator}
     return Sampler(
         init_fn,
         step_fn,
@@ -245,6 +261,7 @@ def as_top_level_api(
             "(info.metropolis_rate is the rate the step would have as a Metropolis proposal)."
         ),
         divergence_advice=unadjusted_advice("liesample.magnetic_hmc(logdensity_fn, ...)"),
+        structure=rebuild_structure(magnetic_langevin, (logdensity_fn,), fixed, numbers),
     )
 
 

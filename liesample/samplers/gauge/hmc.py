@@ -24,14 +24,17 @@ the check uses ``|β|`` for every group.
 
 from __future__ import annotations
 
+import dataclasses
 import math
+
+import jax.numpy as jnp
 
 from liesample.foundation.validation import finite_float
 from liesample.samplers.contract import Sampler
 from liesample.samplers.cotangent.geometric_hmc import geometric_hmc
 from liesample.systems.wilson_gauge import WilsonGauge
 
-__all__ = ["gauge_hmc", "stability_limit"]
+__all__ = ["WilsonLogDensity", "gauge_hmc", "stability_limit"]
 
 
 def stability_limit(system: WilsonGauge, beta) -> float:
@@ -43,6 +46,19 @@ def stability_limit(system: WilsonGauge, beta) -> float:
     c = 0.5 if system.abelian else 1.0 / system.n
     omega = math.sqrt(2.0 * c * abs(beta) * 4 * system.dim)
     return math.inf if omega == 0 else 2.0 / omega
+
+
+@dataclasses.dataclass(frozen=True)
+class WilsonLogDensity:
+    """``(links, β) ↦ −β S/β`` (:meth:`WilsonGauge.logdensity`) with ``β`` an argument: one
+    value per lattice, so that every ``β`` of a sweep is a number of one compiled program
+    (``geometric_hmc``'s ``model_args``)."""
+
+    system: WilsonGauge
+
+    def __call__(self, links, beta):
+        action = self.system.action(links)
+        return -jnp.asarray(beta, action.dtype) * action
 
 
 def gauge_hmc(
@@ -71,11 +87,12 @@ def gauge_hmc(
             f"{0.5 * limit:.3g}"
         )
     sampler = geometric_hmc(
-        system.logdensity(beta),
+        WilsonLogDensity(system),
         system.space,
         step_size,
         num_integration_steps,
         momentum_persistence=momentum_persistence,
+        model_args=(beta,),
         **options,
     )
     sampler.settings.update({"system": repr(system), "beta": beta})
