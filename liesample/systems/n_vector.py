@@ -68,6 +68,14 @@ class NVectorSystem(ValueIdentity):
         ``(*shape, n)``.
     check_beta : None
         Every finite ``β`` gives a normalisable law (the state space is compact).
+
+    Examples
+    --------
+    >>> from liesample.systems import n_vector
+    >>> system = n_vector((3, 3), n=4, periodic=True)
+    >>> system, system.n, system.event_shape
+    (NVectorSystem('O(4) square lattice 3x3'), 4, (3, 3, 4))
+    >>> system.check_position(system.default_position)  # unit spins: no error
     """
 
     name: str

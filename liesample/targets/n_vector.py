@@ -81,7 +81,14 @@ def n_vector_bond_mean(n: int, beta: float, coupling: float = 1.0) -> float:
 
 def n_vector_bond_variance(n: int, beta: float, coupling: float = 1.0) -> float:
     """``Var(s_x·s_{x+1}) = 1 − u² − (n − 1) u / K`` of the open O(n) chain without field
-    (``1/n`` at ``K = 0``)."""
+    (``1/n`` at ``K = 0``).
+
+    Examples
+    --------
+    >>> from liesample.targets import n_vector_bond_variance
+    >>> n_vector_bond_variance(4, beta=0.0)  # a coordinate of a uniform point of S³
+    0.25
+    """
     n = check_spin_components(n)
     k = finite_float("beta", beta) * finite_float("coupling", coupling)
     if abs(k) < _SERIES_BELOW:
@@ -156,10 +163,29 @@ class NVectorChainReference:
         return self.coupling**2 * (self.length - 1) * self.bond_variance()
 
 
+PROPOSALS_PER_ROUND = 4
+"""Wood proposals drawn at once per entry: a round keeps the first accepted one, and only an
+entry whose four proposals are all rejected needs another round, so the rejection loop (whose
+rounds every entry of a vectorised call waits for) seldom runs twice."""
+
+
+def _symmetric_beta(rng_key, shape, n: int, dtype):
+    """``z ~ Beta((n−1)/2, (n−1)/2)`` of shape ``shape``, as ``(1 + t)/2`` with ``t = g₁/|g|``
+    the first coordinate of a uniform point of ``S^{n−1}`` (``g ~ N(0, Iₙ)``). The smaller of
+    ``z`` and ``1 − z`` is ``|g_rest|²/(2|g|(|g| + |g₁|))``, free of cancellation at both ends;
+    the sign of ``g₁`` picks which one ``z`` is."""
+    g = jax.random.normal(rng_key, (*shape, n), dtype=dtype)
+    rest = jnp.sum(g[..., 1:] ** 2, axis=-1)
+    norm = jnp.sqrt(rest + g[..., 0] ** 2)
+    small = rest / (2.0 * norm * (norm + jnp.abs(g[..., 0])))
+    return jnp.where(g[..., 0] < 0.0, small, 1.0 - small)
+
+
 def _wood_one_minus_w(rng_key, kappa, n: int):
     """``1 − w``, ``w`` the cosine to the mean of a von Mises–Fisher draw on ``S^{n−1}``
     (density ``∝ exp(κ w)(1 − w²)^{(n−3)/2}``, ``κ ≥ 0``, shape of ``kappa``): Wood's (1994)
-    rejection sampler with its Beta proposal, every entry redrawn until accepted.
+    rejection sampler with its Beta proposal, :data:`PROPOSALS_PER_ROUND` proposals per entry
+    and round, the first accepted one kept, rounds repeated until every entry has one.
 
     With ``m = n − 1``, ``b = m/(2κ + √(4κ² + m²))``, ``x₀ = (1 − b)/(1 + b)`` and
     ``z ~ Beta(m/2, m/2)``, the proposal ``w = (1 − (1 + b)z)/(1 − (1 − b)z)`` is accepted when
@@ -168,20 +194,23 @@ def _wood_one_minus_w(rng_key, kappa, n: int):
     ``κ = 0`` every proposal is accepted and ``(1 + w)/2 ~ Beta(m/2, m/2)``: the uniform law.
     """
     m = n - 1.0
-    b = m / (2.0 * kappa + jnp.sqrt(4.0 * kappa**2 + m**2))
+    b = (m / (2.0 * kappa + jnp.sqrt(4.0 * kappa**2 + m**2)))[..., None]
     t = 2.0 * b / (1.0 + b)
     x0 = 1.0 - t
+    shape = (*kappa.shape, PROPOSALS_PER_ROUND)
 
     def body(carry):
         key, one_minus_w, done = carry
         key, key_z, key_u = jax.random.split(key, 3)
-        z = jax.random.beta(key_z, m / 2.0, m / 2.0, kappa.shape, dtype=kappa.dtype)
+        z = _symmetric_beta(key_z, shape, n, kappa.dtype)
         candidate = 2.0 * b * z / (1.0 - (1.0 - b) * z)
         log_ratio = jnp.log1p(x0 * candidate / t) - jnp.log1p(x0)
-        log_u = jnp.log(jax.random.uniform(key_u, kappa.shape, dtype=kappa.dtype))
-        accept = kappa * (t - candidate) + m * log_ratio >= log_u
-        take = accept & ~done
-        return key, jnp.where(take, candidate, one_minus_w), done | accept
+        log_u = jnp.log(jax.random.uniform(key_u, shape, dtype=kappa.dtype))
+        accept = kappa[..., None] * (t - candidate) + m * log_ratio >= log_u
+        first = jnp.argmax(accept, axis=-1)
+        chosen = jnp.take_along_axis(candidate, first[..., None], axis=-1)[..., 0]
+        take = jnp.any(accept, axis=-1) & ~done
+        return key, jnp.where(take, chosen, one_minus_w), done | take
 
     start = (rng_key, jnp.zeros_like(kappa), jnp.zeros(kappa.shape, bool))
     _, one_minus_w, _ = jax.lax.while_loop(lambda carry: ~jnp.all(carry[2]), body, start)
