@@ -6,6 +6,7 @@ the concrete systems in :mod:`liesample.systems` build instances of it.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
@@ -16,7 +17,7 @@ import numpy as np
 from jax.typing import ArrayLike
 
 from liesample.dynamics.noise_span import check_noise_reaches_orbit
-from liesample.foundation.compile import evaluate
+from liesample.foundation.compile import evaluate, jit
 from liesample.foundation.identity import ValueIdentity
 from liesample.foundation.validation import concrete_array, finite_float
 from liesample.geometry.algebras import LieAlgebra
@@ -31,6 +32,24 @@ def coordinate_noise(mu: jax.Array) -> jax.Array:
     dual Lie algebra, the noise along every basis direction (paper, ``eq:poisson-langevin-eq``
     with ``Φ_i = e_i``)."""
     return jnp.ravel(mu)
+
+
+@functools.partial(jit, static_argnames="algebra")
+def _algebra_casimirs(position, *, algebra):
+    return algebra.casimirs(position)
+
+
+def _casimirs_function(system):
+    """``system.casimirs`` as one program per algebra value (an algebra equal by its fields is
+    shared by every system on it, built or rebuilt), where an eager call would compile each of
+    its operations on its own; the eager method where the algebra has no hash."""
+    if type(system).casimirs is not LiePoissonSystem.casimirs:
+        return system.casimirs
+    try:
+        hash(system.algebra)
+    except TypeError:
+        return system.casimirs
+    return functools.partial(_algebra_casimirs, algebra=system.algebra)
 
 
 @dataclass(frozen=True, eq=False)
@@ -248,7 +267,7 @@ class LiePoissonSystem(ValueIdentity):
             return
         if not np.all(np.isfinite(value)):
             raise ValueError(f"{name} must be finite, got {value}")
-        casimirs = np.asarray(evaluate(self.casimirs, value))
+        casimirs = np.asarray(evaluate(_casimirs_function(self), value))
         if self.positive_casimirs is not None:
             casimirs = casimirs[..., list(self.positive_casimirs)]
         if np.any(casimirs <= 0):

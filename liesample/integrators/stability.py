@@ -107,8 +107,14 @@ def noise_curvatures(
     directions = jax.vmap(lambda row: pullback(row)[0])(rows)
 
     def along(xi):
+        # The orbit curve φ ↦ Ad*_{exp φξ} μ solves μ̇ = ad*_ξ μ, so at φ = 0 its velocity is
+        # ad*_ξ μ and its acceleration ad*_ξ ad*_ξ μ: h'' there is h'' along the parabola
+        # with that 2-jet, which needs no group exponential (nor its second derivative).
+        velocity = system.algebra.ad_star(xi, mu)
+        acceleration = system.algebra.ad_star(xi, velocity)
+
         def h_at(phi):
-            return system.hamiltonian(system.algebra.coadjoint_exp(phi * xi, mu))
+            return system.hamiltonian(mu + phi * velocity + (0.5 * phi * phi) * acceleration)
 
         def slope(phi):
             return jax.jvp(h_at, (phi,), (jnp.ones_like(phi),))[1]
@@ -116,7 +122,13 @@ def noise_curvatures(
         zero = jnp.zeros((), mu.dtype)
         return jax.jvp(slope, (zero,), (jnp.ones_like(zero),))[1]
 
-    return jax.lax.map(along, directions, batch_size=8)  # bounded memory for large states
+    count = directions.shape[0]
+    if count <= _MAX_DIRECTIONS:  # the step-size rule's directions: one batch
+        return jax.vmap(along)(directions)
+    # bounded memory for many directions; a batch that divides them leaves no remainder,
+    # which lax.map would compile as a second copy of the body
+    batch = max(b for b in range(1, 9) if count % b == 0)
+    return jax.lax.map(along, directions, batch_size=batch)
 
 
 def _chosen_directions(num_noises):
@@ -151,6 +163,13 @@ def _worst_curvatures(positions, *, system):
     return jax.lax.map(worst, positions)
 
 
+@functools.partial(jit, static_argnames="system")
+def _casimirs(positions, *, system):
+    """The Casimirs of each of ``positions``: one program per system value, where an eager call
+    would compile each of its operations on its own."""
+    return jax.vmap(system.casimirs)(positions)
+
+
 def stiffness(system: LiePoissonSystem, theta: float, position: ArrayLike) -> float:
     """``θ · max_i |h''_i|`` estimated on the orbit through ``position`` (module docstring).
 
@@ -165,7 +184,7 @@ def stiffness(system: LiePoissonSystem, theta: float, position: ArrayLike) -> fl
     if theta == 0.0:
         return 0.0
     position = np.asarray(position, dtype=float)
-    casimirs = np.asarray(evaluate(system.casimirs, position))
+    casimirs = np.asarray(evaluate(functools.partial(_casimirs, system=system), position[None]))[0]
     cache_key = (position.shape, tuple(np.round(casimirs, 12).reshape(-1)))
     cache = system.__dict__.setdefault("_stiffness_cache", {})
     if cache_key not in cache:
@@ -193,7 +212,7 @@ def stiffness_on_orbits(system: LiePoissonSystem, theta: float, positions: Array
     positions = np.asarray(positions, dtype=float)
     if theta == 0.0:
         return np.zeros(len(positions))
-    casimirs = np.asarray(evaluate(jax.vmap(system.casimirs), positions))
+    casimirs = np.asarray(evaluate(functools.partial(_casimirs, system=system), positions))
     keys = [(positions.shape[1:], tuple(np.round(c, 12).reshape(-1))) for c in casimirs]
     cache = system.__dict__.setdefault("_stiffness_cache", {})
     missing = sorted({i for i, key in enumerate(keys) if key not in cache})

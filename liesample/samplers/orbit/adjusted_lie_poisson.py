@@ -67,7 +67,7 @@ import numpy as np
 
 from liesample.dynamics.poisson_langevin import PoissonLangevin, Scene
 from liesample.dynamics.system import LiePoissonSystem, checked_beta
-from liesample.foundation.compile import evaluate
+from liesample.foundation.compile import evaluate, jit
 from liesample.foundation.validation import concrete_array, finite_float
 from liesample.integrators.chain_loop import DEFAULT_NOISE_BLOCK_SIZE, NoiseBlocks, check_block_size
 from liesample.integrators.stability import check_precision, stiffness
@@ -156,13 +156,8 @@ def check_linear_noise(system: LiePoissonSystem) -> None:
     rng = np.random.default_rng(0)
     points = [base, base + 0.3 * rng.normal(size=base.shape), rng.normal(size=base.shape)]
     probes = [rng.normal(size=base.shape) for _ in range(2)]
-
-    def slopes(point):
-        return np.stack(
-            [np.asarray(jax.jvp(system.noise_hamiltonians, (point,), (v,))[1]) for v in probes]
-        )
-
-    jacobians = evaluate(lambda: [slopes(p) for p in points])
+    slopes = functools.partial(_noise_slopes, system=system)
+    jacobians = np.asarray(evaluate(slopes, np.stack(points), np.stack(probes)))
     scale = max(1.0, float(np.max(np.abs(jacobians[0]))))
     for jacobian in jacobians[1:]:
         if not np.allclose(jacobian, jacobians[0], rtol=0.0, atol=1e-9 * scale):
@@ -172,6 +167,17 @@ def check_linear_noise(system: LiePoissonSystem) -> None:
                 "gradients change with μ, so the proposal is not an involution. Use the "
                 "unadjusted liesample.lie_poisson_langevin for this system."
             )
+
+
+@functools.partial(jit, static_argnames="system")
+def _noise_slopes(points, probes, *, system):
+    """``[point, probe]``: the derivative of ``ĥ`` at each point along each probe, one program
+    per system value (:mod:`liesample.foundation.identity`)."""
+
+    def slopes(point):
+        return jax.vmap(lambda v: jax.jvp(system.noise_hamiltonians, (point,), (v,))[1])(probes)
+
+    return jax.vmap(slopes)(points)
 
 
 def _energy_and_brackets(dynamics: PoissonLangevin, position):
@@ -232,6 +238,12 @@ def build_noise_kernel(system: LiePoissonSystem):
     (:func:`check_linear_noise`).
     """
     check_linear_noise(system)
+    return _noise_kernel(system)
+
+
+def _noise_kernel(system: LiePoissonSystem):
+    """:func:`build_noise_kernel` of a system already checked (the sampler checks it once when
+    it is built, not again in each program that traces its step)."""
     casimir_error = system.step_casimir_error
 
     def kernel(noise, state: AdjustedLiePoissonState, step_size, sigma, beta):
@@ -421,7 +433,7 @@ class _Stepper:
 
     def __call__(self, value, sigma, beta, init_fn=None, **hooks) -> Sampler:
         system, size = self.system, self.noise_block_size
-        noise_kernel = build_noise_kernel(system)
+        noise_kernel = _noise_kernel(system)
         kernel = _keyed(system, noise_kernel)
 
         def step_fn(rng_key, state):
@@ -446,6 +458,7 @@ class _Stepper:
 def _sampler(system, beta, sigma, step_size, target, noise_block_size) -> Sampler:
     """The sampler of the checked arguments: its settings, and the step size it declares
     tunable by dual averaging (:class:`liesample.samplers.contract.Tunable`)."""
+    check_linear_noise(system)
     settings = orbit_settings(
         "adjusted_lie_poisson", system, beta, sigma=sigma, step_size=step_size,
         step_size_source="given", target_acceptance_rate=target,
