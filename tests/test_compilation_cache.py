@@ -28,12 +28,16 @@ def test_the_suites_own_cache_is_kept():
     assert jax.config.jax_compilation_cache_dir == os.environ["JAX_COMPILATION_CACHE_DIR"]
 
 
-_PROBE = "import jax, liesample.systems; print(jax.config.jax_compilation_cache_dir)"
+_PROBE = (
+    "import jax, liesample.systems; print(jax.config.jax_compilation_cache_dir); "
+    "print(jax.config.jax_persistent_cache_min_compile_time_secs)"
+)
 
 
 @pytest.mark.parametrize(("switch", "expected"), [(None, "liesample/jax"), ("0", "None")])
 def test_a_new_process_gets_the_default_cache_or_none(tmp_path, switch, expected):
-    env = {k: v for k, v in os.environ.items() if k not in ("JAX_COMPILATION_CACHE_DIR", SWITCH)}
+    session = ("JAX_COMPILATION_CACHE_DIR", "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", SWITCH)
+    env = {k: v for k, v in os.environ.items() if k not in session}
     env["XDG_CACHE_HOME"] = str(tmp_path)
     if switch is not None:
         env[SWITCH] = switch
@@ -41,8 +45,10 @@ def test_a_new_process_gets_the_default_cache_or_none(tmp_path, switch, expected
         [sys.executable, "-c", _PROBE], env=env, capture_output=True, text=True, timeout=120
     )
     assert out.returncode == 0, out.stderr
-    printed = out.stdout.strip()
+    printed, min_time = out.stdout.split()
     if expected == "None":
         assert printed == "None"
+        assert float(min_time) == 1.0  # JAX's own default, untouched
     else:
         assert printed == str(tmp_path / "liesample" / "jax") and os.path.isdir(printed)
+        assert float(min_time) == 0.0  # every program of a call is kept for the next process

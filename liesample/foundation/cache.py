@@ -13,8 +13,12 @@ the process chose otherwise:
 - otherwise the cache is ``$XDG_CACHE_HOME/liesample/jax`` (``~/.cache/liesample/jax``).
 
 JAX stores only programs whose compilation took at least
-``jax_persistent_cache_min_compile_time_secs`` (one second by default), and it decides whether
-a process uses a cache at its first compilation: import liesample before computing with JAX,
+``jax_persistent_cache_min_compile_time_secs`` (one second by default). A call of a sampler
+compiles tens of small programs (start checks, the step-size rule, the warm-up, the chunks),
+most well under a second, and together they are what a second process would wait for; so in
+its own folder liesample stores every program (:data:`MIN_COMPILE_TIME`), unless the
+environment sets ``JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS``. JAX decides whether a process
+uses a cache at its first compilation: import liesample before computing with JAX,
 as for ``jax_enable_x64``. The cache is the process's, not only liesample's programs: it is
 JAX's one setting.
 """
@@ -29,6 +33,9 @@ SWITCH = "LIESAMPLE_COMPILATION_CACHE"
 ``no``)."""
 
 _OFF = {"0", "false", "off", "no"}
+
+MIN_COMPILE_TIME = 0.0
+"""The shortest compilation liesample's own cache folder stores (seconds): every program."""
 
 
 def cache_directory(configured: str | None, environ: Mapping[str, str]) -> str | None:
@@ -72,4 +79,6 @@ def enable_compilation_cache() -> str | None:
     except OSError:  # a read-only home: run without a cache
         return None
     jax.config.update("jax_compilation_cache_dir", path)
+    if "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS" not in os.environ:
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", MIN_COMPILE_TIME)
     return path
