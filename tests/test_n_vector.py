@@ -211,6 +211,20 @@ def test_recommended_sampler_by_n():
     )
 
 
+@pytest.mark.parametrize("n", [pytest.param(2, marks=pytest.mark.slow), 3])
+def test_a_spin_without_local_field_is_redrawn_on_the_sphere(n):
+    """A site without neighbours or field (``F = 0``) is redrawn uniformly, as a unit vector
+    (on ``S²`` the closed-form draw once returned ``|s| < 1`` there; slow for ``S¹``, whose
+    zero-direction draw is checked by test_von_mises_fisher_on_every_sphere)."""
+    system = n_vector((1,), n)
+    sampler = liesample.heisenberg_heat_bath(system, beta=1.0, overrelaxation=0)
+    keys = jax.random.split(jax.random.key(n), 2000)
+    state = sampler.init(system.default_position)
+    draws = np.asarray(liesample.jit(jax.vmap(lambda k: sampler.step(k, state)[0].position))(keys))
+    np.testing.assert_allclose(np.linalg.norm(draws, axis=-1), 1.0, atol=1e-5)
+    assert np.all(np.abs(draws.mean(axis=(0, 1))) < Z_MAX / math.sqrt(n * draws.shape[0]))
+
+
 # ---------------------------------------------------------------------------------------------
 # Open chains against the exact law
 # ---------------------------------------------------------------------------------------------

@@ -255,8 +255,10 @@ def heat_bath(system: SpinSystem, rng_key, flat, sublattice: Sublattice, beta):
     frozen field ``F_k``, a von Mises–Fisher law (on ``S²``
     :func:`liesample.targets.spins.von_mises_fisher`, on ``S^{n−1}``
     :func:`liesample.targets.n_vector.von_mises_fisher_sphere`); ``F_k = 0`` gives a uniform
-    draw. ``flat``: spins ``(N, n)``."""
+    draw (about ``e_n``, so that the draw is a unit vector). ``flat``: spins ``(N, n)``."""
     direction, norm = _unit(sublattice_field(system, flat, sublattice))
+    axis = jnp.zeros(flat.shape[-1], flat.dtype).at[-1].set(1.0)
+    direction = jnp.where((norm > 0.0)[..., None], direction, axis)
     draw = von_mises_fisher if flat.shape[-1] == 3 else von_mises_fisher_sphere
     return flat.at[sublattice.sites].set(draw(rng_key, direction, beta * norm))
 
