@@ -1,4 +1,5 @@
-"""Wolff single-cluster moves for the classical Heisenberg (O(3)) ferromagnet.
+"""Wolff single-cluster moves for the classical Heisenberg (O(3)) ferromagnet, and for every
+O(n) ferromagnet of :func:`liesample.systems.n_vector` (the embedding holds for every ``n``).
 
 ``heisenberg_wolff(system, beta=β)`` is :func:`liesample.heisenberg_cluster` with
 ``clusters="seed"`` (one implementation: :mod:`liesample.samplers.spins.heisenberg_cluster`),
