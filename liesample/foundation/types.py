@@ -30,8 +30,10 @@ type PyTree = Tree[ArrayLike]
 type PRNGKey = jax.Array
 """A JAX random key (``jax.random.key(seed)`` or the legacy ``jax.random.PRNGKey(seed)``)."""
 
-type LogDensityFn = Callable[[Any], ArrayLike]
-"""``position ↦ log π(position)`` (up to a constant), a real scalar, JAX-traceable. The position
+type LogDensityFn = Callable[..., ArrayLike]
+"""``position ↦ log π(position)`` (up to a constant), a real scalar, JAX-traceable; a sampler
+given ``model_args``/``model_kwargs`` calls it as ``logdensity_fn(position, *model_args,
+**model_kwargs)``. The position
 is what the sampler moves: an array, or a pytree of arrays like its space; a function annotated
 for the position it is given (``jax.Array``, a dict, ...) fits."""
 

@@ -26,7 +26,7 @@ argument, a name of :data:`liesample.geometry.cotangent.SCHEMES` or a coefficien
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -163,7 +163,7 @@ def with_model_arguments(logdensity_fn: Callable, model_args=(), model_kwargs=No
 def model_values(model_args, model_kwargs) -> dict:
     """The model's arguments as a structure's values (numbers of the compiled program; none
     when the model takes none)."""
-    values = {}
+    values: dict[str, Any] = {}
     if model_args:
         values["model_args"] = tuple(model_args)
     if model_kwargs:

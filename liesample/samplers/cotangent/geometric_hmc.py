@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -289,7 +290,7 @@ def as_top_level_api(
         model_kwargs=model_kwargs,
     )  # fmt: skip
     tunable = ADAPTATION._replace(given=step_size is not None, rebuild=rebuild)
-    fixed = {"divergence_threshold": divergence_threshold, "integrator": integrator,
+    fixed: dict[str, Any] = {"divergence_threshold": divergence_threshold, "integrator": integrator,
              "momentum_persistence": momentum_persistence, "persistent": persistent,
              "jitter": jitter}  # fmt: skip
     numbers = {"step_size": step_size, "inverse_mass_matrix": inverse_mass_matrix,

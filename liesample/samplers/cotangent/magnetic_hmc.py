@@ -317,7 +317,7 @@ def as_top_level_api(
     options = check_options(momentum_persistence, divergence_threshold, persistent)
     scheme = _scheme(integrator)
     tuned = (step_size, inverse_mass_matrix, num_integration_steps, magnetic_field)
-    fixed = {"divergence_threshold": divergence_threshold, "integrator": integrator,
+    fixed: dict[str, Any] = {"divergence_threshold": divergence_threshold, "integrator": integrator,
              "momentum_persistence": momentum_persistence, "persistent": persistent}  # fmt: skip
     model = model_values(model_args, model_kwargs)
     if all(value is None for value in tuned):
