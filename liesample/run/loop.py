@@ -30,7 +30,13 @@ from liesample.integrators.chain_loop import run_draws, run_steps
 from liesample.run import arguments
 from liesample.run.checks import DEFAULT_MIN_ACCEPTANCE_RATE, check_run, record_casimir_drift
 from liesample.run.provenance import adapted_fingerprint, run_fingerprint
-from liesample.run.sharding import chain_sharding, check_output, shard_chains, to_host
+from liesample.run.sharding import (
+    LatticeSharding,
+    check_output,
+    run_sharding,
+    shard_chains,
+    to_host,
+)
 from liesample.run.store import Layout, RunFile
 from liesample.samplers.contract import (
     HOOKS,
@@ -74,6 +80,7 @@ class RunOptions:
     chunk_draws: int | None = None
     on_nonfinite: str = "warn"
     devices: object = None
+    lattice_sharding: object = None
     output: object = None
     resume: bool = False
     adapt: bool | None = None
@@ -354,7 +361,7 @@ class _Run:
             else arguments.observable_shapes(_observe(self.log_likelihood_key), self.positions)
         )
         arguments.check_finite_starts(self.positions, self.num_chains)
-        self.sharding = chain_sharding(o.devices, self.num_chains)
+        self.sharding = run_sharding(o.devices, o.lattice_sharding, self.num_chains, self.sampler)
         check_output(o.output, self.sharding)
         self._check_memory(algorithm, int(num_draws), o)
         self.algorithm, self.num_draws, self.options = algorithm, int(num_draws), o
@@ -441,7 +448,10 @@ class _Run:
     def _init_states(self, sampler):
         """Every chain's initial state, sharded as the chains are."""
         static, values = program(sampler, self.positions)
-        return shard_chains(_init_states(self.positions, values, sampler=static), self.sharding)
+        positions = self.positions
+        if isinstance(self.sharding, LatticeSharding):  # each device inits its own sites
+            positions = shard_chains(positions, self.sharding)
+        return shard_chains(_init_states(positions, values, sampler=static), self.sharding)
 
     def _fingerprint(self):
         tree = self.example[0]

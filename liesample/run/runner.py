@@ -15,7 +15,8 @@ range, the starts' chain axis, and whether the steps fit the chains' step counte
 draws the host's and the device's memory (a run that cannot fit is refused, not started).
 
 - **Devices.** ``devices=`` splits the chain axis over several devices with JAX's own sharding
-  (:mod:`liesample.run.sharding`); the draws are those of the unsharded run.
+  (:mod:`liesample.run.sharding`), ``lattice_sharding=`` the sites of one spin or gauge
+  lattice; the draws are those of the unsharded run.
 - **Pytree positions.** ``initial_positions`` may be a pytree (a dict or tuple of arrays, e.g.
   ``{"mu": (chains, 3), "log_kappa": (chains,)}`` for the geometric samplers) whose leaves share
   the leading chain axis; the draws are then a pytree of arrays ``(chains, draws, *event)``.
@@ -103,6 +104,7 @@ def sample_chains(
     chunk_draws: int | None = None,
     on_nonfinite: str = "warn",
     devices: str | int | Sequence[jax.Device] | NamedSharding | None = None,
+    lattice_sharding: int | Mapping[int, int] | None = None,
     output: str | os.PathLike | None = None,
     resume: bool = False,
     adapt: bool | None = None,
@@ -161,6 +163,14 @@ def sample_chains(
     devices : None, "all", int, sequence of jax devices, or NamedSharding
         Split the chains over these devices (:func:`liesample.run.sharding.chain_sharding`); the
         number of chains must be a multiple of the number of devices. ``None``: one device.
+        With ``lattice_sharding``: the number of devices the chains are split over (an int).
+    lattice_sharding : None, int or dict of int to int
+        Split one lattice over several devices (:func:`liesample.run.sharding.run_sharding`):
+        ``n`` splits lattice axis 0 over ``n`` devices, ``{axis: n, …}`` each given lattice
+        axis (of the lattice, not of the position: a gauge field's direction axis does not
+        count) over its ``n``; every extent must divide by its count. For the spin and gauge
+        lattice samplers only; the draws are those of the unsharded run. The mesh is
+        ``devices`` × the counts, on the first devices JAX lists.
     output : str or path, optional
         NetCDF-4 file written chunk by chunk: the ArviZ ``DataTree`` of :func:`sample` (read by
         :func:`load_chains`, verified) plus what a resume needs (:mod:`liesample.run.store`).
@@ -260,7 +270,7 @@ def sample(
         Coordinates by dim name, and extra attributes for the tree.
     run_options
         The other keywords of :func:`sample_chains`: ``thinning``, ``progress_bar``,
-        ``chunk_draws``, ``on_nonfinite``, ``devices``, ``output``, ``resume``, ``adapt``,
+        ``chunk_draws``, ``on_nonfinite``, ``devices``, ``lattice_sharding``, ``output``, ``resume``, ``adapt``,
         ``min_acceptance_rate``, ``observables``, ``keep_positions``, ``callback``,
         ``log_likelihood`` (the tree's ``log_likelihood`` group, for ``az.loo``). With
         ``output=``, the file holds this tree as it grows (:func:`load_chains`).

@@ -30,8 +30,10 @@ processes, and the window warm-ups across processes are not tested.
 
 from __future__ import annotations
 
+import math
 import operator
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any, cast
 
 import jax
@@ -42,9 +44,14 @@ from liesample.foundation.types import PyTree
 
 __all__ = [
     "CHAIN_AXIS",
+    "LatticeLayout",
+    "LatticeSharding",
     "chain_sharding",
     "check_output",
     "initialize_distributed",
+    "lattice_axis_name",
+    "lattice_layout",
+    "run_sharding",
     "shard_chains",
     "to_host",
 ]
@@ -122,7 +129,230 @@ def chain_sharding(
     return sharding
 
 
-def check_output(output, sharding: NamedSharding | None) -> None:
+# --------------------------------------------------------------------------- one lattice
+
+
+def lattice_axis_name(axis: int) -> str:
+    """The name of the mesh axis over which lattice axis ``axis`` is split (``"lattice0"``…)."""
+    return f"lattice{axis}"
+
+
+@dataclass(frozen=True)
+class LatticeLayout:
+    """Where a lattice sampler's sites lie in one chain's position: the lattice ``shape`` on the
+    event axes ``offset … offset + len(shape) − 1`` (``offset`` 0 for spins ``(*shape, n)``,
+    1 for a gauge field ``(d, *shape, …)``); ``system`` names it in messages."""
+
+    shape: tuple[int, ...]
+    offset: int
+    system: str
+
+
+LATTICE_SAMPLERS = (
+    "a spin lattice (liesample.systems.heisenberg or n_vector with heisenberg_heat_bath, "
+    "heisenberg_metropolis, heisenberg_cluster or heisenberg_wolff) or a gauge field "
+    "(liesample.systems.wilson_gauge with wilson_heat_bath or "
+    "liesample.samplers.gauge.hmc.gauge_hmc)"
+)
+
+
+def lattice_layout(sampler) -> LatticeLayout | None:
+    """The lattice of ``sampler``'s positions, read from its declared structure (the spin
+    samplers' and the gauge heat bath's system, ``gauge_hmc``'s log density); ``None`` for a
+    sampler of no lattice.
+
+    Examples
+    --------
+    >>> from liesample.sharding import lattice_layout
+    >>> system = liesample.systems.wilson_gauge("U1", (4, 6))
+    >>> lattice_layout(liesample.wilson_heat_bath(system, beta=1.0)).shape
+    (4, 6)
+    """
+    # imported here: reading liesample.sharding must not import BlackJAX (module notes)
+    from liesample.samplers.contract import Rebuild
+    from liesample.samplers.gauge.hmc import WilsonLogDensity
+    from liesample.systems.heisenberg import SpinLatticeSystem
+    from liesample.systems.n_vector import NVectorSystem
+    from liesample.systems.wilson_gauge import WilsonGauge
+
+    structure = getattr(sampler, "structure", None)
+    build = None if structure is None else structure.build
+    system = getattr(build, "system", None)
+    if system is None and isinstance(build, Rebuild):  # geometric_hmc(density, space, …)
+        args = build.static[0]
+        if args and isinstance(args[0], WilsonLogDensity):
+            system = args[0].system
+    if isinstance(system, (SpinLatticeSystem, NVectorSystem)):
+        return LatticeLayout(tuple(system.event_shape[:-1]), 0, repr(system))
+    if isinstance(system, WilsonGauge):
+        return LatticeLayout(tuple(system.shape), 1, repr(system))
+    return None
+
+
+@dataclass(frozen=True)
+class LatticeSharding:
+    """The chains and a lattice's axes over one device mesh (``lattice_sharding=``): the mesh
+    has the axis :data:`CHAIN_AXIS` (the devices the chains are split over, maybe 1) then one
+    axis per split lattice axis (:func:`lattice_axis_name`). A leaf of the states whose event
+    axes hold the lattice (:class:`LatticeLayout`) is split along those axes too; any other
+    leaf (a key, a chain's energy) along the chain axis only, each device of a chain's lattice
+    holding a copy."""
+
+    mesh: jax.sharding.Mesh
+    layout: LatticeLayout
+    axes: tuple[int, ...]
+
+    @property
+    def chains(self) -> NamedSharding:
+        """The sharding of a leaf with no lattice axes."""
+        return NamedSharding(self.mesh, PartitionSpec(CHAIN_AXIS))
+
+    @property
+    def is_fully_addressable(self) -> bool:
+        return self.chains.is_fully_addressable
+
+    @property
+    def device_set(self) -> set:
+        return set(self.mesh.devices.flat)
+
+    def of(self, leaf) -> NamedSharding:
+        """The sharding of ``leaf`` (chains first)."""
+        shape, start = tuple(np.shape(leaf)), 1 + self.layout.offset
+        if shape[start : start + len(self.layout.shape)] != self.layout.shape:
+            return self.chains
+        spec: list[str | None] = [CHAIN_AXIS] + [None] * (len(shape) - 1)
+        for axis in self.axes:
+            spec[start + axis] = lattice_axis_name(axis)
+        return NamedSharding(self.mesh, PartitionSpec(*spec))
+
+
+def run_sharding(devices, lattice_sharding, num_chains: int, sampler):
+    """The sharding of a run: :func:`chain_sharding` without ``lattice_sharding``, else the
+    :class:`LatticeSharding` of chains × lattice axes, every argument checked before anything
+    is compiled.
+
+    Parameters
+    ----------
+    devices : None or int
+        With ``lattice_sharding``: the number of devices the chains are split over (``None``:
+        1); the mesh is this many times the lattice's devices, the first devices JAX lists.
+    lattice_sharding : None, int or dict of int to int
+        ``n``: lattice axis 0 split over ``n`` devices; ``{axis: n, …}``: each lattice axis
+        (0 … d−1 of the lattice, whatever axes come before it in a position) over its ``n``.
+        Every extent must divide by its count.
+    num_chains : int
+        A multiple of ``devices``.
+    sampler : liesample.samplers.contract.Sampler
+        A lattice sampler (:func:`lattice_layout`).
+
+    Examples
+    --------
+    On one device (the doctests' CPU) a split over one device is the whole lattice:
+
+    >>> from liesample.sharding import run_sharding
+    >>> system = liesample.systems.heisenberg((4, 4), periodic=True)
+    >>> sampler = liesample.heisenberg_heat_bath(system, beta=1.0)
+    >>> tuple(run_sharding(None, {0: 1}, 2, sampler).of(jnp.zeros((2, 4, 4, 3))).spec)
+    ('chain', 'lattice0', None, None)
+    """
+    if lattice_sharding is None:
+        return chain_sharding(devices, num_chains)
+    counts = _lattice_counts(lattice_sharding)
+    layout = lattice_layout(sampler)
+    if layout is None:
+        settings = getattr(sampler, "settings", None) or {}
+        name = settings.get("sampler", type(sampler).__name__)
+        raise ValueError(
+            f"lattice_sharding={lattice_sharding!r}: {name} samples no lattice; lattice_sharding "
+            f"splits the sites of {LATTICE_SAMPLERS}. To spread chains over devices, pass "
+            "devices= instead"
+        )
+    shape = layout.shape
+    for axis, count in counts.items():
+        if axis >= len(shape):
+            raise ValueError(
+                f"lattice_sharding={lattice_sharding!r}: lattice axis {axis} does not exist; "
+                f"the lattice {shape} of {layout.system} has axes 0 to {len(shape) - 1}"
+            )
+        if shape[axis] % count:
+            divisors = [k for k in range(2, shape[axis] + 1) if shape[axis] % k == 0]
+            raise ValueError(
+                f"lattice_sharding={lattice_sharding!r}: lattice axis {axis} has {shape[axis]} "
+                f"sites, which do not split evenly over {count} devices; give it a count that "
+                f"divides {shape[axis]} ({', '.join(map(str, divisors)) or 'none above 1'}), or "
+                "split another axis"
+            )
+    chains = _chain_devices(devices)
+    if num_chains % chains:
+        raise ValueError(
+            f"the number of chains ({num_chains}) must be a multiple of devices={chains}, the "
+            "devices the chains are split over (with lattice_sharding, devices= counts the "
+            "chains' devices only)"
+        )
+    return _mesh_sharding(chains, counts, layout, lattice_sharding)
+
+
+def _lattice_counts(value) -> dict[int, int]:
+    """``lattice_sharding`` as ``{lattice axis: device count}``, checked by type and range."""
+    if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
+        value = {0: value}
+    if not isinstance(value, Mapping) or not value:
+        raise TypeError(
+            "lattice_sharding must be None, a device count n (lattice axis 0 split over n "
+            "devices) or a non-empty dict {lattice axis: device count}, e.g. {0: 2} or "
+            f"{{0: 2, 1: 2}}; got {value!r}"
+        )
+    counts = {}
+    for axis, count in value.items():
+        good_axis = isinstance(axis, (int, np.integer)) and not isinstance(axis, bool)
+        if not good_axis or axis < 0:
+            raise ValueError(
+                f"lattice_sharding={value!r}: its keys are lattice axes, ints 0 to d-1 (0 is "
+                f"the lattice's first axis, whatever comes before it in a position); got {axis!r}"
+            )
+        good_count = isinstance(count, (int, np.integer)) and not isinstance(count, bool)
+        if not good_count or count < 1:
+            raise ValueError(
+                f"lattice_sharding={value!r}: lattice axis {axis} must be split over a positive "
+                f"int number of devices, got {count!r}"
+            )
+        counts[int(axis)] = int(count)
+    return counts
+
+
+def _chain_devices(devices) -> int:
+    """``devices=`` beside ``lattice_sharding``: the count of the chains' devices."""
+    if devices is None:
+        return 1
+    if isinstance(devices, (int, np.integer)) and not isinstance(devices, bool) and devices >= 1:
+        return int(devices)
+    raise ValueError(
+        f"devices={devices!r} with lattice_sharding: the mesh is built from the first devices "
+        "JAX lists, so devices= is then the number of devices the chains are split over (a "
+        "positive int, e.g. devices=2: 2 × the lattice's devices in all) or None (the chains "
+        "on one device's share of the lattice each)"
+    )
+
+
+def _mesh_sharding(chains, counts, layout, lattice_sharding) -> LatticeSharding:
+    """The mesh ``(chains, *counts)`` on the first devices, refused if there are too few."""
+    needed = chains * math.prod(counts.values())
+    available = jax.devices()
+    if needed > len(available):
+        raise ValueError(
+            f"lattice_sharding={lattice_sharding!r} with devices={chains} needs {chains} × "
+            f"{' × '.join(map(str, counts.values()))} = {needed} devices, more than the "
+            f"{len(available)} JAX sees ({available[0].platform}): lower the counts, or start "
+            f"JAX with more devices (on a CPU, XLA_FLAGS=--xla_force_host_platform_device_count="
+            f"{needed} before JAX starts simulates them)"
+        )
+    axes = tuple(sorted(counts))
+    grid = np.asarray(available[:needed], dtype=object).reshape(chains, *(counts[a] for a in axes))
+    names = (CHAIN_AXIS, *(lattice_axis_name(a) for a in axes))
+    return LatticeSharding(jax.sharding.Mesh(grid, names), layout, axes)
+
+
+def check_output(output, sharding: NamedSharding | LatticeSharding | None) -> None:
     """Refuse ``output=`` for chains spread over several processes: a run file is written by
     one process, and its resume needs every chain's state there.
 
@@ -150,8 +380,9 @@ def _axis_names(entry):
     return (entry,) if isinstance(entry, str) else tuple(entry)
 
 
-def shard_chains[T: PyTree](tree: T, sharding: NamedSharding | None) -> T:
-    """Place every leaf of ``tree`` (leading axis = chains) with ``sharding`` (or leave it).
+def shard_chains[T: PyTree](tree: T, sharding: NamedSharding | LatticeSharding | None) -> T:
+    """Place every leaf of ``tree`` (leading axis = chains) with ``sharding`` (or leave it); a
+    :class:`LatticeSharding` places each leaf by :meth:`LatticeSharding.of`.
 
     Examples
     --------
@@ -162,6 +393,10 @@ def shard_chains[T: PyTree](tree: T, sharding: NamedSharding | None) -> T:
     """
     if sharding is None:
         return tree
+    if isinstance(sharding, LatticeSharding):  # each leaf by whether it holds the lattice
+        if sharding.is_fully_addressable:
+            return jax.tree.map(lambda leaf: jax.device_put(leaf, sharding.of(leaf)), tree)
+        return jax.tree.map(lambda leaf: _global_array(leaf, sharding.of(leaf)), tree)
     if sharding.is_fully_addressable:  # one process: its own devices
         return jax.device_put(tree, sharding)
     return jax.tree.map(lambda leaf: _global_array(leaf, sharding), tree)
