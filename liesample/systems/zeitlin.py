@@ -213,8 +213,12 @@ class QuantisedHarmonics:
         return -self._unpack(y * jnp.asarray(self._valid, p.dtype))
 
     def energy(self, x: ArrayLike) -> jax.Array:
-        """``h = −½⟨W, Δ_N⁻¹W⟩ = ½ Σ ω_ℓm²/(ℓ(ℓ+1))`` (shape ``x.shape[:-2]``)."""
-        return -0.5 * jnp.sum(x * self.inverse_laplacian(x), axis=(-2, -1))
+        """``h = −½⟨W, Δ_N⁻¹W⟩ = ½ Σ ω_ℓm²/(ℓ(ℓ+1))`` (shape ``x.shape[:-2]``).
+
+        Its derivative is declared (``jax.custom_jvp``): ``Δ_N⁻¹`` is self-adjoint, so
+        ``dh = −⟨Δ_N⁻¹W, dW⟩`` reuses the one solve of the value, and a gradient transposes a
+        product instead of the solve and the diagonal gathers."""
+        return _energy(self, jnp.asarray(x))
 
     # -- spherical-harmonic coefficients --------------------------------------------------
 
@@ -253,10 +257,16 @@ class QuantisedHarmonics:
                 f"degrees must satisfy 0 <= min_degree <= max_degree <= N − 1 = {self.size - 1}, "
                 f"got min_degree={min_degree}, max_degree={max_degree}"
             )
+        # In NumPy (no program to compile): each matrix is :meth:`from_coefficients` of a unit
+        # vector, whose one nonzero term per entry makes every sum exact, as in JAX.
+        n = self.size
         first, last = min_degree**2, (max_degree + 1) ** 2
-        unit = np.zeros((last - first, self.size * self.size))
-        unit[np.arange(last - first), np.arange(first, last)] = 1.0
-        return np.asarray(_compiled_from_coefficients(self)(jnp.asarray(unit)))
+        rows, count = self._coef_rows[first:last], last - first
+        packed = np.zeros((count, 2, n * n))
+        packed[np.arange(count), 0, rows] = self._coef_upper[first:last]
+        packed[np.arange(count), 1, rows] = self._coef_lower[first:last]
+        p = np.einsum("mik,...mk->...mi", self.eigenvectors, packed.reshape(count, 2, n, n))
+        return p.reshape(count, 2 * n * n)[:, self._unpack_index]
 
     def energy_spectrum(self, x: ArrayLike) -> jax.Array:
         """Energy per degree ``ε_ℓ = ½ Σ_m ω_ℓm²/(ℓ(ℓ+1))``, ``ℓ = 1 … N−1``; shape
@@ -279,6 +289,18 @@ class QuantisedHarmonics:
         c = self.coefficients(jnp.asarray(x, dtype=float))
         values = _grid_values(c, jnp.asarray(theta), jnp.asarray(phi), self.size - 1)
         return theta, phi, values
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
+def _energy(harmonics, x):
+    return -0.5 * jnp.sum(x * harmonics.inverse_laplacian(x), axis=(-2, -1))
+
+
+@_energy.defjvp
+def _energy_jvp(harmonics, primals, tangents):
+    (x,), (dx,) = primals, tangents
+    p = harmonics.inverse_laplacian(x)
+    return -0.5 * jnp.sum(x * p, axis=(-2, -1)), -jnp.sum(p * dx, axis=(-2, -1))
 
 
 @functools.partial(jax.jit, static_argnums=3)

@@ -1,0 +1,91 @@
+"""Small compiled programs: a first call of Zeitlin's recommended sampler and of the SU(2) heat
+bath compiles a bounded number of XLA programs, and the heat bath's step holds one copy of its
+link update whatever the lattice's dimension (counted, not timed: the numbers do not depend on
+the machine).
+
+The bounds are this tree's counts plus a small margin: a regression guard against eager
+operations in a constructor or a start check (each compiles as a program of its own) and
+against bodies unrolled over directions. The persistent compilation cache (``tests/conftest.py``)
+and programs earlier tests compiled can only lower a count.
+"""
+
+import contextlib
+import re
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import liesample
+from liesample.samplers.gauge import heat_bath
+
+COMPILE_EVENT = "/jax/core/compile/backend_compile_duration"
+
+# this tree's counts (float64, a cold process): 9 + 14 for Zeitlin su(8), 11 for the heat bath
+ZEITLIN_BUILD_BOUND = 12
+ZEITLIN_FIRST_CALL_BOUND = 30
+HEAT_BATH_FIRST_CALL_BOUND = 14
+
+
+@contextlib.contextmanager
+def counted_compiles():
+    """``with counted_compiles() as compiles:`` counts the XLA compilations of the block
+    (``len(compiles)``)."""
+    compiles = []
+
+    def listener(event, duration, **kwargs):
+        if event == COMPILE_EVENT:
+            compiles.append(duration)
+
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        yield compiles
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)
+
+
+def _sample(sampler, starts):
+    return liesample.sample(
+        sampler, jax.random.key(0), starts, 10, num_warmup=10, progress_bar=False
+    )
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")  # 10 draws: the convergence checks speak
+def test_a_first_zeitlin_call_compiles_few_programs():
+    with counted_compiles() as building:
+        system = liesample.systems.zeitlin_euler(8)
+        sampler = liesample.recommended_sampler(system, beta=1.0)
+    starts = np.stack([np.asarray(system.default_position)] * 2)
+    with counted_compiles() as sampling:
+        _sample(sampler, starts)
+    assert len(building) <= ZEITLIN_BUILD_BOUND
+    assert len(building) + len(sampling) <= ZEITLIN_FIRST_CALL_BOUND
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_a_first_heat_bath_call_compiles_few_programs():
+    system = liesample.systems.wilson_gauge("SU2", (4, 4))
+    starts = np.broadcast_to(np.eye(2, dtype=complex), (2, system.dim, 4, 4, 2, 2))
+    with counted_compiles() as compiles:
+        _sample(liesample.wilson_heat_bath(system, beta=2.0), starts)
+    assert len(compiles) <= HEAT_BATH_FIRST_CALL_BOUND
+
+
+def _while_loops(shape):
+    """The ``while`` loops in the main function of the heat bath's lowered step (traced, not
+    compiled; the random bits' own loops are functions of their own, one per shape drawn)."""
+    system = liesample.systems.wilson_gauge("SU2", shape)
+    kernel = heat_bath.build_kernel(system, heat_bath_sweeps=1, overrelaxation=1)
+    links = jnp.broadcast_to(jnp.eye(2, dtype=jnp.complex128), (len(shape), *shape, 2, 2))
+    lowered = jax.jit(lambda key, links: kernel(key, heat_bath.GaugeState(links), 2.0)).lower(
+        jax.random.key(0), links
+    )
+    main = lowered.as_text().split("func.func public @main", 1)[1].split("\n  func.func ", 1)[0]
+    return len(re.findall(r"stablehlo\.while", main))
+
+
+def test_the_heat_bath_step_holds_one_link_update_whatever_the_dimension():
+    # the 2d direction × parity classes are one scan: a 4-D lattice's step has the loops of
+    # a 2-D one, not twice as many rejection loops
+    assert _while_loops((2, 2, 2, 2)) == _while_loops((4, 4))
