@@ -43,6 +43,7 @@ if TYPE_CHECKING:  # what the lazy names below resolve to, for type checkers and
     from liesample.samplers.orbit.lie_poisson_langevin import lie_poisson_langevin
     from liesample.samplers.orbit.vortex_metropolis import vortex_metropolis
     from liesample.samplers.recommended import recommended_sampler
+    from liesample.samplers.spins.cp_heat_bath import cp_heat_bath
     from liesample.samplers.spins.heisenberg_cluster import heisenberg_cluster
     from liesample.samplers.spins.heisenberg_heat_bath import heisenberg_heat_bath
     from liesample.samplers.spins.heisenberg_metropolis import heisenberg_metropolis
@@ -67,6 +68,7 @@ _ATTRIBUTES = {
     "PoissonLangevin": "liesample.dynamics",
     "Scene": "liesample.dynamics",
     "adjusted_lie_poisson": "liesample.samplers.orbit.adjusted_lie_poisson",
+    "cp_heat_bath": "liesample.samplers.spins.cp_heat_bath",
     "default_magnetic_field": "liesample.samplers.cotangent._euclidean",
     "geometric_hmc": "liesample.samplers.cotangent.geometric_hmc",
     "geometric_langevin": "liesample.samplers.cotangent.geometric_langevin",
@@ -101,6 +103,7 @@ __all__ = [
     "adjusted_lie_poisson",
     "algebras",
     "analysis",
+    "cp_heat_bath",
     "default_magnetic_field",
     "diagnostics",
     "drivers",

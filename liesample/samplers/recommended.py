@@ -8,6 +8,8 @@
   (:func:`spin_sampler_name`, chosen by measurement); O(n) lattices with ``n ≠ 3``
   (:func:`liesample.systems.n_vector`): the heat bath with over-relaxation (a default, not a
   measurement: :func:`spin_sampler_name`);
+- CP(N−1) lattices (:func:`liesample.systems.cp_model`): :func:`liesample.cp_heat_bath` with
+  one over-relaxation sweep (exact local moves; no cluster embedding exists for ``N ≥ 3``);
 - lattice gauge fields (:func:`liesample.systems.wilson_gauge`):
   :func:`liesample.wilson_heat_bath` with one over-relaxation sweep; exact, no step size;
 - point vortices: :func:`liesample.vortex_metropolis`; exact, no step bias near collisions;
@@ -31,8 +33,10 @@ from liesample.samplers.gauge.heat_bath import wilson_heat_bath
 from liesample.samplers.orbit.adjusted_lie_poisson import adjusted_lie_poisson, check_linear_noise
 from liesample.samplers.orbit.lie_poisson_langevin import lie_poisson_langevin
 from liesample.samplers.orbit.vortex_metropolis import vortex_metropolis
+from liesample.samplers.spins.cp_heat_bath import cp_heat_bath
 from liesample.samplers.spins.heisenberg_cluster import heisenberg_cluster
 from liesample.samplers.spins.heisenberg_heat_bath import heisenberg_heat_bath
+from liesample.systems.cp_model import CPModelSystem
 from liesample.systems.heisenberg import SpinLatticeSystem
 from liesample.systems.n_vector import NVectorSystem
 from liesample.systems.point_vortices import PointVortexSystem
@@ -100,9 +104,12 @@ def recommended_sampler(system: LiePoissonSystem, *, beta: float, **options: Any
     if isinstance(system, WilsonGauge):
         options.setdefault("overrelaxation", 1)
         return wilson_heat_bath(system, beta=beta, **options)
+    if isinstance(system, CPModelSystem):
+        options.setdefault("overrelaxation", 1)
+        return cp_heat_bath(system, beta=beta, **options)
     if not isinstance(system, (LiePoissonSystem, NVectorSystem)):
         raise TypeError(
-            "system must be a LiePoissonSystem, an NVectorSystem or a WilsonGauge "
+            "system must be a LiePoissonSystem, an NVectorSystem, a CPModelSystem or a WilsonGauge "
             f"(liesample.systems), got {type(system).__name__}"
         )
     if isinstance(system, (SpinLatticeSystem, NVectorSystem)):

@@ -2,6 +2,7 @@
 
 from liesample.dynamics.system import LiePoissonSystem
 from liesample.systems.charged_particle import charged_particle, charged_particle_path
+from liesample.systems.cp_model import CPModelSystem, cp_model
 from liesample.systems.custom import lie_poisson_system
 from liesample.systems.heavy_top import heavy_top
 from liesample.systems.heisenberg import heisenberg
@@ -13,11 +14,13 @@ from liesample.systems.wilson_gauge import WilsonGauge, wilson_gauge
 from liesample.systems.zeitlin import isospectral_midpoint, zeitlin_euler
 
 __all__ = [
+    "CPModelSystem",
     "LiePoissonSystem",
     "NVectorSystem",
     "WilsonGauge",
     "charged_particle",
     "charged_particle_path",
+    "cp_model",
     "heavy_top",
     "heisenberg",
     "isospectral_midpoint",

@@ -3,6 +3,12 @@
 One module per family of laws; everything public is re-exported here.
 """
 
+from liesample.targets.cp_model import (
+    CPChainReference,
+    complex_bingham,
+    cp_bond_moments,
+    tilted_simplex,
+)
 from liesample.targets.gauge import (
     single_plaquette_mean,
     su2_torus_plaquette_mean,
@@ -63,6 +69,7 @@ from liesample.targets.zeitlin import (
 )
 
 __all__ = [
+    "CPChainReference",
     "Gaussian",
     "HeavyTopGibbs",
     "HeisenbergChainReference",
@@ -78,7 +85,9 @@ __all__ = [
     "bingham_marginal_density",
     "bingham_second_moments",
     "check_vortex_beta",
+    "complex_bingham",
     "correlated_gaussian",
+    "cp_bond_moments",
     "dipole_gibbs_moments",
     "gibbs_expectation",
     "haar_unitaries",
@@ -99,6 +108,7 @@ __all__ = [
     "su3_torus_plaquette_mean",
     "sun_character_coefficients",
     "sun_torus_plaquette_mean",
+    "tilted_simplex",
     "u1_plaquette_mean",
     "u1_torus_charge_law",
     "u1_torus_plaquette_mean",

@@ -128,16 +128,20 @@ def init(position, system: SpinSystem, rng_key=None) -> SpinState:
 
 def spin_sampler(
     name: str, build_kernel, structural: tuple, system: SpinSystem, beta, *parameters,
-    **settings,
+    start: Callable | None = None, **settings,
 ):  # fmt: skip
     """The :class:`~liesample.samplers.contract.Sampler` of ``kernel(rng_key, state, beta,
     *parameters)``, ``kernel = build_kernel(system, *structural)``, on ``system`` (keyless
-    :func:`init`); its settings are ``name``, the system, ``beta``, then ``settings`` in order.
+    :func:`init`, or ``start(system)``'s ``init_fn(position, rng_key=None)`` where given: a
+    module-level function, so that equal samplers stay equal); its settings are ``name``, the
+    system, ``beta``, then ``settings`` in order.
     It declares its :class:`~liesample.samplers.contract.Structure`: ``β`` and the numeric
     ``parameters`` are traced, so a sweep over them compiles once. Chains of a
     :func:`heisenberg` system are grouped by orbit (unit spins: one group); those of an
     :func:`n_vector` system sample one law."""
-    at = _SpinStepper(build_kernel, system, tuple(structural), len(parameters))
+    at = _SpinStepper(
+        build_kernel, system, tuple(structural), len(parameters), start or _real_spin_start
+    )
     values = {"beta": beta} | {f"parameter_{i}": value for i, value in enumerate(parameters)}
     return at(
         **values,
@@ -158,6 +162,7 @@ class _SpinStepper:
     system: SpinSystem
     structural: tuple
     num_parameters: int
+    start: Callable
 
     def __call__(self, beta, **hooks) -> Sampler:
         parameters = [hooks.pop(f"parameter_{i}") for i in range(self.num_parameters)]
@@ -166,7 +171,12 @@ class _SpinStepper:
         def step_fn(rng_key, state):
             return kernel(step_key(rng_key), state, beta, *parameters)
 
-        return Sampler(plain_init_fn(init, self.system), step_fn, **hooks)
+        return Sampler(self.start(self.system), step_fn, **hooks)
+
+
+def _real_spin_start(system: SpinSystem):
+    """The O(n) samplers' ``init_fn``: :func:`init` on a real start."""
+    return plain_init_fn(init, system)
 
 
 class Sublattice(NamedTuple):
@@ -270,7 +280,8 @@ def finish_step(system: SpinSystem, old, new, acceptance_rate, info_class=SpinIn
     divergent = ~(jnp.all(jnp.isfinite(new)) & jnp.isfinite(energy))
     position = jnp.where(divergent, old, new)
     energy = jnp.where(divergent, system.hamiltonian(old), energy)
-    rate = jnp.where(divergent, 0.0, jnp.asarray(acceptance_rate, dtype=position.dtype))
+    real_dtype = jnp.finfo(position.dtype).dtype  # a complex state's (CP(N−1)) real part
+    rate = jnp.where(divergent, 0.0, jnp.asarray(acceptance_rate, dtype=real_dtype))
     return SpinState(position), info_class(divergent, rate, energy, **extra)
 
 
