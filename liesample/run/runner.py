@@ -270,10 +270,11 @@ def sample(
         Coordinates by dim name, and extra attributes for the tree.
     run_options
         The other keywords of :func:`sample_chains`: ``thinning``, ``progress_bar``,
-        ``chunk_draws``, ``on_nonfinite``, ``devices``, ``lattice_sharding``, ``output``, ``resume``, ``adapt``,
-        ``min_acceptance_rate``, ``observables``, ``keep_positions``, ``callback``,
-        ``log_likelihood`` (the tree's ``log_likelihood`` group, for ``az.loo``). With
-        ``output=``, the file holds this tree as it grows (:func:`load_chains`).
+        ``chunk_draws``, ``on_nonfinite``, ``devices``, ``lattice_sharding``, ``output``,
+        ``resume``, ``adapt``, ``min_acceptance_rate``, ``observables``, ``keep_positions``,
+        ``callback``, ``log_likelihood`` (the tree's ``log_likelihood`` group, for
+        ``az.loo``). With ``output=``, the file holds this tree as it grows
+        (:func:`load_chains`).
 
     Notes
     -----

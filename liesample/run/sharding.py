@@ -1,4 +1,4 @@
-"""Chains across devices: JAX's own sharding of the chain axis (``jax.sharding.NamedSharding``).
+"""Chains, and one lattice's sites, across devices: JAX's own sharding (``NamedSharding``).
 
 Chains are independent, so the runner splits the leading (chain) axis of the states and of the
 per-chain keys over a one-dimensional device mesh and lets ``jax.jit`` partition the vmapped
@@ -22,10 +22,39 @@ process (``multihost_utils.process_allgather``): every process returns the whole
 draws of one process running every chain. A run file (``output=``) is refused for such a run
 (:func:`check_output`): save the returned tree from one process.
 
-The test suite runs one process with several (forced host) CPU devices, bitwise equal to the
-unsharded run, and two processes on the loopback interface with one CPU device each, bitwise
-equal to one process (and the refusal of ``output=``). Several machines, GPUs over several
-processes, and the window warm-ups across processes are not tested.
+One lattice over several devices (``lattice_sharding=``)
+-------------------------------------------------------
+A spin lattice or a gauge field too large for one device is split along its lattice axes
+(:func:`run_sharding`, :class:`LatticeSharding`): ``lattice_sharding=2`` puts half of every
+chain's sites (lattice axis 0) on each of two devices, ``{0: 2, 1: 2}`` a quarter on each of
+four, and ``devices=2`` beside it splits the chains too (a mesh of chains × lattice axes, on
+the first devices JAX lists). The positions and states are placed with a ``NamedSharding``
+per leaf, a leaf that holds the lattice split along its lattice axes and any other (a key, an
+energy) along the chains only; ``jax.jit`` propagates the split through the step, and XLA's
+SPMD partitioner turns the neighbour shifts (``jnp.roll``) and the checkerboard's gathers into
+exchanges between the devices: there is no communication of liesample's own. Every site draws
+the same random numbers (partitionable Threefry) and runs the same arithmetic whatever the
+split, so the draws are those of the unsharded run, bitwise on CPU; a chain's energy, a sum over
+its sites, is added in another order and agrees to round-off. Every lattice sampler shards:
+the spin heat bath and its over-relaxation (:func:`liesample.heisenberg_heat_bath`),
+Metropolis, the cluster moves (Swendsen–Wang, Wolff: their cluster search gathers every site's
+label, one integer per site, on each device; the spins stay split) and, for
+:func:`liesample.systems.wilson_gauge`, the heat bath with over-relaxation and
+:func:`liesample.samplers.gauge.hmc.gauge_hmc`. Refused before anything is compiled, each by
+name with its fix: a sampler of no lattice, an axis that does not exist or whose extent does
+not divide by its count, more devices than JAX sees, and ``devices=`` other than an int (the
+chains' devices). The starts are read on one device before they are split, and the kept draws
+come back to the host, as for chains.
+
+What is tested
+--------------
+One process with several (forced host) CPU devices: chains over them, bitwise equal to the
+unsharded run; one lattice, the spin heat bath on 2 devices and (slow tests) every spin and
+gauge sampler above on 4, over two lattice axes and over chains × a lattice axis, bitwise equal
+to the unsharded run. Two processes on the loopback
+interface with one CPU device each, bitwise equal to one process (and the refusal of
+``output=``). Several machines, GPUs over several processes, a lattice over several processes,
+and the window warm-ups across processes are not tested.
 """
 
 from __future__ import annotations
@@ -133,7 +162,13 @@ def chain_sharding(
 
 
 def lattice_axis_name(axis: int) -> str:
-    """The name of the mesh axis over which lattice axis ``axis`` is split (``"lattice0"``…)."""
+    """The name of the mesh axis over which lattice axis ``axis`` is split.
+
+    Examples
+    --------
+    >>> liesample.sharding.lattice_axis_name(1)
+    'lattice1'
+    """
     return f"lattice{axis}"
 
 
@@ -141,7 +176,17 @@ def lattice_axis_name(axis: int) -> str:
 class LatticeLayout:
     """Where a lattice sampler's sites lie in one chain's position: the lattice ``shape`` on the
     event axes ``offset … offset + len(shape) − 1`` (``offset`` 0 for spins ``(*shape, n)``,
-    1 for a gauge field ``(d, *shape, …)``); ``system`` names it in messages."""
+    1 for a gauge field ``(d, *shape, …)``); ``system`` names it in messages.
+
+    Examples
+    --------
+    A gauge field's lattice comes after its direction axis:
+
+    >>> system = liesample.systems.wilson_gauge("SU2", (4, 6))
+    >>> layout = liesample.sharding.lattice_layout(liesample.wilson_heat_bath(system, beta=1.0))
+    >>> layout.shape, layout.offset
+    ((4, 6), 1)
+    """
 
     shape: tuple[int, ...]
     offset: int
@@ -196,7 +241,18 @@ class LatticeSharding:
     axis per split lattice axis (:func:`lattice_axis_name`). A leaf of the states whose event
     axes hold the lattice (:class:`LatticeLayout`) is split along those axes too; any other
     leaf (a key, a chain's energy) along the chain axis only, each device of a chain's lattice
-    holding a copy."""
+    holding a copy.
+
+    Examples
+    --------
+    Built by :func:`run_sharding`; on one device (the doctests' CPU) every axis has one:
+
+    >>> system = liesample.systems.heisenberg((4, 4), periodic=True)
+    >>> sampler = liesample.heisenberg_heat_bath(system, beta=1.0)
+    >>> sharding = liesample.sharding.run_sharding(1, {1: 1}, 2, sampler)
+    >>> dict(sharding.mesh.shape), tuple(sharding.of(jnp.zeros(2)).spec)
+    ({'chain': 1, 'lattice1': 1}, ('chain',))
+    """
 
     mesh: jax.sharding.Mesh
     layout: LatticeLayout
