@@ -64,7 +64,12 @@ from liesample.analysis.correlated_errors import JackknifeResult, jackknife
 from liesample.foundation.precision import check_dtype, float64_hint, roundoff_tolerance
 from liesample.foundation.validation import concrete_array
 
-__all__ = ["topological_charge", "topological_charge_density", "topological_susceptibility"]
+__all__ = [
+    "cp_topological_charge",
+    "topological_charge",
+    "topological_charge_density",
+    "topological_susceptibility",
+]
 
 UNIT_NORM_TOLERANCE = 1e-9
 """How far ``|s|`` may be from 1 in a float64 configuration (in float32, the round-off of its
@@ -197,6 +202,97 @@ def topological_charge(spins: ArrayLike) -> jax.Array:
     True
     """
     return jnp.sum(topological_charge_density(spins), axis=(-2, -1))
+
+
+def _check_cp_field(z: ArrayLike, name: str = "z") -> jax.Array:
+    """``z`` as a complex array ``(..., L1, L2, N)`` of unit vectors (checked when concrete),
+    or an error naming ``name``."""
+    shape = np.shape(z)
+    if len(shape) < 3 or shape[-1] < 2 or min(shape[-3:-1]) < 2:
+        raise ValueError(
+            f"{name} must be a 2-D lattice of unit vectors of C^N, shape (..., L1, L2, N) with "
+            f"L1, L2 >= 2 and N >= 2, got shape {shape}; the positions of "
+            "liesample.systems.cp_model((L1, L2), N, periodic=True) have that shape"
+        )
+    dtype = jnp.result_type(z)
+    if not jnp.issubdtype(dtype, jnp.complexfloating):
+        raise TypeError(
+            f"{name} must be a complex array (unit vectors z_x of C^N), got {dtype}; pass "
+            "numpy.asarray(z, dtype=complex) (O(3) spins go to topological_charge)"
+        )
+    value = concrete_array(z)
+    if value is not None:
+        _check_unit(np.abs(value), name)
+    return jnp.asarray(z)
+
+
+def _triangle_phases(z1: jax.Array, z2: jax.Array, z3: jax.Array) -> jax.Array:
+    """``arg(z₁^†z₂ z₂^†z₃ z₃^†z₁) = arg tr(P₁P₂P₃) ∈ (−π, π]`` per triangle (last axis the
+    vector), ``NaN`` where the product lies within ``EXCEPTIONAL_ULPS · ε`` of the closed
+    negative real axis (a zero overlap or an undecided ``±π``)."""
+    overlap = lambda a, b: jnp.sum(jnp.conj(a) * b, axis=-1)
+    product = overlap(z1, z2) * overlap(z2, z3) * overlap(z3, z1)
+    real, imag = jnp.real(product), jnp.imag(product)
+    tolerance = EXCEPTIONAL_ULPS * jnp.finfo(real.dtype).eps
+    exceptional = (real <= tolerance) & (jnp.abs(imag) <= tolerance)
+    return jnp.where(exceptional, jnp.nan, jnp.arctan2(imag, real))
+
+
+def cp_topological_charge(z: ArrayLike) -> jax.Array:
+    """The geometric topological charge ``Q`` of a periodic 2-D CP(N−1) configuration.
+
+    With ``P = z z^†``, the charge is ``Q = (1/2π) Σ arg tr(P₁P₂P₃)`` over the same ``2 L1 L2``
+    counter-clockwise triangles as :func:`topological_charge`, and
+    ``tr(P₁P₂P₃) = z₁^†z₂ z₂^†z₃ z₃^†z₁``. Each phase ``z_x^†z_y/|z_x^†z_y|`` of a link enters
+    the two triangles that share it with opposite orientations, so the phases cancel and the
+    sum of the principal arguments is ``2π`` times an integer: ``Q`` is an integer by
+    construction, it depends on the rays only (``z_x → e^{iφ_x} z_x`` changes no product) and
+    a global ``z_x → U z_x``, ``U ∈ U(N)``, changes none. For ``N = 2`` the Hopf map
+    ``s = z^† σ z`` gives ``tr(P₁P₂P₃) = (1 + s₁·s₂ + s₂·s₃ + s₃·s₁ + i s₁·(s₂ × s₃))/4``, so
+    ``Q`` is the O(3) charge of :func:`topological_charge` of ``s``.
+
+    Parameters
+    ----------
+    z : array_like, shape (..., L1, L2, N)
+        Unit vectors of ``Cᴺ`` on a periodic ``L1 × L2`` lattice (``L ≥ 2``, ``N ≥ 2``), e.g. a
+        position of ``liesample.systems.cp_model((L1, L2), N, periodic=True)``; leading axes are
+        a batch. Complex; checked for unit length when concrete.
+
+    Returns
+    -------
+    jax.Array, shape (...)
+        ``Q``, an integer up to round-off, in the real dtype of ``z``; ``NaN`` for an
+        exceptional configuration (a triangle with a zero overlap, or a product on the negative
+        real axis: measure zero). Jit-able; ``observables={"Q": cp_topological_charge}``
+        records it at every draw.
+
+    Raises
+    ------
+    ValueError
+        ``z`` not of shape ``(..., L1, L2, N)`` with the extents above, or (concrete input) not
+        unit vectors.
+    TypeError
+        ``z`` not complex.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from liesample.analysis.topology import cp_topological_charge
+    >>> system = liesample.systems.cp_model((6, 6), N=3, periodic=True)
+    >>> float(cp_topological_charge(system.default_position))
+    0.0
+    >>> rng = np.random.default_rng(0)
+    >>> z = rng.normal(size=(6, 6, 3)) + 1j * rng.normal(size=(6, 6, 3))
+    >>> q = float(cp_topological_charge(z / np.linalg.norm(z, axis=-1, keepdims=True)))
+    >>> abs(q - round(q)) < 1e-9
+    True
+    """
+    z = _check_cp_field(z)
+    right = jnp.roll(z, -1, axis=-3)  # z(x + ê₁)
+    up = jnp.roll(z, -1, axis=-2)  # z(x + ê₂)
+    diagonal = jnp.roll(right, -1, axis=-2)  # z(x + ê₁ + ê₂)
+    phases = _triangle_phases(z, right, diagonal) + _triangle_phases(z, diagonal, up)
+    return jnp.sum(phases, axis=(-2, -1)) / (2.0 * math.pi)
 
 
 def topological_susceptibility(

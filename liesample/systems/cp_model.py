@@ -127,11 +127,11 @@ class CPModelSystem(ValueIdentity):
                 f"{name} must have shape {self.event_shape} for the {self.name} (one unit "
                 f"vector of C^{self.n} per site), got {shape}"
             )
-        kind = np.dtype(jnp.result_type(position)).kind
-        if kind not in "iufc":
+        dtype = np.dtype(getattr(position, "dtype", None) or np.asarray(position).dtype)
+        if dtype.kind not in "iufc":
             raise TypeError(
                 f"{name} must be a complex (or real) numeric array of unit vectors z_x, got "
-                f"dtype {jnp.result_type(position)}; pass np.asarray(position, dtype=complex)"
+                f"dtype {dtype}; pass np.asarray(position, dtype=complex)"
             )
         value = concrete_array(position)
         if value is not None and not np.all(np.isfinite(value)):
