@@ -429,8 +429,9 @@ class _Run:
             self.phase("warm-up (adapting)")
             # From the initial states and deterministic given rng_key: a resumed run re-derives
             # the same parameters.
+            starts = self.placed_positions()
             sampler, adapted = warm_up(
-                sampler, self.rng_key, self.chain_keys, states, self.positions, o.num_warmup
+                sampler, self.rng_key, self.chain_keys, states, starts, o.num_warmup
             )
             arguments.check_starts(sampler, self.positions, self.num_chains)
             if adapted is not None:
@@ -446,12 +447,17 @@ class _Run:
         self.settings = dict(sampler.settings, num_warmup=o.num_warmup, adapted=adapting)
 
     def _init_states(self, sampler):
-        """Every chain's initial state, sharded as the chains are."""
+        """Every chain's initial state, placed as the run is sharded."""
         static, values = program(sampler, self.positions)
-        positions = self.positions
-        if isinstance(self.sharding, LatticeSharding):  # each device inits its own sites
-            positions = shard_chains(positions, self.sharding)
-        return shard_chains(_init_states(positions, values, sampler=static), self.sharding)
+        states = _init_states(self.placed_positions(), values, sampler=static)
+        return shard_chains(states, self.sharding)
+
+    def placed_positions(self):
+        """The starts, split over the devices for a lattice run (each device then inits and
+        warms up its own sites); else as given (the chains' programs place them)."""
+        if isinstance(self.sharding, LatticeSharding):
+            return shard_chains(self.positions, self.sharding)
+        return self.positions
 
     def _fingerprint(self):
         tree = self.example[0]

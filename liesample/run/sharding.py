@@ -35,7 +35,9 @@ SPMD partitioner turns the neighbour shifts (``jnp.roll``) and the checkerboard'
 exchanges between the devices: there is no communication of liesample's own. Every site draws
 the same random numbers (partitionable Threefry) and runs the same arithmetic whatever the
 split, so the draws are those of the unsharded run, bitwise on CPU; a chain's energy, a sum over
-its sites, is added in another order and agrees to round-off. Every lattice sampler shards:
+its sites, is added in another order and agrees to round-off; so does a step size that a
+warm-up adapts on the split lattice (to sums over the sites), and with it the draws. Every
+lattice sampler shards:
 the spin heat bath and its over-relaxation (:func:`liesample.heisenberg_heat_bath`),
 Metropolis, the cluster moves (Swendsen–Wang, Wolff: their cluster search gathers every site's
 label, one integer per site, on each device; the spins stay split) and, for
@@ -51,8 +53,8 @@ What is tested
 One process with several (forced host) CPU devices: chains over them, bitwise equal to the
 unsharded run; one lattice, the spin heat bath on 2 devices and (slow tests) every spin and
 gauge sampler above on 4, over two lattice axes and over chains × a lattice axis, bitwise equal
-to the unsharded run. Two processes on the loopback
-interface with one CPU device each, bitwise equal to one process (and the refusal of
+to the unsharded run, and gauge HMC's window warm-up on 4, equal to round-off. Two processes
+on the loopback interface with one CPU device each, bitwise equal to one process (and the refusal of
 ``output=``). Several machines, GPUs over several processes, a lattice over several processes,
 and the window warm-ups across processes are not tested.
 """
