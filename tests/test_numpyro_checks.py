@@ -117,7 +117,8 @@ def test_the_host_side_tells_chains_apart_by_their_keys_and_keeps_mcmcs_thinning
             value = {"x": np.array([10.0 * chain + step])}
             fields = {"diverging": np.array([False])}
             checks.receive(keys[chain][step], keys[chain][step + 1], value, fields)
-    ((variables, fields),) = seen
+    ((variables, fields, scales),) = seen
+    assert scales == {}  # no model: no hierarchical scale
     # Of 5 draws thinned by 2 MCMC keeps draws 2 and 4: it skips the first num_samples % 2,
     # then keeps the last of each pair.
     np.testing.assert_array_equal(variables["x"], [[2.0, 4.0], [12.0, 14.0]])

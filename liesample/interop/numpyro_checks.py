@@ -57,7 +57,7 @@ except ImportError as error:  # an optional integration module
 from liesample.analysis.convergence import convergence_warnings
 from liesample.run.checks import DEFAULT_MIN_ACCEPTANCE_RATE, check_run
 
-__all__ = ["RunChecks", "calling_mcmc", "check_draws", "check_mcmc"]
+__all__ = ["RunChecks", "calling_mcmc", "check_draws", "check_mcmc", "funnel_warnings"]
 
 CHAIN_METHODS = ("sequential", "vectorized", "parallel")
 DIVERGENCE_ADVICE = (
@@ -69,6 +69,36 @@ STUCK_ADVICE = (
     "adapt_step_size=False, or init_params near the posterior."
 )
 SILENCE = "GeometricHMC(..., check_convergence=False) (the default) turns these checks off"
+
+
+def funnel_warnings(variables: dict[str, np.ndarray], fields: dict[str, np.ndarray],
+                    scales: dict[str, tuple[str, ...]]) -> list[str]:  # fmt: skip
+    """A message for each hierarchical scale (``scales``: scale site → the sites it is the
+    scale of, :func:`liesample.interop.numpyro_sites.hierarchical_scales`) when the run shows
+    the funnel: divergent transitions, or the scale's own R-hat or ESS failing
+    (:func:`liesample.analysis.convergence.convergence_warnings`). Centred, the chains cannot
+    reach the scale's small values (the funnel's neck), so they under-sample them; the fix is
+    the non-centred form, ``numpyro.infer.reparam.LocScaleReparam``. Returns the messages."""
+    divergent = int(np.sum(fields["diverging"])) if "diverging" in fields else 0
+    out = []
+    for scale, children in scales.items():
+        if scale not in variables:
+            continue
+        unconverged = convergence_warnings({scale: np.log(np.asarray(variables[scale]))})
+        if not divergent and not unconverged:
+            continue
+        evidence = [f"{divergent} divergent transition(s)"] if divergent else []
+        evidence += [m.split(". ", 1)[0] for m in unconverged]  # what failed, not the advice
+        config = ", ".join(f"{child!r}: LocScaleReparam(0)" for child in children)
+        out.append(
+            f"{scale} is the scale of {', '.join(children)} (a centred hierarchy, a funnel): "
+            f"the chains cannot reach its small values, where the neck narrows, and "
+            f"under-sample them ({'; '.join(evidence)}), so the draws of {scale} and "
+            f"{', '.join(children)} are likely wrong. Reparametrise non-centred: "
+            f"numpyro.handlers.reparam(model, config={{{config}}}) with "
+            "numpyro.infer.reparam.LocScaleReparam"
+        )
+    return out
 
 
 def calling_mcmc(kernel) -> MCMC | None:
@@ -108,6 +138,8 @@ class RunChecks:
 
     def __init__(self, num_warmup: int, num_samples: int, num_chains: int, thinning: int):
         self.settings = (int(num_warmup), int(num_samples), int(num_chains), int(thinning))
+        # the model's hierarchical scales, for funnel_warnings (the kernel sets them)
+        self.scales: dict[str, tuple[str, ...]] = {}
         self._chains: list[_Chain] = []
         self._by_key: dict[bytes, _Chain] = {}
 
@@ -171,6 +203,7 @@ class RunChecks:
             check_draws(
                 _stacked([chain.values for chain in complete[:num_chains]]),
                 _stacked([chain.fields for chain in complete[:num_chains]]),
+                self.scales,
             )
 
 
@@ -179,11 +212,13 @@ def _stacked(chains) -> dict[str, np.ndarray]:
     return {name: np.stack([[d[name] for d in draws] for draws in chains]) for name in chains[0][0]}
 
 
-def check_draws(variables: dict[str, np.ndarray], fields: dict[str, np.ndarray]) -> list[str]:
+def check_draws(variables: dict[str, np.ndarray], fields: dict[str, np.ndarray],
+                scales: dict[str, tuple[str, ...]] | None = None) -> list[str]:  # fmt: skip
     """The checks of :func:`liesample.sample` on a finished run: ``variables`` name →
     ``(chains, draws, …)`` (the latent sites), ``fields`` NumPyro's per-draw ``diverging``,
     ``accept_prob`` and ``energy`` ``(chains, draws)`` (any may be missing). Warns as the module
-    docstring says; returns the convergence messages."""
+    docstring says; with ``scales`` (the model's hierarchical scales), also
+    :func:`funnel_warnings`. Returns the convergence and funnel messages."""
     info = {
         new: np.asarray(fields[old])
         for old, new in (
@@ -213,7 +248,10 @@ def check_draws(variables: dict[str, np.ndarray], fields: dict[str, np.ndarray])
             UserWarning,
             stacklevel=3,
         )
-    return messages
+    funnels = funnel_warnings(variables, fields, scales or {})
+    for message in funnels:
+        warnings.warn(f"GeometricHMC: {message}. ({SILENCE}.)", UserWarning, stacklevel=3)
+    return messages + funnels
 
 
 def check_mcmc(mcmc: MCMC) -> list[str]:
@@ -227,9 +265,11 @@ def check_mcmc(mcmc: MCMC) -> list[str]:
         variables = {"z": np.asarray(samples)}
     else:
         variables = {k: np.asarray(v) for k, v in samples.items() if latent is None or k in latent}
-    fields = {k: np.asarray(v) for k, v in mcmc.get_extra_fields(group_by_chain=True).items()}
-    fields = {k: v for k, v in fields.items() if v.ndim == 2}
-    return check_draws(variables, fields)
+    extra = mcmc.get_extra_fields(group_by_chain=True)
+    # per-draw arrays only: adapt_state, say, is a tuple of them
+    fields = {k: np.asarray(v) for k, v in extra.items()
+              if isinstance(v, (np.ndarray, jax.Array)) and v.ndim == 2}  # fmt: skip
+    return check_draws(variables, fields, getattr(mcmc.sampler, "hierarchical_scales", None))
 
 
 def latent_values(postprocess, names):

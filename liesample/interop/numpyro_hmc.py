@@ -26,7 +26,7 @@ import numpy as np
 from liesample.geometry.cotangent import cotangent_bundle
 from liesample.interop.numpyro_sites import Layout, find_start
 from liesample.samplers.cotangent.geometric_hmc import geometric_hmc
-from liesample.tuning.protocol import Adaptation, restart_step_size, row_at
+from liesample.tuning.protocol import Adaptation, odd_chains, restart_step_size, row_at
 from liesample.tuning.trajectory import chain_move, euclidean_size, halton, jittered_steps
 from liesample.tuning.windows import (
     DenseBlocks,
@@ -53,6 +53,7 @@ __all__ = [
     "record_chain",
     "sample_batch",
     "sample_one",
+    "warn_odd_chains",
     "warn_unadapted",
     "windows",
 ]
@@ -368,11 +369,48 @@ def sample_batch(c: Core, state, logdensity, on_draw=None):
         adaptation,
         rng_key,
     )
+    if settings.num_warmup > 0 and settings.adapt_step_size and num_chains >= 3:
+        jax.lax.cond(
+            i == settings.num_warmup - 1,
+            lambda: jax.debug.callback(warn_odd_chains, new.step.smoothed),
+            lambda: None,
+        )
     if on_draw is not None:  # the draw, to the post-run checks
         fields = {"diverging": info.is_divergent, "accept_prob": info.acceptance_rate,
                   "energy": energy}  # fmt: skip
         on_draw(i, state.rng_key, rng_key, new_state.z, fields)
     return new_state
+
+
+ODD_CHAIN_ADVICE = (
+    "Look at that chain's draws (mcmc.get_samples(group_by_chain=True)); start the chains "
+    "elsewhere (init_strategy=numpyro.infer.init_to_median(), or init_params near the "
+    "posterior), give a longer num_warmup, or reparametrise the model (a hierarchical scale: "
+    "numpyro.infer.reparam.LocScaleReparam)."
+)
+
+
+def warn_odd_chains(smoothed) -> list:
+    """After a shared warm-up (on the host): warn, naming each, of the chains whose running
+    rate ended far below the others' (:func:`liesample.tuning.protocol.odd_chains`); returns
+    them. The shared step is the majority's (the window adaptation pools by the median), so
+    such a chain did not drag the others down, but its own draws are suspect."""
+    odd = odd_chains(smoothed)
+    if odd:
+        described = "; ".join(
+            f"chain {chain}: {rate:.3g} against the other chains' median {median:.3g}"
+            for chain, rate, median in odd
+        )
+        warnings.warn(
+            "GeometricHMC: chains warmed up together (chain_method='vectorized') share one "
+            "step size, the one most of them accept at; at the end of the warm-up some "
+            f"accepted far less often (running acceptance rate {described}). Such a chain "
+            "sits where that step cannot move it (a degenerate mode, the neck of a funnel) "
+            "or is stuck, and its draws are likely wrong. " + ODD_CHAIN_ADVICE,
+            UserWarning,
+            stacklevel=2,
+        )
+    return odd
 
 
 def sample_one(c: Core, state, logdensity, record, on_draw=None):

@@ -133,6 +133,7 @@ from liesample.interop.numpyro_sites import (
     Layout,
     check_init_params,
     dense_groups,
+    hierarchical_scales,
     layout,
     logdensity_fn,
     model_sites,
@@ -388,13 +389,6 @@ class GeometricHMC(MCMCKernel):
                      forward_mode_differentiation, regularize_mass_matrix)  # fmt: skip
         self._model = model
         self._potential_fn = potential_fn
-
-        """Set up the kernel (nothing is traced or compiled until ``init``); the parameters
-        are documented on the class."""
-        _check_model(model, potential_fn, init_strategy, kinetic_fn,
-                     forward_mode_differentiation, regularize_mass_matrix)  # fmt: skip
-        self._model = model
-        self._potential_fn = potential_fn
         self._init_strategy = init_strategy
         step_size = finite_float("step_size", step_size, positive=True)
         num_integration_steps, time, learn = _trajectory_arguments(
@@ -437,6 +431,8 @@ class GeometricHMC(MCMCKernel):
         self._check_convergence = bool(check_convergence)
         # The post-run checks of the MCMC running this kernel (set by init; None: unchecked).
         self.run_checks: RunChecks | None = None
+        # Scale site -> the sites it is the scale of (a centred hierarchy; set by init).
+        self.hierarchical_scales: dict[str, tuple[str, ...]] = {}
 
     # ------------------------------------------------------------------ the sites
     def _set_sites(self, sites, array_params, has_deterministic):
@@ -489,6 +485,8 @@ class GeometricHMC(MCMCKernel):
         else:
             key = rng_key[0] if batched else rng_key
             sites, deterministic = model_sites(self._model, key, model_args, model_kwargs)
+            self.hierarchical_scales = hierarchical_scales(self._model, key, model_args,
+                                                           model_kwargs)  # fmt: skip
             self._set_sites(sites, False, deterministic)
             if init_params is not None:
                 init_params = check_init_params(sites, init_params, batched)
@@ -496,6 +494,8 @@ class GeometricHMC(MCMCKernel):
             warn_unadapted(settings)
         checks = self._check_convergence
         self.run_checks = RunChecks.find(self, num_warmup, batched) if checks else None
+        if self.run_checks is not None:
+            self.run_checks.scales = self.hierarchical_scales
         if settings.num_warmup > 0:  # constants, also under jit
             self._core = self._core._replace(rows=schedule(settings.num_warmup))
         mass = starting_mass(self._initial_mass, self._layout, jnp.zeros(()).dtype)

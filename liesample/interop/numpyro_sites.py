@@ -45,6 +45,7 @@ __all__ = [
     "check_init_params",
     "dense_groups",
     "find_start",
+    "hierarchical_scales",
     "layout",
     "logdensity_fn",
     "model_sites",
@@ -150,6 +151,51 @@ def model_sites(model, rng_key, model_args, model_kwargs) -> tuple[dict[str, Sit
     if not sites:
         raise ValueError("the model has no latent sample sites: nothing to sample")
     return sites, any(s["type"] == "deterministic" for s in trace.values())
+
+
+def _scale_of(fn):
+    """The ``scale`` of a distribution under any ``expand`` / ``to_event`` wrappers, or
+    ``None``."""
+    while not hasattr(fn, "scale") and hasattr(fn, "base_dist"):
+        fn = fn.base_dist
+    scale = getattr(fn, "scale", None)
+    return None if scale is None else np.asarray(scale)
+
+
+def hierarchical_scales(model, rng_key, model_args, model_kwargs) -> dict[str, tuple[str, ...]]:
+    """The positive latent sites that are the ``scale`` of other latent sites' distributions,
+    a centred hierarchy (``theta ~ Normal(mu, tau)``: ``{"tau": ("theta",)}``), whose
+    posterior is a funnel. Found on the host by tracing the model at feasible values, then
+    again with each positive site doubled: a latent site whose distribution's ``scale``
+    doubles with it is its child. Eager (a few traces of the model, as :func:`model_sites`
+    makes one); a doubled value the model refuses (``ValueError``) names no child."""
+    seeded = numpyro.handlers.seed(model, rng_key)
+
+    def trace(**substitute):
+        handled = numpyro.handlers.substitute(seeded, **substitute)
+        return numpyro.handlers.trace(handled).get_trace(*model_args, **model_kwargs)
+
+    first = trace(substitute_fn=_feasible_value)
+    latent = {n: t for n, t in first.items() if t["type"] == "sample" and not t["is_observed"]}
+    values = {n: t["value"] for n, t in latent.items()}
+    out = {}
+    for name, site in latent.items():
+        if _base_constraint(site["fn"].support) is not constraints.positive:
+            continue
+        try:
+            doubled = trace(data={**values, name: 2.0 * jnp.asarray(values[name])})
+        except ValueError:
+            continue
+        children = []
+        for child in latent:
+            a, b = _scale_of(latent[child]["fn"]), _scale_of(doubled[child]["fn"])
+            if child == name or a is None or b is None or a.shape != b.shape:
+                continue
+            if np.all(np.isfinite(a)) and np.any(a != 0) and np.allclose(b, 2.0 * a):
+                children.append(child)
+        if children:
+            out[name] = tuple(children)
+    return out
 
 
 def potential_sites(init_params, batched) -> tuple[dict[str, Site], bool]:

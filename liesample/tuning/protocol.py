@@ -31,7 +31,9 @@ drives, calls the same ``current`` and ``update`` once per transition
 (:mod:`liesample.interop.numpyro_kernel`).
 
 The pieces adaptations are made of are here too: :func:`pooled_rate` and
-:func:`step_size_adaptation` (dual averaging of one step shared by the chains); the mass and
+:func:`step_size_adaptation` (dual averaging of one step shared by the chains, pooled so that
+a stuck chain is freed, or so that a minority cannot move the step), :func:`odd_chains` (the
+chains a robust pooled step left behind); the mass and
 the trajectory length are in :mod:`liesample.tuning.adaptation` and
 :mod:`liesample.tuning.trajectory`.
 """
@@ -53,11 +55,15 @@ from liesample.integrators.chain_loop import NoiseBlocks, declared_noise_blocks,
 from liesample.samplers.contract import Sampler
 
 __all__ = [
+    "ODD_RATE_FRACTION",
+    "POOLINGS",
     "RATE_SMOOTHING",
+    "STEP_POOLINGS",
     "Adaptation",
     "Row",
     "StepSizeState",
     "fixed",
+    "odd_chains",
     "pooled_rate",
     "run_adaptation",
     "schedule",
@@ -69,7 +75,9 @@ _CHAINS = "chains"
 
 class Row(NamedTuple):
     """One transition of the warm-up: its index, stage (0: fast window, 1: slow window),
-    whether a slow window ends there, and whether its trajectory length enters the tuned one."""
+    whether a slow window ends there, whether its trajectory length enters the tuned one, and
+    whether it is in the initial fast window (before the first slow window; the first half
+    without a slow window)."""
 
     # Arrays, numpy for the whole schedule and traced for one row. The field ``index`` shadows
     # ``tuple.index``, which a checker reports as an incompatible override.
@@ -77,6 +85,7 @@ class Row(NamedTuple):
     stage: np.ndarray | jax.Array
     window_end: np.ndarray | jax.Array
     average: np.ndarray | jax.Array
+    initial: np.ndarray | jax.Array
 
 
 class Adaptation(NamedTuple):
@@ -98,12 +107,13 @@ def schedule(num_steps: int) -> Row:
     ends = table[:, 1].astype(bool)
     slow = np.flatnonzero(stages == 1)
     if not slow.size:
-        start = num_steps // 2
+        start = first = num_steps // 2
     else:
         earlier = np.flatnonzero(ends[: slow[-1]])  # window ends before the last window's
         start = int(earlier[-1]) + 1 if earlier.size else 0
+        first = int(slow[0])
     index = np.arange(num_steps)
-    return Row(index, stages, ends, index >= start)
+    return Row(index, stages, ends, index >= start, index < first)
 
 
 def row_at(rows: Row, index) -> Row:
@@ -116,20 +126,72 @@ RATE_SMOOTHING = 0.9
 """Weight of the past in each chain's running rate (about ten transitions)."""
 
 
-def pooled_rate(rates, smoothed):
+POOLINGS = ("harmonic", "median")
+"""The pooled statistics :func:`pooled_rate` offers."""
+
+STEP_POOLINGS = (*POOLINGS, "harmonic_then_median")
+"""The poolings of :func:`step_size_adaptation`: ``"harmonic_then_median"`` is the harmonic
+rule in the initial fast window (:class:`Row`'s ``initial``) and the median after it."""
+
+
+def pooled_rate(rates, smoothed, pooling: str = "harmonic"):
     """``(rate, smoothed)``: the rate dual averaging reads from a batch of chains, and their
-    updated running rates. The rate is the chains' mean rate times the ratio of the harmonic
-    to the arithmetic mean of their running rates: near 1 for chains that accept alike (the
-    step then meets the target), near 0 while one chain stays stuck (the step is lowered until
-    it moves). (The harmonic mean of the per-transition rates would also free a stuck chain,
-    but per-transition rates are noisy and it ends well above the target.) A non-finite rate
-    counts as 0."""
+    updated running rates. The rate is the chains' mean rate times a ratio of two summaries
+    of their running rates, near 1 for chains that accept alike (the step then meets the
+    target). A non-finite rate counts as 0.
+
+    ``pooling="harmonic"``: the ratio of the harmonic to the arithmetic mean, near 0 while one
+    chain stays stuck: the step is lowered until it moves. (The harmonic mean of the
+    per-transition rates would also free a stuck chain, but per-transition rates are noisy and
+    it ends well above the target.) Right where a chain is stuck only because the step is too
+    large for its start; wrong where a chain sits in a region no step of the others' size can
+    move in (a degenerate mode of a mixture, the neck of a funnel): there one chain sets the
+    step of all of them.
+
+    ``pooling="median"``: the ratio of the median to the arithmetic mean, so that dual
+    averaging drives the median running rate to the target. A minority of chains (fewer than
+    half) cannot move the median, however low or high their rates, so the step is the one the
+    majority needs; the chains left behind are named by :func:`odd_chains`. The mean rate
+    still carries each transition's fluctuation, so dual averaging sees the same noise as with
+    one chain; a batch of one or two chains gets ``mean(rates)``. (The median of the
+    per-transition rates themselves would be robust too, but it is biased: a transition's
+    rate is mostly near 0 or 1, and the median of a few such values is not their mean.)"""
+    if pooling not in POOLINGS:
+        raise ValueError(f"pooling must be one of {POOLINGS}, got {pooling!r}")
     own = jnp.where(jnp.isfinite(rates), rates, 0.0)
     smoothed = RATE_SMOOTHING * smoothed + (1.0 - RATE_SMOOTHING) * own
-    harmonic = 1.0 / jnp.mean(1.0 / jnp.maximum(smoothed, 1e-30))
+    if pooling == "harmonic":
+        level = 1.0 / jnp.mean(1.0 / jnp.maximum(smoothed, 1e-30))
+    else:
+        level = jnp.median(smoothed)
     arithmetic = jnp.mean(smoothed)
-    ratio = jnp.where(arithmetic > 0, harmonic / jnp.maximum(arithmetic, 1e-30), 1.0)
+    ratio = jnp.where(arithmetic > 0, level / jnp.maximum(arithmetic, 1e-30), 1.0)
     return jnp.mean(own) * ratio, smoothed
+
+
+ODD_RATE_FRACTION = 0.25
+"""A chain whose running rate ends below this fraction of the others' median is odd."""
+
+
+def odd_chains(smoothed, fraction: float = ODD_RATE_FRACTION) -> list[tuple[int, float, float]]:
+    """Chains adapted together whose running rate (``smoothed``, one per chain, as
+    :func:`pooled_rate` keeps it) is below ``fraction`` of the median of the other chains' (or
+    not finite): ``(chain, its rate, the others' median)`` for each. A robust pooled step
+    (``pooling="median"``) is the majority's; a chain that cannot move at it sits where the
+    others are not (a degenerate mode, a funnel's neck) or is stuck, and its draws are
+    suspect. With fewer than three chains none can be told apart from the majority: ``[]``.
+    On the host (numpy), after the warm-up."""
+    rates = np.asarray(smoothed, dtype=float).ravel()
+    if len(rates) < 3:
+        return []
+    out = []
+    for chain, rate in enumerate(rates):
+        others = np.delete(rates, chain)
+        others = others[np.isfinite(others)]
+        median = float(np.median(others)) if others.size else float("nan")
+        if np.isfinite(median) and median > 0 and not rate >= fraction * median:
+            out.append((chain, float(rate), median))
+    return out
 
 
 class StepSizeState(NamedTuple):
@@ -142,14 +204,25 @@ class StepSizeState(NamedTuple):
 
 
 def step_size_adaptation(target: float, rate_field: str = "acceptance_rate",
-                         max_step_size: float = math.inf) -> Adaptation:  # fmt: skip
+                         max_step_size: float = math.inf,
+                         pooling: str = "harmonic") -> Adaptation:  # fmt: skip
     """Dual averaging of one step size shared by the chains towards ``target`` of their
     :func:`pooled_rate` of ``info.<rate_field>`` (Hoffman & Gelman 2014, as
     ``blackjax.window_adaptation``; ``blackjax.adaptation.step_size.dual_averaging_adaptation``);
     steps above ``max_step_size`` are not used nor returned. ``init`` reads
     ``parameters["step_size"]``; ``final`` gives ``{"step_size": …}``, dual averaging's
     average. Also the step-size piece of the window adaptations (:meth:`restart` at a window's
-    end)."""
+    end).
+
+    ``pooling`` (:data:`STEP_POOLINGS`): ``"harmonic"`` (the orbit samplers' warm-up: a chain
+    stuck at its start is freed), ``"median"`` (a minority cannot move the step), or
+    ``"harmonic_then_median"`` (the window adaptation's: the harmonic rule frees chains stuck
+    at their starts in the initial fast window, while every chain is still far from where it
+    will sample; after it the median keeps the step of the majority, so that a chain falling
+    later into a region no step of the others' size moves in, a degenerate mode or a funnel's
+    neck, cannot stop the others; ``update`` then needs the row)."""
+    if pooling not in STEP_POOLINGS:
+        raise ValueError(f"pooling must be one of {STEP_POOLINGS}, got {pooling!r}")
     da_init, da_update, da_final = dual_averaging_adaptation(target)
 
     def init(states, parameters):
@@ -161,7 +234,13 @@ def step_size_adaptation(target: float, rate_field: str = "acceptance_rate",
         return {"step_size": jnp.minimum(state.step_size, max_step_size)}
 
     def update(state, row, parameters, before, after, infos):
-        rate, smoothed = pooled_rate(getattr(infos, rate_field), state.smoothed)
+        rates = getattr(infos, rate_field)
+        if pooling != "harmonic_then_median":
+            rate, smoothed = pooled_rate(rates, state.smoothed, pooling)
+        else:
+            rate, smoothed = pooled_rate(rates, state.smoothed, "median")
+            early, _ = pooled_rate(rates, state.smoothed, "harmonic")
+            rate = jnp.where(row.initial, early, rate)
         da = da_update(state.da, rate)
         return StepSizeState(da, jnp.exp(da.log_step_size), smoothed)
 

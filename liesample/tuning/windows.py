@@ -7,7 +7,13 @@ trajectory length and field, tuned together on one batch of chains.
 
 - the step size: dual averaging of the chains' pooled rate
   (:func:`liesample.tuning.protocol.step_size_adaptation`), restarted from its average at the
-  end of each slow window when the mass is adapted;
+  end of each slow window when the mass is adapted; pooled (``pooling="harmonic_then_median"``,
+  :func:`liesample.tuning.protocol.pooled_rate`) by the harmonic rule in the initial fast
+  window, which lowers the step until a chain stuck at its start moves, and by the median of
+  the chains' running rates after it, so that a minority of chains that fall into a region no
+  step of the others' size moves in (a degenerate mode of a mixture, the neck of a funnel)
+  cannot lower the step of the rest: those chains are named after the warm-up
+  (:func:`liesample.tuning.protocol.odd_chains`);
 - the mass: Welford moments of a statistic of the chains' states (pooled over the chains) in
   the slow windows, turned into the inverse mass at each window's end (``mass_from``);
   optionally dense blocks (:class:`DenseBlocks`: the pooled Welford covariance of some
@@ -147,6 +153,10 @@ class Windows(NamedTuple):
     dense : :class:`DenseBlocks` or ``None``.
     jitter : ``L = ceil(u T / ε)`` with ``u`` the Halton point (default), else ``u = 1``.
     step_size : a step size kept fixed (not adapted), or ``None``.
+    pooling : how the chains' rates are pooled
+        (:func:`liesample.tuning.protocol.step_size_adaptation`): ``"harmonic_then_median"``
+        (default: stuck starts freed, then a minority cannot move the step), ``"median"`` or
+        ``"harmonic"``.
     """
 
     target: float
@@ -163,6 +173,7 @@ class Windows(NamedTuple):
     dense: DenseBlocks | None = None
     jitter: bool = True
     step_size: float | None = None
+    pooling: str = "harmonic_then_median"
 
 
 class WindowState(NamedTuple):
@@ -197,7 +208,7 @@ def windows_adaptation(w: Windows) -> Adaptation:
     ``num_integration_steps`` (HMC), ``integration_time`` (the ``T`` jittered, with
     ``lengths``) and ``extra``'s; ``final`` gives ``step_size``,
     ``inverse_mass_matrix`` and ``integration_time`` (with ``lengths``)."""
-    step = step_size_adaptation(w.target, w.rate_field)
+    step = step_size_adaptation(w.target, w.rate_field, pooling=w.pooling)
     dense_keys = () if w.dense is None else w.dense.keys
 
     def init(states, parameters):
