@@ -1,11 +1,12 @@
 """Chains that adapt together cannot drag each other down.
 
-The window adaptation (``liesample.tuning.windows``, the NumPyro kernel's warm-up) pools the
-chains' rates by the harmonic rule in the initial fast window (a chain stuck at its start is
-freed) and by the median of their running rates after it (``protocol.step_size_adaptation(...,
-pooling="harmonic_then_median")``): a minority of chains stuck later cannot lower the shared
-step, and the odd chain is named after the warm-up (``protocol.odd_chains``, the NumPyro
-kernel's warning). The orbit samplers' dual averaging keeps the harmonic rule throughout.
+The NumPyro kernel's window adaptation (``liesample.tuning.windows`` with
+``numpyro_hmc.POOLING``) pools the chains' rates by the harmonic rule in the initial fast
+window (a chain stuck at its start is freed) and by the median of their running rates after it
+(``protocol.step_size_adaptation(..., pooling="harmonic_then_median")``): a minority of chains
+stuck later cannot lower the shared step, and the odd chain is named after the warm-up
+(``protocol.odd_chains``, the kernel's warning). The orbit samplers' dual averaging and the
+native window adaptations keep the harmonic rule throughout.
 Checked on the rule itself (no sampler), on a synthetic stuck chain through NumPyro's ``MCMC``
 with vectorized chains, and (slow) on posteriordb's ``low_dim_gauss_mix``.
 """

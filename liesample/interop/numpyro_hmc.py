@@ -40,6 +40,7 @@ from liesample.tuning.windows import (
 
 __all__ = [
     "HEURISTIC_ACCEPT_PROB",
+    "POOLING",
     "AdaptState",
     "Core",
     "GeometricHMCState",
@@ -60,6 +61,13 @@ __all__ = [
 
 HEURISTIC_ACCEPT_PROB = 0.8
 """The one-step rate NumPyro's ``find_reasonable_step_size`` aims at."""
+
+POOLING = "harmonic_then_median"
+"""How the warm-up pools the rates of chains adapted together
+(:func:`liesample.tuning.protocol.step_size_adaptation`): the harmonic rule in the initial fast
+window frees chains stuck at their starts; the median after it keeps the step of the majority,
+so a minority that falls into a degenerate mode or a funnel's neck cannot stop the others
+(vectorized chains; :func:`warn_odd_chains` names it)."""
 
 
 class AdaptState(NamedTuple):
@@ -149,6 +157,7 @@ def windows(settings: Settings, layout: Layout) -> Windows:
         dense=DenseBlocks(tuple(layout.dense_keys)) if layout.dense_keys else None,
         jitter=settings.jitter,
         step_size=None if settings.adapt_step_size else settings.step_size,
+        pooling=POOLING,
     )
 
 

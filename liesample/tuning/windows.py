@@ -7,12 +7,14 @@ trajectory length and field, tuned together on one batch of chains.
 
 - the step size: dual averaging of the chains' pooled rate
   (:func:`liesample.tuning.protocol.step_size_adaptation`), restarted from its average at the
-  end of each slow window when the mass is adapted; pooled (``pooling="harmonic_then_median"``,
-  :func:`liesample.tuning.protocol.pooled_rate`) by the harmonic rule in the initial fast
-  window, which lowers the step until a chain stuck at its start moves, and by the median of
-  the chains' running rates after it, so that a minority of chains that fall into a region no
-  step of the others' size moves in (a degenerate mode of a mixture, the neck of a funnel)
-  cannot lower the step of the rest: those chains are named after the warm-up
+  end of each slow window when the mass is adapted; pooled as ``Windows.pooling`` says
+  (:func:`liesample.tuning.protocol.pooled_rate`): the harmonic rule, which lowers the step
+  until a stuck chain moves (:func:`liesample.window_adaptation` and
+  :func:`liesample.magnetic_window_adaptation`), or (``"harmonic_then_median"``, the NumPyro
+  kernel's) that rule in the initial fast window only and the median of the chains' running
+  rates after it, so that a minority of chains that fall into a region no step of the
+  others' size moves in (a degenerate mode of a mixture, the neck of a funnel) cannot lower
+  the step of the rest: those chains are named after the warm-up
   (:func:`liesample.tuning.protocol.odd_chains`);
 - the mass: Welford moments of a statistic of the chains' states (pooled over the chains) in
   the slow windows, turned into the inverse mass at each window's end (``mass_from``);
@@ -154,9 +156,9 @@ class Windows(NamedTuple):
     jitter : ``L = ceil(u T / ε)`` with ``u`` the Halton point (default), else ``u = 1``.
     step_size : a step size kept fixed (not adapted), or ``None``.
     pooling : how the chains' rates are pooled
-        (:func:`liesample.tuning.protocol.step_size_adaptation`): ``"harmonic_then_median"``
-        (default: stuck starts freed, then a minority cannot move the step), ``"median"`` or
-        ``"harmonic"``.
+        (:func:`liesample.tuning.protocol.step_size_adaptation`): ``"harmonic"`` (default: a
+        stuck chain lowers the step until it moves), ``"harmonic_then_median"`` (stuck starts
+        freed, then a minority cannot move the step) or ``"median"``.
     """
 
     target: float
@@ -173,7 +175,7 @@ class Windows(NamedTuple):
     dense: DenseBlocks | None = None
     jitter: bool = True
     step_size: float | None = None
-    pooling: str = "harmonic_then_median"
+    pooling: str = "harmonic"
 
 
 class WindowState(NamedTuple):
