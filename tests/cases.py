@@ -151,6 +151,13 @@ def _heisenberg():
     return liesample.systems.heisenberg((4, 4), periodic=True)
 
 
+def _cp_starts(shape, n, seed):
+    """Two chains of random unit vectors of C^n at every site of ``shape``."""
+    rng = np.random.default_rng(seed)
+    z = rng.normal(size=(2, *shape, n)) + 1j * rng.normal(size=(2, *shape, n))
+    return z / np.linalg.norm(z, axis=-1, keepdims=True)
+
+
 def _point_vortices():
     return liesample.systems.point_vortices((1.0, 1.0, -0.5, 2.0), max_degree=2)
 
@@ -268,6 +275,11 @@ SAMPLERS = [
         ),
     ),
     SamplerCase(
+        "cp_heat_bath",
+        lambda: liesample.cp_heat_bath(liesample.systems.cp_model((4,), 3), beta=1.5),
+        lambda: _cp_starts((4,), 3, seed=7),
+    ),
+    SamplerCase(
         "heisenberg_wolff",
         lambda: liesample.heisenberg_wolff(_heisenberg(), beta=0.5),
         lambda: _spin_starts((4, 4), seed=3),
@@ -283,6 +295,11 @@ NOT_SAMPLED = {
     "isospectral_midpoint": "an integrator for zeitlin_euler, not a system",
     "wilson_gauge": "a T*G system (not Lie-Poisson): its sampler row is wilson_heat_bath",
     "WilsonGauge": "the class of wilson_gauge's systems",
+    "n_vector": "O(n) spins: n = 3 is the heisenberg row, other n are not Lie-Poisson systems "
+    "(the spin samplers sample them: tests/test_n_vector.py)",
+    "NVectorSystem": "the class of n_vector's systems for n != 3",
+    "cp_model": "CP(N-1) lattices (not Lie-Poisson in z): its sampler row is cp_heat_bath",
+    "CPModelSystem": "the class of cp_model's systems",
 }
 """Names in ``liesample.systems`` that are not system rows, and why."""
 
