@@ -54,7 +54,10 @@ towards ``1e-3 I`` as Stan does), and a jittered integration time ``u T``
 with ``T`` learnt by the ChEES-type rule, unless ``num_integration_steps`` or
 ``integration_time`` is given. Vectorized chains
 (``chain_method="vectorized"``) adapt together: one step size (their pooled rate,
-:func:`liesample.tuning.protocol.pooled_rate`), one mass (pooled moments) and one ``T``;
+:func:`liesample.tuning.protocol.pooled_rate`, by the median of their running rates after the
+initial fast window, :data:`liesample.interop.numpyro_hmc.POOLING`, so a minority stuck in a
+degenerate mode cannot lower the step of the rest; such a chain is named in a warning at the
+end of the warm-up), one mass (pooled moments) and one ``T``;
 sequential chains adapt alone: at the end of each one's warm-up the kernel records its step size
 and diagonal inverse mass (``chain_adaptations``) and warns when a chain's ends more than 10
 times from the median of the other chains' (:func:`liesample.tuning.windows.far_adapted`).
@@ -76,11 +79,14 @@ keyed by tuples of site names, and ``trajectory_length``, the adapted ``T``).
 **Checks after the run.** :func:`liesample.interop.numpyro_checks.check_mcmc` runs on a
 finished ``MCMC`` the checks :func:`liesample.sample` runs: divergences, stuck chains, and the
 rank-normalised split R-hat and bulk/tail ESS of every element of every latent site, as warnings
-naming them; it costs nothing while the chains run. ``check_convergence=True`` runs the same
-checks at the end of ``MCMC.run`` with no extra call, at the price of a host round trip per
-kept draw (several times the sampling time of a cheap model): NumPyro does not tell a kernel
-how many draws follow its warm-up, so ``init`` finds the calling ``MCMC`` on the call stack; the
-mechanism and its limits are in :mod:`liesample.interop.numpyro_checks`.
+naming them, and a funnel warning naming a centred hierarchy's scale site
+(``hierarchical_scales``, found in the model at ``init``) with
+``numpyro.infer.reparam.LocScaleReparam`` as the fix; it costs nothing while the chains run.
+``check_convergence=True`` runs the same checks at the end of ``MCMC.run`` with no extra call,
+at the price of a host round trip per kept draw (several times the sampling time of a cheap
+model): NumPyro does not tell a kernel how many draws follow its warm-up, so ``init`` finds the
+calling ``MCMC`` on the call stack; the mechanism and its limits are in
+:mod:`liesample.interop.numpyro_checks`.
 
 **Chains.** ``chain_method="vectorized"`` vmaps init and transition over chains;
 ``"sequential"`` works as well. NumPyro compiles its loop with plain ``jax.jit``, not
