@@ -346,8 +346,22 @@ KEY_DATA_BITS = 32
 
 
 def chunk_length(num_draws: int, chunk_draws) -> int:
-    """Draws per compiled chunk: ``chunk_draws``, else about 20 chunks."""
-    return int(chunk_draws) if chunk_draws else max(1, math.ceil(num_draws / 20))
+    """Draws per compiled chunk: ``chunk_draws``, else about 20 chunks, of equal length where a
+    divisor of ``num_draws`` gives 10 to 40 of them: every chunk is then one compiled program
+    (a last, shorter chunk would be a second program, compiling the step's body again).
+
+    Examples
+    --------
+    >>> from liesample.run.arguments import chunk_length
+    >>> chunk_length(50, None), chunk_length(1000, None), chunk_length(997, None)
+    (2, 50, 50)
+    """
+    if chunk_draws:
+        return int(chunk_draws)
+    even = [num_draws // k for k in range(10, 41) if num_draws % k == 0]  # k chunks of n / k
+    if even:
+        return min(even, key=lambda d: abs(num_draws / d - 20))
+    return max(1, math.ceil(num_draws / 20))
 
 
 def max_steps(sampler: Sampler) -> int:
