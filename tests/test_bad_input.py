@@ -763,6 +763,25 @@ ROWS = [
         ValueError,
         "step_size.*finite",
     ),
+    # ---- liesample.cp_heat_bath
+    (
+        "cp_heat_bath beta nan",
+        lambda: liesample.cp_heat_bath(systems.cp_model((4,), 3), beta=NAN),
+        ValueError,
+        "beta must be finite",
+    ),
+    (
+        "cp_heat_bath overrelaxation negative",
+        lambda: liesample.cp_heat_bath(systems.cp_model((4,), 3), beta=1.0, overrelaxation=-1),
+        ValueError,
+        "overrelaxation must be a non-negative int",
+    ),
+    (
+        "cp_heat_bath an O(3) system",
+        lambda: liesample.cp_heat_bath(CHAIN, beta=1.0),
+        TypeError,
+        "system must be a cp_model.*heisenberg_heat_bath",
+    ),
     # ---- liesample.heisenberg_heat_bath, liesample.heisenberg_wolff, heisenberg_cluster
     (
         "heisenberg_heat_bath anisotropy",
