@@ -381,7 +381,7 @@ def sample_batch(c: Core, state, logdensity, on_draw=None):
     if settings.num_warmup > 0 and settings.adapt_step_size and num_chains >= 3:
         jax.lax.cond(
             i == settings.num_warmup - 1,
-            lambda: jax.debug.callback(warn_odd_chains, new.step.smoothed),
+            lambda: jax.debug.callback(_warn_odd_chains, new.step.smoothed),
             lambda: None,
         )
     if on_draw is not None:  # the draw, to the post-run checks
@@ -397,6 +397,11 @@ ODD_CHAIN_ADVICE = (
     "posterior), give a longer num_warmup, or reparametrise the model (a hierarchical scale: "
     "numpyro.infer.reparam.LocScaleReparam)."
 )
+
+
+def _warn_odd_chains(smoothed) -> None:
+    """:func:`warn_odd_chains` as a ``jax.debug.callback`` (which returns nothing)."""
+    warn_odd_chains(smoothed)
 
 
 def warn_odd_chains(smoothed) -> list:

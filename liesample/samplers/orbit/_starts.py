@@ -32,7 +32,7 @@ __all__ = [
 ]
 
 
-def orbit_settings(name: str, system: LiePoissonSystem, beta, **settings) -> dict:
+def orbit_settings(name: str, system, beta, **settings) -> dict:
     """What every orbit sampler reports first in ``settings``: its name, the system and ``β``;
     then ``settings`` in order."""
     return {"sampler": name, "system": system.name, "beta": beta, **settings}

@@ -42,6 +42,7 @@ from liesample.foundation.validation import finite_float
 from liesample.geometry.algebras import so3
 from liesample.samplers.contract import BasicInfo, Sampler, Structure, step_key
 from liesample.samplers.orbit._starts import orbit_groups, orbit_settings, plain_init_fn
+from liesample.systems.cp_model import CPModelSystem
 from liesample.systems.heisenberg import (
     SpinLatticeSystem,
     colouring,
@@ -76,9 +77,9 @@ __all__ = [
 ]
 
 
-SpinSystem = SpinLatticeSystem | NVectorSystem
-"""What the spin samplers take: :func:`liesample.systems.heisenberg` or
-:func:`liesample.systems.n_vector` lattices."""
+SpinSystem = SpinLatticeSystem | NVectorSystem | CPModelSystem
+"""What the spin samplers take: :func:`liesample.systems.heisenberg`,
+:func:`liesample.systems.n_vector` or :func:`liesample.systems.cp_model` lattices."""
 
 
 class SpinState(NamedTuple):
