@@ -52,6 +52,24 @@ def finite_float(
     return x
 
 
+def positive_int(name: str, value, what: str) -> int:
+    """``value`` as an int ``>= 1`` (``what`` says what it counts), else a ``TypeError`` (not an
+    int, or a bool) or a ``ValueError`` (below 1), each naming ``name``.
+
+    Examples
+    --------
+    >>> from liesample.foundation.validation import positive_int
+    >>> positive_int("length", np.int64(12), "sites of the chain")
+    12
+    """
+    message = f"{name} must be an int >= 1 ({what}), got {value!r}"
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise TypeError(message)
+    if value < 1:
+        raise ValueError(message)
+    return int(value)
+
+
 def principal_moments(inertia: Sequence[float]) -> tuple[float, float, float]:
     """Three finite, positive principal moments of inertia, or a ``ValueError`` naming the bad
     one."""

@@ -24,15 +24,14 @@ the real coordinates of ``P`` (``tr(P_x P_y)`` is their Euclidean dot product).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
-from typing import Any
+from collections.abc import Sequence
+from dataclasses import dataclass
 
 import jax.numpy as jnp
 import numpy as np
 from jax.typing import ArrayLike
 
-from liesample.foundation.identity import ValueIdentity, by_value
+from liesample.foundation.identity import by_value
 from liesample.foundation.validation import concrete_array
 from liesample.systems.heisenberg import (
     bond_sum,
@@ -40,6 +39,7 @@ from liesample.systems.heisenberg import (
     lattice_arguments,
     lattice_name,
 )
+from liesample.systems.n_vector import UnitVectorLattice
 from liesample.targets.cp_model import CPChainReference, check_cp_components
 
 __all__ = ["CPModelSystem", "cp_model", "projector_coordinates"]
@@ -65,7 +65,7 @@ def projector_coordinates(z):
 
 
 @dataclass(frozen=True, eq=False)
-class CPModelSystem(ValueIdentity):
+class CPModelSystem(UnitVectorLattice):
     """A CP(N−1) lattice (:func:`cp_model`): what its samplers read.
 
     Attributes
@@ -96,27 +96,6 @@ class CPModelSystem(ValueIdentity):
     (CPModelSystem('CP(2) square lattice 3x3'), 3, (3, 3, 3))
     >>> system.check_position(system.default_position)  # unit vectors: no error
     """
-
-    name: str
-    hamiltonian: Callable
-    default_position: np.ndarray
-    params: dict[str, Any] = field(default_factory=dict)
-    reference: Callable | None = None
-    component_names: tuple[str, ...] = ()
-    event_shape: tuple[int, ...] = None  # type: ignore[assignment]
-    check_beta: None = None
-
-    def __post_init__(self):
-        if self.event_shape is None:
-            object.__setattr__(self, "event_shape", tuple(np.shape(self.default_position)))
-
-    def __repr__(self) -> str:
-        return f"CPModelSystem({self.name!r})"
-
-    @property
-    def n(self) -> int:
-        """``N``: complex components of ``z``."""
-        return self.event_shape[-1]
 
     def check_position(self, position: ArrayLike, name: str = "position") -> None:
         """Reject a state of the wrong shape, non-numeric, non-finite, or with a ``z_x`` off the

@@ -41,11 +41,41 @@ from liesample.systems.heisenberg import (
 )
 from liesample.targets.n_vector import NVectorChainReference, check_spin_components
 
-__all__ = ["NVectorSystem", "n_vector"]
+__all__ = ["NVectorSystem", "UnitVectorLattice", "n_vector"]
 
 
 @dataclass(frozen=True, eq=False)
-class NVectorSystem(ValueIdentity):
+class UnitVectorLattice(ValueIdentity):
+    """What the exact spin samplers read of a lattice of unit vectors that is no Lie–Poisson
+    system (:class:`NVectorSystem`, :class:`liesample.systems.cp_model.CPModelSystem`): its
+    name, ``h``, a start, its parameters, its exact reference and the shape of a state; equal
+    by value (:mod:`liesample.foundation.identity`). The subclasses document the fields and
+    check a position."""
+
+    name: str
+    hamiltonian: Callable
+    default_position: np.ndarray
+    params: dict[str, Any] = field(default_factory=dict)
+    reference: Callable | None = None
+    component_names: tuple[str, ...] = ()
+    event_shape: tuple[int, ...] = None  # type: ignore[assignment]
+    check_beta: None = None
+
+    def __post_init__(self):
+        if self.event_shape is None:
+            object.__setattr__(self, "event_shape", tuple(np.shape(self.default_position)))
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.name!r})"
+
+    @property
+    def n(self) -> int:
+        """Components of the vector at a site (the last axis of a state)."""
+        return self.event_shape[-1]
+
+
+@dataclass(frozen=True, eq=False)
+class NVectorSystem(UnitVectorLattice):
     """An O(n) spin lattice for ``n ≠ 3`` (:func:`n_vector`): what the spin samplers read.
 
     Attributes
@@ -77,27 +107,6 @@ class NVectorSystem(ValueIdentity):
     (NVectorSystem('O(4) square lattice 3x3'), 4, (3, 3, 4))
     >>> system.check_position(system.default_position)  # unit spins: no error
     """
-
-    name: str
-    hamiltonian: Callable
-    default_position: np.ndarray
-    params: dict[str, Any] = field(default_factory=dict)
-    reference: Callable | None = None
-    component_names: tuple[str, ...] = ()
-    event_shape: tuple[int, ...] = None  # type: ignore[assignment]
-    check_beta: None = None
-
-    def __post_init__(self):
-        if self.event_shape is None:
-            object.__setattr__(self, "event_shape", tuple(np.shape(self.default_position)))
-
-    def __repr__(self) -> str:
-        return f"NVectorSystem({self.name!r})"
-
-    @property
-    def n(self) -> int:
-        """Components of a spin."""
-        return self.event_shape[-1]
 
     def check_position(self, position: ArrayLike, name: str = "position") -> None:
         """Reject a state of the wrong shape, non-finite, or with a spin off the unit sphere

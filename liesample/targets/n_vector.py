@@ -28,7 +28,7 @@ import numpy as np
 import numpy.typing as npt
 from jax.typing import ArrayLike
 
-from liesample.foundation.validation import finite_float
+from liesample.foundation.validation import finite_float, positive_int
 
 __all__ = [
     "NVectorChainReference",
@@ -121,12 +121,9 @@ class NVectorChainReference:
     coupling: float = 1.0
 
     def __post_init__(self):
-        length = self.length
-        if isinstance(length, (bool, np.bool_)) or not isinstance(length, (int, np.integer)):
-            raise TypeError(f"length must be an int >= 1 (sites of the chain), got {length!r}")
-        if length < 1:
-            raise ValueError(f"length must be an int >= 1 (sites of the chain), got {length!r}")
-        object.__setattr__(self, "length", int(self.length))
+        object.__setattr__(
+            self, "length", positive_int("length", self.length, "sites of the chain")
+        )
         object.__setattr__(self, "n", check_spin_components(self.n))
         object.__setattr__(self, "beta", finite_float("beta", self.beta))
         object.__setattr__(self, "coupling", finite_float("coupling", self.coupling))

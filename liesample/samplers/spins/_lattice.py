@@ -62,6 +62,7 @@ __all__ = [
     "check_precession_angle",
     "check_spin_system",
     "check_sweeps",
+    "checkerboard_step",
     "energy_change",
     "finish_step",
     "heat_bath",
@@ -272,6 +273,23 @@ def heat_bath(system: SpinSystem, rng_key, flat, sublattice: Sublattice, beta):
     direction = jnp.where((norm > 0.0)[..., None], direction, axis)
     draw = von_mises_fisher if flat.shape[-1] == 3 else von_mises_fisher_sphere
     return flat.at[sublattice.sites].set(draw(rng_key, direction, beta * norm))
+
+
+def checkerboard_step(system, rng_key, state, classes, heat_bath_sweeps, overrelaxation,
+                      draw: Callable, reflect: Callable):  # fmt: skip
+    """One step of a lattice's exact moves: ``heat_bath_sweeps`` sweeps of ``draw(key, flat,
+    sublattice)`` over the colour classes (one key per class and sweep), then
+    ``overrelaxation`` sweeps of ``reflect(flat, sublattice)``; ``(state, info)`` by
+    :func:`finish_step`."""
+    flat = state.position.reshape(-1, state.position.shape[-1])
+    keys = jax.random.split(rng_key, max(1, heat_bath_sweeps * len(classes)))
+    for sweep in range(heat_bath_sweeps):
+        for c, sublattice in enumerate(classes):
+            flat = draw(keys[sweep * len(classes) + c], flat, sublattice)
+    for _ in range(overrelaxation):
+        for sublattice in classes:
+            flat = reflect(flat, sublattice)
+    return finish_step(system, state.position, flat.reshape(state.position.shape), 1.0)
 
 
 def finish_step(system: SpinSystem, old, new, acceptance_rate, info_class=SpinInfo, **extra):

@@ -39,7 +39,6 @@ from __future__ import annotations
 
 import functools
 
-import jax
 import jax.numpy as jnp
 
 from liesample.samplers.contract import Sampler, sampling_api
@@ -49,7 +48,7 @@ from liesample.samplers.spins._lattice import (
     Sublattice,
     check_beta,
     check_sweeps,
-    finish_step,
+    checkerboard_step,
     spin_sampler,
     sublattices,
 )
@@ -123,15 +122,11 @@ def build_kernel(system: CPModelSystem, heat_bath_sweeps: int = 1, overrelaxatio
     classes = sublattices(system)
 
     def kernel(rng_key, state: SpinState, beta):
-        flat = state.position.reshape(-1, state.position.shape[-1])
-        keys = jax.random.split(rng_key, max(1, heat_bath_sweeps * len(classes)))
-        for sweep in range(heat_bath_sweeps):
-            for c, sublattice in enumerate(classes):
-                flat = heat_bath(system, keys[sweep * len(classes) + c], flat, sublattice, beta)
-        for _ in range(overrelaxation):
-            for sublattice in classes:
-                flat = reflect(system, flat, sublattice, beta)
-        return finish_step(system, state.position, flat.reshape(state.position.shape), 1.0)
+        return checkerboard_step(
+            system, rng_key, state, classes, heat_bath_sweeps, overrelaxation,
+            lambda key, flat, sublattice: heat_bath(system, key, flat, sublattice, beta),
+            lambda flat, sublattice: reflect(system, flat, sublattice, beta),
+        )  # fmt: skip
 
     return kernel
 

@@ -27,8 +27,6 @@ from __future__ import annotations
 
 import math
 
-import jax
-
 from liesample.foundation.validation import finite_float
 from liesample.samplers.contract import Sampler, sampling_api
 from liesample.samplers.spins._lattice import (
@@ -39,7 +37,7 @@ from liesample.samplers.spins._lattice import (
     check_precession_angle,
     check_spin_system,
     check_sweeps,
-    finish_step,
+    checkerboard_step,
     heat_bath,
     init,
     precess,
@@ -64,15 +62,11 @@ def build_kernel(system: SpinSystem, heat_bath_sweeps: int = 1, overrelaxation: 
     classes = sublattices(system)
 
     def kernel(rng_key, state: SpinState, beta, precession_angle):
-        flat = state.position.reshape(-1, state.position.shape[-1])
-        keys = jax.random.split(rng_key, max(1, heat_bath_sweeps * len(classes)))
-        for sweep in range(heat_bath_sweeps):
-            for c, sublattice in enumerate(classes):
-                flat = heat_bath(system, keys[sweep * len(classes) + c], flat, sublattice, beta)
-        for _ in range(overrelaxation):
-            for sublattice in classes:
-                flat = precess(system, flat, sublattice, precession_angle)
-        return finish_step(system, state.position, flat.reshape(state.position.shape), 1.0)
+        return checkerboard_step(
+            system, rng_key, state, classes, heat_bath_sweeps, overrelaxation,
+            lambda key, flat, sublattice: heat_bath(system, key, flat, sublattice, beta),
+            lambda flat, sublattice: precess(system, flat, sublattice, precession_angle),
+        )  # fmt: skip
 
     return kernel
 
