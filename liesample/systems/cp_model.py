@@ -64,7 +64,7 @@ def projector_coordinates(z):
     return jnp.concatenate([jnp.real(flat), jnp.imag(flat)], axis=-1)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)  # the base class's short repr
 class CPModelSystem(UnitVectorLattice):
     """A CP(N−1) lattice (:func:`cp_model`): what its samplers read.
 

@@ -74,7 +74,7 @@ class UnitVectorLattice(ValueIdentity):
         return self.event_shape[-1]
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)  # the base class's short repr
 class NVectorSystem(UnitVectorLattice):
     """An O(n) spin lattice for ``n ≠ 3`` (:func:`n_vector`): what the spin samplers read.
 
