@@ -233,3 +233,17 @@ def test_restricted_gaussian_density_normalised_on_sphere(beta):
     draws = target.sample(jax.random.key(3), 1000)
     assert draws.shape == (1000, 3)
     assert np.max(np.abs(np.linalg.norm(np.asarray(draws), axis=1) - r)) < 1e-12
+
+
+def test_the_heisenberg_bond_variance_is_continuous_where_its_series_takes_over():
+    """Below ``|βJ| = 1e-3`` the bond variance is the series ``1/3 − K²/15`` of ``1/K² −
+    1/sinh²K``: the two agree to the series' next term on either side of the switch."""
+    from liesample.targets.spins import HeisenbergChainReference
+
+    def variance(k):
+        return HeisenbergChainReference(length=4, beta=k, coupling=1.0).bond_variance()
+
+    for k in (0.999e-3, 1.001e-3):
+        exact = 1 / k**2 - 1 / np.sinh(k) ** 2  # numpy float64: fine at this K (error ~1e-10)
+        assert abs(variance(k) - exact) < 1e-9
+    assert abs(variance(0.999e-3) - variance(1.001e-3)) < 1e-9

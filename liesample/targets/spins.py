@@ -107,7 +107,7 @@ class HeisenbergChainReference:
         """``Var(s_k·s_{k+1}) = 1/K² − 1/sinh²K``."""
         k = self.beta * self.coupling
         if abs(k) < 1e-3:
-            return 1.0 / 3.0 - 2.0 * k**2 / 15.0
+            return 1.0 / 3.0 - k**2 / 15.0  # the series of 1/K² − 1/sinh²K
         return 1.0 / k**2 - 1.0 / math.sinh(k) ** 2
 
     def energy_mean(self) -> float:
