@@ -436,10 +436,12 @@ def draw_bytes(positions, keep_positions: bool, recorded, info: int) -> int:
     return info + sum(math.prod(leaf.shape[1:]) * np.dtype(leaf.dtype).itemsize for leaf in leaves)
 
 
-def check_memory(sizes, num_draws: int, options, devices) -> None:
+def check_memory(sizes, num_draws: int, options, devices, lattice_parts: int = 1) -> None:
     """The kept draws fit: the whole run in host memory (the draws are returned there), one
     chunk and its thinning window on each device. ``sizes``: ``(chains, bytes of one chain's
-    draw, bytes of one step's info)``. Lower bounds: only what surely cannot fit is refused."""
+    draw, bytes of one step's info)``; ``lattice_parts``: the devices one chain's lattice is
+    split over (``lattice_sharding=``), each holding that fraction of its draws. Lower bounds:
+    only what surely cannot fit is refused."""
     o, (chains, per_draw, info) = options, sizes
     total, host = chains * num_draws * per_draw, host_memory()
     fewer = (
@@ -455,8 +457,8 @@ def check_memory(sizes, num_draws: int, options, devices) -> None:
             f"larger thinning: one draw every thinning steps), or {fewer}"
         )
     chunk = min(chunk_length(num_draws, o.chunk_draws), num_draws)
-    per_device = math.ceil(chains / len(devices))
-    need = per_device * (chunk * per_draw + o.thinning * info)
+    per_device = math.ceil(chains / (len(devices) // lattice_parts))
+    need = per_device * (math.ceil(chunk * per_draw / lattice_parts) + o.thinning * info)
     free, where = device_memory(devices)
     if free is not None and need > free:
         raise ValueError(

@@ -31,6 +31,7 @@ from liesample.run import arguments
 from liesample.run.checks import DEFAULT_MIN_ACCEPTANCE_RATE, check_run, record_casimir_drift
 from liesample.run.provenance import adapted_fingerprint, run_fingerprint
 from liesample.run.sharding import (
+    CHAIN_AXIS,
     LatticeSharding,
     check_output,
     run_sharding,
@@ -378,8 +379,10 @@ class _Run:
         recorded = (self.observable_shapes, self.log_likelihood_shapes)
         per_draw = arguments.draw_bytes(self.positions, options.keep_positions, recorded, info)
         devices = [jax.devices()[0]] if self.sharding is None else list(self.sharding.device_set)
-        sizes = (self.num_chains, per_draw, info)
-        arguments.check_memory(sizes, num_draws, options, devices)
+        sizes, parts = (self.num_chains, per_draw, info), 1
+        if isinstance(self.sharding, LatticeSharding):  # a chain's lattice over several devices
+            parts = len(devices) // self.sharding.mesh.shape[CHAIN_AXIS]
+        arguments.check_memory(sizes, num_draws, options, devices, parts)
 
     def phase(self, name):
         """Name what the run is doing now on the progress bar."""
