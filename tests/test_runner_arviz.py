@@ -77,3 +77,22 @@ def test_progress_is_the_deprecated_name_of_progress_bar():
         )
     new = liesample.sample_chains(NUTS, KEY, STARTS, 50, progress_bar=False, **run)
     np.testing.assert_array_equal(old.positions, new.positions)
+
+
+def test_a_thermalised_configuration_comes_with_one_warning_only():
+    """A one-draw run (a thermalised configuration after a warm-up) warns once, that its
+    convergence cannot be checked, and ArviZ's guess at swapped axes (two chains, one draw)
+    does not speak: the tree's axes are named."""
+    import warnings
+
+    system = liesample.systems.heisenberg((4,), periodic=True)
+    sampler = liesample.heisenberg_heat_bath(system, beta=1.0)
+    starts = np.stack([system.default_position] * 2)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        tree = liesample.sample(
+            sampler, jax.random.key(0), starts, 1, num_warmup=20, progress_bar=False
+        )
+    messages = [str(w.message) for w in caught]
+    assert len(messages) == 1 and "convergence cannot be checked with 1 draw" in messages[0]
+    assert tree.posterior.sizes["draw"] == 1 and tree.posterior.sizes["chain"] == 2

@@ -10,6 +10,7 @@ real and imaginary parts).
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING
 
@@ -225,7 +226,10 @@ def to_datatree(
         group_attrs["sample_stats"] = run_attrs
     from arviz_base import from_dict
 
-    return from_dict(data, dims=dims, coords=all_coords, attrs=group_attrs)
+    with warnings.catch_warnings():  # ArviZ guesses swapped axes when chains outnumber draws;
+        # here the first two axes are named chain and draw, so a short run's tree is as meant
+        warnings.filterwarnings("ignore", message="Found chain dimension to be longer")
+        return from_dict(data, dims=dims, coords=all_coords, attrs=group_attrs)
 
 
 def _tree_attrs(attrs: Mapping) -> dict:
