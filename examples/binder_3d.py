@@ -6,9 +6,10 @@ phase and to ``2/3`` in the ordered one; at the critical point it is (to leading
 same for every ``L``, so the curves of two sizes cross at ``β_c`` (literature: ``β_c J ≈ 0.693``,
 ``U* ≈ 0.62``).
 
-For each size, every ``β`` of the grid runs in one compiled program (the sampler's kernel takes
-``β`` as an argument), with the exact sampler ``liesample.recommended_sampler`` would choose for
-that lattice near ``β_c`` (:func:`liesample.samplers.recommended.spin_sampler_name`: heat bath
+For each size, every ``β`` of the grid is one ``liesample.sample`` call (its warm-up, checks
+and ArviZ output), compiled once for the grid (a sampler's ``β`` is a number of its program),
+with the exact sampler ``liesample.recommended_sampler`` would choose for that lattice near
+``β_c`` (:func:`liesample.samplers.recommended.spin_sampler_name`: heat bath
 with over-relaxation, or Swendsen–Wang clusters on large lattices). ``U`` gets jackknife
 errors over blocks of draws (:func:`liesample.analysis.diagnostics.binder_cumulant`); a
 weighted straight line through each size's ``U(β)`` locates the crossing of consecutive sizes,
@@ -38,46 +39,41 @@ import numpy as np
 import liesample
 from liesample.analysis.diagnostics import binder_cumulant
 from liesample.samplers.recommended import spin_sampler_name
-from liesample.samplers.spins.heisenberg_cluster import heisenberg_cluster
-from liesample.samplers.spins.heisenberg_heat_bath import SpinState, heisenberg_heat_bath
 from liesample.systems.heisenberg import heisenberg
 
 BETA_C = 0.693
 
 
-def kernel_for(system, beta):
-    """``(name, step(key, state, β))`` of the sampler recommended for ``system`` near ``beta``,
-    with ``β`` a traced argument (one compilation serves the whole grid)."""
-    name = spin_sampler_name(system, beta)
+def sampler_at(system, beta, name):
+    """The sampler ``name`` (what ``liesample.recommended_sampler`` would choose near ``β_c``)
+    at ``beta``: the same structure at every ``β``, so one compilation serves the grid."""
     if name == "heisenberg_cluster":
-        return name, heisenberg_cluster.build_kernel(system)
-    kernel = heisenberg_heat_bath.build_kernel(system, 1, 1)
-    return name, lambda key, state, b: kernel(key, state, b, math.pi)
+        return liesample.heisenberg_cluster(system, beta=beta)
+    return liesample.heisenberg_heat_bath(system, beta=beta, overrelaxation=1)
+
+
+def magnetisation(spins):
+    """``m``, the magnetisation per site of one configuration (an observable of the run)."""
+    return jnp.mean(spins.reshape(-1, 3), axis=0)
 
 
 def magnetisations(size, betas, num_chains, num_draws, num_warmup, seed):
-    """``m`` per site, shape ``(betas, chains, draws, 3)``, and the sampler's name."""
+    """``m`` per site, shape ``(betas, chains, draws, 3)``, and the sampler's name: one
+    ``liesample.sample`` per ``β`` (its checks included), the spins themselves not kept."""
     system = heisenberg((size,) * 3, periodic=True)
-    name, step = kernel_for(system, float(np.mean(betas)))
+    name = spin_sampler_name(system, float(np.mean(betas)))
     rng = np.random.default_rng(seed)
-    starts = rng.normal(size=(len(betas), num_chains, size, size, size, 3))
-    starts /= np.linalg.norm(starts, axis=-1, keepdims=True)
-
-    def chain(key, start, beta):
-        def advance(state, k):
-            state, _ = step(k, state, beta)
-            return state, jnp.mean(state.position.reshape(-1, 3), axis=0)
-
-        key_warm, key_draw = jax.random.split(key)
-        state, _ = jax.lax.scan(advance, SpinState(start), jax.random.split(key_warm, num_warmup))
-        _, m = jax.lax.scan(advance, state, jax.random.split(key_draw, num_draws))
-        return m
-
-    run = jax.vmap(jax.vmap(chain, in_axes=(0, 0, None)), in_axes=(0, 0, 0))
-    keys = jax.random.split(jax.random.key(seed), len(betas) * num_chains)
-    keys = keys.reshape(len(betas), num_chains)
-    m = liesample.jit(run)(keys, jnp.asarray(starts), jnp.asarray(betas, dtype=float))
-    return np.asarray(m), name
+    keys = jax.random.split(jax.random.key(seed), len(betas))
+    m = []
+    for key, beta in zip(keys, betas, strict=True):
+        starts = rng.normal(size=(num_chains, size, size, size, 3))
+        starts /= np.linalg.norm(starts, axis=-1, keepdims=True)
+        tree = liesample.sample(
+            sampler_at(system, beta, name), key, starts, num_draws, num_warmup=num_warmup,
+            observables={"m": magnetisation}, keep_positions=False, progress_bar=False,
+        )  # fmt: skip
+        m.append(np.asarray(tree.posterior["m"].values))
+    return np.stack(m), name
 
 
 def line_fit(x, y, error):
