@@ -52,7 +52,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax.typing import ArrayLike
 
-from liesample.foundation.validation import finite_float, positive_int
+from liesample.foundation.validation import finite_float
+from liesample.targets.open_chain import OpenChainLaw
 
 __all__ = [
     "CPChainReference",
@@ -119,7 +120,7 @@ def cp_bond_moments(n: int, beta: float, coupling: float = 1.0) -> tuple[float, 
 
 
 @dataclass(frozen=True)
-class CPChainReference:
+class CPChainReference(OpenChainLaw):
     """Exact Gibbs law of an open chain of ``length`` CP(N−1) sites (module docstring): the
     ``length − 1`` bond variables ``t = |z_x^† z_{x+1}|²`` are i.i.d. with the mean and variance
     of :func:`cp_bond_moments`.
@@ -136,18 +137,10 @@ class CPChainReference:
     True
     """
 
-    length: int
-    n: int
-    beta: float
-    coupling: float = 1.0
-
-    def __post_init__(self):
-        object.__setattr__(
-            self, "length", positive_int("length", self.length, "sites of the chain")
-        )
-        object.__setattr__(self, "n", check_cp_components(self.n))
-        object.__setattr__(self, "beta", finite_float("beta", self.beta))
-        object.__setattr__(self, "coupling", finite_float("coupling", self.coupling))
+    @staticmethod
+    def check_components(n) -> int:
+        """``n`` checked by :func:`check_cp_components`."""
+        return check_cp_components(n)
 
     def bond_mean(self) -> float:
         """``E[|z_x^† z_{x+1}|²]``."""
@@ -156,18 +149,6 @@ class CPChainReference:
     def bond_variance(self) -> float:
         """``Var(|z_x^† z_{x+1}|²)``."""
         return cp_bond_moments(self.n, self.beta, self.coupling)[1]
-
-    def bond_energy_mean(self) -> float:
-        """``E[−J |z_x^† z_{x+1}|²] = −J E[t]``: the energy per bond."""
-        return -self.coupling * self.bond_mean()
-
-    def energy_mean(self) -> float:
-        """``E[h] = −J (length − 1) E[t]``."""
-        return (self.length - 1) * self.bond_energy_mean()
-
-    def energy_variance(self) -> float:
-        """``Var(h) = J² (length − 1) Var(t)``."""
-        return self.coupling**2 * (self.length - 1) * self.bond_variance()
 
 
 def _split_scores(rates):

@@ -28,7 +28,8 @@ import numpy as np
 import numpy.typing as npt
 from jax.typing import ArrayLike
 
-from liesample.foundation.validation import finite_float, positive_int
+from liesample.foundation.validation import finite_float
+from liesample.targets.open_chain import OpenChainLaw
 
 __all__ = [
     "NVectorChainReference",
@@ -98,7 +99,7 @@ def n_vector_bond_variance(n: int, beta: float, coupling: float = 1.0) -> float:
 
 
 @dataclass(frozen=True)
-class NVectorChainReference:
+class NVectorChainReference(OpenChainLaw):
     """Exact Gibbs law of an open chain of ``length`` O(n) spins without field (module
     docstring): the ``length − 1`` bond cosines are i.i.d. with mean ``u`` and variance
     :func:`n_vector_bond_variance`.
@@ -115,23 +116,19 @@ class NVectorChainReference:
     True
     """
 
-    length: int
-    n: int
-    beta: float
-    coupling: float = 1.0
-
-    def __post_init__(self):
-        object.__setattr__(
-            self, "length", positive_int("length", self.length, "sites of the chain")
-        )
-        object.__setattr__(self, "n", check_spin_components(self.n))
-        object.__setattr__(self, "beta", finite_float("beta", self.beta))
-        object.__setattr__(self, "coupling", finite_float("coupling", self.coupling))
+    @staticmethod
+    def check_components(n) -> int:
+        """``n`` checked by :func:`check_spin_components`."""
+        return check_spin_components(n)
 
     @property
     def u(self) -> float:
         """``E[s_x·s_{x+1}]``."""
         return n_vector_bond_mean(self.n, self.beta, self.coupling)
+
+    def bond_mean(self) -> float:
+        """``E[s_x·s_{x+1}] = u``."""
+        return self.u
 
     def correlation(self, r: npt.ArrayLike) -> np.ndarray:
         """``E[s_x·s_{x+r}] = uʳ`` for integer ``0 ≤ r ≤ length − 1``."""
@@ -146,18 +143,6 @@ class NVectorChainReference:
     def bond_variance(self) -> float:
         """``Var(s_x·s_{x+1})``."""
         return n_vector_bond_variance(self.n, self.beta, self.coupling)
-
-    def bond_energy_mean(self) -> float:
-        """``E[−J s_x·s_{x+1}] = −J u``: the energy per bond."""
-        return -self.coupling * self.u
-
-    def energy_mean(self) -> float:
-        """``E[h] = −J (length − 1) u``."""
-        return (self.length - 1) * self.bond_energy_mean()
-
-    def energy_variance(self) -> float:
-        """``Var(h) = J² (length − 1) Var(s_x·s_{x+1})``."""
-        return self.coupling**2 * (self.length - 1) * self.bond_variance()
 
 
 PROPOSALS_PER_ROUND = 4
