@@ -43,6 +43,10 @@ FIGURES = {
             "autocorrelation.png": "demo_autocorrelation.png",
         },
     ),
+    "topology_o3": (
+        [PYTHON, "examples/topology_o3.py", "--plot", "{out}/topology_o3.png"],
+        {"topology_o3.png": "topology_o3.png"},
+    ),
     "binder_3d": (
         [
             PYTHON,
