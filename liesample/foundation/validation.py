@@ -52,20 +52,20 @@ def finite_float(
     return x
 
 
-def positive_int(name: str, value, what: str) -> int:
-    """``value`` as an int ``>= 1`` (``what`` says what it counts), else a ``TypeError`` (not an
-    int, or a bool) or a ``ValueError`` (below 1), each naming ``name``.
+def int_at_least(name: str, value, what: str, minimum: int = 1) -> int:
+    """``value`` as an int ``>= minimum`` (``what`` says what it counts), else a ``TypeError``
+    (not an int, or a bool) or a ``ValueError`` (below ``minimum``), each naming ``name``.
 
     Examples
     --------
-    >>> from liesample.foundation.validation import positive_int
-    >>> positive_int("length", np.int64(12), "sites of the chain")
+    >>> from liesample.foundation.validation import int_at_least
+    >>> int_at_least("length", np.int64(12), "sites of the chain")
     12
     """
-    message = f"{name} must be an int >= 1 ({what}), got {value!r}"
+    message = f"{name} must be an int >= {minimum} ({what}), got {value!r}"
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
         raise TypeError(message)
-    if value < 1:
+    if value < minimum:
         raise ValueError(message)
     return int(value)
 

@@ -44,15 +44,13 @@ for large rates).
 from __future__ import annotations
 
 import math
-import operator
 from dataclasses import dataclass
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jax.typing import ArrayLike
 
-from liesample.foundation.validation import finite_float
+from liesample.foundation.validation import finite_float, int_at_least
 from liesample.targets.open_chain import OpenChainLaw
 
 __all__ = [
@@ -71,16 +69,7 @@ entry whose proposals are all rejected needs another round of the rejection loop
 def check_cp_components(n) -> int:
     """``N`` (the complex components of ``z``, the ``N`` of CP(N−1)) as an int ``≥ 2``, or a
     ``TypeError``/``ValueError`` naming ``N``."""
-    what = "N must be an int >= 2 (complex components of z: 2 for CP(1), 3 for CP(2), ...)"
-    try:
-        if isinstance(n, (bool, np.bool_)):
-            raise TypeError
-        value = operator.index(n)
-    except TypeError:
-        raise TypeError(f"{what}, got {n!r}") from None
-    if value < 2:
-        raise ValueError(f"{what}, got {value}")
-    return value
+    return int_at_least("N", n, "complex components of z: 2 for CP(1), 3 for CP(2), ...", minimum=2)
 
 
 def cp_bond_moments(n: int, beta: float, coupling: float = 1.0) -> tuple[float, float]:

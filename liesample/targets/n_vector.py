@@ -19,7 +19,6 @@ the Langevin function ``coth K − 1/K`` (:func:`liesample.targets.spins.langevi
 from __future__ import annotations
 
 import math
-import operator
 from dataclasses import dataclass
 
 import jax
@@ -28,7 +27,7 @@ import numpy as np
 import numpy.typing as npt
 from jax.typing import ArrayLike
 
-from liesample.foundation.validation import finite_float
+from liesample.foundation.validation import finite_float, int_at_least
 from liesample.targets.open_chain import OpenChainLaw
 
 __all__ = [
@@ -47,16 +46,8 @@ _SERIES_BELOW = 1e-4
 def check_spin_components(n) -> int:
     """``n`` (the number of components of a spin, the ``n`` of O(n)) as an int ``≥ 2``, or a
     ``TypeError``/``ValueError`` naming ``n``."""
-    what = "n must be an int >= 2 (spin components: 2 for XY, 3 for Heisenberg, 4 for O(4))"
-    try:
-        if isinstance(n, (bool, np.bool_)):
-            raise TypeError
-        value = operator.index(n)
-    except TypeError:
-        raise TypeError(f"{what}, got {n!r}") from None
-    if value < 2:
-        raise ValueError(f"{what}, got {value}")
-    return value
+    what = "spin components: 2 for XY, 3 for Heisenberg, 4 for O(4)"
+    return int_at_least("n", n, what, minimum=2)
 
 
 def n_vector_bond_mean(n: int, beta: float, coupling: float = 1.0) -> float:

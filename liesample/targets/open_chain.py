@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from liesample.foundation.validation import finite_float, positive_int
+from liesample.foundation.validation import finite_float, int_at_least
 
 __all__ = ["OpenChainLaw"]
 
@@ -38,7 +38,7 @@ class OpenChainLaw:
     coupling: float = 1.0
 
     def __post_init__(self):
-        length = positive_int("length", self.length, "sites of the chain")
+        length = int_at_least("length", self.length, "sites of the chain")
         object.__setattr__(self, "length", length)
         object.__setattr__(self, "n", self.check_components(self.n))
         object.__setattr__(self, "beta", finite_float("beta", self.beta))
