@@ -41,6 +41,7 @@ from liesample.targets.n_vector import (
     n_vector_bond_variance,
     von_mises_fisher_sphere,
 )
+from liesample.targets.n_vector_ring import NVectorRingReference
 from liesample.targets.orbits import (
     HeavyTopGibbs,
     RestrictedGaussian,
@@ -75,6 +76,7 @@ __all__ = [
     "HeisenbergChainReference",
     "MatrixFisherLaw",
     "NVectorChainReference",
+    "NVectorRingReference",
     "RestrictedGaussian",
     "UnitaryOrbitLaw",
     "VonMisesFisherLaw",
