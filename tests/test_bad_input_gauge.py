@@ -57,6 +57,14 @@ LINKS = U1.cold_start()
         (lambda: U1.cold_start(dtype=np.int32), TypeError, "dtype must be a real floating"),
         (lambda: U1.hot_start(0), TypeError, "rng_key must be a JAX random key"),
         (lambda: U1.logdensity(math.nan), ValueError, "beta must be finite"),
+        # the anisotropy: a finite number > 0, named with what it is and a value that works
+        (lambda: wilson_gauge("SU2", (4, 4), anisotropy=0.0), ValueError, "anisotropy must be >"),
+        (lambda: wilson_gauge("U1", (4, 4), anisotropy=-2.0), ValueError, "anisotropy=1.0"),
+        (lambda: wilson_gauge("U1", (4, 4), anisotropy=math.nan), ValueError, "anisotropy must "),
+        (lambda: wilson_gauge("U1", (4, 4), anisotropy=math.inf), ValueError, "be finite.*β_t"),
+        (lambda: wilson_gauge("U1", (4, 4), anisotropy="2"), TypeError, "anisotropy must be a"),
+        (lambda: wilson_gauge("U1", (4, 4), anisotropy=True), TypeError, "anisotropy must be a"),
+        (lambda: U1.spatial_plaquette(LINKS), ValueError, "spatial_plaquette needs a plane"),
         # flow_scale: one length, finite, increasing
         (lambda: flow_scale([1, 2, 3], [1, 2]), ValueError, "times and energies must have one"),
         (lambda: flow_scale([1, 2], [1, np.inf]), ValueError, "energies must be finite"),

@@ -7,19 +7,31 @@ elements (the links), not a point of a coadjoint orbit, so it is not a
 - ``space``: the links as a space of :mod:`liesample.geometry.spaces` (``U1`` angles of shape
   ``(d, *shape)``, or ``SU(N)`` matrices of shape ``(d, *shape, N, N)``), which is what the
   ``T*G`` samplers (:func:`liesample.geometric_hmc`) move by exact group exponentials;
-- ``action(links)``: ``S/β = Σ_P (1 − Re tr U_P / N)`` (``1 − cos θ_P`` for U(1)), so the Gibbs
-  law is ``exp(−β S/β)`` with respect to the Haar measure of every link, and
-  ``logdensity(beta)`` is the ``log π`` a ``T*G`` sampler takes;
+- ``action(links)``: ``S/β = Σ_P w_P (1 − Re tr U_P / N)`` (``1 − cos θ_P`` for U(1)), so the
+  Gibbs law is ``exp(−β S/β)`` with respect to the Haar measure of every link, and
+  ``logdensity(beta)`` is the ``log π`` a ``T*G`` sampler takes; the plane weights ``w_P`` are 1
+  (the isotropic action) unless the system has an ``anisotropy`` (below);
 - the observables ``mean_plaquette``, ``topological_charge``, ``wilson_loop``,
   ``polyakov_loop``, ``energy_density``, and the Haar / identity starts ``hot_start`` and
   ``cold_start``;
-- ``staples(links, mu)``: the sum ``A_μ(x)`` of the staples, so that the action is, link by link,
-  ``−(1/N) Re tr(U_μ(x) A_μ(x))`` plus terms free of ``U_μ(x)`` (what the heat bath uses).
+- ``staples(links, mu)``: the sum ``A_μ(x)`` of the staples, each weighted by its plane's
+  ``w_P``, so that the action is, link by link, ``−(1/N) Re tr(U_μ(x) A_μ(x))`` plus terms free
+  of ``U_μ(x)`` (what the heat bath uses).
 
 The plaquette is ``U_P = U_μ(x) U_ν(x+μ̂) U_μ(x+ν̂)† U_ν(x)†`` (``θ_μ(x) + θ_ν(x+μ̂) −
 θ_μ(x+ν̂) − θ_ν(x)`` for U(1)), one per site and pair ``μ < ν``. Periodic boundaries close the
 lattice into a torus; ``"open"`` keeps only the plaquettes that do not wrap (the links at the
 far edge that no plaquette holds are then free, Haar-distributed).
+
+Anisotropy. The time direction is the last lattice axis (``d − 1``, the default axis of
+``polyakov_loop`` and ``wilson_loop``). With a bare anisotropy ``ξ > 0`` the action is
+``S = β_s Σ_{spatial P} (1 − Re tr U_P/N) + β_t Σ_{temporal P} (…)``, ``β_s = β/ξ`` and
+``β_t = β ξ`` (Karsch 1982's parameterisation: ``ξ = a_s/a_t`` at tree level), i.e. the
+plane weights ``w_P = 1/ξ`` for a plane of two spatial directions and ``w_P = ξ`` for a plane
+that holds the time direction; ``ξ = 1`` (the default) is the isotropic action, computed by the
+very same operations (no weights are multiplied in). A 2-D lattice has only the space–time
+plane, so there ``S = β ξ Σ_P (…)``. ``mean_plaquette``, ``spatial_plaquette``,
+``temporal_plaquette`` and ``energy_density`` are unweighted means (observables, not the action).
 """
 
 from __future__ import annotations
@@ -112,12 +124,14 @@ class WilsonGauge:
     group: str
     shape: tuple[int, ...]
     boundary: str = "periodic"
+    anisotropy: float = 1.0
 
     def __post_init__(self):
         _group_order(self.group)
         object.__setattr__(self, "shape", _lattice_shape(self.shape))
         if self.boundary not in ("periodic", "open"):
             raise ValueError(f"boundary must be 'periodic' or 'open', got {self.boundary!r}")
+        object.__setattr__(self, "anisotropy", _anisotropy(self.anisotropy))
 
     # ------------------------------------------------------------------ structure
     @property
@@ -147,6 +161,28 @@ class WilsonGauge:
     @property
     def planes(self) -> tuple[tuple[int, int], ...]:
         return tuple((mu, nu) for mu in range(self.dim) for nu in range(mu + 1, self.dim))
+
+    @property
+    def time_axis(self) -> int:
+        """The time direction, ``d − 1`` (the last lattice axis; module notes)."""
+        return self.dim - 1
+
+    @property
+    def spatial_planes(self) -> tuple[tuple[int, int], ...]:
+        """The planes ``μ < ν`` of two spatial directions (none in 2-D)."""
+        return tuple(p for p in self.planes if self.time_axis not in p)
+
+    @property
+    def temporal_planes(self) -> tuple[tuple[int, int], ...]:
+        """The planes ``(μ, d − 1)`` that hold the time direction."""
+        return tuple(p for p in self.planes if self.time_axis in p)
+
+    def plane_weight(self, mu: int, nu: int) -> float:
+        """``w_P`` of the plane ``(μ, ν)`` in the action: ``ξ`` if it holds the time
+        direction, ``1/ξ`` if not (1 for the isotropic action)."""
+        if self.anisotropy == 1.0:
+            return 1.0
+        return self.anisotropy if self.time_axis in (mu, nu) else 1.0 / self.anisotropy
 
     def check_links(self, links: ArrayLike, name: str = "links") -> None:
         """Raise unless ``links`` has the shape and dtype of this system's links (cheap: shape
@@ -242,7 +278,12 @@ class WilsonGauge:
                 self.shift(u_nu, nu, -1),
             )
             up_mask, down_mask = mask, self.shift(mask, nu, -1)
-            total = total + self._as_matrix(up, up_mask) + self._as_matrix(down, down_mask)
+            up, down = self._as_matrix(up, up_mask), self._as_matrix(down, down_mask)
+            weight = self.plane_weight(mu, nu)
+            if weight == 1.0:  # the isotropic sum, in its own order of additions
+                total = total + up + down
+            else:
+                total = total + weight * (up + down)
         return cast(jax.Array, total)  # an array: every link has a plane through it
 
     def _as_matrix(self, u, mask):
@@ -252,20 +293,28 @@ class WilsonGauge:
 
     # ------------------------------------------------------------------ action
     def action(self, links: jax.Array) -> jax.Array:
-        """``S/β = Σ_P (1 − Re tr U_P / N)``."""
+        """``S/β = Σ_P w_P (1 − Re tr U_P / N)`` (``w_P = 1`` unless anisotropic: module
+        notes)."""
+        return self._deficit(links, self.planes, weighted=True)
+
+    def _deficit(self, links, planes, weighted: bool) -> jax.Array:
+        """``Σ_{P in planes} (w_P) (1 − Re tr U_P / N)`` over the action's plaquettes."""
         self.check_links(links)
         total = 0.0
-        for mu, nu in self.planes:
+        for mu, nu in planes:
             mask = jnp.asarray(self.plaquette_mask(mu, nu))
             deficit = 1.0 - self.retrace(self.plaquette(links, mu, nu))
-            total = total + jnp.sum(jnp.where(mask, deficit, 0.0))
-        return cast(jax.Array, total)  # an array: a lattice has at least one plane
+            plane = jnp.sum(jnp.where(mask, deficit, 0.0))
+            weight = self.plane_weight(mu, nu) if weighted else 1.0
+            total = total + (plane if weight == 1.0 else weight * plane)
+        return cast(jax.Array, total)  # an array: every call has at least one plane
 
     def logdensity(self, beta: float) -> Callable[[jax.Array], jax.Array]:
         """``links ↦ −β S/β``: the ``log π`` (Haar measure) of a ``T*G`` sampler.
 
         ``β`` is any finite real: the groups are compact, so ``exp(−β S/β)`` is normalisable at
-        either sign (``β < 0`` favours plaquettes far from the identity)."""
+        either sign (``β < 0`` favours plaquettes far from the identity). With an anisotropy the
+        action is the weighted one, ``β_s = β/ξ`` and ``β_t = βξ`` (module notes)."""
         beta = finite_float("beta", beta)
         return lambda links: -beta * self.action(links)
 
@@ -285,8 +334,29 @@ class WilsonGauge:
 
     # ------------------------------------------------------------------ observables
     def mean_plaquette(self, links: jax.Array) -> jax.Array:
-        """Mean over the action's plaquettes of ``Re tr U_P / N`` (``cos θ_P`` for U(1))."""
-        return 1.0 - self.action(links) / self.num_plaquettes
+        """Mean over the action's plaquettes of ``Re tr U_P / N`` (``cos θ_P`` for U(1)),
+        every plane counted once whatever the anisotropy."""
+        return 1.0 - self._deficit(links, self.planes, weighted=False) / self.num_plaquettes
+
+    def spatial_plaquette(self, links: jax.Array) -> jax.Array:
+        """Mean of ``Re tr U_P / N`` over the plaquettes of the spatial planes (3-D and 4-D
+        lattices: a 2-D one has none)."""
+        return self._plane_mean(links, self.spatial_planes, "spatial_plaquette")
+
+    def temporal_plaquette(self, links: jax.Array) -> jax.Array:
+        """Mean of ``Re tr U_P / N`` over the plaquettes of the planes that hold the time
+        direction (the last axis)."""
+        return self._plane_mean(links, self.temporal_planes, "temporal_plaquette")
+
+    def _plane_mean(self, links, planes, name: str) -> jax.Array:
+        if not planes:
+            raise ValueError(
+                f"{name} needs a plane of two spatial directions, which a {self.dim}-D lattice "
+                "does not have (its one plane holds the time direction); use temporal_plaquette "
+                "or mean_plaquette"
+            )
+        count = int(sum(np.sum(self.plaquette_mask(mu, nu)) for mu, nu in planes))
+        return 1.0 - self._deficit(links, planes, weighted=False) / count
 
     def topological_charge(self, links: jax.Array) -> jax.Array:
         """2-D U(1): the geometric charge ``Σ_P arg(U_P) / 2π`` (an integer on the torus).
@@ -371,8 +441,10 @@ class WilsonGauge:
     def energy_density(self, links: jax.Array) -> jax.Array:
         """``E = 2 Σ_{μ<ν} Re tr(1 − U_μν) / V`` per site in Lüscher's normalisation
         (``t² E`` defines ``t₀``: ``t₀² ⟨E(t₀)⟩ = 0.3``, the reference chosen for SU(3)); the
-        same sum for every group, U(1) included (``N = 1``: ``2 Σ (1 − cos θ_μν) / V``)."""
-        return 2.0 * self.n * self.action(links) / math.prod(self.shape)
+        same sum for every group, U(1) included (``N = 1``: ``2 Σ (1 − cos θ_μν) / V``); every
+        plane counted once whatever the anisotropy."""
+        deficit = self._deficit(links, self.planes, weighted=False)
+        return 2.0 * self.n * deficit / math.prod(self.shape)
 
 
 def clover_charge(system: WilsonGauge, links: jax.Array) -> jax.Array:
@@ -417,7 +489,22 @@ def _leaf(system, links, mu, nu, s_mu, s_nu):
     return loop if s_mu * s_nu > 0 else _dagger(loop)
 
 
-def wilson_gauge(group: str, shape: Sequence[int], boundary: str = "periodic") -> WilsonGauge:
+def _anisotropy(value: object) -> float:
+    """``ξ`` as a finite float ``> 0``, or an error naming ``anisotropy``."""
+    try:
+        xi = finite_float("anisotropy", value, positive=True)
+    except (TypeError, ValueError) as error:
+        raise type(error)(
+            f"{error} (the bare anisotropy ξ of β_s = β/ξ, β_t = βξ: a finite number > 0, "
+            "e.g. anisotropy=1.0 for the isotropic action or 2.0 for a time spacing half the "
+            "spatial one)"
+        ) from None
+    return xi
+
+
+def wilson_gauge(
+    group: str, shape: Sequence[int], boundary: str = "periodic", anisotropy: float = 1.0
+) -> WilsonGauge:
     """The Wilson gauge action ``S = β Σ_P (1 − Re tr U_P / N)`` on a lattice.
 
     Parameters
@@ -431,6 +518,11 @@ def wilson_gauge(group: str, shape: Sequence[int], boundary: str = "periodic") -
     boundary : str
         ``"periodic"`` (a torus, default) or ``"open"`` (only the plaquettes that do not
         wrap).
+    anisotropy : float
+        The bare anisotropy ``ξ > 0``: the action becomes
+        ``β/ξ Σ_{spatial P} (…) + βξ Σ_{temporal P} (…)``, time the last axis (module notes);
+        ``1.0`` (default) is the isotropic action. Every sampler (heat bath, over-relaxation,
+        HMC) samples the weighted law; the Wilson flow uses the isotropic action.
 
     Returns
     -------
@@ -446,8 +538,12 @@ def wilson_gauge(group: str, shape: Sequence[int], boundary: str = "periodic") -
     >>> system.hot_start(jax.random.key(0)).shape  # (d, *shape, N, N), Haar-random links
     (2, 4, 4, 2, 2)
     >>> sampler = liesample.recommended_sampler(system, beta=2.0)  # heat bath, over-relaxation
+    >>> anisotropic = wilson_gauge("SU2", (4, 4, 4, 4), anisotropy=2.0)  # β_s = β/2, β_t = 2β
+    >>> anisotropic.plane_weight(0, 1), anisotropic.plane_weight(0, 3)
+    (0.5, 2.0)
     """
-    return WilsonGauge(group, cast(tuple[int, ...], shape), boundary)  # checked as a tuple there
+    shape = cast(tuple[int, ...], shape)  # checked as a tuple there
+    return WilsonGauge(group, shape, boundary, cast(float, anisotropy))
 
 
 jax.tree_util.register_static(WilsonGauge)

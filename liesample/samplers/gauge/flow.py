@@ -21,10 +21,17 @@ three-stage scheme of third order, Lüscher's included, multiplies a mode of rat
 the real root of ``R(z) = −1`` (:data:`RK3_STABILITY`). A flow step ``ε = t/n`` with
 ``4dε ≥ r₃`` amplifies the staggered mode (a field then flows to a rough limit cycle, not to a
 smooth one), so :func:`wilson_flow` refuses it and names the ``num_steps`` that fits.
+
+Anisotropy. The flow is a smoothing with its own action: it uses the isotropic Wilson action
+(every plane of weight 1) whatever the ``anisotropy`` of the system that sampled the links, the
+usual convention (the flow time is then in units of the lattice spacing of every direction; on
+an anisotropic lattice, whose time spacing is ``a_s/ξ``, the flowed field is smoothed over a
+different physical extent in time than in space).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 
@@ -52,8 +59,10 @@ def max_flow_step(system: WilsonGauge) -> float:
 
 
 def _velocity(system: WilsonGauge) -> Callable[[jax.Array], jax.Array]:
+    isotropic = dataclasses.replace(system, anisotropy=1.0)  # the flow's own action (notes)
+
     def logdensity(links: jax.Array) -> jax.Array:
-        return -system.action(links)
+        return -isotropic.action(links)
 
     grad = spaces.trivialised_value_and_grad(logdensity, system.space)
     scale = 0.5 * max(system.n, 2)  # N/2 for SU(N); U(1) flows like U(1) ⊂ SU(2)

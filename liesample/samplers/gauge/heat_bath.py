@@ -22,6 +22,10 @@ of a U(1) link is then the von Mises law with ``κ = |β||A|`` about ``π − ar
 SU(2) subgroup ``W ∝ exp(α ½ tr W)`` with ``α < 0`` is ``−W′``, ``W′ ∝ exp(|α| ½ tr W′)`` (``−I``
 is central and keeps the Haar measure), so ``a₀`` is drawn at ``|α|`` and negated.
 Over-relaxation keeps the action whatever the sign.
+
+An anisotropic system (``wilson_gauge(..., anisotropy=ξ)``) weights each plane of a staple by
+its own ``w_P`` (``1/ξ`` spatial, ``ξ`` temporal) in ``A``, so the conditional law above, and
+each draw and reflection, is that of the anisotropic action with the one scalar ``β``.
 """
 
 from __future__ import annotations
@@ -195,8 +199,10 @@ def as_top_level_api(
     system : WilsonGauge
         From :func:`liesample.systems.wilson_gauge` (even extents on a torus).
     beta : float
-        The coupling ``β`` of ``S = β Σ_P (1 − Re tr U_P / N)``: any finite real (``β < 0``
-        is normalisable on the compact links and drawn exactly, module notes).
+        The coupling ``β`` of ``S = β Σ_P w_P (1 − Re tr U_P / N)``: any finite real
+        (``β < 0`` is normalisable on the compact links and drawn exactly, module notes); the
+        plane weights ``w_P`` are the system's (``1/ξ`` spatial, ``ξ`` temporal with an
+        ``anisotropy`` ``ξ``, else 1).
     heat_bath_sweeps : int
         Heat-bath sweeps per step (``>= 0``; with 0 the chain keeps the action and samples the
         Gibbs law only from exact starts).

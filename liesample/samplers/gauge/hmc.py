@@ -12,7 +12,11 @@ Stability. Near the identity (the weak-coupling region, where the stiffest modes
 is the quadratic form ``β c |d a|²`` of the link algebra coordinates ``a`` (``c = ½`` for U(1)
 angles, ``1/N`` for SU(N)), ``d`` the lattice curl; its largest eigenvalue on a torus with even
 extents is ``4d`` (the staggered mode). The leapfrog is unstable on that mode when
-``ε ω ≥ 2``, ``ω² = 2 c β · 4d``; such a step is refused. Below the limit the quadratic part
+``ε ω ≥ 2``, ``ω² = 2 c β · 4d``; such a step is refused. With an anisotropy ``ξ`` the planes
+carry the weights ``w_P`` (``1/ξ`` spatial, ``ξ`` temporal) and the staggered mode's eigenvalue
+is ``4 max(dξ, (d−1)/ξ + ξ)`` (the second only for ``d ≥ 3``: the largest eigenvalue of the
+weighted Laplacian of the complete graph on the ``d`` directions, four times), ``4d`` at
+``ξ = 1``. Below the limit the quadratic part
 is stable, but the non-linear couplings still heat a long trajectory from an ordered field at
 ``0.8`` of the limit; useful steps are about half the limit or less.
 
@@ -39,13 +43,23 @@ __all__ = ["WilsonLogDensity", "gauge_hmc", "stability_limit"]
 
 def stability_limit(system: WilsonGauge, beta) -> float:
     """The leapfrog step ``2/ω`` beyond which the stiffest weak-coupling mode is unstable
-    (``ω² = 2c|β|·4d``, module notes; ``inf`` at ``β = 0``)."""
+    (``ω² = 2c|β|·4d``, or the anisotropic eigenvalue of the module notes; ``inf`` at
+    ``β = 0``)."""
     if not isinstance(system, WilsonGauge):
         raise TypeError(f"system must be a wilson_gauge(...) system, got {type(system).__name__}")
     beta = finite_float("beta", beta)
     c = 0.5 if system.abelian else 1.0 / system.n
-    omega = math.sqrt(2.0 * c * abs(beta) * 4 * system.dim)
+    omega = math.sqrt(2.0 * c * abs(beta) * _stiffest_eigenvalue(system))
     return math.inf if omega == 0 else 2.0 / omega
+
+
+def _stiffest_eigenvalue(system: WilsonGauge) -> float:
+    """The largest eigenvalue of the weighted curl form ``Σ_P w_P |d a|_P²`` (module notes)."""
+    d, xi = system.dim, system.anisotropy
+    if xi == 1.0:
+        return 4.0 * d
+    spatial = (d - 1) / xi + xi if d >= 3 else 0.0
+    return 4.0 * max(d * xi, spatial)
 
 
 @dataclasses.dataclass(frozen=True)
