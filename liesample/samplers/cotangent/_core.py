@@ -61,6 +61,7 @@ __all__ = [
     "check_starts",
     "drift_flows",
     "energy",
+    "energy_errors",
     "hamiltonian_scheme",
     "hamiltonian_transition",
     "init",
@@ -484,13 +485,23 @@ def hamiltonian_transition(
     The involution ``(g, p, s) ↦ (g', −p', −s)`` then, if ``persistent``, the flip
     ``(p, s) ↦ (−p, −s)``: accepted ``(g', p', s)``, rejected ``(g, −p, −s)``. With
     ``persistent=False``: accepted ``(g', −p', −s)``, rejected ``(g, p, s)``.
+
+    Divergences are watched at every step, as NUTS does (:func:`energy_errors`): the transition
+    is flagged divergent when the energy error ``H(z_k) − H(z_0)`` of any step ``k`` exceeds
+    ``divergence_threshold``, so a trajectory that overshoots and comes back is counted; the
+    energy of each step comes with the gradient its last kick evaluated (no second evaluation).
+    The test itself is the one of the end point, except that a trajectory passing through a
+    non-finite energy is rejected: the reversed trajectory passes through the same states, so
+    the condition is symmetric under the involution and the chain keeps ``exp(−H)``.
     """
     sign = state.magnetic_sign
-    step = scheme_step(move, sign)
     initial = _point(state, momentum)
-    proposal = jax.lax.fori_loop(0, num_integration_steps, lambda _, point: step(point), initial)
+    proposal, worst, finite = energy_errors(move, initial, num_integration_steps, sign)
     outcome = metropolis(rng_key, move.bundle, initial, proposal, divergence_threshold)
-    is_accepted = outcome[0]
+    is_accepted = outcome[0] & finite
+    acceptance_rate = jnp.where(finite, outcome[1], jnp.zeros_like(outcome[1]))
+    is_divergent = outcome[2] | ~finite | (worst > divergence_threshold)
+    outcome = (is_accepted, acceptance_rate, is_divergent, *outcome[3:])
     negate = lambda tree: jax.tree.map(jnp.negative, tree)
     new_momentum = select(is_accepted, proposal.momentum, negate(momentum))
     new_sign = jnp.where(is_accepted, sign, -sign)
@@ -504,6 +515,30 @@ def hamiltonian_transition(
         jnp.asarray(new_sign).astype(jnp.result_type(sign)),
     )
     return new_state, outcome
+
+
+def energy_errors(move: Move, initial: PhasePoint, num_integration_steps, sign):
+    """``num_integration_steps`` steps of ``move.scheme`` from ``initial`` (evaluated):
+    ``(end point, max_k (H(z_k) − H(z_0)), every H(z_k) finite)`` over the steps ``k ≥ 1``.
+
+    Each step ends at an evaluated point (:func:`scheme_step`), so ``H(z_k)`` is its ``−log π``,
+    already computed with the gradient, plus the kinetic energy: watching costs no gradient.
+    A non-finite ``H(z_k)`` counts as an infinite error.
+    """
+    step = scheme_step(move, sign)
+    start = energy(move.bundle, initial.logdensity, initial.momentum)
+    dtype = jnp.result_type(start)
+
+    def body(_, carry):
+        point, worst, finite = carry
+        point = step(point)
+        error = energy(move.bundle, point.logdensity, point.momentum) - start
+        ok = jnp.isfinite(error)
+        worst = jnp.maximum(worst, jnp.where(ok, error, jnp.inf))
+        return point, worst, finite & ok
+
+    carry = (initial, jnp.full((), -jnp.inf, dtype), jnp.ones((), bool))
+    return jax.lax.fori_loop(0, num_integration_steps, body, carry)
 
 
 def unadjusted_transition(
