@@ -28,6 +28,7 @@ from liesample.foundation.types import PyTree
 from liesample.foundation.validation import is_single_array, single_key
 from liesample.integrators.chain_loop import run_draws, run_steps
 from liesample.run import arguments
+from liesample.run.agreement import agreement
 from liesample.run.checks import DEFAULT_MIN_ACCEPTANCE_RATE, check_run, record_casimir_drift
 from liesample.run.provenance import adapted_fingerprint, run_fingerprint
 from liesample.run.sharding import (
@@ -36,9 +37,10 @@ from liesample.run.sharding import (
     check_output,
     run_sharding,
     shard_chains,
+    spans_processes,
     to_host,
 )
-from liesample.run.store import Layout, RunFile
+from liesample.run.store import Layout, RunFile, check_same_file
 from liesample.samplers.contract import (
     HOOKS,
     SAMPLE_STATS_NAMES,
@@ -364,6 +366,10 @@ class _Run:
         arguments.check_finite_starts(self.positions, self.num_chains)
         self.sharding = run_sharding(o.devices, o.lattice_sharding, self.num_chains, self.sampler)
         check_output(o.output, self.sharding)
+        # chains over several processes: process 0 alone writes the run file, and every
+        # process agrees at each step of the file (liesample.run.agreement)
+        self.across = spans_processes(self.sharding)
+        self.writer = not self.across or jax.process_index() == 0
         self._check_memory(algorithm, int(num_draws), o)
         self.algorithm, self.num_draws, self.options = algorithm, int(num_draws), o
         self.spec, self.store = spec, None
@@ -392,18 +398,24 @@ class _Run:
         """Open the run file (refused here, before any compilation, if it cannot be ours), and
         name the draws: as given, else as the saved run named them, else by default."""
         o = self.options
-        if o.output is not None:
-            self.store = RunFile.open(o.output, o.resume)
-            self.spec = self.store.names(self.spec)
-        self.spec = self.spec.named_for(self.sampler, self.positions, o.keep_positions)
-        self.example = self.spec.example(
-            self.positions if o.keep_positions else None,
-            self.observable_shapes,
-            self.log_likelihood_shapes,
-        )
-        if self.store is not None:
-            self.fingerprint = self._fingerprint()
-            self.store.check(self.fingerprint)
+        across = self.across and o.output is not None
+        with agreement(f"opening the run file {o.output!r}", across) as agreed:
+            if o.output is not None:
+                opened = RunFile.open if self.writer else RunFile.reader
+                self.store = opened(o.output, o.resume)
+                self.spec = self.store.names(self.spec)
+            self.spec = self.spec.named_for(self.sampler, self.positions, o.keep_positions)
+            self.example = self.spec.example(
+                self.positions if o.keep_positions else None,
+                self.observable_shapes,
+                self.log_likelihood_shapes,
+            )
+            if self.store is not None:
+                self.fingerprint = self._fingerprint()
+                self.store.check(self.fingerprint)
+                agreed.value = self.store.view()
+        if across:
+            check_same_file(agreed.values, o.output)
 
     def start(self):
         """Open the file, check every start, choose or tune the step (the warm-up)."""
@@ -490,12 +502,16 @@ class _Run:
         first = jax.tree.map(lambda leaf: leaf[0], (self.states, self.chain_keys))
         adapted = adapted_fingerprint(self.sampler, first[0], first[1])
         self.fingerprint.update(adapted)
-        self.store.check(self.fingerprint, required=adapted)
-        if not self.store.exists:
-            return 0, None
-        _, positions, observables, log_likelihood = self.example
-        layout = Layout(positions, observables, log_likelihood, self.spec.var_name or "mu")
-        done, states, previous = self.store.resume(self.states, layout, self.num_draws)
+        done, states, previous = 0, None, None
+        with agreement(f"reading the saved run {self.store.path!r}", self.across) as agreed:
+            self.store.check(self.fingerprint, required=adapted)
+            if self.store.exists:
+                _, positions, observables, log_likelihood = self.example
+                layout = Layout(positions, observables, log_likelihood, self.spec.var_name or "mu")
+                done, states, previous = self.store.resume(self.states, layout, self.num_draws)
+            agreed.value = self.store.view()
+        if self.across:
+            check_same_file(agreed.values, self.store.path)
         if done:
             self.states = shard_chains(states, self.sharding)
             self.run_warmup = False
@@ -560,13 +576,24 @@ class _Run:
                 self._save(done - count, done, chunks[-1], states, wall_time)
             bar.update(count)
             if o.callback is not None:
-                o.callback(done)
+                with agreement(f"in callback({done})", self.across):
+                    o.callback(done)
         if wall_time is None:  # nothing ran (a finished run resumed): the warm-up's time
             wall_time = time.perf_counter() - start
         return chunks, wall_time
 
     def _save(self, first, end, draws, states, wall_time):
-        """Write the draws ``first … end`` to the run file, with the tree's attributes then."""
+        """Write the draws ``first … end`` to the run file, with the tree's attributes then
+        (over several processes: the states gathered on every process, written by process 0,
+        which tells the others whether it succeeded)."""
+        states = to_host(states)  # a collective over several processes: every process takes it
+        saving = f"saving draws {first} to {end - 1} of the run to {self.options.output!r}"
+        with agreement(saving, self.across):
+            if self.writer:
+                self._write(first, end, draws, states, wall_time)
+
+    def _write(self, first, end, draws, states, wall_time):
+        """The writer's part of :meth:`_save` (``states`` on the host)."""
         o = self.options
         attrs = run_attrs(
             self.settings,
@@ -590,7 +617,7 @@ class _Run:
             stats_names.get(k, k): [k, np.asarray(v).dtype.str] for k, v in draws["info"].items()
         }
         store = cast(RunFile, self.store)  # a chunk is stored only when the run has a file
-        store.append(first, tree, names, to_host(states), self.fingerprint)
+        store.append(first, tree, names, states, self.fingerprint)
 
     def finish(self, chunks, wall_time, convergence) -> ChainsResult:
         """The result of the whole run, after the post-run checks (with the convergence checks

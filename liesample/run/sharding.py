@@ -84,6 +84,7 @@ __all__ = [
     "lattice_layout",
     "run_sharding",
     "shard_chains",
+    "spans_processes",
     "to_host",
 ]
 
@@ -410,26 +411,40 @@ def _mesh_sharding(chains, counts, layout, lattice_sharding) -> LatticeSharding:
     return LatticeSharding(jax.sharding.Mesh(grid, names), layout, axes)
 
 
-def check_output(output, sharding: NamedSharding | LatticeSharding | None) -> None:
-    """Refuse ``output=`` for chains spread over several processes: a run file is written by
-    one process, and its resume needs every chain's state there.
+def spans_processes(sharding: NamedSharding | LatticeSharding | None) -> bool:
+    """Whether a run with this sharding spans several processes (its devices are not all this
+    process's).
 
     Examples
     --------
-    Chains in one process (no sharding, or devices of this process only) may write a file:
+    >>> liesample.sharding.spans_processes(liesample.sharding.chain_sharding("all", 4))
+    False
+    """
+    return sharding is not None and not sharding.is_fully_addressable
+
+
+def check_output(output, sharding: NamedSharding | LatticeSharding | None) -> None:
+    """Refuse ``output=`` for chains spread over some but not all of the processes of
+    ``jax.distributed``: process 0 writes the run file, with the draws gathered from every
+    process, and a resume reads it on every process, so the run must span all of them.
+
+    Examples
+    --------
+    Chains in one process, or over every process (``devices="all"``), may write a file:
 
     >>> liesample.sharding.check_output("run.nc", None)
     """
-    if output is None or sharding is None or sharding.is_fully_addressable:
+    if output is None or not spans_processes(sharding):
         return
-    processes = len({getattr(device, "process_index", 0) for device in sharding.device_set})
-    raise ValueError(
-        f"output={output!r}: a run file is not written for chains spread over {processes} "
-        "processes (devices of jax.distributed); pass output=None and save the tree that "
-        "liesample.sample returns on every process from one of them, e.g. "
-        "`if jax.process_index() == 0: tree.to_netcdf(path)` (a run over several processes "
-        "is not resumed: run it again whole)"
-    )
+    found = {getattr(device, "process_index", 0) for device in cast(Any, sharding).device_set}
+    count = jax.process_count()
+    if found != set(range(count)):
+        raise ValueError(
+            f"output={output!r}: the chains run on the devices of processes {sorted(found)} of "
+            f"the {count} of jax.distributed; a run file is written by process 0 and resumed "
+            "by every process, so with output= the chains must span every process: pass "
+            "devices='all' (or a sharding over devices of every process), or output=None"
+        )
 
 
 def _axis_names(entry):
@@ -483,11 +498,18 @@ def to_host(tree: PyTree) -> PyTree:
     >>> to_host({"mu": jnp.ones(2)})
     {'mu': array([1., 1.])}
     """
-    if jax.process_count() > 1:
+    return jax.tree.map(_leaf_to_host, tree)
+
+
+def _leaf_to_host(leaf) -> np.ndarray:
+    """One leaf on this host: an array spread over several processes gathered from all of them
+    (``multihost_utils.process_allgather``), any other copied (a run within one process of
+    ``jax.distributed`` keeps its own chains)."""
+    if isinstance(leaf, jax.Array) and not leaf.is_fully_addressable:
         from jax.experimental import multihost_utils
 
-        return jax.tree.map(np.asarray, multihost_utils.process_allgather(tree, tiled=True))
-    return jax.tree.map(np.asarray, tree)
+        return np.asarray(multihost_utils.process_allgather(leaf, tiled=True))
+    return np.asarray(leaf)
 
 
 def initialize_distributed(**kwargs: Any) -> bool:

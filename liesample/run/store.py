@@ -520,15 +520,47 @@ def _update_attrs(stored, attrs):
             stored[name] = attrs[name]
 
 
+def check_same_file(views: list[str], output) -> None:
+    """Refuse to go on unless every process of a run over several processes finds at
+    ``output`` what process 0 does (``views``: each process's :meth:`RunFile.view`, by
+    process index): on a resume every process reads the saved run, so the file must be on a
+    file system that all of them see."""
+    first = json.loads(views[0])
+    problems = []
+    for index, view in enumerate(views[1:], start=1):
+        path, exists, seen = json.loads(view)
+        if [exists, seen] == first[1:]:
+            continue
+        if first[1] and not exists:
+            problems.append(f"process {index} finds no file at {path!r}")
+        elif exists and not first[1]:
+            problems.append(f"process {index} finds a file at {path!r}, process 0 none")
+        else:
+            problems.append(f"process {index} reads another run file at {path!r}")
+    if problems:
+        raise RunFileError(
+            f"output {os.fspath(output)!r}: process 0 of {len(views)} "
+            + ("resumes the run saved at" if first[1] else "finds no file at")
+            + f" {first[0]!r}, but "
+            + "; ".join(problems)
+            + ". In a run over several processes process 0 alone writes the run file and on a "
+            "resume every process reads it, so it must be on a file system that every process "
+            "sees (a cluster's shared home or scratch directory, not a node's local disk such "
+            "as /tmp), at a path that names it on every process (absolute, or relative to a "
+            "working directory that is the same everywhere): move or copy it there, and resume "
+            "with that output"
+        )
+
+
 class RunFile:
     """The run file of one ``sample_chains`` call: locked for its whole run (:meth:`open`),
     checked against the run's fingerprint, read to resume, and grown chunk by chunk, each chunk
     published whole or not at all (:mod:`liesample.run.atomic`)."""
 
-    def __init__(self, path: str, lock: OutputLock):
+    def __init__(self, path: str, lock: OutputLock | None, exists: bool | None = None):
         self.path = path
-        self.lock = lock
-        self.exists = os.path.exists(path)
+        self.lock = lock  # None: a reader, which never writes (:meth:`reader`)
+        self.exists = os.path.exists(path) if exists is None else exists
         # what a resume adopts and checks, read (format, commit, attributes checked) at once
         self.header: tuple[dict[str, Any], dict[str, Any]] | None = (
             _header(path) if self.exists else None
@@ -537,6 +569,7 @@ class RunFile:
         self.state_slot = 1  # the slot the next state goes to is the other one
         # the attributes of the file as committed (_attribute_fields)
         self.fields: dict[str, Any] | None = None
+        self.commit: dict[str, Any] | None = None  # the commit record read by resume()
 
     @classmethod
     def open(cls, output, resume: bool) -> RunFile:
@@ -552,8 +585,35 @@ class RunFile:
             lock.release()
             raise
 
+    @classmethod
+    def reader(cls, output, resume: bool) -> RunFile:
+        """The run file as a process other than the writer sees it, in a run over several
+        processes: with ``resume``, the saved run's header read from ``output`` if this process
+        finds a file there; without, nothing is read (the writer checks the path). It takes no
+        lock, removes nothing and never writes (:meth:`append` refuses)."""
+        path = os.fspath(output)
+        exists = bool(resume) and os.path.isfile(path)
+        return cls(path, None, exists=exists)
+
+    @property
+    def writes(self) -> bool:
+        """Whether this process writes the file (it holds the lock)."""
+        return self.lock is not None
+
+    def view(self) -> str:
+        """What this process finds at the path, as a short JSON text that two processes reading
+        the same file give alike (the absolute path apart): whether a file is there, and a
+        SHA-256 of its header (fingerprint and variable names), or after :meth:`resume` of its
+        commit record."""
+        seen = None
+        if self.exists:
+            record = self.header if self.commit is None else self.commit
+            seen = hashlib.sha256(json.dumps(record, sort_keys=True).encode()).hexdigest()
+        return json.dumps([os.path.abspath(self.path), self.exists, seen])
+
     def close(self):
-        self.lock.release()
+        if self.lock is not None:
+            self.lock.release()
 
     def names(self, spec):
         """``spec`` (a :class:`liesample.run.runner.TreeSpec`) with the saved run's
@@ -601,6 +661,7 @@ class RunFile:
         structure and dtypes; ``layout`` is the :class:`Layout` of the run's variables."""
         with _open(self.path) as (f, h5):
             commit, self.fields = verify(f, h5, self.path)
+            self.commit = commit
             done = commit["draws_done"]
             if done > num_draws:
                 raise RunFileError(
@@ -638,6 +699,11 @@ class RunFile:
         the commit, to a copy of the file that then replaces it (the first call creates it with
         the run's ``fingerprint``). A failure leaves the file as it was (``OSError`` naming the
         path, the draws it holds and how to go on)."""
+        if not self.writes:
+            raise RuntimeError(
+                f"{self.path!r} is written by process 0 of the run alone; this process only "
+                "reads it"
+            )
         states = _state_leaves(states)
         count = tree["posterior"].sizes["draw"]
         end = first + count
