@@ -17,7 +17,9 @@ process 1's stands for a node's local disk, so a relative ``output=`` there find
    error, process 1 an ``OtherProcessError`` naming it (neither waits for the other).
 
 Then two new processes, both in process 0's directory, resume ``part.nc``: the draws, and the
-file, are those of one uninterrupted one-process run, bitwise.
+file, are those of one uninterrupted one-process run, bitwise. They are started as the tasks of
+a SLURM job step (its variables, on this machine), and ``initialize_distributed()`` without
+arguments reads the job from them.
 
 The workers also check that importing liesample and reading ``liesample.sharding`` start no
 XLA backend, so that ``initialize_distributed`` can follow ``import liesample``.
@@ -62,9 +64,13 @@ WORKER = (
     assert not xb._backends, xb._backends  # initialize_distributed can still follow
 
     port, process_id, phase, results = sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4]
-    initialize_distributed(
-        coordinator_address=f"127.0.0.1:{port}", num_processes=2, process_id=process_id
-    )
+    if phase == "resume":  # the job read from (simulated) SLURM variables
+        assert initialize_distributed()
+    else:
+        initialize_distributed(
+            coordinator_address=f"127.0.0.1:{port}", num_processes=2, process_id=process_id
+        )
+    assert jax.process_index() == process_id
     assert jax.process_count() == 2 and len(jax.devices()) == 2, jax.devices()
     warnings.simplefilter("ignore", UserWarning)  # 20 draws: the convergence checks remark
     from liesample.run import atomic, store
@@ -150,14 +156,28 @@ def _environment() -> dict:
     return os.environ | {"JAX_PLATFORMS": "cpu", "PYTHONWARNINGS": "ignore"}
 
 
-def _run_pair(script, phase, directories, results) -> list[dict]:
-    """Start two workers of ``phase``, process ``i`` in ``directories[i]``; their records."""
+def _slurm(process_id, port) -> dict:
+    """The variables of task ``process_id`` of a SLURM job step of two tasks on this machine
+    (``jax.distributed.initialize`` reads them; JAX_COORDINATOR_PORT sets its port)."""
+    return {
+        "SLURM_JOB_ID": "4242",
+        "SLURM_STEP_NODELIST": "127.0.0.1",
+        "SLURM_NTASKS": "2",
+        "SLURM_PROCID": str(process_id),
+        "SLURM_LOCALID": str(process_id),
+        "JAX_COORDINATOR_PORT": str(port),
+    }
+
+
+def _run_pair(script, phase, directories, results, slurm=False) -> list[dict]:
+    """Start two workers of ``phase``, process ``i`` in ``directories[i]`` (the job given by
+    arguments, or by SLURM's variables); their records."""
     port = _free_port()
     workers = [
         subprocess.Popen(
             [sys.executable, str(script), str(port), str(i), phase, str(results)],
             cwd=directories[i],
-            env=_environment(),
+            env=_environment() | (_slurm(i, port) if slurm else {}),
             stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT,
             text=True,
@@ -248,7 +268,7 @@ def test_two_processes_give_the_single_process_draws_and_run_file(tmp_path):
     assert "No space left on device" in message, message
 
     # the stopped run resumed by two new processes: one uninterrupted run's draws and file
-    resumed = _run_pair(script, "resume", [shared, shared], results)
+    resumed = _run_pair(script, "resume", [shared, shared], results, slurm=True)
     for record in resumed:
         np.testing.assert_array_equal(np.asarray(record["resumed"]), single)
     assert resumed[1]["calls"] == {"lock": 0, "write": 0}
