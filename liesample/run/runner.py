@@ -27,6 +27,7 @@ draws the host's and the device's memory (a run that cannot fit is refused, not 
   interruption or to extend it to more draws, and returns the same draws as an uninterrupted run
   (bitwise). The file records what made the run and a checksum of every chunk: a resume with
   another sampler or setting, or from an edited file, is refused; one run at a time writes it.
+  Chains over several processes: process 0 writes the file, every process reads it to resume.
 - **Observables.** ``observables=`` evaluates functions of the position at every kept draw
   inside the compiled loop (magnetisation, correlation functions, spectra) and stores their
   values per draw; with ``keep_positions=False`` the full states are not stored (large lattices,
@@ -176,15 +177,18 @@ def sample_chains(
         :func:`load_chains`, verified) plus what a resume needs (:mod:`liesample.run.store`).
         One run writes a path at a time (a second is refused at once, naming the holder);
         refused before compiling if its directory is missing, or if it exists and ``resume``
-        is False.
+        is False. Chains over several processes (``jax.distributed``): process 0 writes it
+        alone, the same file as one process's (:mod:`liesample.run.sharding`).
     resume : bool
         Continue the run saved in ``output`` (bitwise the draws of one uninterrupted run; a
         larger ``num_draws`` extends it; no file yet: start afresh). What made it is checked
         (:mod:`liesample.run.provenance`: sampler, settings, key, starts, …; each differing
-        field named with both values), and every saved chunk against its checksum.
+        field named with both values), and every saved chunk against its checksum. Over several
+        processes every process reads the file: it must be on a file system they all see.
     callback : callable, optional
         ``callback(draws_done)`` after each chunk (saved first when ``output`` is given): to
         report progress elsewhere, or stop a run by raising (what was saved stays resumable).
+        Over several processes it runs on each; if it raises on one, every process stops.
     log_likelihood : dict of str to callable, optional
         ``{observed variable: function of one chain's position}`` giving each observation's
         log-likelihood, recorded at every draw like ``observables``; :func:`sample` puts them

@@ -11,16 +11,29 @@ Several processes (``jax.distributed``)
 Start every process with the same script; right after ``import liesample`` (which starts no XLA
 backend, nor does reading ``liesample.sharding``; reading ``liesample.sample`` or a sampler
 imports BlackJAX, whose import does), call :func:`initialize_distributed` (a guarded
-``jax.distributed.initialize``, which reads a SLURM, Open MPI or Kubernetes job from the
-environment and selects gloo CPU collectives), before any other JAX call. Then
+``jax.distributed.initialize``, which reads a SLURM, Open MPI, Kubernetes or Cloud TPU job
+from the environment and selects gloo CPU collectives), before any other JAX call. Then
 ``jax.devices()`` lists the devices of every process and ``devices="all"`` spreads the chains
 over all of them. Every process passes the same ``rng_key`` and ``initial_positions`` (the
 whole chain axis); :func:`shard_chains` builds global arrays from them
 (``jax.make_array_from_callback``: each process places the shards of its own devices), each
 process computes its own chains, and :func:`to_host` gathers every chain's draws to every
 process (``multihost_utils.process_allgather``): every process returns the whole tree, the
-draws of one process running every chain. A run file (``output=``) is refused for such a run
-(:func:`check_output`): save the returned tree from one process.
+draws of one process running every chain.
+
+A run file (``output=``) is written by process 0 alone: after each chunk every process gathers
+the draws and the chain states, process 0 writes them (it alone takes the file's lock,
+:mod:`liesample.run.lock`), and the others write nothing, so the file is, chunk for chunk, the
+one a single process running every chain would write. On ``resume=True`` every process reads
+the file, checks it and the saved run's fingerprint, and places its own chains' saved states;
+the file must therefore be on a file system that every process sees, at a path that names it
+on each: a process that finds no file, or another file, where process 0 finds the saved run is
+refused on every process, with where to put it (:func:`liesample.run.store.check_same_file`).
+After each of these steps, and after the ``callback``, the processes agree
+(:mod:`liesample.run.agreement`): an error on one process (process 0 failing to write, a
+refused resume, a ``callback`` that raises) is raised on every process there, instead of
+leaving the others waiting in the next gather. :func:`check_output` refuses ``output=`` for
+chains over only some of the processes.
 
 One lattice over several devices (``lattice_sharding=``)
 -------------------------------------------------------
@@ -53,9 +66,15 @@ What is tested
 One process with several (forced host) CPU devices: chains over them, bitwise equal to the
 unsharded run; one lattice, the spin heat bath on 2 devices and (slow tests) every spin and
 gauge sampler above on 4, over two lattice axes and over chains × a lattice axis, bitwise equal
-to the unsharded run, and gauge HMC's window warm-up on 4, equal to round-off. Two processes
-on the loopback interface with one CPU device each, bitwise equal to one process (and the refusal of
-``output=``). Several machines, GPUs over several processes, a lattice over several processes,
+to the unsharded run, and gauge HMC's window warm-up on 4, equal to round-off. Two processes on the
+loopback interface with one CPU device each (``tests/test_multiprocess.py``), chains over both:
+the draws bitwise those of one process; with ``output=``, the file that one process writes
+(every chunk's checksum, the saved states, the draws) and no lock or write by process 1; a run
+stopped by its ``callback`` after one chunk, resumed by two new processes started as the tasks
+of a SLURM job step (:func:`initialize_distributed` without arguments), bitwise one
+uninterrupted run's draws and file; a resume refused on both processes where process 1 does not
+see the file; and process 0 failing to write a chunk, raised on both. Several machines, a file
+system shared over a network, GPUs over several processes, a lattice over several processes,
 and the window warm-ups across processes are not tested.
 """
 
@@ -516,9 +535,14 @@ def initialize_distributed(**kwargs: Any) -> bool:
     """``jax.distributed.initialize(**kwargs)`` once; ``False`` if it was already initialised.
 
     Call it at the top of every process of a multi-host run, before any other JAX call. Without
-    arguments JAX reads the cluster from the environment (SLURM, Open MPI, Kubernetes, or
-    ``JAX_COORDINATOR_ADDRESS``, ``JAX_NUM_PROCESSES``, ``JAX_PROCESS_ID``); pass
-    ``coordinator_address=``, ``num_processes=``, ``process_id=`` otherwise.
+    arguments JAX reads the job from the environment of the clusters it knows
+    (``jax._src.clusters``): a SLURM job step (``SLURM_JOB_ID``, ``SLURM_STEP_NODELIST``,
+    ``SLURM_NTASKS``, ``SLURM_PROCID``, ``SLURM_LOCALID``: the coordinator is the step's first
+    node), Open MPI's ``mpirun`` (Open MPI 5 through ``mpi4py``), a Kubernetes job (with the
+    ``kubernetes`` package) and Cloud TPU VMs; ``cluster_detection_method="mpi4py"`` asks for
+    ``mpi4py``'s communicator; ``JAX_COORDINATOR_ADDRESS`` and ``JAX_COORDINATOR_PORT`` set the
+    coordinator. Elsewhere pass ``coordinator_address=``, ``num_processes=`` and
+    ``process_id=``. Every keyword is passed on to ``jax.distributed.initialize``.
 
     Examples
     --------

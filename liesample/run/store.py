@@ -26,6 +26,11 @@ removes a copy that a killed one left. Every HDF5 handle is closed
 on every path, an error's included, so a failed write does not fail again at exit. Resuming and
 :func:`load_chains` verify every checksum; an edited, truncated, empty or foreign file is
 refused with its path, what is wrong and what to do (:class:`RunFileError`).
+
+In a run whose chains span several processes (``jax.distributed``), process 0 is the writer
+(:meth:`RunFile.open`) and every other process a reader (:meth:`RunFile.reader`: no lock, no
+writes); on a resume each reads and verifies the file itself, and :func:`check_same_file`
+refuses the run on every process unless all of them find the file that process 0 finds.
 """
 
 from __future__ import annotations
@@ -555,7 +560,9 @@ def check_same_file(views: list[str], output) -> None:
 class RunFile:
     """The run file of one ``sample_chains`` call: locked for its whole run (:meth:`open`),
     checked against the run's fingerprint, read to resume, and grown chunk by chunk, each chunk
-    published whole or not at all (:mod:`liesample.run.atomic`)."""
+    published whole or not at all (:mod:`liesample.run.atomic`). On the processes of a run over
+    several processes other than process 0, a reader (:meth:`reader`): checked and read to
+    resume alike, never locked nor written."""
 
     def __init__(self, path: str, lock: OutputLock | None, exists: bool | None = None):
         self.path = path
