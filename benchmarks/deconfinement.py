@@ -1,0 +1,523 @@
+"""The SU(2) deconfinement transition from the Polyakov loop, and the anisotropic Wilson action.
+
+A suite of ``benchmarks/run.py`` (``benchmarks/suites.py``); alone::
+
+    .venv/bin/python benchmarks/deconfinement.py          # N_t = 2, N_s = 4, 6 (~5–10 min)
+    .venv/bin/python benchmarks/deconfinement.py --quick  # smoke (benchmarks/results/quick/)
+
+Writes ``deconfinement.json`` and ``deconfinement.png``.
+
+1. The 4-D SU(2) Wilson action on ``N_s³ × N_t`` lattices (``wilson_gauge("SU2", (N_s, N_s,
+   N_s, N_t))``, time the last axis) at ``N_t = 2``, for each ``N_s`` a scan of β: one lattice
+   per β, all β of a scan drawn together (``jax.vmap`` of the heat bath's kernel,
+   ``liesample.wilson_heat_bath.build_kernel(system, 1, overrelaxation)``, β an argument: one
+   compiled program per volume), ``CHAINS`` independent chains from hot starts, a thermalisation,
+   then the volume-averaged Polyakov loop ``P`` and the plaquette at every step. Per β:
+   ``⟨|P|⟩`` with its blocking error (``tau_int`` shown), ``χ_P = N_s³(⟨|P|²⟩ − ⟨|P|⟩²)`` and
+   the Binder cumulant ``U = 1 − ⟨|P|⁴⟩/(3⟨|P|²⟩²)`` with jackknife errors over blocks longer
+   than the autocorrelation time (``liesample.analysis.polyakov.polyakov_summary``).
+2. The transition: per volume, the peak of ``χ_P`` (the vertex of the parabola through the
+   largest value and its two neighbours on the β grid), and between the two volumes the
+   crossing of the Binder cumulants (linear interpolation of ``U_large − U_small`` in the
+   bracket where it changes sign). The error of each is the jackknife of that location: the runs
+   at different β are independent, so its variance is the sum over the runs it uses of the
+   jackknife variance with that run's blocks left out one at a time (``jackknife`` of
+   ``liesample.analysis.correlated_errors``, its default block length: the blocking level's).
+   Compared with the published critical couplings (:data:`PUBLISHED`).
+3. The anisotropic action: SU(2) on ``4³ × 2`` at β = 2, ``ξ = 1.5`` (``β_s = β/ξ``,
+   ``β_t = βξ``): the spatial and temporal plaquettes from the heat bath and from HMC
+   (``liesample.samplers.gauge.hmc.gauge_hmc``, step a third of its stability limit), each with
+   its blocking error (``tau_int`` included), and their difference in combined standard errors.
+
+Every error bar printed or plotted includes the autocorrelation (blocking or jackknife over
+blocks). Times are wall-clock on the machine recorded, compilation excluded (counted apart).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import jax.numpy as jnp
+import numpy as np
+
+import liesample
+from benchmarks import common, suites
+from liesample.analysis.correlated_errors import blocking_error, jackknife
+from liesample.analysis.polyakov import polyakov_summary
+from liesample.samplers.gauge.heat_bath import GaugeState
+from liesample.samplers.gauge.hmc import gauge_hmc, stability_limit
+from liesample.systems import wilson_gauge
+
+SUITE = {
+    "order": 36,
+    "title": "SU(2) deconfinement: the Polyakov loop across the N_t = 2 transition; anisotropy",
+}
+
+PUBLISHED = {
+    "beta_c": {2: 1.8735, 4: 2.2986},
+    "source": (
+        "the SU(2) critical couplings commonly quoted from the compilation in J. Fingberg, "
+        "U. Heller and F. Karsch, Nucl. Phys. B 392 (1993) 493 (whose own determinations are "
+        "at N_t = 8 and 16)"
+    ),
+}
+CHUNK = 20  # steps per compiled call
+CONFIG = {
+    "full": {
+        "nt": 2,
+        "sizes": (4, 6),
+        "betas": (1.65, 1.7, 1.75, 1.8, 1.85, 1.9, 1.95, 2.0, 2.05),
+        "chains": 2,
+        "thermalisation": 100,
+        "draws": {4: 1000, 6: 500},
+        "overrelaxation": 1,
+        "anisotropic": {"shape": (4, 4, 4, 2), "beta": 2.0, "xi": 1.5, "chains": 2,
+                        "warmup": 100, "draws": 400, "hmc_steps": 10},
+    },
+    "quick": {
+        "nt": 2,
+        "sizes": (4, 6),
+        "betas": (1.7, 1.8, 1.9, 2.0),
+        "chains": 2,
+        "thermalisation": 20,
+        "draws": {4: 100, 6: 60},
+        "overrelaxation": 1,
+        "anisotropic": {"shape": (4, 4, 4, 2), "beta": 2.0, "xi": 1.5, "chains": 2,
+                        "warmup": 20, "draws": 60, "hmc_steps": 10},
+    },
+}  # fmt: skip
+
+
+# --------------------------------------------------------------------------- the β scan
+
+
+def scan_runner(system, overrelaxation: int, num_lattices: int):
+    """A compiled call of ``CHUNK`` steps on ``num_lattices`` lattices, one β each (traced),
+    returning the links and, per step, ``(Re P, plaquette)`` of every lattice."""
+    kernel = liesample.wilson_heat_bath.build_kernel(system, 1, overrelaxation)
+
+    def observe(links):
+        return jnp.real(system.polyakov_loop(links)), system.mean_plaquette(links)
+
+    @liesample.jit
+    def run(links, key, betas):
+        def body(u, k):
+            keys = jax.random.split(k, num_lattices)
+            state, _ = jax.vmap(kernel)(keys, GaugeState(u), betas)
+            return state.position, jax.vmap(observe)(state.position)
+
+        return jax.lax.scan(body, links, jax.random.split(key, CHUNK))
+
+    return run
+
+
+def scan_volume(ns: int, nt: int, betas, chains: int, thermalisation: int, draws: int,
+                overrelaxation: int, seed: int, log) -> dict:  # fmt: skip
+    """The series ``P`` and plaquette of every β (``(chains, draws)`` each) on ``N_s³ × N_t``."""
+    system = wilson_gauge("SU2", (ns, ns, ns, nt))
+    betas_array = jnp.asarray(betas, jnp.float64)
+    run = scan_runner(system, overrelaxation, len(betas))
+    loops = np.zeros((len(betas), chains, draws))
+    plaquettes = np.zeros_like(loops)
+    keys = jax.random.split(jax.random.key(seed), chains)
+    start = time.perf_counter()
+    starts = jax.vmap(system.hot_start)(jax.random.split(keys[0], len(betas)))
+    jax.block_until_ready(run(starts, keys[0], betas_array))
+    compile_seconds = time.perf_counter() - start
+    seconds = 0.0
+    for c in range(chains):
+        start = time.perf_counter()
+        links = jax.vmap(system.hot_start)(jax.random.split(keys[c], len(betas)))
+        chunk_keys = jax.random.split(
+            jax.random.fold_in(keys[c], 1), 1 + -(-thermalisation // CHUNK) + -(-draws // CHUNK)
+        )
+        n_therm = -(-thermalisation // CHUNK)
+        for k in chunk_keys[:n_therm]:
+            links, _ = run(links, k, betas_array)
+        recorded = []
+        for k in chunk_keys[n_therm : n_therm + -(-draws // CHUNK)]:
+            links, values = run(links, k, betas_array)
+            recorded.append(jax.device_get(values))
+        jax.block_until_ready(links)
+        seconds += time.perf_counter() - start
+        p = np.concatenate([r[0] for r in recorded])[:draws]  # (draws, β)
+        q = np.concatenate([r[1] for r in recorded])[:draws]
+        loops[:, c], plaquettes[:, c] = p.T, q.T
+    steps = chains * len(betas) * (n_therm + -(-draws // CHUNK)) * CHUNK
+    log(f"  N_s = {ns}: {steps} lattice steps in {seconds:.0f} s (+ {compile_seconds:.0f} s "
+        "compile)")  # fmt: skip
+    return {
+        "system": system,
+        "loops": loops,
+        "plaquettes": plaquettes,
+        "seconds": seconds,
+        "compile_seconds": compile_seconds,
+        "lattice_steps": steps,
+        "steps_per_lattice": (n_therm + -(-draws // CHUNK)) * CHUNK,
+    }
+
+
+def beta_rows(betas, loops, plaquettes, volume) -> list[dict]:
+    """Per β: ``⟨|P|⟩``, ``χ_P``, ``U`` and the plaquette, each with its error (τ included)."""
+    rows = []
+    for beta, p, q in zip(betas, loops, plaquettes, strict=True):
+        summary = polyakov_summary(p, volume)
+        plaquette = blocking_error(q, warn=False)
+        rows.append({
+            "beta": float(beta),
+            "abs_p": summary.modulus.mean, "abs_p_error": summary.modulus.error,
+            "tau_int_abs_p": summary.modulus.tau_int,
+            "chi": summary.susceptibility.estimate, "chi_error": summary.susceptibility.error,
+            "binder": summary.binder.estimate, "binder_error": summary.binder.error,
+            "block_size": summary.binder.block_size,
+            "plaquette": plaquette.mean, "plaquette_error": plaquette.error,
+            "tau_int_plaquette": plaquette.tau_int,
+        })  # fmt: skip
+    return rows
+
+
+# --------------------------------------------------------------------------- the transition
+
+
+def _chi(volume):
+    return lambda a, a2: volume * (a2 - a**2)
+
+
+def _binder(a2, a4):
+    return 1.0 - a4 / (3.0 * a2**2)
+
+
+def _vertex(x, y) -> float:
+    """The maximum of the parabola through three points."""
+    c2, c1, _ = np.polyfit(x, y, 2)
+    return float(-c1 / (2.0 * c2)) if c2 < 0 else math.nan
+
+
+def _located(location, datasets, moments, fixed):
+    """``location(values)`` and its jackknife error: the runs are independent, so the variance
+    is the sum over the runs in ``datasets`` of the jackknife variance from that run alone.
+
+    ``moments(i)`` gives the per-draw series whose means fix run ``i``'s value, ``fixed`` the
+    values of every run from all draws, ``value(i, *means)`` (the last of ``datasets[i]``)
+    one run's value from its means."""
+    estimate = location(dict(fixed))
+    variance = 0.0
+    for key, value in datasets:
+
+        def perturbed(*means, key=key, value=value):
+            values = dict(fixed)
+            values[key] = value(*means)
+            return location(values)
+
+        variance += jackknife(perturbed, *moments(key)).error ** 2
+    return estimate, math.sqrt(variance)
+
+
+def chi_peak(betas, loops, volume):
+    """The vertex of ``χ_P`` through its largest grid value and neighbours, with its error
+    (``nan`` when the largest value is at an end of the grid)."""
+    m = [np.abs(p) for p in loops]
+    chi = [_chi(volume)(x.mean(), (x**2).mean()) for x in m]
+    k = int(np.argmax(chi))
+    if k in (0, len(betas) - 1):
+        return math.nan, math.nan
+    idx = (k - 1, k, k + 1)
+    x = np.asarray([betas[i] for i in idx])
+    fixed = {i: chi[i] for i in idx}
+    datasets = [(i, _chi(volume)) for i in idx]
+    return _located(
+        lambda v: _vertex(x, [v[i] for i in idx]), datasets, lambda i: (m[i], m[i] ** 2), fixed
+    )
+
+
+def binder_crossing(betas, small_loops, large_loops):
+    """Where ``U_large − U_small`` changes sign from below to above (the bracket nearest the
+    middle of the grid when there are several), by linear interpolation, with its error."""
+    m2 = {("s", i): np.abs(p) ** 2 for i, p in enumerate(small_loops)}
+    m2 |= {("l", i): np.abs(p) ** 2 for i, p in enumerate(large_loops)}
+    u = {key: _binder(x.mean(), (x**2).mean()) for key, x in m2.items()}
+    d = [u["l", i] - u["s", i] for i in range(len(betas))]
+    brackets = [j for j in range(len(betas) - 1) if d[j] < 0 <= d[j + 1]]
+    if not brackets:
+        return math.nan, math.nan
+    j = min(brackets, key=lambda j: abs(j + 0.5 - (len(betas) - 1) / 2))
+    keys = [("s", j), ("l", j), ("s", j + 1), ("l", j + 1)]
+
+    def crossing(v):
+        lo, hi = v["l", j] - v["s", j], v["l", j + 1] - v["s", j + 1]
+        return betas[j] + (betas[j + 1] - betas[j]) * (-lo) / (hi - lo)
+
+    fixed = {key: u[key] for key in keys}
+    return _located(
+        crossing, [(key, _binder) for key in keys], lambda k: (m2[k], m2[k] ** 2), fixed
+    )
+
+
+# --------------------------------------------------------------------------- anisotropy
+
+
+def anisotropic_rows(settings, seed, log) -> dict:
+    """Spatial and temporal plaquettes at ``ξ ≠ 1`` from the heat bath and HMC."""
+    system = wilson_gauge("SU2", tuple(settings["shape"]), anisotropy=settings["xi"])
+    beta = settings["beta"]
+    step = stability_limit(system, beta) / 3.0
+    samplers = {
+        "heat bath + OR": liesample.wilson_heat_bath(system, beta=beta),
+        "HMC": gauge_hmc(system, beta=beta, step_size=step,
+                         num_integration_steps=settings["hmc_steps"]),
+    }  # fmt: skip
+    rows = []
+    for name, sampler in samplers.items():
+        starts = jax.vmap(system.hot_start)(
+            jax.random.split(jax.random.key(seed), settings["chains"])
+        )
+        observables = {"spatial": system.spatial_plaquette, "temporal": system.temporal_plaquette}
+        start = time.perf_counter()
+        tree = liesample.sample(
+            sampler, jax.random.key(seed + 1), starts, settings["draws"],
+            num_warmup=settings["warmup"], observables=observables, keep_positions=False,
+            progress_bar=False,
+        )  # fmt: skip
+        seconds = time.perf_counter() - start
+        row = {"sampler": name, "seconds_with_compile": seconds}
+        for part in observables:
+            result = blocking_error(np.asarray(tree.posterior[part].values), warn=False)
+            row |= {part: result.mean, f"{part}_error": result.error,
+                    f"{part}_tau_int": result.tau_int}  # fmt: skip
+        if name == "HMC":
+            row["acceptance"] = float(np.mean(tree.sample_stats["acceptance_rate"].values))
+        rows.append(row)
+        log(f"  ξ = {settings['xi']}: {name} spatial {row['spatial']:.4f} ± "
+            f"{row['spatial_error']:.4f}, temporal {row['temporal']:.4f} ± "
+            f"{row['temporal_error']:.4f}")  # fmt: skip
+    heat, hmc = rows
+    for part in ("spatial", "temporal"):
+        sigma = math.hypot(heat[f"{part}_error"], hmc[f"{part}_error"])
+        hmc[f"{part}_z"] = (hmc[part] - heat[part]) / sigma
+    return {"settings": settings, "step_size": step, "rows": rows}
+
+
+# --------------------------------------------------------------------------- run, plot, report
+
+
+def run(out_dir: Path, quick: bool, log=print) -> None:
+    start = time.perf_counter()
+    mode = "quick" if quick else "full"
+    cfg = CONFIG[mode]
+    nt, betas = cfg["nt"], list(cfg["betas"])
+    volumes, raw = [], {}
+    for n, ns in enumerate(cfg["sizes"], start=1):
+        log(f"{n}. N_s = {ns}, N_t = {nt}: β = {betas[0]} … {betas[-1]}")
+        scan = scan_volume(ns, nt, betas, cfg["chains"], cfg["thermalisation"], cfg["draws"][ns],
+                           cfg["overrelaxation"], seed=10 * ns, log=log)  # fmt: skip
+        raw[ns] = scan["loops"]
+        peak, peak_error = chi_peak(betas, scan["loops"], ns**3)
+        volumes.append({
+            "ns": ns, "nt": nt, "rows": beta_rows(betas, scan["loops"], scan["plaquettes"], ns**3),
+            "chi_peak": peak, "chi_peak_error": peak_error,
+            "seconds": scan["seconds"], "compile_seconds": scan["compile_seconds"],
+            "lattice_steps": scan["lattice_steps"], "steps_per_lattice": scan["steps_per_lattice"],
+            "draws": cfg["draws"][ns], "chains": cfg["chains"],
+        })  # fmt: skip
+        log(f"  χ_P peak at β = {peak:.4f} ± {peak_error:.4f}")
+    small, large = cfg["sizes"][0], cfg["sizes"][-1]
+    crossing, crossing_error = binder_crossing(betas, raw[small], raw[large])
+    log(f"  Binder crossing N_s = {small}, {large}: β = {crossing:.4f} ± {crossing_error:.4f}")
+    log(f"{len(cfg['sizes']) + 1}. anisotropic action: heat bath and HMC")
+    aniso = anisotropic_rows(cfg["anisotropic"], seed=7, log=log)
+    data = {
+        "description": __doc__,
+        "machine": common.machine_info(),
+        "mode": mode,
+        "config": {k: v for k, v in cfg.items() if k != "draws"} | {
+            "draws": {str(k): v for k, v in cfg["draws"].items()}},
+        "published": {"beta_c": {str(k): v for k, v in PUBLISHED["beta_c"].items()},
+                      "source": PUBLISHED["source"]},
+        "volumes": volumes,
+        "crossing": {"sizes": [small, large], "beta": crossing, "error": crossing_error},
+        "anisotropic": aniso,
+        "total_seconds": time.perf_counter() - start,
+    }  # fmt: skip
+    path = common.write_json(out_dir / "deconfinement.json", data)
+    plot(data, out_dir / "deconfinement.png")
+    log(f"wrote {path} in {time.perf_counter() - start:.0f} s")
+
+
+def plot(data, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 3, figsize=(13, 4))
+    quantities = (("abs_p", "⟨|P|⟩"), ("chi", "χ_P = N_s³(⟨|P|²⟩ − ⟨|P|⟩²)"),
+                  ("binder", "U = 1 − ⟨|P|⁴⟩ / 3⟨|P|²⟩²"))  # fmt: skip
+    nt = data["config"]["nt"]
+    beta_c = data["published"]["beta_c"].get(str(nt))
+    for ax, (key, label) in zip(axes, quantities, strict=True):
+        for color, volume in zip(("C0", "C1", "C2"), data["volumes"], strict=False):
+            rows = volume["rows"]
+            ax.errorbar([r["beta"] for r in rows], [r[key] for r in rows],
+                        yerr=[r[f"{key}_error"] for r in rows], fmt="o-", color=color,
+                        capsize=2, label=f"{volume['ns']}³ × {volume['nt']}")  # fmt: skip
+            if key == "chi" and math.isfinite(volume["chi_peak"]):
+                c, e = volume["chi_peak"], volume["chi_peak_error"]
+                ax.axvspan(c - e, c + e, color=color, alpha=0.2)
+        if key == "binder" and math.isfinite(data["crossing"]["beta"]):
+            c, e = data["crossing"]["beta"], data["crossing"]["error"]
+            ax.axvspan(c - e, c + e, color="grey", alpha=0.3, label="crossing")
+        if beta_c is not None:
+            ax.axvline(beta_c, color="k", ls=":", label=f"published β_c = {beta_c}")
+        ax.set_xlabel("β")
+        ax.set_title(label, fontsize=10)
+        ax.grid(True, alpha=0.3)
+    axes[0].legend(fontsize=8)
+    axes[2].legend(fontsize=8)
+    fig.suptitle(f"4-D SU(2), N_t = {nt}: heat bath + over-relaxation; error bars from blocking "
+                 "/ jackknife over blocks (τ_int included)", fontsize=10)  # fmt: skip
+    fig.tight_layout()
+    fig.savefig(path, dpi=common.DPI)
+    plt.close(fig)
+
+
+def _pm(x, e, digits=4) -> str:
+    return f"{x:.{digits}f} ± {e:.{digits}f}" if math.isfinite(x) else "—"
+
+
+def _scan_table(data) -> list[str]:
+    lines = [
+        "| lattice | β | ⟨\\|P\\|⟩ | τ_int(\\|P\\|) | χ_P | U | plaquette | block |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for volume in data["volumes"]:
+        for r in volume["rows"]:
+            lines.append(
+                f"| {volume['ns']}³×{volume['nt']} | {r['beta']:.3f} | "
+                f"{_pm(r['abs_p'], r['abs_p_error'])} | {r['tau_int_abs_p']:.1f} | "
+                f"{_pm(r['chi'], r['chi_error'], 3)} | {_pm(r['binder'], r['binder_error'], 3)} | "
+                f"{_pm(r['plaquette'], r['plaquette_error'])} | {r['block_size']} |"
+            )
+    return lines
+
+
+def _transition_lines(data) -> list[str]:
+    nt = data["config"]["nt"]
+    beta_c = data["published"]["beta_c"][str(nt)]
+    lines = ["| estimate | β | − published β_c | sweeps per β | seconds (compile) |",
+             "|---|---|---|---|---|"]  # fmt: skip
+    for v in data["volumes"]:
+        diff = v["chi_peak"] - beta_c
+        lines.append(
+            f"| χ_P peak, {v['ns']}³×{v['nt']} | {_pm(v['chi_peak'], v['chi_peak_error'])} | "
+            f"{diff:+.4f} | {v['chains']} × {v['steps_per_lattice']} | "
+            f"{v['seconds']:.0f} ({v['compile_seconds']:.0f}) |".replace("-", "−")
+        )
+    c = data["crossing"]
+    lines.append(
+        f"| Binder crossing, N_s = {c['sizes'][0]}, {c['sizes'][1]} | {_pm(c['beta'], c['error'])}"
+        f" | {c['beta'] - beta_c:+.4f} | both scans | — |".replace("-", "−")
+    )
+    return lines
+
+
+def _anisotropic_lines(data) -> list[str]:
+    a = data["anisotropic"]
+    s = a["settings"]
+    lines = [
+        f"SU(2) on {'×'.join(map(str, s['shape']))} at β = {s['beta']}, ξ = {s['xi']} "
+        f"(β_s = {s['beta'] / s['xi']:.4g}, β_t = {s['beta'] * s['xi']:.4g}), {s['chains']} chains "
+        f"× {s['draws']} draws after {s['warmup']} warm-up steps each; HMC: "
+        f"{s['hmc_steps']} leapfrog steps of {a['step_size']:.4f} (a third of the stability "
+        "limit). Errors: blocking over the chains (τ_int shown).",
+        "",
+        "| sampler | spatial plaquette | τ_int | temporal plaquette | τ_int | seconds (with "
+        "compile) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in a["rows"]:
+        extra = f" (acceptance {r['acceptance']:.2f})" if "acceptance" in r else ""
+        lines.append(
+            f"| {r['sampler']}{extra} | {_pm(r['spatial'], r['spatial_error'])} | "
+            f"{r['spatial_tau_int']:.1f} | {_pm(r['temporal'], r['temporal_error'])} | "
+            f"{r['temporal_tau_int']:.1f} | {r['seconds_with_compile']:.0f} |"
+        )
+    hmc = a["rows"][1]
+    difference = (
+        f"HMC − heat bath, in combined standard errors: spatial {hmc['spatial_z']:+.1f}, "
+        f"temporal {hmc['temporal_z']:+.1f}."
+    )
+    lines += ["", difference.replace("-", "−")]
+    return lines
+
+
+def report(out_dir: Path, md_dir: Path) -> str:
+    """Section from ``deconfinement.json``, if it exists."""
+    path = out_dir / "deconfinement.json"
+    if not path.exists():
+        return ""
+    data = common.read_json(path)
+    machine = data["machine"]
+    plot_link = os.path.relpath(out_dir / "deconfinement.png", md_dir)
+    nt = data["config"]["nt"]
+    published = data["published"]
+    lines = [
+        "## SU(2) deconfinement: the Polyakov loop across the N_t = 2 transition; anisotropy",
+        "",
+        (
+            f"From `benchmarks/deconfinement.py` ({machine['date_utc']}, "
+            f"{data['total_seconds']:.0f} s, {data['mode']} mode, backend `{machine['backend']}`, "
+            f"{machine['usable_cpus']} usable CPU cores, {machine['cpu_model']}, load average "
+            f"{machine['load_average_1min']}). 4-D SU(2) Wilson action on N_s³ × {nt}, heat bath "
+            f"with {data['config']['overrelaxation']} over-relaxation sweep(s) per step, one "
+            f"lattice per β, all β of a volume drawn together (one compiled program), "
+            f"{data['config']['chains']} chains from hot starts, "
+            f"{data['config']['thermalisation']} thermalisation steps. ⟨|P|⟩ and the plaquette: "
+            "blocking errors (τ_int shown); χ_P and the Binder cumulant U: jackknife over blocks "
+            "of the blocking level ('block', in steps) — every error includes the "
+            "autocorrelation."
+        ),
+        "",
+        *_scan_table(data),
+        "",
+        (
+            "The transition: the vertex of the parabola through the largest χ_P and its two "
+            "grid neighbours, per volume; the crossing of U between the two volumes (linear "
+            "interpolation in the bracket where U_large − U_small changes sign). Their errors: "
+            "the jackknife of the location over the blocks of each run it uses (the runs are "
+            f"independent: the variances add). Published β_c(N_t = {nt}) = "
+            f"{published['beta_c'][str(nt)]}: {published['source']}. On these small volumes "
+            "the χ_P peak is a pseudo-critical coupling, shifted from β_c by finite-size "
+            "corrections of order N_s^(−1/ν), ν ≈ 0.63 (3-D Ising universality)."
+        ),
+        "",
+        *_transition_lines(data),
+        "",
+        (
+            "What accuracy costs: the statistical error of a location falls as "
+            "1/√(sweeps); at the rates above, halving it costs four times the seconds of its "
+            "row; the finite-size shift falls only with a larger N_s, each doubling of N_s "
+            "costing eight times the seconds per sweep (and longer autocorrelations near β_c)."
+        ),
+        "",
+        f"![SU(2) deconfinement]({plot_link})",
+        "",
+        "The anisotropic Wilson action, heat bath against HMC:",
+        "",
+        *_anisotropic_lines(data),
+        "",
+    ]
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    raise SystemExit(suites.standalone(__file__))
