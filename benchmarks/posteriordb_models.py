@@ -58,6 +58,13 @@ POSTERIORS = (
     "hmm_example-hmm_example",
     "arma-arma11",
     "earnings-earn_height",
+    "gp_pois_regr-gp_regr",
+    "kidiq-kidscore_interaction",
+    "earnings-logearn_interaction_z",
+    "nes1972-nes",
+    "bball_drive_event_0-hmm_drive_0",
+    "mesquite-logmesquite_logvash",
+    "sblri-blr",
 )
 
 
@@ -114,8 +121,9 @@ def kidscore_momiq(data):
 
 
 def logmesquite(data):
-    """``logmesquite.stan``: log-log regression on six predictors, flat priors."""
-    beta = numpyro.sample("beta", _flat(constraints.real, (7,)))
+    """``logmesquite.stan`` (six predictors) and ``logmesquite_logvash.stan`` (five): log-log
+    regression, flat priors."""
+    beta = numpyro.sample("beta", _flat(constraints.real, (data["predictors"].shape[1] + 1,)))
     sigma = numpyro.sample("sigma", _flat(constraints.positive))
     mean = beta[0] + data["predictors"] @ beta[1:]
     numpyro.sample("log_weight", dist.Normal(mean, sigma), obs=data["log_weight"])
@@ -240,6 +248,70 @@ def earn_height(data):
     numpyro.sample("earn", dist.Normal(mean, sigma), obs=data["earn"])
 
 
+def gp_regr(data):
+    """``gp_regr.stan``: a GP marginal likelihood, ``y ~ multi_normal(0, K(x; alpha, rho) +
+    sigma I)`` (the program adds ``sigma``, not ``sigma²``, to the diagonal)."""
+    x, y = data["x"], data["y"]
+    rho = numpyro.sample("rho", dist.Gamma(25.0, 4.0))
+    alpha = numpyro.sample("alpha", dist.HalfNormal(2.0))
+    sigma = numpyro.sample("sigma", dist.HalfNormal(1.0))
+    squared = (x[:, None] - x[None, :]) ** 2
+    cov = alpha**2 * jnp.exp(-0.5 * squared / rho**2) + sigma * jnp.eye(len(x))
+    numpyro.sample("y", dist.MultivariateNormal(jnp.zeros(len(x)), cov), obs=y)
+
+
+def kidscore_interaction(data):
+    """``kidscore_interaction.stan``: flat ``beta``, mother's IQ, high school and their product."""
+    beta = numpyro.sample("beta", _flat(constraints.real, (4,)))
+    sigma = numpyro.sample("sigma", dist.HalfCauchy(2.5))
+    hs, iq = data["mom_hs"], data["mom_iq"]
+    mean = beta[0] + beta[1] * hs + beta[2] * iq + beta[3] * hs * iq
+    numpyro.sample("kid_score", dist.Normal(mean, sigma), obs=data["kid_score"])
+
+
+def logearn_interaction_z(data):
+    """``logearn_interaction_z.stan``: log earnings on standardised height, sex and their
+    product; flat priors."""
+    beta = numpyro.sample("beta", _flat(constraints.real, (4,)))
+    sigma = numpyro.sample("sigma", _flat(constraints.positive))
+    z, male = data["z_height"], data["male"]
+    mean = beta[0] + beta[1] * z + beta[2] * male + beta[3] * z * male
+    numpyro.sample("log_earn", dist.Normal(mean, sigma), obs=data["log_earn"])
+
+
+def nes(data):
+    """``nes.stan``: party identification on nine predictors (age as a factor), flat priors."""
+    x = data["predictors"]
+    beta = numpyro.sample("beta", _flat(constraints.real, (x.shape[1] + 1,)))
+    sigma = numpyro.sample("sigma", _flat(constraints.positive))
+    numpyro.sample("partyid7", dist.Normal(beta[0] + x @ beta[1:], sigma), obs=data["partyid7"])
+
+
+def hmm_drive_0(data):
+    """``hmm_drive_0.stan``: a two-state HMM of a basketball drive, exponential emissions of
+    1/speed (rates ``phi``) and hoop distance (rates ``lambda``), positive-ordered rates with
+    normal priors on each, Dirichlet rows of the transition matrix."""
+    alpha = data["alpha"]
+    theta1 = numpyro.sample("theta1", dist.Dirichlet(alpha[0]))
+    theta2 = numpyro.sample("theta2", dist.Dirichlet(alpha[1]))
+    phi = numpyro.sample("phi", _flat(constraints.positive_ordered_vector, (2,)))
+    lam = numpyro.sample("lambda", _flat(constraints.positive_ordered_vector, (2,)))
+    centres = jnp.array([0.0, 3.0])
+    prior = dist.Normal(centres, 1.0).log_prob(phi) + dist.Normal(centres, 1.0).log_prob(lam)
+    numpyro.factor("rates_prior", jnp.sum(prior))
+    log_transition = jnp.log(jnp.stack([theta1, theta2]))  # [from j, to k]
+    emission = dist.Exponential(phi).log_prob(data["u"][:, None]) + dist.Exponential(lam).log_prob(
+        data["v"][:, None]
+    )  # (N, K)
+
+    def forward(gamma, emitted):
+        gamma = jax.nn.logsumexp(gamma[:, None] + log_transition, axis=0) + emitted
+        return gamma, None
+
+    gamma, _ = jax.lax.scan(forward, emission[0], emission[1:])
+    numpyro.factor("observations", jax.nn.logsumexp(gamma))
+
+
 def resonance(data):
     """The resonance toy (not from posteriordb): ``x ~ normal(0, 0.003)`` beside three
     standard normals and a ``gamma(4, 4)``. A fixed integration time near π/2 in a metric
@@ -283,6 +355,36 @@ PREDICTORS_LOGGED = ("diam1", "diam2", "canopy_height", "total_height", "density
 def _diamonds_data(raw):
     x = np.asarray(raw["X"], float)[:, 1:]  # the first column is the intercept's
     return {"Xc": x - x.mean(axis=0), "Y": np.asarray(raw["Y"], float)}
+
+
+def _logearn_z_data(raw):
+    height = np.asarray(raw["height"], float)
+    z = (height - height.mean()) / height.std(ddof=1)  # Stan's sd divides by N - 1
+    return {
+        "z_height": z,
+        "male": np.asarray(raw["male"], float),
+        "log_earn": np.log(np.asarray(raw["earn"], float)),
+    }
+
+
+NES_PREDICTORS = ("real_ideo", "race_adj", "age30_44", "age45_64", "age65up", "educ1",
+                  "gender", "income")  # fmt: skip
+
+
+def _nes_data(raw):
+    age = np.asarray(raw["age_discrete"], int)
+    columns = {"age30_44": age == 2, "age45_64": age == 3, "age65up": age == 4}
+    columns.update({k: raw[k] for k in ("real_ideo", "race_adj", "educ1", "gender", "income")})
+    predictors = np.stack([np.asarray(columns[k], float) for k in NES_PREDICTORS], axis=1)
+    return {"predictors": predictors, "partyid7": np.asarray(raw["partyid7"], float)}
+
+
+def _mesquite_logvash_data(raw):
+    d1, d2 = np.asarray(raw["diam1"], float), np.asarray(raw["diam2"], float)
+    height, total = np.asarray(raw["canopy_height"], float), np.asarray(raw["total_height"], float)
+    columns = [np.log(d1 * d2 * height), np.log(d1 * d2), np.log(d1 / d2), np.log(total)]
+    predictors = np.stack([*columns, np.asarray(raw["group"], float)], axis=1)
+    return {"predictors": predictors, "log_weight": np.log(np.asarray(raw["weight"], float))}
 
 
 def _arrays(*names, integer=()):
@@ -355,6 +457,19 @@ SPECS = {
     "hmm_example-hmm_example": _Spec(hmm_example, _arrays("y"), ("theta1", "theta2", "mu")),
     "arma-arma11": _Spec(arma11, _arrays("y"), ("mu", "phi", "theta", "sigma")),
     "earnings-earn_height": _Spec(earn_height, _arrays("earn", "height"), ("beta", "sigma")),
+    "gp_pois_regr-gp_regr": _Spec(gp_regr, _arrays("x", "y"), ("rho", "alpha", "sigma")),
+    "kidiq-kidscore_interaction": _Spec(
+        kidscore_interaction, _arrays("kid_score", "mom_iq", "mom_hs"), ("beta", "sigma")
+    ),
+    "earnings-logearn_interaction_z": _Spec(
+        logearn_interaction_z, _logearn_z_data, ("beta", "sigma")
+    ),
+    "nes1972-nes": _Spec(nes, _nes_data, ("beta", "sigma")),
+    "bball_drive_event_0-hmm_drive_0": _Spec(
+        hmm_drive_0, _arrays("u", "v", "alpha"), ("theta1", "theta2", "phi", "lambda")
+    ),
+    "mesquite-logmesquite_logvash": _Spec(logmesquite, _mesquite_logvash_data, ("beta", "sigma")),
+    "sblri-blr": _Spec(blr, _arrays("X", "y"), ("beta", "sigma")),
 }
 
 

@@ -174,6 +174,92 @@ def stan_earn_height(d, p):
     return _normal(d["earn"], b[0] + b[1] * d["height"], p["sigma"])
 
 
+def stan_gp_regr(d, p):
+    x = d["x"]
+    cov = p["alpha"] ** 2 * np.exp(-0.5 * np.subtract.outer(x, x) ** 2 / p["rho"] ** 2)
+    cov = cov + np.diag(np.full(len(x), p["sigma"]))
+    return (
+        stats.gamma.logpdf(p["rho"], 25, scale=1 / 4)
+        + _normal(p["alpha"], 0, 2)
+        + _normal(p["sigma"], 0, 1)
+        + stats.multivariate_normal.logpdf(d["y"], np.zeros(len(x)), cov)
+    )
+
+
+def stan_kidscore_interaction(d, p):
+    b, hs, iq = p["beta"], d["mom_hs"], d["mom_iq"]
+    inter = hs * iq
+    mean = b[0] + b[1] * hs + b[2] * iq + b[3] * inter
+    return stats.cauchy.logpdf(p["sigma"], 0, 2.5) + _normal(d["kid_score"], mean, p["sigma"])
+
+
+def _raw(name):
+    return {k: np.asarray(v) for k, v in pdb.read_record(name)["data"].items()}
+
+
+def stan_logearn_interaction_z(d, p):
+    raw = _raw("earnings-logearn_interaction_z")  # transformed data from the raw data
+    log_earn = np.log(raw["earn"])
+    z = (raw["height"] - raw["height"].mean()) / np.std(raw["height"], ddof=1)
+    inter = z * raw["male"]
+    b = p["beta"]
+    return _normal(log_earn, b[0] + b[1] * z + b[2] * raw["male"] + b[3] * inter, p["sigma"])
+
+
+def stan_nes(d, p):
+    raw = _raw("nes1972-nes")
+    age = raw["age_discrete"]
+    b = p["beta"]
+    mean = (
+        b[0]
+        + b[1] * raw["real_ideo"]
+        + b[2] * raw["race_adj"]
+        + b[3] * (age == 2)
+        + b[4] * (age == 3)
+        + b[5] * (age == 4)
+        + b[6] * raw["educ1"]
+        + b[7] * raw["gender"]
+        + b[8] * raw["income"]
+    )
+    return _normal(raw["partyid7"], mean, p["sigma"])
+
+
+def stan_hmm_drive_0(d, p):
+    raw = _raw("bball_drive_event_0-hmm_drive_0")
+    u, v, alpha = raw["u"], raw["v"], raw["alpha"]
+    theta = [p["theta1"], p["theta2"]]
+    phi, lam = p["phi"], p["lambda"]
+    target = sum(stats.dirichlet.logpdf(theta[k], alpha[k]) for k in range(2))
+    target += stats.norm.logpdf(phi[0], 0, 1) + stats.norm.logpdf(phi[1], 3, 1)
+    target += stats.norm.logpdf(lam[0], 0, 1) + stats.norm.logpdf(lam[1], 3, 1)
+
+    def emit(t, k):  # exponential_lpdf(y | rate) = log(rate) - rate * y
+        return np.log(phi[k]) - phi[k] * u[t] + np.log(lam[k]) - lam[k] * v[t]
+
+    gamma = [emit(0, k) for k in range(2)]
+    for t in range(1, len(u)):
+        gamma = [
+            np.logaddexp(*[gamma[j] + np.log(theta[j][k]) + emit(t, k) for j in range(2)])
+            for k in range(2)
+        ]
+    return target + np.logaddexp(*gamma)
+
+
+def stan_logmesquite_logvash(d, p):
+    raw = _raw("mesquite-logmesquite_logvash")
+    d1, d2 = raw["diam1"], raw["diam2"]
+    b = p["beta"]
+    mean = (
+        b[0]
+        + b[1] * np.log(d1 * d2 * raw["canopy_height"])
+        + b[2] * np.log(d1 * d2)
+        + b[3] * np.log(d1 / d2)
+        + b[4] * np.log(raw["total_height"])
+        + b[5] * raw["group"]
+    )
+    return _normal(np.log(raw["weight"]), mean, p["sigma"])
+
+
 def stan_resonance(d, p):
     return (
         _normal(p["x"], 0, 0.003)
@@ -197,6 +283,13 @@ STAN = {
     "hmm_example-hmm_example": stan_hmm_example,
     "arma-arma11": stan_arma11,
     "earnings-earn_height": stan_earn_height,
+    "gp_pois_regr-gp_regr": stan_gp_regr,
+    "kidiq-kidscore_interaction": stan_kidscore_interaction,
+    "earnings-logearn_interaction_z": stan_logearn_interaction_z,
+    "nes1972-nes": stan_nes,
+    "bball_drive_event_0-hmm_drive_0": stan_hmm_drive_0,
+    "mesquite-logmesquite_logvash": stan_logmesquite_logvash,
+    "sblri-blr": stan_blr,
     pdb.RESONANCE: stan_resonance,
 }
 
