@@ -21,6 +21,10 @@ its section of ``RESULTS.md`` is built from that file alone (:func:`report`).
 2. 2-D U(1) on ``n × n`` at several β: the integrated autocorrelation time of the geometric
    charge ``Q`` for the heat bath + OR (topological freezing grows it with β), and ``⟨Q²⟩``
    against the exact torus law (``liesample.targets.gauge.u1_torus_charge_law``).
+
+Every error bar printed (the plaquette's, the flowed ``t² E``'s, ``⟨Q²⟩``'s) is an MCSE
+``σ / √ESS`` with ArviZ's bulk ESS of the correlated series (:func:`_statistics`), so it includes
+the autocorrelation: ``ESS = n / (2 τ_int)``.
 """
 
 from __future__ import annotations
@@ -409,7 +413,8 @@ def report_section(data) -> str:
             "heat-bath + 4 over-relaxation sweeps each) from a hot start (its plaquette "
             f"{data['start_plaquette']:.5f}). The plaquette is the "
             "mean over the updates of the lattice-mean plaquette; its MCSE is the standard "
-            "deviation over √ESS, with ArviZ's bulk ESS of the per-update series (no ESS is "
+            "deviation over √ESS, with ArviZ's bulk ESS of the per-update series, so it "
+            "includes the autocorrelation (ESS = n / 2τ_int; no ESS is "
             f"given for a chain accepted at most {data['acceptance_floor']:.0%} of the time). "
             "These are short runs: with an ESS this small the MCSE is itself uncertain, by "
             "about 1/√(2 ESS) relative. ESS/s and link updates/s exclude compilation; a "
