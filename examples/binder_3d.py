@@ -136,6 +136,11 @@ def main(argv=None) -> int:
     if len(betas) < 2:
         parser.error("--betas needs at least two values (a line through each size's U)")
 
+    print(
+        "errors: U by the jackknife over blocks of the automatic blocking level (blocks longer "
+        "than tau_int, so the autocorrelation is included); beta* by propagating them through "
+        "the two weighted line fits"
+    )
     results = {}
     for size in sizes:
         m, name = magnetisations(size, betas, args.chains, args.draws, args.warmup, args.seed)

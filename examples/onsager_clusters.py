@@ -7,7 +7,8 @@ states) like-signed vortices gather into two clusters, one of each sign, and ``|
 its largest value ``N²``. ``liesample.vortex_metropolis`` samples this law with no step bias:
 single-vortex Metropolis sweeps, the proposal scale tuned in the warm-up.
 
-Prints, for each ``β``: ``E|D|²`` with its Monte Carlo standard error, R-hat, the mean angle from a
+Prints, for each ``β``: ``E|D|²`` with its Monte Carlo standard error (``sd/√ESS``, ArviZ's bulk
+ESS over the chains, so the autocorrelation is included), R-hat, the mean angle from a
 vortex to its nearest like-signed neighbour, and the tuned proposal scale. ``--plot FILE`` also
 saves ``|D|²`` against ``β`` and one state per ``β`` (longitude–latitude map).
 
@@ -73,7 +74,7 @@ def plot(path, rows, circulations):
     betas = [row["beta"] for row in rows]
     axes[0].errorbar(
         betas, [row["dipole"] for row in rows], yerr=[2 * row["mcse"] for row in rows], fmt="o-"
-    )
+    )  # two MCSEs (from the ESS: autocorrelation included)
     axes[0].axhline(circulations.size**2, ls=":", c="gray")
     axes[0].set(xlabel="β", ylabel="E|D|²", title="dipole against β")
     for ax, row in zip(axes[1:], rows, strict=True):
@@ -107,6 +108,7 @@ def main(argv=None) -> int:
         f"{args.vortices} vortices (Γ = ±1): the Gibbs law is normalisable for "
         f"{low:.3g} < β < {high:.3g}"
     )
+    print("MCSE = sd / sqrt(ESS), ArviZ's bulk ESS over the chains (autocorrelation included)")
     print(
         f"{'β':>6} {'E|D|²':>8} {'± MCSE':>7} {'R-hat':>6} "
         f"{'like-signed NN angle':>21} {'scale':>7}"

@@ -13,7 +13,8 @@ the charge freezes: what slows down is how often ``Q`` changes at all.
 For each ``β`` the run records ``Q`` as an observable of :func:`liesample.sample` with two
 samplers: the recommended one (:func:`liesample.recommended_sampler`: heat bath with one
 over-relaxation sweep per step) and the plain heat bath (no over-relaxation). It prints the
-topological susceptibility ``χ_t = ⟨Q²⟩/V`` with its jackknife error, ``τ_int(Q)`` from the
+topological susceptibility ``χ_t = ⟨Q²⟩/V`` with its jackknife error over blocks of at least
+``10 τ_int(Q)`` draws (so the error includes the autocorrelation), ``τ_int(Q)`` from the
 bulk ESS (:func:`liesample.analysis.convergence.rank_diagnostics`, ``τ = draws / ESS``) and the
 number of changes of ``Q`` per chain (a frozen chain has none, and then no ``τ`` can be
 estimated: it prints ``frozen``). ``--plot FILE`` saves the history of ``Q`` at each ``β`` and
@@ -26,6 +27,7 @@ estimated: it prints ``frozen``). ``--plot FILE`` saves the history of ``Q`` at 
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import warnings
 from pathlib import Path
@@ -44,6 +46,7 @@ from liesample.analysis.topology import topological_charge, topological_suscepti
 from liesample.systems.heisenberg import heisenberg
 
 SAMPLERS = ("recommended", "heat bath")
+BLOCKS_PER_TAU = 10  # jackknife blocks at least this many τ_int(Q) long
 QUICK = {"size": 6, "betas": "1.0,2.0", "chains": 2, "draws": 64}
 
 
@@ -77,12 +80,24 @@ def charge_history(system, name, beta, num_chains, num_draws, seed):
 def summarise(q, volume):
     """``χ_t`` and its error, ``τ_int(Q)`` and the changes of ``Q`` per chain."""
     q = np.rint(q)  # integers up to round-off
-    chi = topological_susceptibility(q, volume, block_size=max(1, q.shape[1] // 16))
     ess = float(rank_diagnostics(q[None])[1][0])
     changes = np.count_nonzero(np.diff(q, axis=1), axis=1)
     frozen = bool(np.all(changes == 0))
     tau = float("nan") if frozen else q.size / ess
-    return {"chi": chi.estimate, "chi_error": chi.error, "tau": tau, "changes": changes}
+    # blocks of at least BLOCKS_PER_TAU τ_int(Q) draws, so the jackknife error includes the
+    # autocorrelation; at most half a chain (two blocks per chain)
+    block = q.shape[1] // 16 if frozen else math.ceil(BLOCKS_PER_TAU * tau)
+    block = max(1, min(max(block, q.shape[1] // 16), q.shape[1] // 2))
+    chi = topological_susceptibility(q, volume, block_size=block)
+    short = not frozen and block < BLOCKS_PER_TAU * tau  # the error is then uncertain
+    return {
+        "chi": chi.estimate,
+        "chi_error": chi.error,
+        "tau": tau,
+        "changes": changes,
+        "block_size": block,
+        "blocks_too_short": short,
+    }
 
 
 def plot(path, betas, results, histories, size):
@@ -134,15 +149,17 @@ def main(argv=None) -> int:
     volume = args.size**2
     results, histories = {}, {}
     print(f"2-D O(3), periodic {args.size}x{args.size}, {args.chains} chains x {args.draws} draws")
+    print("errors: jackknife over blocks of >= 10 tau_int(Q) draws (autocorrelation included)")
     for name in SAMPLERS:
         for beta in betas:
             q = charge_history(system, name, beta, args.chains, args.draws, args.seed)
             results[name, beta] = out = summarise(q, volume)
             histories[name, beta] = np.rint(q)
             tau = "frozen" if np.isnan(out["tau"]) else f"{out['tau']:.1f}"
+            flag = " (blocks < 10 tau_int: error uncertain)" if out["blocks_too_short"] else ""
             print(
                 f"{name:>11}  beta = {beta:.3g}: chi_t = {out['chi']:.4g} +- "
-                f"{out['chi_error']:.2g}, tau_int(Q) = {tau}, changes of Q per chain = "
+                f"{out['chi_error']:.2g}{flag}, tau_int(Q) = {tau}, changes of Q per chain = "
                 f"{out['changes'].tolist()}"
             )
     if args.plot is not None:
