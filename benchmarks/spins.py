@@ -397,7 +397,8 @@ def report_section(results) -> str:
             "of one lattice ran side by side in one process, so their ratios are steadier, and "
             "τ_int does not depend on the machine. Periodic L³ lattice, J = 1, no field, "
             f"β = {BETA_C}, {NUM_CHAINS} chains from equilibrated starts; τ_int in steps "
-            "(Sokal window, Madras–Sokal error); ESS/s over the sampling time, compilation "
+            "(Sokal window, Madras–Sokal error, which is the only error bar here: the "
+            "means are printed without one); ESS/s over the sampling time, compilation "
             "excluded. A heat-bath step is one heat-bath and one over-relaxation sweep, a "
             "Swendsen–Wang step one update of every cluster."
         ),

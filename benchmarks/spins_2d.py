@@ -344,7 +344,9 @@ def report_section(results) -> str:
             "that to approach convergence; the load changed during a run, so actual times "
             "differ; two 200-step pilots included, one "
             f"draw per sweep — a Wolff draw every ≈ N/cluster-size clusters — first "
-            f"{WARMUP_FRACTION:.0%} of the steps warm-up)."
+            f"{WARMUP_FRACTION:.0%} of the steps warm-up). Error bars (± MCSE) are ArviZ's "
+            "Monte Carlo standard error of the mean, from its bulk ESS over the chains, so "
+            "they include the autocorrelation."
         ),
         "",
         (

@@ -373,6 +373,13 @@ def _findings(results) -> str:
     )
 
 
+def _shortest_block_in_tau(rows) -> float:
+    """The shortest jackknife block of ``χ_t`` (a sixteenth of a chain) in units of
+    ``τ_int(Q)``, over the rows of ``Q``."""
+    ratios = [r["draws_per_chain"] // 16 / r["tau_int"] for r in rows if r["quantity"] == "Q"]
+    return min(ratios) if ratios else float("nan")
+
+
 def report_section(results) -> str:
     """The ``RESULTS.md`` section for the contents of ``spins_beyond_o3.json``."""
     rows, machine = results["ess"], results["machine"]
@@ -394,7 +401,11 @@ def report_section(results) -> str:
             f"{', '.join(names)} per step; `plain` is the heat bath alone "
             "(`heisenberg_heat_bath` / `cp_heat_bath` with `overrelaxation=0`). ESS is ArviZ's "
             "bulk ESS over the chains, τ_int = chains × draws / ESS in steps, ESS/s over the "
-            "run's `sampling_time` (compilation excluded, warm-up included)."
+            "run's `sampling_time` (compilation excluded, warm-up included). Error bars: "
+            "± MCSE is ArviZ's Monte Carlo standard error of the mean, from that ESS, so it "
+            "includes the autocorrelation; χ_t's error is the jackknife over 16 blocks per "
+            f"chain, each at least {_shortest_block_in_tau(rows):.0f} τ_int(Q) long here (so it "
+            "includes the autocorrelation too)."
         ),
         "",
         "| model | lattice | β | quantity | τ_int plain | τ_int recommended | "
