@@ -543,7 +543,7 @@ def wilson_gauge(
     (0.5, 2.0)
     """
     shape = cast(tuple[int, ...], shape)  # checked as a tuple there
-    return WilsonGauge(group, shape, boundary, cast(float, anisotropy))
+    return WilsonGauge(group, shape, boundary, anisotropy)
 
 
 jax.tree_util.register_static(WilsonGauge)
