@@ -133,9 +133,15 @@ class QuantisedHarmonics:
         valid = index[None, :] < n - index[:, None]  # [m, k]: k < N − m
         self._valid = valid
         k, m = index[None, :], index[:, None]
-        # Gather of the diagonals: upper[m, k] = x[k, k+m], lower[m, k] = x[k+m, k] (padded).
-        self._upper_index = np.where(valid, k * n + k + m, 0)
-        self._lower_index = np.where(valid, (k + m) * n + k, 0)
+        # Gather of the diagonals, both at once: [0, m, k] = x[k, k+m] (upper), [1, m, k] =
+        # x[k+m, k] (lower), zero-padded (one gather and one mask, however often it is traced).
+        self._pack_index = np.stack(
+            [np.where(valid, k * n + k + m, 0), np.where(valid, (k + m) * n + k, 0)]
+        )
+        self._pack_mask = np.stack([valid, valid]).astype(float)
+        # The m = 0 rows of both halves (the main diagonal, twice), for jnp.where.
+        self._main_rows = np.zeros((2, n, n), bool)
+        self._main_rows[:, 0, :] = True
         # Scatter back as a gather from concat(upper, lower) (flattened).
         i, j = index[:, None], index[None, :]
         self._unpack_index = np.where(j >= i, (j - i) * n + i, n * n + (i - j) * n + j)
@@ -164,10 +170,7 @@ class QuantisedHarmonics:
     def _pack(self, x):
         """``(..., 2, N, N)``: the upper and lower diagonals ``[m, k]``, zero-padded."""
         flat = jnp.reshape(x, jnp.shape(x)[:-2] + (self.size * self.size,))
-        valid = jnp.asarray(self._valid, dtype=flat.dtype)
-        upper = flat[..., self._upper_index] * valid
-        lower = flat[..., self._lower_index] * valid
-        return jnp.stack([upper, lower], axis=-3)
+        return flat[..., self._pack_index] * jnp.asarray(self._pack_mask, dtype=flat.dtype)
 
     def _unpack(self, packed):
         flat = jnp.reshape(packed, jnp.shape(packed)[:-3] + (2 * self.size * self.size,))
@@ -202,14 +205,17 @@ class QuantisedHarmonics:
         tridiagonal solve over the diagonals, O(N²)."""
         n = self.size
         p = self._pack(x)
-        mean = jnp.mean(p[..., 0, 0, :], axis=-1, keepdims=True)
+        diagonal = p[..., 0, 0, :]
+        mean = jnp.mean(diagonal, axis=-1, keepdims=True)
         # m = 0 appears as both upper[0] and lower[0]: make it trace-free, pin its last entry.
-        main = (p[..., 0, 0, :] - mean).at[..., n - 1].set(0.0)
-        p = p.at[..., 0, 0, :].set(main).at[..., 1, 0, :].set(main)
+        # Selections, not indexed updates: each .at[].set would be a scatter of its own (and
+        # its own kernel to compile) in every program that evaluates h.
+        main = jnp.where(np.arange(n) == n - 1, 0.0, diagonal - mean)
+        p = jnp.where(self._main_rows, main[..., None, None, :], p)
         lo, d, up = (jnp.broadcast_to(jnp.asarray(b, p.dtype), p.shape) for b in self._solve_bands)
         y = jax.lax.linalg.tridiagonal_solve(lo, d, up, p[..., None])[..., 0]
         y0 = y[..., 0, 0, :] - jnp.mean(y[..., 0, 0, :], axis=-1, keepdims=True)
-        y = y.at[..., 0, 0, :].set(y0).at[..., 1, 0, :].set(y0)
+        y = jnp.where(self._main_rows, y0[..., None, None, :], y)
         return -self._unpack(y * jnp.asarray(self._valid, p.dtype))
 
     def energy(self, x: ArrayLike) -> jax.Array:
@@ -229,8 +235,8 @@ class QuantisedHarmonics:
         p = self._pack(x)
         c = jnp.einsum("mik,...mi->...mk", v, p)  # [..., 2, m, ℓ − m]
         flat = jnp.reshape(c, c.shape[:-2] + (self.size * self.size,))
-        upper, lower = flat[..., 0, self._coef_rows], flat[..., 1, self._coef_rows]
-        return self._coef_upper * upper + self._coef_lower * lower
+        rows = flat[..., self._coef_rows]  # one gather for both halves
+        return self._coef_upper * rows[..., 0, :] + self._coef_lower * rows[..., 1, :]
 
     def from_coefficients(self, coefficients: ArrayLike) -> jax.Array:
         """The inverse of :meth:`coefficients` (the transform is orthogonal)."""
