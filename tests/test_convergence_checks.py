@@ -2,9 +2,12 @@
 
 The vectorised R-hat and ESS agree with ArviZ's; through ``liesample.sample``, chains in mirror
 modes, a split mixture and a flat (improper) target each raise the warning, naming the
-variables, and a well-mixed run raises none.
+variables, and a well-mixed run raises none. A variable larger than ``MAX_RANKED_ELEMENTS``
+(a lattice) is ranked in part and screened whole: the ranked elements are bounded, and a
+displaced element, a slowly mixing one, many displaced ones and a stuck chain are all reported.
 """
 
+import re
 import warnings
 
 import jax
@@ -14,10 +17,13 @@ import pytest
 from arviz_stats.base import array_stats
 
 import liesample
+from liesample.analysis import convergence
 from liesample.analysis.convergence import (
+    MAX_RANKED_ELEMENTS,
     MAX_RHAT,
     convergence_warnings,
     rank_diagnostics,
+    screen,
 )
 from liesample.spaces import Euclidean, Sphere
 
@@ -141,3 +147,88 @@ def test_well_mixed_run_is_quiet():
             sampler, jax.random.key(3), starts, 500, num_warmup=100, progress_bar=False
         )
     assert tree.posterior["mu"].shape == (4, 500, 2)
+
+
+# A lattice-sized variable: (30, 40) elements, 4 chains of 1000 iid standard normal draws. The
+# rank R-hat of iid draws exceeds 1 by O(χ²₇/(7n)) with 8 split chains of n = 500 draws: the
+# largest of 1200 elements stays near 1.003, well below MAX_RHAT, and every bulk and tail ESS
+# near 4000, far above 400; the defects below move their element's R-hat to about 1.1 and its
+# ESS to about 60 (AR(1) with ρ = 0.97: ESS ≈ 4000 (1 − ρ)/(1 + ρ)).
+_LATTICE = (30, 40)
+
+
+@pytest.fixture(scope="module")
+def lattice_draws():
+    return np.random.default_rng(11).normal(size=(4, 1000, *_LATTICE))
+
+
+@pytest.fixture
+def ranked_counts(monkeypatch):
+    """The number of elements each call of ``rank_diagnostics`` receives."""
+    counts = []
+
+    def counted(x):
+        counts.append(len(x))
+        return rank_diagnostics(x)
+
+    monkeypatch.setattr(convergence, "rank_diagnostics", counted)
+    return counts
+
+
+def test_a_large_variable_is_ranked_in_part(lattice_draws, ranked_counts):
+    assert convergence_warnings({"x": lattice_draws}) == []
+    assert ranked_counts == [MAX_RANKED_ELEMENTS]  # of 1200 varying elements
+    small = lattice_draws[:, :, :2]  # 80 elements: all ranked, as before
+    assert convergence_warnings({"x": small}) == [] and ranked_counts[-1] == 80
+
+
+def test_a_large_variable_still_shows_one_displaced_or_slow_element(lattice_draws, ranked_counts):
+    draws = lattice_draws.copy()
+    draws[0, :, 17, 23] += 1.0  # one chain sits elsewhere at one site
+    rho, noise = 0.97, draws[:, :, 4, 5]  # and one site mixes slowly (AR(1), unit variance)
+    slow = np.empty_like(noise)
+    slow[:, 0] = noise[:, 0]
+    for t in range(1, noise.shape[1]):
+        slow[:, t] = rho * slow[:, t - 1] + np.sqrt(1 - rho**2) * noise[:, t]
+    draws[:, :, 4, 5] = slow
+    rhat, ess = convergence_warnings({"x": draws})
+    # the slow site may show in R-hat too (its chains have few independent draws each)
+    named = lambda message: set(re.findall(r"x\[\d+,\d+\]", message))
+    assert rhat.startswith(f"R-hat > {MAX_RHAT:g} for ")
+    # 2 of 8 split chains shifted by one sd: the means vary by 3/14, R-hat ≈ √(1 + 3/14) ≈ 1.1
+    assert 1.05 < float(re.search(r"x\[17,23\]: ([0-9.]+)", rhat)[1]) < 1.2
+    assert named(rhat) <= {"x[17,23]", "x[4,5]"}
+    assert ess.startswith("ESS below 100 per chain") and named(ess) <= {"x[17,23]", "x[4,5]"}
+    assert "x[4,5]: bulk" in ess
+    assert max(ranked_counts) <= MAX_RANKED_ELEMENTS
+
+
+def test_a_large_variable_counts_every_displaced_element(lattice_draws):
+    # more displaced sites than are ranked: the screened R-hat of the others reports them too
+    draws = lattice_draws.copy()
+    draws[0, :, :10] += 1.0  # 400 sites
+    (rhat, *_) = convergence_warnings({"x": draws})
+    assert rhat.startswith(f"R-hat > {MAX_RHAT:g} for 400 element(s): x[")
+
+
+def test_a_stuck_chain_shows_in_a_large_variable(lattice_draws):
+    draws = lattice_draws.copy()
+    draws[2] = draws[2, :1]  # chain 2 never moves from its first draw
+    (rhat, *_) = convergence_warnings({"x": draws})
+    assert rhat.startswith(f"R-hat > {MAX_RHAT:g} for ")
+
+
+def test_the_screen_is_plain_split_rhat_and_lag_one_autocorrelation():
+    rng = np.random.default_rng(2)
+    x = rng.normal(size=(3, 2, 100))
+    r_hat, rho = screen(x)
+    with np.errstate(all="ignore"):
+        expected = array_stats.rhat(x, method="split")
+    assert np.all(r_hat >= expected - 1e-12)  # the larger of values' and distances' R-hat
+    halves = np.concatenate([x[..., :50], x[..., 50:]], axis=1)
+    c = halves - halves.mean(-1, keepdims=True)
+    np.testing.assert_allclose(
+        rho, (c[..., 1:] * c[..., :-1]).sum((1, 2)) / (c * c).sum((1, 2)), rtol=1e-12
+    )
+    with pytest.raises(ValueError, match="draws >= 4"):
+        screen(x[..., :3])

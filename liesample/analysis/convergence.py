@@ -9,8 +9,21 @@ prob=(0.05, 0.95))``), and returns a message for each kind of failure: R-hat abo
 drifting target) or an ESS below :data:`MIN_ESS_PER_CHAIN` per chain. ArviZ computes these one
 element at a time in Python; here every element of a variable is computed in one pass of array
 operations (ranks by one sort, autocovariances by one FFT, Geyer's truncation by cumulative
-reductions), so a lattice's thousands of elements cost little; the values are ArviZ's to
-round-off.
+reductions); the values are ArviZ's to round-off.
+
+**Large variables.** A variable with more than :data:`MAX_RANKED_ELEMENTS` varying elements (a
+lattice's links or spins) is not ranked whole: ranks and FFTs of every site would cost more
+than a short run. Every element is first *screened* by cheap statistics of one pass over its
+draws: the plain split R-hat of the values and of their distances from the pooled mean (chains
+in different places or with different spreads) and the lag-1 autocorrelation pooled over the
+split chains (slow mixing). The rank-normalised R-hat and the bulk and tail ESS are then
+computed on the :data:`MAX_RANKED_ELEMENTS` most suspicious elements: half the elements with
+the largest screened R-hat, the rest those with the largest autocorrelation (ties by position,
+so the subset is a function of the draws alone). An element outside that subset whose screened
+R-hat is above :data:`MAX_RHAT` is still reported, with that R-hat. A stuck or displaced chain
+moves every site's screen, and a single site that has not converged tops it, so neither is
+missed; what the rule gives up is the rank-normalised values of the unremarkable sites, whose
+law (on a lattice with its translations) the ranked ones share.
 """
 
 from __future__ import annotations
@@ -22,12 +35,22 @@ import numpy.typing as npt
 import scipy.fft
 from scipy.special import ndtri
 
-__all__ = ["MAX_RHAT", "MIN_ESS_PER_CHAIN", "convergence_warnings", "rank_diagnostics"]
+__all__ = [
+    "MAX_RANKED_ELEMENTS",
+    "MAX_RHAT",
+    "MIN_ESS_PER_CHAIN",
+    "convergence_warnings",
+    "rank_diagnostics",
+    "screen",
+]
 
 MAX_RHAT = 1.01
 """An element whose rank-normalised split R-hat is above this is reported (Vehtari et al.)."""
 MIN_ESS_PER_CHAIN = 100
 """An element whose bulk or tail ESS is below this many per chain is reported."""
+MAX_RANKED_ELEMENTS = 128
+"""The most elements of one variable (within one law group) given the rank-normalised R-hat
+and ESS; the others are screened (module docstring, "Large variables")."""
 
 _MIN_DRAWS = 4  # split chains need at least two draws per half
 _TAIL_PROB = (0.05, 0.95)
@@ -116,12 +139,13 @@ def rank_diagnostics(x: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarr
     if x.ndim != 3 or x.shape[-1] < _MIN_DRAWS:
         raise ValueError(f"x must have shape (elements, chains, draws >= 4), got {x.shape}")
     split = _split(x)
+    scores = _z_scale(split)  # the R-hat's and the bulk ESS's, ranked once
     if x.shape[1] > 1:
         folded = np.abs(split - np.median(split.reshape(len(x), -1), axis=1)[:, None, None])
-        r_hat = np.maximum(_rhat(_z_scale(split)), _rhat(_z_scale(folded)))
+        r_hat = np.maximum(_rhat(scores), _rhat(_z_scale(folded)))
     else:
         r_hat = np.full(len(x), np.nan)
-    ess_bulk = _ess(_z_scale(split))
+    ess_bulk = _ess(scores)
     flat = x.reshape(len(x), -1)
     ess_tail = np.minimum(
         *(
@@ -130,6 +154,38 @@ def rank_diagnostics(x: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarr
         )
     )
     return r_hat, ess_bulk, ess_tail
+
+
+def screen(x: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """``(r_hat, rho)`` of every element of ``x (elements, chains, draws >= 4)`` in one pass of
+    array operations, no sort and no FFT: the larger of the plain split R-hat of the values and
+    of their distances from the pooled mean (NaN where a within-chain variance vanishes), and
+    the lag-1 autocorrelation pooled over the split chains. What picks the elements of a large
+    variable that get the rank-normalised diagnostics (module docstring)."""
+    x = np.asarray(x, dtype=float)
+    if x.ndim != 3 or x.shape[-1] < _MIN_DRAWS:
+        raise ValueError(f"x must have shape (elements, chains, draws >= 4), got {x.shape}")
+    split = _split(x)
+    folded = np.abs(split - split.mean(axis=(1, 2), keepdims=True))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r_hat = np.fmax(_rhat(split), _rhat(folded))
+        centred = split - split.mean(-1, keepdims=True)
+        lagged = np.sum(centred[..., 1:] * centred[..., :-1], axis=(1, 2))
+        rho = lagged / np.sum(centred * centred, axis=(1, 2))
+    return r_hat, rho
+
+
+def _suspects(r_hat, rho, budget):
+    """The ``budget`` elements to rank: half with the largest screened R-hat, the rest with the
+    largest autocorrelation among the others (NaN counts as largest; ties by position)."""
+
+    def worst_first(values):
+        return np.argsort(-np.where(np.isnan(values), np.inf, values), kind="stable")
+
+    chosen = worst_first(r_hat)[: budget // 2]
+    by_rho = worst_first(rho)
+    by_rho = by_rho[~np.isin(by_rho, chosen)][: budget - len(chosen)]
+    return np.sort(np.concatenate([chosen, by_rho]))
 
 
 def _chain_groups(groups, num_chains):
@@ -172,37 +228,74 @@ def _real_parts(variables):
             yield name, values
 
 
-def _group_rows(x, names, group):
-    """Rows ``(name, r_hat, ess_bulk, ess_tail, chains)`` of the elements of ``x (elements,
-    chains of group, draws)`` that are finite and vary, and the count of non-finite ones."""
+def _checked(x):
+    """``(finite, varies)`` masks of the elements of ``x (elements, chains, draws)``: finite
+    draws, and a spread above round-off (constants such as Casimirs say nothing)."""
     finite = np.isfinite(x).all((1, 2))
-    x, names = x[finite], names[finite]
     flat = x.reshape(len(x), -1)
-    size = np.max(np.abs(flat), axis=1, initial=1e-300)
-    varies = np.ptp(flat, axis=1) > 1e-9 * size  # constants (Casimirs) say nothing
-    if not varies.any():
-        return [], int(np.sum(~finite))
-    r_hat, bulk, tail = rank_diagnostics(x[varies])
-    rows = [(n, r, b, t, group) for n, r, b, t in zip(names[varies], r_hat, bulk, tail)]
+    with np.errstate(invalid="ignore"):
+        size = np.max(np.abs(flat), axis=1, initial=1e-300)
+        varies = finite & (np.ptp(flat, axis=1) > 1e-9 * size)
+    return finite, varies
+
+
+class _Variable:
+    """One real variable's draws ``(chains, draws, elements)`` taken in batches of about
+    :data:`_BATCH_VALUES` draws (bounded temporaries): ``elements(index, group)`` is the
+    ``(elements, chains of group, draws)`` array of the elements ``index``."""
+
+    def __init__(self, name, array):
+        chains, draws = array.shape[:2]
+        self.names = np.array(_element_names(name, array.shape[2:]), dtype=object)
+        self.flat = array.reshape(chains, draws, -1)
+        self.batch = max(1, _BATCH_VALUES // (chains * draws))
+
+    def batches(self, index):
+        for first in range(0, len(index), self.batch):
+            yield index[first : first + self.batch]
+
+    def elements(self, index, group):
+        return np.moveaxis(self.flat[..., index].astype(float), -1, 0)[:, group]
+
+
+def _group_rows(variable, group):
+    """Rows ``(name, r_hat, ess_bulk, ess_tail, chains)`` of the elements of one variable
+    that are finite and vary, within the chains ``group``, and the count of non-finite ones; a
+    variable of more than :data:`MAX_RANKED_ELEMENTS` such elements is screened and ranked in
+    part (module docstring)."""
+    every = np.arange(variable.flat.shape[-1])
+    masks = [_checked(variable.elements(index, group)) for index in variable.batches(every)]
+    finite = np.concatenate([m[0] for m in masks])
+    checked = every[np.concatenate([m[1] for m in masks])]
+    rows = []
+    if len(checked) > MAX_RANKED_ELEMENTS:
+        screens = [screen(variable.elements(i, group)) for i in variable.batches(checked)]
+        screened = np.concatenate([r for r, _ in screens])
+        rho = np.concatenate([a for _, a in screens])
+        ranked = _suspects(screened, rho, MAX_RANKED_ELEMENTS)
+        if len(group) > 1:  # R-hat compares chains
+            others = np.setdiff1d(np.arange(len(checked)), ranked, assume_unique=True)
+            flagged = others[~(screened[others] <= MAX_RHAT)]  # NaN (frozen chains) counts
+            rows = [(variable.names[checked[i]], np.nan_to_num(screened[i], nan=np.inf),
+                     np.nan, np.nan, group) for i in flagged]  # fmt: skip
+        checked = checked[ranked]
+    for index in variable.batches(checked):
+        r_hat, bulk, tail = rank_diagnostics(variable.elements(index, group))
+        names = variable.names[index]
+        rows += [(n, r, b, t, group) for n, r, b, t in zip(names, r_hat, bulk, tail)]
     return rows, int(np.sum(~finite))
 
 
 def _rows(variables, groups):
     """One row per checked element and law group: ``(name, r_hat, ess_bulk, ess_tail,
-    chains)``, and the number of elements left out as not finite. Elements are taken in
-    batches of about :data:`_BATCH_VALUES` draws, which bounds the temporaries' memory."""
+    chains)``, and the number of elements left out as not finite."""
     rows, not_finite = [], 0
     for name, array in _real_parts(variables):
-        chains, draws = array.shape[:2]
-        names = np.array(_element_names(name, array.shape[2:]), dtype=object)
-        flat = array.reshape(chains, draws, -1)
-        batch = max(1, _BATCH_VALUES // (chains * draws))
-        for first in range(0, flat.shape[-1], batch):
-            x = np.moveaxis(flat[..., first : first + batch].astype(float), -1, 0)
-            for group in groups:
-                found, bad = _group_rows(x[:, group], names[first : first + batch], group)
-                rows += found
-                not_finite += bad
+        variable = _Variable(name, array)
+        for group in groups:
+            found, bad = _group_rows(variable, group)
+            rows += found
+            not_finite += bad
     return rows, not_finite
 
 

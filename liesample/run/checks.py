@@ -75,7 +75,8 @@ def check_variables(
     Warns (``RuntimeWarning``) for each variable with non-finite draws, naming it and its
     chains; then (``convergence=True``) one ``UserWarning`` with the messages of
     :func:`liesample.analysis.convergence.convergence_warnings` (rank-normalised split R-hat
-    above 1.01, bulk or tail ESS below 100 per chain, on every element within each law group,
+    above 1.01, bulk or tail ESS below 100 per chain, on every element within each law group:
+    a large variable's elements screened and the most suspicious ranked, as that module says;
     or why the checks were impossible). Returns every message."""
     messages = []
     for name, values in variables.items():
