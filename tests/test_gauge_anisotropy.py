@@ -121,6 +121,41 @@ def test_the_flow_uses_the_isotropic_action():
     np.testing.assert_array_equal(np.asarray(ea), np.asarray(eb))
 
 
+class _Compiles:
+    count = 0
+
+    def __call__(self, event, duration, **kwargs):
+        if event == "/jax/core/compile/backend_compile_duration":
+            self.count += 1
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")  # 20 draws: the convergence checks speak
+def test_an_anisotropic_sweep_in_beta_compiles_at_its_first_point_only():
+    # the anisotropy is part of the system (a value): an equal system rebuilt at another β
+    # compiles nothing; another ξ is another structure
+    def run(beta):
+        system = wilson_gauge("U1", (4, 4), anisotropy=2.0)
+        starts = np.stack([system.cold_start()] * 2)
+        sampler = liesample.wilson_heat_bath(system, beta=beta)
+        return liesample.sample(
+            sampler, jax.random.key(0), starts, 20, num_warmup=0, progress_bar=False
+        )
+
+    run(0.5)
+    compiles = _Compiles()
+    jax.monitoring.register_event_duration_secs_listener(compiles)
+    try:
+        run(3.0)
+    finally:
+        jax.monitoring.unregister_event_duration_listener(compiles)
+    assert compiles.count == 0
+    hmc = lambda xi, beta: gauge_hmc(
+        wilson_gauge("SU2", (4, 4), anisotropy=xi), beta=beta, step_size=0.1,
+        num_integration_steps=3,
+    ).structure.build  # fmt: skip
+    assert hmc(2.0, 1.0) == hmc(2.0, 3.0) != hmc(1.5, 1.0)
+
+
 # --------------------------------------------------------------------------- laws
 
 
