@@ -12,9 +12,10 @@ process 1's stands for a node's local disk, so a relative ``output=`` there find
    saved chain states', the draws;
 2. a run into ``part.nc`` stopped by its ``callback`` after the first chunk;
 3. its resume, refused on both processes: process 1 cannot find ``part.nc``, and the message
-   says where the file must be;
-4. a run whose writer (process 0) fails while saving its second chunk: process 0 raises its
-   error, process 1 an ``OtherProcessError`` naming it (neither waits for the other).
+   says where the file must be; and a run given ``output=`` on process 0 only, refused on both;
+4. a run whose ``callback`` raises on process 1 only, and one whose writer (process 0) fails
+   while saving its second chunk: the process that failed raises its error, the other an
+   ``OtherProcessError`` naming it (neither waits for the other).
 
 Then two new processes, both in process 0's directory, resume ``part.nc``: the draws, and the
 file, are those of one uninterrupted one-process run, bitwise. They are started as the tasks of
@@ -40,6 +41,7 @@ import numpy as np
 import pytest
 
 import liesample
+from liesample.run import agreement
 from liesample.run.store import RUN_GROUP, load_chains
 
 SYSTEM_ARGS = (1.0, 2.0, 4.0)
@@ -51,6 +53,7 @@ WORKER = (
     textwrap.dedent(
         """
     import json
+    import os
     import sys
     import warnings
 
@@ -115,6 +118,8 @@ WORKER = (
         record["full"] = run("full.nc")
         record["stopped"] = failure(output="part.nc", callback=stop)
         record["not_shared"] = failure(output="part.nc", resume=True)
+        record["one_callback"] = failure(callback=stop if process_id == 1 else None)
+        record["one_output"] = failure(output="mixed.nc" if process_id == 0 else None)
         if process_id == 0:  # the writer fails on its second chunk
             append = store.RunFile.append
 
@@ -130,6 +135,8 @@ WORKER = (
     record["calls"] = calls
     with open(f"{results}/{phase}-{process_id}.json", "w") as f:
         json.dump(record, f)
+    jax.distributed.shutdown()
+    os._exit(0)  # done: the interpreter's teardown of JAX's objects only costs time
     """
     )
     .replace("SYSTEM_ARGS", repr(SYSTEM_ARGS))
@@ -247,7 +254,7 @@ def test_two_processes_give_the_single_process_draws_and_run_file(tmp_path):
         np.testing.assert_array_equal(np.asarray(record["full"]), single)
     _assert_same_file(shared / "full.nc", tmp_path / "one.nc")
     assert written[1]["calls"] == {"lock": 0, "write": 0}
-    assert written[0]["calls"]["lock"] == 4 and written[0]["calls"]["write"] == 4 + 1 + 1
+    assert written[0]["calls"]["write"] == 4 + 1 + 1  # full.nc, part.nc, broken.nc's first
     assert sorted(os.listdir(local)) == []
     assert sorted(os.listdir(shared)) == ["broken.nc", "full.nc", "part.nc"]
     # 2. the callback stopped both processes after the first chunk
@@ -259,7 +266,17 @@ def test_two_processes_give_the_single_process_draws_and_run_file(tmp_path):
         assert kind == "RunFileError", message
         assert "process 1 finds no file at" in message and str(local) in message, message
         assert "file system that every process sees" in message, message
-    # 4. the writer's error stops both
+    for record in written:
+        kind, message = record["one_output"]
+        assert kind == "ValueError", message
+        assert "process 0: output=<path>, resume=False; process 1: output=None" in message
+    assert written[0]["calls"]["lock"] == 5  # process 0 took the lock of mixed.nc, then refused
+    # 4. an error on one process stops both: process 1's callback, process 0's writing
+    assert written[1]["one_callback"] == ["Stop", f"stopped after {CHUNK} draws"]
+    kind, message = written[0]["one_callback"]
+    assert kind == "OtherProcessError", message
+    assert message.startswith(f"process 1 of 2 failed while running callback({CHUNK})"), message
+    assert message.endswith(f"its error: Stop: stopped after {CHUNK} draws"), message
     kind, message = written[0]["failed_write"]
     assert kind == "OSError" and "No space left on device" in message, message
     kind, message = written[1]["failed_write"]
@@ -284,3 +301,11 @@ def test_output_refused_for_chains_over_some_of_the_processes(monkeypatch):
         liesample.sharding.check_output("run.nc", sharding)
     assert "devices='all'" in str(refused.value) and "output=None" in str(refused.value)
     liesample.sharding.check_output(None, sharding)
+
+
+def test_a_long_error_message_is_shortened_to_fit_its_record():
+    row = agreement._record("é" * 5000, "draws_done=10")
+    assert row.shape == (agreement.RECORD_BYTES,)
+    record = agreement._read(row)
+    assert record["value"] == "draws_done=10"
+    assert record["error"].startswith("ééé") and record["error"].endswith(" …")

@@ -12,6 +12,7 @@ from __future__ import annotations
 import collections
 import dataclasses
 import functools
+import json
 import time
 import warnings
 from collections.abc import Callable, Mapping, Sequence
@@ -398,8 +399,8 @@ class _Run:
         """Open the run file (refused here, before any compilation, if it cannot be ours), and
         name the draws: as given, else as the saved run named them, else by default."""
         o = self.options
-        across = self.across and o.output is not None
-        with agreement(f"opening the run file {o.output!r}", across) as agreed:
+        where = "checking the run's options" if o.output is None else f"opening {o.output!r}"
+        with agreement(where, self.across) as agreed:
             if o.output is not None:
                 opened = RunFile.open if self.writer else RunFile.reader
                 self.store = opened(o.output, o.resume)
@@ -413,9 +414,10 @@ class _Run:
             if self.store is not None:
                 self.fingerprint = self._fingerprint()
                 self.store.check(self.fingerprint)
-                agreed.value = self.store.view()
-        if across:
-            check_same_file(agreed.values, o.output)
+            view = None if self.store is None else self.store.view()
+            agreed.value = json.dumps([o.output is not None, bool(o.resume), view])
+        if self.across:
+            _check_same_output([json.loads(value) for value in agreed.values], o.output)
 
     def start(self):
         """Open the file, check every start, choose or tune the step (the warm-up)."""
@@ -575,8 +577,10 @@ class _Run:
             if self.store is not None:
                 self._save(done - count, done, chunks[-1], states, wall_time)
             bar.update(count)
-            if o.callback is not None:
-                with agreement(f"in callback({done})", self.across):
+            # over several processes, every process agrees here (a callback may be given on
+            # some of them only, e.g. to report from process 0)
+            with agreement(f"running callback({done})", self.across):
+                if o.callback is not None:
                     o.callback(done)
         if wall_time is None:  # nothing ran (a finished run resumed): the warm-up's time
             wall_time = time.perf_counter() - start
@@ -653,6 +657,26 @@ class _Run:
             stacklevel=5,
         )
         return result
+
+
+def _check_same_output(found: list, output) -> None:
+    """Refuse a run over several processes unless every process gives ``output=`` and
+    ``resume=`` alike (``found``: each process's ``[output given, resume, file view]``), and
+    then, with ``output=``, finds the same file (:func:`check_same_file`)."""
+    differ = [i for i, (given, resume, _) in enumerate(found) if [given, resume] != found[0][:2]]
+    if differ:
+        described = "; ".join(
+            f"process {i}: {'output=<path>' if given else 'output=None'}, resume={resume}"
+            for i, (given, resume, _) in enumerate(found)
+        )
+        raise ValueError(
+            f"output= and resume= differ between the processes of this run ({described}): in a "
+            "run over several processes every process passes the same output= and resume= "
+            "(process 0 writes the file, every process reads it on a resume and waits for "
+            "process 0 at each chunk); pass them alike on every process"
+        )
+    if found[0][0]:
+        check_same_file([view for *_, view in found], output)
 
 
 def _variables(result: ChainsResult, var_name: str) -> dict[str, np.ndarray]:
