@@ -5,7 +5,8 @@ A run whose chains span several processes is one program on every process: each 
 others in every collective (the gather of a chunk's draws). A process that raises alone would
 leave the others waiting in their next collective. So, around each step that only some
 processes take or that may fail on one of them (process 0 opening, checking and writing the
-run file; each process reading it on a resume; the ``callback``), every process runs
+run file; each process reading it on a resume; the ``callback`` after each chunk, which may be
+given on some processes only), every process runs
 :func:`agreement`: at its end each process sends to every other whether it failed, with its
 error's type and message, and a short text of what it found (``value``), in one small gather
 (``multihost_utils.process_allgather`` of a fixed-size byte array: one compiled program for

@@ -32,8 +32,9 @@ refused on every process, with where to put it (:func:`liesample.run.store.check
 After each of these steps, and after the ``callback``, the processes agree
 (:mod:`liesample.run.agreement`): an error on one process (process 0 failing to write, a
 refused resume, a ``callback`` that raises) is raised on every process there, instead of
-leaving the others waiting in the next gather. :func:`check_output` refuses ``output=`` for
-chains over only some of the processes.
+leaving the others waiting in the next gather. Every process passes the same ``output=`` and
+``resume=`` (else the run is refused on all; a ``callback`` may differ), and
+:func:`check_output` refuses ``output=`` for chains over only some of the processes.
 
 One lattice over several devices (``lattice_sharding=``)
 -------------------------------------------------------
@@ -73,7 +74,8 @@ the draws bitwise those of one process; with ``output=``, the file that one proc
 stopped by its ``callback`` after one chunk, resumed by two new processes started as the tasks
 of a SLURM job step (:func:`initialize_distributed` without arguments), bitwise one
 uninterrupted run's draws and file; a resume refused on both processes where process 1 does not
-see the file; and process 0 failing to write a chunk, raised on both. Several machines, a file
+see the file, and ``output=`` given on process 0 only; a ``callback`` raising on process 1
+only, and process 0 failing to write a chunk, each raised on both. Several machines, a file
 system shared over a network, GPUs over several processes, a lattice over several processes,
 and the window warm-ups across processes are not tested.
 """
