@@ -1,4 +1,5 @@
-"""The periodic O(n) ring's transfer-matrix reference (``targets.NVectorRingReference``).
+"""The periodic O(n) and CP(N−1) rings' transfer-matrix references
+(``targets.NVectorRingReference``, ``targets.CPRingReference``).
 
 References, written independently of the samplers:
 
@@ -26,8 +27,15 @@ import pytest
 
 import liesample
 from liesample.diagnostics import blocking_error
-from liesample.systems import n_vector
-from liesample.targets import NVectorChainReference, NVectorRingReference, n_vector_bond_mean
+from liesample.systems import cp_model, n_vector
+from liesample.targets import (
+    CPChainReference,
+    CPRingReference,
+    NVectorChainReference,
+    NVectorRingReference,
+    cp_bond_moments,
+    n_vector_bond_mean,
+)
 from liesample.targets.n_vector import n_vector_bond_variance
 
 Z_MAX = 4.0
@@ -197,3 +205,95 @@ def test_plain_heat_bath_samples_the_exact_ring(n):
     sampler = liesample.heisenberg_heat_bath(system, beta=2.0, overrelaxation=0)
     series = ring_series(sampler, n, 200, 8192, 80 + n)
     assert_exact_ring_law(series, n, 2.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# CP(N−1) rings (targets.CPRingReference)
+# ---------------------------------------------------------------------------------------------
+
+
+def haar_cp(rng, size, n):
+    z = rng.normal(size=(size, n)) + 1j * rng.normal(size=(size, n))
+    return z / np.linalg.norm(z, axis=-1, keepdims=True)
+
+
+@pytest.mark.parametrize("n", [3, 4])
+@pytest.mark.parametrize("k", [-1.5, 0.7, 12.0])
+def test_cp_two_sites_are_one_bond_at_twice_the_coupling(n, k):
+    ring = CPRingReference(length=2, n=n, beta=k)
+    mean, variance = cp_bond_moments(n, 2 * k)
+    assert ring.bond_mean() == pytest.approx(mean, rel=1e-12)
+    assert ring.energy_variance() == pytest.approx(4 * variance, rel=1e-9)
+
+
+@pytest.mark.parametrize("length", [3, 8])
+@pytest.mark.parametrize("k", [-2.0, 1.0, 20.0])
+def test_cp1_ring_is_the_o3_ring_at_half_the_coupling(length, k):
+    """Hopf: ``t = (1 + s·s′)/2``, so ``E[t] = (1 + E[s·s′])/2`` and ``Var Σt = Var Σ s·s′ / 4``
+    of the O(3) ring at ``K/2``."""
+    cp, o3 = CPRingReference(length, 2, k), NVectorRingReference(length, 3, k / 2)
+    assert cp.bond_mean() == pytest.approx((1 + o3.bond_mean()) / 2, rel=1e-12)
+    assert cp.energy_variance() == pytest.approx(o3.energy_variance() / 4, rel=1e-10)
+
+
+def test_cp_long_ring_is_the_open_chain():
+    ring, chain = CPRingReference(600, 3, 2.5), CPChainReference(600, 3, 2.5)
+    assert ring.bond_mean() == pytest.approx(chain.bond_mean(), rel=1e-12)
+    assert ring.energy_variance() / 600 == pytest.approx(chain.bond_variance(), rel=1e-8)
+
+
+def test_cp2_triangle_against_independent_haar_draws():
+    """``E[t̄]`` and ``E[(Σt)²]`` of the CP(2) triangle at ``K = 2`` by importance sampling
+    from 400 000 i.i.d. Haar triples (weights ``e^{K Σt}``; delta-method standard error),
+    within ``Z_MAX`` standard errors: a check of the higher degrees the two-site ring and the
+    long ring do not see."""
+    k, num = 2.0, 400_000
+    rng = np.random.default_rng(5)
+    z = [haar_cp(rng, num, 3) for _ in range(3)]
+    bonds = sum(np.abs(np.sum(np.conj(z[i]) * z[(i + 1) % 3], axis=-1)) ** 2 for i in range(3))
+    weight = np.exp(k * (bonds - 3.0))
+    ring = CPRingReference(3, 3, k)
+    second = ring.energy_variance() + (3 * ring.bond_mean()) ** 2
+    for values, exact in ((bonds / 3, ring.bond_mean()), (bonds**2, second)):
+        estimate = np.sum(weight * values) / np.sum(weight)
+        influence = weight * (values - estimate) / weight.mean()  # ratio estimator
+        assert abs(estimate - exact) < Z_MAX * influence.std() / math.sqrt(num), (estimate, exact)
+
+
+def test_recommended_sampler_samples_the_exact_cp_ring():
+    """The energy per site of a CP(2) ring of 4 sites at ``β = 5`` (short and cold enough for
+    the periodic bond to change it by many standard errors from the open chain's)."""
+    beta, n, length = 5.0, 3, 4
+    system = cp_model((length,), n, periodic=True)
+    algorithm = liesample.recommended_sampler(system, beta=beta)
+    rng = np.random.default_rng(6)
+    starts = jnp.asarray(np.stack([haar_cp(rng, length, n) for _ in range(CHAINS)]))
+
+    def chain(key, position):
+        def body(state, step):
+            state, info = algorithm.step(jax.random.fold_in(key, step), state)
+            return state, info.energy / length
+
+        return jax.lax.scan(body, algorithm.init(position), jnp.arange(2148))[1][100:]
+
+    keys = jax.random.split(jax.random.key(95), CHAINS)
+    series = np.asarray(liesample.jit(jax.vmap(chain))(keys, starts), dtype=float)
+    result = blocking_error(series)
+    for b, inside in ((beta, True), (1.25 * beta, False)):
+        z = (result.mean - CPRingReference(length, n, b).bond_energy_mean()) / result.error
+        assert (abs(z) < Z_MAX) == inside, (b, result.mean, z)
+    open_chain = CPChainReference(length, n, beta).bond_energy_mean()
+    assert abs(result.mean - open_chain) > Z_MAX * result.error  # the periodic bond is seen
+
+
+@pytest.mark.parametrize(
+    ("make", "error", "match"),
+    [
+        (lambda: CPRingReference(length=1, n=3, beta=1.0), ValueError, "length"),
+        (lambda: CPRingReference(length=4, n=1, beta=1.0), ValueError, "N must"),
+        (lambda: CPRingReference(length=4, n=3, beta=math.inf), ValueError, "beta"),
+    ],
+)
+def test_cp_bad_arguments_are_refused(make, error, match):
+    with pytest.raises(error, match=match):
+        make()

@@ -9,6 +9,7 @@ from liesample.targets.cp_model import (
     cp_bond_moments,
     tilted_simplex,
 )
+from liesample.targets.cp_ring import CPRingReference
 from liesample.targets.gauge import (
     single_plaquette_mean,
     su2_torus_plaquette_mean,
@@ -71,6 +72,7 @@ from liesample.targets.zeitlin import (
 
 __all__ = [
     "CPChainReference",
+    "CPRingReference",
     "Gaussian",
     "HeavyTopGibbs",
     "HeisenbergChainReference",
