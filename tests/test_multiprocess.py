@@ -114,6 +114,8 @@ WORKER = (
         raise Stop(f"stopped after {draws_done} draws")
 
     if phase == "write":
+        # an array of this process alone stays its own (it is not stacked with the others')
+        record["local"] = liesample.sharding.to_host(jax.numpy.arange(3.0)).tolist()
         record["draws"] = run()
         record["full"] = run("full.nc")
         record["stopped"] = failure(output="part.nc", callback=stop)
@@ -250,6 +252,7 @@ def test_two_processes_give_the_single_process_draws_and_run_file(tmp_path):
 
     # 1. the draws, and process 0's file, are one process's; process 1 locks and writes nothing
     for record in written:
+        assert record["local"] == [0.0, 1.0, 2.0]
         np.testing.assert_array_equal(np.asarray(record["draws"]), single)
         np.testing.assert_array_equal(np.asarray(record["full"]), single)
     _assert_same_file(shared / "full.nc", tmp_path / "one.nc")
