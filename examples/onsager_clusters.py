@@ -108,7 +108,6 @@ def main(argv=None) -> int:
         f"{args.vortices} vortices (Γ = ±1): the Gibbs law is normalisable for "
         f"{low:.3g} < β < {high:.3g}"
     )
-    print("MCSE = sd / sqrt(ESS), ArviZ's bulk ESS over the chains (autocorrelation included)")
     print(
         f"{'β':>6} {'E|D|²':>8} {'± MCSE':>7} {'R-hat':>6} "
         f"{'like-signed NN angle':>21} {'scale':>7}"
@@ -134,6 +133,7 @@ def main(argv=None) -> int:
             f"{beta:6g} {row['dipole']:8.2f} {row['mcse']:7.2f} {row['r_hat']:6.3f} "
             f"{row['angle']:19.1f}°  {scale:7.3g}"
         )
+    print("MCSE = sd / sqrt(ESS), ArviZ's bulk ESS over the chains (autocorrelation included)")
     if args.plot is not None:
         plot(args.plot, rows, circulations)
         print(f"wrote {args.plot}")
