@@ -48,10 +48,11 @@ checked against each other and against direct integration over ``(S^{n−1})^L``
 exponentially scaled Bessel functions (``scipy.special.ive``) and combined with ``log d_l``
 in logarithms, so large ``K`` and large ``n`` stay finite. A negative ``K`` flips the sign of
 the odd degrees, ``λ_l(−K) = (−1)ˡ λ_l(|K|)``. The sum runs over ``l ≤ 2|K| + 2n + 40``: past
-``l + α + 1 > 2|K|`` each ratio ``ρ_{l+1}/ρ_l`` is below ``1/2``, so 40 further degrees make the
-neglected terms smaller than ``2^{−40L}`` times the last kept one (degeneracies growing only
-polynomially); :data:`RING_TOLERANCE` is checked on that last term. ``K = 0`` (independent
-spins) is taken in closed form.
+``l + α + 1 > 2|K|`` each ratio ``ρ_{l+1}/ρ_l = I_{l+α+1}/I_{l+α}`` is below
+``|K|/(2(l + α + 1)) < 1/4`` and, for ``l ≥ 2n``, ``d_{l+1}/d_l < 2``, so each neglected term is
+below half the one before and their sum below the last kept term, which must be below
+:data:`RING_TOLERANCE` (else the reference is refused). ``K = 0`` (independent spins) is taken
+in closed form.
 """
 
 from __future__ import annotations
