@@ -110,5 +110,9 @@ def test_centred_eight_schools_is_right_or_warned(chain_method):
     )
     messages = [str(w.message) for w in caught]
     assert right or messages, (posterior.keys, error, mcse, sd_ratio)
-    if not right:  # the funnel is named, with its fix
-        assert any("tau is the scale of theta" in m for m in messages), messages
+    if not right:  # the funnel is named, with its fix and the divergences seen
+        named = [m for m in messages if "tau is the scale of theta" in m]
+        assert named, messages
+        divergent = int(np.sum(mcmc.get_extra_fields()["diverging"]))
+        if divergent:
+            assert f"{divergent} divergent transition(s)" in named[0], named

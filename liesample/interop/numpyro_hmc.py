@@ -233,44 +233,69 @@ def heuristic_step_size(c: Core, key, inner, logdensity, mass, step_size):
 
 def parameters(c: Core, adaptation, i):
     """The parameters of transition ``i``: the adaptation's ``current`` in the warm-up, its
-    ``final`` after it (``L`` then the fixed one, or ``ceil(u T / ε)``)."""
+    ``final`` after it (``L`` then the fixed one, or ``ceil(u T / ε)``). Only the phase's
+    branch runs (``lax.cond`` on ``i``)."""
     settings = c.settings
-    tuned = c.adaptation.final(adaptation)
-    step_size = tuned["step_size"]
-    if settings.num_integration_steps is not None:
-        steps = jnp.asarray(settings.num_integration_steps)
-        time = step_size * steps
-    else:
-        time = tuned["integration_time"]
-        u = halton(i) if settings.jitter else 1.0
-        steps = jittered_steps(u, time, step_size)
-    after = {**tuned, "num_integration_steps": steps, "integration_time": time}
+
+    def after():
+        tuned = c.adaptation.final(adaptation)
+        step_size = tuned["step_size"]
+        if settings.num_integration_steps is not None:
+            steps = jnp.asarray(settings.num_integration_steps)
+            time = step_size * steps
+        else:
+            time = tuned["integration_time"]
+            u = halton(i) if settings.jitter else 1.0
+            steps = jittered_steps(u, time, step_size)
+        return {**tuned, "num_integration_steps": steps, "integration_time": time}
+
     if settings.num_warmup == 0:
-        return after
-    during = c.adaptation.current(adaptation, row_at(c.rows, i))
-    during.setdefault("integration_time", during["step_size"] * steps)
-    return jax.tree.map(lambda a, b: jnp.where(i < settings.num_warmup, a, b), during, after)
+        return after()
+
+    def during():
+        current = c.adaptation.current(adaptation, row_at(c.rows, i))
+        current.setdefault(
+            "integration_time", current["step_size"] * current["num_integration_steps"]
+        )
+        return current
+
+    # the types jnp.where of the two would give, so either branch returns the same numbers
+    types = jax.tree.map(
+        lambda a, b: jax.ShapeDtypeStruct(jnp.broadcast_shapes(a.shape, b.shape),
+                                          jnp.result_type(a, b)),
+        jax.eval_shape(during), jax.eval_shape(after),
+    )  # fmt: skip
+    typed = lambda branch: (
+        lambda: jax.tree.map(
+            lambda x, t: jnp.broadcast_to(jnp.asarray(x, t.dtype), t.shape), branch(), types
+        )
+    )
+    return jax.lax.cond(i < settings.num_warmup, typed(during), typed(after))
 
 
 def adapt(c: Core, adaptation, i, parameters, before, inner, info, logdensity, key_step):
     """The shared warm-up's ``update`` after transition ``i`` of every chain; with
     ``find_heuristic_step_size`` dual averaging restarts from NumPyro's search at a mass
-    window's end. After the warm-up nothing changes."""
+    window's end. After the warm-up nothing changes, and nothing is computed (``lax.cond``)."""
     settings = c.settings
     row = row_at(c.rows, i)
     update = cast(Callable, c.adaptation.update)  # the window adaptation has one
-    updated = update(adaptation, row, parameters, before, inner, info)
-    if settings.find_heuristic and settings.adapt_mass:
 
-        def restart(state):  # NumPyro's search, from the first chain
-            step = c.adaptation.current(state, row)["step_size"]
-            first = jax.tree.map(lambda x: x[0], inner)
-            step = heuristic_step_size(c, key_step, first, logdensity, state.inverse_mass, step)
-            return state._replace(step=restart_step_size(state.step, settings.target, step))
+    def updated(adaptation):
+        new = update(adaptation, row, parameters, before, inner, info)
+        if settings.find_heuristic and settings.adapt_mass:
 
-        updated = jax.lax.cond(row.window_end, restart, lambda state: state, updated)
-    in_warmup = i < settings.num_warmup
-    return jax.tree.map(lambda a, b: jnp.where(in_warmup, a, b), updated, adaptation)
+            def restart(state):  # NumPyro's search, from the first chain
+                step = c.adaptation.current(state, row)["step_size"]
+                first = jax.tree.map(lambda x: x[0], inner)
+                step = heuristic_step_size(c, key_step, first, logdensity, state.inverse_mass, step)
+                return state._replace(step=restart_step_size(state.step, settings.target, step))
+
+            new = jax.lax.cond(row.window_end, restart, lambda state: state, new)
+        # the types of the state carried, so both branches agree
+        return jax.tree.map(lambda a, b: jnp.asarray(a, jnp.result_type(b)), new, adaptation)
+
+    return jax.lax.cond(i < settings.num_warmup, updated, lambda state: state, adaptation)
 
 
 def init_state(c: Core, key, params, logdensity, inner_logdensity, draw, starting_mass):
