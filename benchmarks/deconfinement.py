@@ -2,7 +2,7 @@
 
 A suite of ``benchmarks/run.py`` (``benchmarks/suites.py``); alone::
 
-    .venv/bin/python benchmarks/deconfinement.py          # N_t = 2, N_s = 4, 6 (~5–10 min)
+    .venv/bin/python benchmarks/deconfinement.py          # N_t = 2, N_s = 4, 6 (5–15 min)
     .venv/bin/python benchmarks/deconfinement.py --quick  # smoke (benchmarks/results/quick/)
 
 Writes ``deconfinement.json`` and ``deconfinement.png``.
@@ -396,16 +396,17 @@ def _pm(x, e, digits=4) -> str:
 
 def _scan_table(data) -> list[str]:
     lines = [
-        "| lattice | β | ⟨\\|P\\|⟩ | τ_int(\\|P\\|) | χ_P | U | plaquette | block |",
-        "|---|---|---|---|---|---|---|---|",
+        "| lattice | β | ⟨\\|P\\|⟩ | τ_int(\\|P\\|) | χ_P | U | plaquette | block | blocks |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for volume in data["volumes"]:
         for r in volume["rows"]:
+            blocks = volume["chains"] * (volume["draws"] // r["block_size"])
             lines.append(
                 f"| {volume['ns']}³×{volume['nt']} | {r['beta']:.3f} | "
                 f"{_pm(r['abs_p'], r['abs_p_error'])} | {r['tau_int_abs_p']:.1f} | "
                 f"{_pm(r['chi'], r['chi_error'], 3)} | {_pm(r['binder'], r['binder_error'], 3)} | "
-                f"{_pm(r['plaquette'], r['plaquette_error'])} | {r['block_size']} |"
+                f"{_pm(r['plaquette'], r['plaquette_error'])} | {r['block_size']} | {blocks} |"
             )
     return lines
 
@@ -483,8 +484,10 @@ def report(out_dir: Path, md_dir: Path) -> str:
             f"{data['config']['chains']} chains from hot starts, "
             f"{data['config']['thermalisation']} thermalisation steps. ⟨|P|⟩ and the plaquette: "
             "blocking errors (τ_int shown); χ_P and the Binder cumulant U: jackknife over blocks "
-            "of the blocking level ('block', in steps) — every error includes the "
-            "autocorrelation."
+            "of the blocking level ('block', in steps; 'blocks' over both chains) — every "
+            "error includes the autocorrelation. Where τ_int is long against the run (near "
+            "β_c on the larger volume) the blocks are few and the errors themselves uncertain, "
+            "by about 1/√(2 · blocks) relative."
         ),
         "",
         *_scan_table(data),
