@@ -12,9 +12,10 @@ error's type and message, and a short text of what it found (``value``), in one 
 (``multihost_utils.process_allgather`` of a fixed-size byte array: one compiled program for
 every agreement). A process that failed raises its own error; every other raises
 :class:`OtherProcessError`, naming the process, the step and that error. A process killed
-outright (SIGKILL, a lost node) never sends: JAX's coordination service then ends the others
-once it misses the dead process's heartbeats (``heartbeat_timeout_seconds`` of
-``jax.distributed.initialize``).
+outright (SIGKILL, a lost node) never sends: the gather the others wait in fails when its
+connection drops, and JAX's coordination service ends every process once it misses the dead
+process's heartbeats (``heartbeat_timeout_seconds`` of ``jax.distributed.initialize``), or at
+once when the dead process is process 0, which runs the service.
 
 In a run within one process an agreement is the block alone: nothing is gathered.
 """
