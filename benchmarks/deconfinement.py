@@ -66,9 +66,10 @@ SUITE = {
 PUBLISHED = {
     "beta_c": {2: 1.8735, 4: 2.2986},
     "source": (
-        "the SU(2) critical couplings commonly quoted from the compilation in J. Fingberg, "
-        "U. Heller and F. Karsch, Nucl. Phys. B 392 (1993) 493 (whose own determinations are "
-        "at N_t = 8 and 16)"
+        "the SU(2) critical couplings commonly quoted for N_t = 2 and 4 and attributed to "
+        "J. Fingberg, U. Heller and F. Karsch, Nucl. Phys. B 392 (1993) 493 (whose own new "
+        "determinations are at N_t = 8 and 16; the digits are not checked here against the "
+        "paper's tables)"
     ),
 }
 CHUNK = 20  # steps per compiled call
