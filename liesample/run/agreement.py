@@ -6,16 +6,16 @@ others in every collective (the gather of a chunk's draws). A process that raise
 leave the others waiting in their next collective. So, around each step that only some
 processes take or that may fail on one of them (process 0 opening, checking and writing the
 run file; each process reading it on a resume; the ``callback`` after each chunk, which may be
-given on some processes only), every process runs
-:func:`agreement`: at its end each process sends to every other whether it failed, with its
-error's type and message, and a short text of what it found (``value``), in one small gather
-(``multihost_utils.process_allgather`` of a fixed-size byte array: one compiled program for
-every agreement). A process that failed raises its own error; every other raises
-:class:`OtherProcessError`, naming the process, the step and that error. A process killed
-outright (SIGKILL, a lost node) never sends: the gather the others wait in fails when its
-connection drops, and JAX's coordination service ends every process once it misses the dead
-process's heartbeats (``heartbeat_timeout_seconds`` of ``jax.distributed.initialize``), or at
-once when the dead process is process 0, which runs the service.
+given on some processes only), every process runs :func:`agreement`: at its end each process
+sends to every other whether it failed, with its error's type and message, and a short text of
+what it found (``value``), in one small gather (``multihost_utils.process_allgather`` of a
+fixed-size byte array: one compiled program for every agreement). A process that failed raises
+its own error; every other raises :class:`OtherProcessError`, naming the process, the step and
+that error. A process killed outright (SIGKILL, a lost node) never sends: the gather the others
+wait in fails when its connection drops (gloo's, on CPUs), and JAX's coordination service ends
+every process once it misses the dead process's heartbeats (``heartbeat_timeout_seconds`` of
+``jax.distributed.initialize``), or at once when the dead process is process 0, which runs the
+service.
 
 In a run within one process an agreement is the block alone: nothing is gathered.
 """
