@@ -335,7 +335,8 @@ class GeometricHMC(MCMCKernel):
         on manifold sites and in ``(−2, 2)`` in the unconstrained coordinates of the others
         (NumPyro's ``init_to_uniform``). ``init_params`` given to ``MCMC.run`` win.
     divergence_threshold : float
-        ``ΔH`` above which a transition is flagged divergent.
+        Energy error ``H(z_k) − H(z_0)`` above which a transition is flagged divergent, at
+        any step ``k`` of its trajectory (NumPyro's ``diverging``, as its NUTS counts it).
     integrator : str or sequence of (effect, fraction) pairs
         The integration scheme, as for :func:`liesample.geometric_hmc` (``"leapfrog"`` by
         default, ``"minimal_norm"``, or a palindromic coefficient list).

@@ -108,7 +108,8 @@ class GeometricInfo(NamedTuple):
         library's Info contract for unadjusted samplers).
     is_accepted : whether the proposal was taken.
     is_divergent : the proposal's state or energy is non-finite, or ``ΔH`` exceeds the
-        divergence threshold.
+        divergence threshold; for HMC at any step of the trajectory
+        (:func:`hamiltonian_transition`).
     energy : ``H`` of the proposal for HMC (as in BlackJAX), of the new state for Langevin
         (``inf`` when non-finite).
     num_integration_steps : steps of the integration scheme in the transition.

@@ -20,7 +20,8 @@ A BlackJAX-shaped module (``init``, ``build_kernel``, ``as_top_level_api``). One
 The drift is exact only for a bi-invariant kinetic energy (``M ∝ I`` on every copy of a
 non-abelian group: see :mod:`liesample.geometry.spaces`), which is why the inverse mass is one
 scalar per copy of a group or sphere; ``Euclidean`` blocks take a diagonal or a dense ``M⁻¹``. A
-rejected or non-finite proposal keeps the state; a non-finite one is flagged ``is_divergent``.
+rejected or non-finite proposal keeps the state; a non-finite one is flagged ``is_divergent``, as
+is a trajectory whose energy error exceeds ``divergence_threshold`` at any of its steps.
 """
 
 from __future__ import annotations
@@ -230,7 +231,8 @@ def as_top_level_api(
         not the target; ``None`` (default) is plain geometric HMC. See
         :func:`liesample.samplers.cotangent._euclidean.default_magnetic_field`.
     divergence_threshold : float
-        ``ΔH`` above which a transition is flagged divergent.
+        Energy error ``H(z_k) − H(z_0)`` above which a transition is flagged divergent, at
+        any step ``k`` of its trajectory (as NUTS does; default 1000, NUTS's and Stan's).
     momentum_persistence : float in [0, 1)
         ``α`` of the partial momentum refreshment; 0 (default) draws a fresh momentum.
     persistent : bool

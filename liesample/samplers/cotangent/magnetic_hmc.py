@@ -120,7 +120,8 @@ class MagneticHMCInfo(NamedTuple):
 
     acceptance_rate : ``min(1, e^{−ΔH})`` (0 for a non-finite proposal).
     is_accepted : whether the proposal was accepted.
-    is_divergent : ``ΔH`` above ``divergence_threshold``, or a non-finite proposal (rejected).
+    is_divergent : the energy error above ``divergence_threshold`` at some step of the
+        trajectory, or a non-finite energy on it (then rejected).
     energy : ``H`` of the proposal (``-log π + kinetic``; ``inf`` for a non-finite one), as in
         BlackJAX's HMC.
     num_integration_steps : steps of the integration scheme in the trajectory.
@@ -278,7 +279,8 @@ def as_top_level_api(
         Antisymmetric ``G`` (any rank, ``0`` allowed), in the order of the raveled position;
         see :func:`liesample.default_magnetic_field`.
     divergence_threshold : float
-        ``ΔH`` above which a transition is flagged divergent (default 1000).
+        Energy error ``H(z_k) − H(z_0)`` above which a transition is flagged divergent, at
+        any step ``k`` of its trajectory (default 1000, as in NUTS).
     integrator : str or sequence of (effect, fraction) pairs
         The scheme of one step, as for :func:`liesample.geometric_hmc`: ``"leapfrog"``
         (default), ``"minimal_norm"``, a palindromic coefficient list of ``"B"`` and ``"A"``,
