@@ -1,6 +1,7 @@
 """Small compiled programs: a first call of Zeitlin's recommended sampler and of the SU(2) heat
-bath compiles a bounded number of XLA programs, and the heat bath's step holds one copy of its
-link update whatever the lattice's dimension (counted, not timed: the numbers do not depend on
+bath compiles a bounded number of XLA programs, the heat bath's step holds one copy of its
+link update whatever the lattice's dimension, and Zeitlin's step compiles to a bounded number
+of XLA kernels, its energy to no scatter (counted, not timed: the numbers do not depend on
 the machine).
 
 The bounds are this tree's counts plus a small margin: a regression guard against eager
@@ -19,6 +20,7 @@ import pytest
 
 import liesample
 from liesample.samplers.gauge import heat_bath
+from liesample.samplers.orbit import adjusted_lie_poisson
 
 COMPILE_EVENT = "/jax/core/compile/backend_compile_duration"
 
@@ -100,3 +102,33 @@ def test_the_heat_bath_step_holds_one_link_update_whatever_the_dimension():
     # the 2d direction × parity classes are one scan: a 4-D lattice's step has the loops of
     # a 2-D one, not twice as many rejection loops
     assert _while_loops((2, 2, 2, 2)) == _while_loops((4, 4))
+
+
+# XLA:CPU compiles each kernel of a program (a fusion, a copy, a transpose, a dot, a gather or
+# scatter, a custom call, a loop) on its own, so their number is what a program's compile time
+# follows. Zeitlin su(8)'s adjusted step (2 chains, vmapped) compiled to 210 kernels before
+# its energy's indexed updates became selections and its proposal was formed once (153 after,
+# jaxlib 0.12.0.1). The bound sits between: about 20 % above this tree's count, room for
+# another XLA's fusion choices, and below what either regression would add back.
+ZEITLIN_STEP_KERNEL_BOUND = 185
+_KERNEL = re.compile(r" = \S+ (?:fusion|copy|transpose|gather|scatter|custom-call|dot|while)\(")
+
+
+def test_zeitlins_energy_holds_no_scatter():
+    # the value and gradient of h: gathers of the diagonals and one solve, no indexed update
+    # (each .at[].set is a scatter, a kernel of its own in every program that evaluates h)
+    system = liesample.systems.zeitlin_euler(8)
+    energy = jax.jit(jax.value_and_grad(system.hamiltonian))
+    text = energy.lower(jnp.asarray(system.default_position)).as_text()
+    assert "stablehlo.scatter" not in text
+
+
+def test_zeitlins_step_compiles_to_few_kernels():
+    system = liesample.systems.zeitlin_euler(8)  # N >= 5: the noise by harmonic transform
+    kernel = adjusted_lie_poisson.build_noise_kernel(system)
+    state = adjusted_lie_poisson.init(system.default_position, system)
+    states = jax.tree.map(lambda leaf: jnp.stack([leaf] * 2), state)
+    noise = jnp.zeros((2, system.num_noises + 1))
+    step = jax.vmap(lambda n, s: kernel(n, s, 0.01, 1.0, 1.0))
+    compiled = jax.jit(step).lower(noise, states).compile()
+    assert len(_KERNEL.findall(compiled.as_text())) <= ZEITLIN_STEP_KERNEL_BOUND

@@ -453,6 +453,12 @@ class SkewHermitianUnitary(Unitary):
         """``U = e^{−Z}`` (unitary to round-off)."""
         return _skew_hermitian_exponential(-self.to_matrix(zeta))
 
+    def coadjoint_exp(self, zeta: ArrayLike, mu: ArrayLike) -> jax.Array:
+        """``e^{−Z} W e^{Z}`` (:meth:`Unitary.coadjoint_exp`), computed once where it is used:
+        XLA would otherwise copy the projection onto the skew-Hermitian part into each of its
+        uses (the energy, the brackets, the acceptance), each with transposes of its own."""
+        return jax.lax.optimization_barrier(super().coadjoint_exp(zeta, mu))
+
 
 TRACE_TOLERANCE = 1e-10
 """The float64 floor of the trace a start may have, relative to its norm (in float32 the
