@@ -68,7 +68,7 @@ One process with several (forced host) CPU devices: chains over them, bitwise eq
 unsharded run; one lattice, the spin heat bath on 2 devices and (slow tests) every spin and
 gauge sampler above on 4, over two lattice axes and over chains × a lattice axis, bitwise equal
 to the unsharded run, and gauge HMC's window warm-up on 4, equal to round-off. Two processes on the
-loopback interface with one CPU device each (``tests/test_multiprocess.py``), chains over both:
+loopback interface with one CPU device each (the project's test suite), chains over both:
 the draws bitwise those of one process; with ``output=``, the file that one process writes
 (every chunk's checksum, the saved states, the draws) and no lock or write by process 1; a run
 stopped by its ``callback`` after one chunk, resumed by two new processes started as the tasks
