@@ -29,6 +29,7 @@ from liesample.analysis.topology import cp_topological_charge, topological_charg
 from liesample.systems import cp_model
 from liesample.targets import (
     CPChainReference,
+    CPRingReference,
     cp_bond_moments,
     langevin_function,
     n_vector_bond_variance,
@@ -114,8 +115,10 @@ def test_system_energy_and_identity():
     assert float(system.hamiltonian(jnp.asarray(z))) == pytest.approx(-0.7 * bonds, rel=1e-12)
     phases = np.exp(1j * np.random.default_rng(1).uniform(0, 2 * np.pi, (3, 4, 1)))
     assert float(system.hamiltonian(jnp.asarray(z * phases))) == pytest.approx(-0.7 * bonds)
-    assert cp_model((4,), 3, periodic=True).reference(1.0) is None
+    ring = cp_model((4,), 3, coupling=0.7, periodic=True).reference(1.0)
+    assert ring == CPRingReference(length=4, n=3, beta=1.0, coupling=0.7)  # the ring's energy
     assert cp_model((4, 4), 3).reference(1.0) is None
+    assert cp_model((4, 4), 3, periodic=True).reference(1.0) is None
 
 
 @pytest.mark.parametrize(

@@ -25,8 +25,14 @@ from scipy import integrate
 
 import liesample
 from liesample.systems import heisenberg, n_vector
-from liesample.targets import NVectorChainReference, langevin_function, n_vector_bond_mean
+from liesample.targets import (
+    NVectorChainReference,
+    NVectorRingReference,
+    langevin_function,
+    n_vector_bond_mean,
+)
 from liesample.targets.n_vector import n_vector_bond_variance, von_mises_fisher_sphere
+from liesample.targets.spins import HeisenbergRingReference
 
 Z_MAX = 4.5
 BETA = 2.0
@@ -139,9 +145,26 @@ def test_energy_of_aligned_and_random_spins():
 
 def test_reference_only_where_exact():
     assert isinstance(n_vector((8,), 2).reference(1.0), NVectorChainReference)
-    assert n_vector((8,), 2, periodic=True).reference(1.0) is None
     assert n_vector((8,), 2, field=(0.0, 0.1)).reference(1.0) is None
+    assert n_vector((8,), 2, periodic=True, field=(0.0, 0.1)).reference(1.0) is None
     assert n_vector((4, 4), 2).reference(1.0) is None
+    assert n_vector((4, 4), 2, periodic=True).reference(1.0) is None
+
+
+@pytest.mark.parametrize("n", [2, 4, 5])
+def test_periodic_chain_reference_is_the_ring(n):
+    ring = n_vector((8,), n, coupling=-0.6, periodic=True).reference(1.5)
+    assert ring == NVectorRingReference(length=8, n=n, beta=1.5, coupling=-0.6)
+
+
+def test_periodic_heisenberg_chain_reference_is_the_o3_ring():
+    """``n = 3`` is ``heisenberg``'s ring reference, the same law as the O(3) ring."""
+    ring = n_vector((7,), 3, coupling=0.8, periodic=True).reference(2.0)
+    assert ring == HeisenbergRingReference(length=7, beta=2.0, coupling=0.8)
+    o3 = NVectorRingReference(length=7, n=3, beta=2.0, coupling=0.8)
+    r = np.arange(8)
+    np.testing.assert_allclose(ring.correlation(r), o3.correlation(r), rtol=1e-12)
+    assert ring.energy_mean() == pytest.approx(o3.energy_mean(), rel=1e-12)
 
 
 @pytest.mark.parametrize(

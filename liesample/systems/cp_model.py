@@ -41,6 +41,7 @@ from liesample.systems.heisenberg import (
 )
 from liesample.systems.n_vector import UnitVectorLattice
 from liesample.targets.cp_model import CPChainReference, check_cp_components
+from liesample.targets.cp_ring import CPRingReference
 
 __all__ = ["CPModelSystem", "cp_model", "projector_coordinates"]
 
@@ -79,8 +80,12 @@ class CPModelSystem(UnitVectorLattice):
     params : dict
         ``shape``, ``N``, ``coupling``, ``periodic``.
     reference : callable
-        ``(beta, position=None) ↦`` the exact :class:`~liesample.targets.cp_model.
-        CPChainReference` of an open chain, else ``None``.
+        ``(beta, position=None) ↦`` the exact law of a chain: the
+        :class:`~liesample.targets.cp_model.CPChainReference` of an open chain, the
+        :class:`~liesample.targets.cp_ring.CPRingReference` of a periodic one (a ring, for
+        its energy: ``bond_mean``, ``bond_energy_mean``, ``energy_mean``,
+        ``energy_variance``; its bonds are correlated, so it has no ``bond_variance``); else
+        ``None``.
     component_names : tuple of str
         ``("z_1", …, "z_N")``.
     event_shape : tuple of int
@@ -143,7 +148,9 @@ def cp_model(
         State shape ``(*shape, N)``, complex, unit vectors checked at ``init``, default position
         ``z_x = e_1`` everywhere; equal to every system built from equal arguments. Its
         ``reference(beta)`` is the exact :class:`~liesample.targets.cp_model.CPChainReference`
-        of an open chain, else ``None``.
+        of an open chain, the :class:`~liesample.targets.cp_ring.CPRingReference` of a
+        periodic one (its energy: the bond mean, the energy's mean and variance), else
+        ``None``.
 
     Which samplers apply: :func:`liesample.cp_heat_bath` (exact heat bath of the local complex
     Bingham law, with over-relaxation), which :func:`liesample.recommended_sampler` returns.
@@ -170,13 +177,14 @@ def _cp_model(shape, n: int, coupling, periodic) -> CPModelSystem:
     def hamiltonian(z):
         return -coupling * bond_sum(projector_coordinates(z), periodic)
 
-    exact_chain = len(shape) == 1 and not periodic
+    exact_chain = len(shape) == 1
 
     def reference(beta, position=None):
         del position  # one law for every start
         if not exact_chain:
             return None
-        return CPChainReference(length=shape[0], n=n, beta=float(beta), coupling=coupling)
+        law = CPRingReference if periodic else CPChainReference
+        return law(length=shape[0], n=n, beta=float(beta), coupling=coupling)
 
     default_position = np.zeros((*shape, n), dtype=complex)
     default_position[..., 0] = 1.0

@@ -40,6 +40,7 @@ from liesample.systems.heisenberg import (
     lattice_name,
 )
 from liesample.targets.n_vector import NVectorChainReference, check_spin_components
+from liesample.targets.n_vector_ring import NVectorRingReference
 
 __all__ = ["NVectorSystem", "UnitVectorLattice", "n_vector"]
 
@@ -90,8 +91,10 @@ class NVectorSystem(UnitVectorLattice):
         ``shape``, ``n``, ``coupling``, ``periodic``, ``field`` (a tuple of ``n`` floats) and
         ``anisotropy`` (always 0: the exact samplers' shared bookkeeping).
     reference : callable
-        ``(beta, position=None) ↦`` the exact :class:`~liesample.targets.n_vector.
-        NVectorChainReference` of an open chain without field, else ``None``.
+        ``(beta, position=None) ↦`` the exact law of a chain without field: the
+        :class:`~liesample.targets.n_vector.NVectorChainReference` of an open chain, the
+        :class:`~liesample.targets.n_vector_ring.NVectorRingReference` of a periodic one (a
+        ring); else ``None``.
     component_names : tuple of str
         ``("s_1", …, "s_n")``.
     event_shape : tuple of int
@@ -154,8 +157,11 @@ def n_vector(
         spin along the last axis. For ``n = 3``: ``heisenberg(shape, coupling, periodic,
         field)`` itself (equal to it, so the two share every compiled program). For ``n ≠ 3``
         an :class:`NVectorSystem`, equal to every system built from equal arguments; its
-        ``reference(beta)`` is the exact :class:`~liesample.targets.n_vector.
-        NVectorChainReference` of an open chain without field, else ``None``.
+        ``reference(beta)`` is the exact law of a chain without field, the
+        :class:`~liesample.targets.n_vector.NVectorChainReference` of an open chain or the
+        :class:`~liesample.targets.n_vector_ring.NVectorRingReference` of a periodic one,
+        else ``None`` (``n = 3``: :func:`~liesample.systems.heisenberg.heisenberg`'s
+        references, the same laws).
 
     Which samplers apply (every ``n``): :func:`liesample.heisenberg_heat_bath` (exact von
     Mises–Fisher heat bath on ``S^{n−1}``, with over-relaxation ``s ↦ 2(s·F̂)F̂ − s``; for
@@ -196,13 +202,14 @@ def _n_vector(shape, n: int, coupling, periodic, field) -> NVectorSystem:
     def hamiltonian(s):
         return exchange_energy(s, coupling, periodic, field)
 
-    exact_chain = len(shape) == 1 and not periodic and not has_field
+    exact_chain = len(shape) == 1 and not has_field
 
     def reference(beta, position=None):
         del position  # one law for every unit-spin start
         if not exact_chain:
             return None
-        return NVectorChainReference(length=shape[0], n=n, beta=float(beta), coupling=coupling)
+        law = NVectorRingReference if periodic else NVectorChainReference
+        return law(length=shape[0], n=n, beta=float(beta), coupling=coupling)
 
     default_position = np.zeros((*shape, n))
     default_position[..., -1] = 1.0
