@@ -2,17 +2,23 @@
 
 A suite of ``benchmarks/run.py`` (``benchmarks/suites.py``); alone::
 
-    .venv/bin/python benchmarks/deconfinement.py          # N_t = 2, N_s = 4, 6 (5–15 min)
-    .venv/bin/python benchmarks/deconfinement.py --quick  # smoke (benchmarks/results/quick/)
+    .venv/bin/python benchmarks/deconfinement.py              # every part (35–60 min on 2 cores)
+    .venv/bin/python benchmarks/deconfinement.py --part nt4   # one part, merged into the JSON
+    .venv/bin/python benchmarks/deconfinement.py --quick      # smoke (benchmarks/results/quick/)
 
-Writes ``deconfinement.json`` and ``deconfinement.png``.
+Writes ``deconfinement.json`` and ``deconfinement.png``. Its parts (:data:`PARTS`): ``nt2``
+(``N_t = 2``, ``N_s = 4, 6``), ``nt4`` (``N_t = 4``, ``N_s = 6, 8``) and ``anisotropic``; each
+records its own machine, date and load, and ``--part`` (repeatable) reruns only those, keeping
+the others from the existing JSON.
 
 1. The 4-D SU(2) Wilson action on ``N_s³ × N_t`` lattices (``wilson_gauge("SU2", (N_s, N_s,
-   N_s, N_t))``, time the last axis) at ``N_t = 2``, for each ``N_s`` a scan of β: one lattice
-   per β, all β of a scan drawn together (``jax.vmap`` of the heat bath's kernel,
-   ``liesample.wilson_heat_bath.build_kernel(system, 1, overrelaxation)``, β an argument: one
-   compiled program per volume), ``CHAINS`` independent chains from hot starts, a thermalisation,
-   then the volume-averaged Polyakov loop ``P`` and the plaquette at every step. Per β:
+   N_s, N_t))``, time the last axis) at ``N_t = 2`` and ``4``, for each ``N_s`` a scan of β
+   (at ``N_t = 4`` denser near the published ``β_c``): one lattice per β, all β of a scan
+   drawn together (``jax.vmap`` of the heat bath's kernel, ``liesample.wilson_heat_bath.
+   build_kernel(system, 1, overrelaxation)``, β an argument: one compiled program per volume;
+   one over-relaxation sweep per step, as more were seen to compile slowly over many batched
+   lattices), independent chains from hot starts, a thermalisation, then the volume-averaged
+   Polyakov loop ``P`` and the plaquette at every step. Per β:
    ``⟨|P|⟩`` with its blocking error (``tau_int`` shown), ``χ_P = N_s³(⟨|P|²⟩ − ⟨|P|⟩²)`` and
    the Binder cumulant ``U = 1 − ⟨|P|⁴⟩/(3⟨|P|²⟩²)`` with jackknife errors over blocks longer
    than the autocorrelation time (``liesample.analysis.polyakov.polyakov_summary``).
@@ -60,39 +66,46 @@ from liesample.systems import wilson_gauge
 
 SUITE = {
     "order": 36,
-    "title": "SU(2) deconfinement: the Polyakov loop across the N_t = 2 transition; anisotropy",
+    "title": "SU(2) deconfinement: the Polyakov loop across the N_t = 2 and 4 transitions; "
+    "anisotropy",
 }
 
 PUBLISHED = {
     "beta_c": {2: 1.8735, 4: 2.2986},
     "source": (
-        "the SU(2) critical couplings commonly quoted for N_t = 2 and 4 and attributed to "
-        "J. Fingberg, U. Heller and F. Karsch, Nucl. Phys. B 392 (1993) 493 (whose own new "
-        "determinations are at N_t = 8 and 16; the digits are not checked here against the "
-        "paper's tables)"
+        "the SU(2) critical couplings commonly quoted for N_t = 2 and 4, given here without "
+        "errors: their digits are not checked against a paper's table (the papers below are "
+        "checked against their abstracts only). They are often "
+        "attributed to J. Fingberg, U. Heller and F. Karsch, Nucl. Phys. B 392 (1993) 493, "
+        "whose own determinations are at N_t = 8 and 16 (its abstract). Determinations at "
+        "N_t = 2 and 4: A. Velytsky, Int. J. Mod. Phys. C 19 (2008) 1079 (arXiv:0711.0748; "
+        "N_t = 1, 2, 4, 8, from the Binder cumulant), and at N_t = 4 J. Engels, "
+        "S. Mashkevich, T. Scheideler and G. Zinovjev, Phys. Lett. B (1996), "
+        "doi:10.1016/0370-2693(95)01280-X (hep-lat/9509091; a χ² fit of the Polyakov loop)"
     ),
 }
 CHUNK = 20  # steps per compiled call
+PARTS = ("nt2", "nt4", "anisotropic")  # what ``run`` measures; ``--part`` runs one and merges
 CONFIG = {
     "full": {
-        "nt": 2,
-        "sizes": (4, 6),
-        "betas": (1.65, 1.7, 1.75, 1.8, 1.85, 1.9, 1.95, 2.0, 2.05),
-        "chains": 2,
-        "thermalisation": 100,
-        "draws": {4: 1000, 6: 500},
-        "overrelaxation": 1,
+        "nt2": {"nt": 2, "sizes": (4, 6), "seed": 0,
+                "betas": (1.65, 1.7, 1.75, 1.8, 1.85, 1.9, 1.95, 2.0, 2.05),
+                "chains": 2, "thermalisation": 100, "draws": {4: 1000, 6: 500},
+                "overrelaxation": 1},
+        "nt4": {"nt": 4, "sizes": (6, 8), "seed": 400,
+                "betas": (2.2, 2.25, 2.28, 2.3, 2.32, 2.35, 2.4),
+                "chains": 2, "thermalisation": 100, "draws": {6: 640, 8: 640},
+                "overrelaxation": 1},
         "anisotropic": {"shape": (4, 4, 4, 2), "beta": 2.0, "xi": 1.5, "chains": 2,
                         "warmup": 100, "draws": 400, "hmc_steps": 10},
     },
     "quick": {
-        "nt": 2,
-        "sizes": (4, 6),
-        "betas": (1.7, 1.8, 1.9, 2.0),
-        "chains": 2,
-        "thermalisation": 20,
-        "draws": {4: 100, 6: 60},
-        "overrelaxation": 1,
+        "nt2": {"nt": 2, "sizes": (4, 6), "seed": 0, "betas": (1.7, 1.8, 1.9, 2.0),
+                "chains": 2, "thermalisation": 20, "draws": {4: 100, 6: 60},
+                "overrelaxation": 1},
+        "nt4": {"nt": 4, "sizes": (4, 6), "seed": 400, "betas": (2.2, 2.3, 2.4),
+                "chains": 2, "thermalisation": 20, "draws": {4: 40, 6: 40},
+                "overrelaxation": 1},
         "anisotropic": {"shape": (4, 4, 4, 2), "beta": 2.0, "xi": 1.5, "chains": 2,
                         "warmup": 20, "draws": 60, "hmc_steps": 10},
     },
@@ -311,16 +324,16 @@ def anisotropic_rows(settings, seed, log) -> dict:
 # --------------------------------------------------------------------------- run, plot, report
 
 
-def run(out_dir: Path, quick: bool, log=print) -> None:
+def scan_part(cfg: dict, log) -> dict:
+    """One ``N_t``: the β scan of every volume, the χ_P peaks and the Binder crossing."""
     start = time.perf_counter()
-    mode = "quick" if quick else "full"
-    cfg = CONFIG[mode]
+    machine = common.machine_info()
     nt, betas = cfg["nt"], list(cfg["betas"])
     volumes, raw = [], {}
-    for n, ns in enumerate(cfg["sizes"], start=1):
-        log(f"{n}. N_s = {ns}, N_t = {nt}: β = {betas[0]} … {betas[-1]}")
+    for ns in cfg["sizes"]:
+        log(f"N_s = {ns}, N_t = {nt}: β = {betas[0]} … {betas[-1]}")
         scan = scan_volume(ns, nt, betas, cfg["chains"], cfg["thermalisation"], cfg["draws"][ns],
-                           cfg["overrelaxation"], seed=10 * ns, log=log)  # fmt: skip
+                           cfg["overrelaxation"], seed=cfg["seed"] + 10 * ns, log=log)  # fmt: skip
         raw[ns] = scan["loops"]
         peak, peak_error = chi_peak(betas, scan["loops"], ns**3)
         volumes.append({
@@ -334,22 +347,65 @@ def run(out_dir: Path, quick: bool, log=print) -> None:
     small, large = cfg["sizes"][0], cfg["sizes"][-1]
     crossing, crossing_error = binder_crossing(betas, raw[small], raw[large])
     log(f"  Binder crossing N_s = {small}, {large}: β = {crossing:.4f} ± {crossing_error:.4f}")
-    log(f"{len(cfg['sizes']) + 1}. anisotropic action: heat bath and HMC")
-    aniso = anisotropic_rows(cfg["anisotropic"], seed=7, log=log)
-    data = {
-        "description": __doc__,
-        "machine": common.machine_info(),
-        "mode": mode,
-        "config": {k: v for k, v in cfg.items() if k != "draws"} | {
-            "draws": {str(k): v for k, v in cfg["draws"].items()}},
-        "published": {"beta_c": {str(k): v for k, v in PUBLISHED["beta_c"].items()},
-                      "source": PUBLISHED["source"]},
+    return {
+        "machine": machine,
+        "config": {k: v for k, v in cfg.items() if k != "draws"}
+        | {"draws": {str(k): v for k, v in cfg["draws"].items()}},
         "volumes": volumes,
         "crossing": {"sizes": [small, large], "beta": crossing, "error": crossing_error},
-        "anisotropic": aniso,
+        "seconds": time.perf_counter() - start,
+    }  # fmt: skip
+
+
+def _legacy_parts(data: dict) -> dict:
+    """The parts of a result written before the suite had parts (``N_t = 2`` and anisotropy)."""
+    if "parts" in data:
+        return data["parts"]
+    volumes = data["volumes"]
+    nt2 = {
+        "machine": data["machine"],
+        "config": {k: v for k, v in data["config"].items() if k != "anisotropic"} | {"seed": 0},
+        "volumes": volumes,
+        "crossing": data["crossing"],
+        "seconds": sum(v["seconds"] + v["compile_seconds"] for v in volumes),
+    }
+    return {"nt2": nt2, "anisotropic": data["anisotropic"] | {"machine": data["machine"]}}
+
+
+def run(out_dir: Path, quick: bool, log=print, parts=PARTS) -> None:
+    """Measure ``parts`` (of :data:`PARTS`); the others are kept from an existing result."""
+    start = time.perf_counter()
+    mode = "quick" if quick else "full"
+    cfg = CONFIG[mode]
+    path = out_dir / "deconfinement.json"
+    kept = {}
+    if set(parts) != set(PARTS) and path.exists():
+        kept = _legacy_parts(common.read_json(path))
+    results = {}
+    for name in PARTS:
+        if name not in parts:
+            if name not in kept:
+                raise ValueError(f"part {name!r} is neither measured nor in {path}: run it too "
+                                 f"(parts={PARTS})")  # fmt: skip
+            results[name] = kept[name]
+            continue
+        log(f"part {name}")
+        if name == "anisotropic":
+            results[name] = anisotropic_rows(cfg["anisotropic"], seed=7, log=log) | {
+                "machine": common.machine_info()
+            }
+        else:
+            results[name] = scan_part(cfg[name], log)
+    data = {
+        "description": __doc__,
+        "mode": mode,
+        "published": {"beta_c": {str(k): v for k, v in PUBLISHED["beta_c"].items()},
+                      "source": PUBLISHED["source"]},
+        "parts": results,
+        "measured_now": list(parts),
         "total_seconds": time.perf_counter() - start,
     }  # fmt: skip
-    path = common.write_json(out_dir / "deconfinement.json", data)
+    common.write_json(path, data)
     plot(data, out_dir / "deconfinement.png")
     log(f"wrote {path} in {time.perf_counter() - start:.0f} s")
 
@@ -360,47 +416,52 @@ def plot(data, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 3, figsize=(13, 4))
+    scans = [part for name, part in data["parts"].items() if name != "anisotropic"]
+    fig, grid = plt.subplots(len(scans), 3, figsize=(13, 4 * len(scans)), squeeze=False)
     quantities = (("abs_p", "⟨|P|⟩"), ("chi", "χ_P = N_s³(⟨|P|²⟩ − ⟨|P|⟩²)"),
                   ("binder", "U = 1 − ⟨|P|⁴⟩ / 3⟨|P|²⟩²"))  # fmt: skip
-    nt = data["config"]["nt"]
-    beta_c = data["published"]["beta_c"].get(str(nt))
-    for ax, (key, label) in zip(axes, quantities, strict=True):
-        for color, volume in zip(("C0", "C1", "C2"), data["volumes"], strict=False):
-            rows = volume["rows"]
-            ax.errorbar([r["beta"] for r in rows], [r[key] for r in rows],
-                        yerr=[r[f"{key}_error"] for r in rows], fmt="o-", color=color,
-                        capsize=2, label=f"{volume['ns']}³ × {volume['nt']}")  # fmt: skip
-            if key == "chi" and math.isfinite(volume["chi_peak"]):
-                c, e = volume["chi_peak"], volume["chi_peak_error"]
-                ax.axvspan(c - e, c + e, color=color, alpha=0.2)
-        if key == "binder" and math.isfinite(data["crossing"]["beta"]):
-            c, e = data["crossing"]["beta"], data["crossing"]["error"]
-            ax.axvspan(c - e, c + e, color="grey", alpha=0.3, label="crossing")
-        if beta_c is not None:
-            ax.axvline(beta_c, color="k", ls=":", label=f"published β_c = {beta_c}")
-        ax.set_xlabel("β")
-        ax.set_title(label, fontsize=10)
-        ax.grid(True, alpha=0.3)
-    axes[0].legend(fontsize=8)
-    axes[2].legend(fontsize=8)
-    fig.suptitle(f"4-D SU(2), N_t = {nt}: heat bath + over-relaxation; error bars from blocking "
-                 "/ jackknife over blocks (τ_int included)", fontsize=10)  # fmt: skip
+    for axes, part in zip(grid, scans, strict=True):
+        nt = part["config"]["nt"]
+        beta_c = PUBLISHED["beta_c"].get(nt)
+        for ax, (key, label) in zip(axes, quantities, strict=True):
+            for color, volume in zip(("C0", "C1", "C2"), part["volumes"], strict=False):
+                rows = volume["rows"]
+                ax.errorbar([r["beta"] for r in rows], [r[key] for r in rows],
+                            yerr=[r[f"{key}_error"] for r in rows], fmt="o-", color=color,
+                            capsize=2, label=f"{volume['ns']}³ × {volume['nt']}")  # fmt: skip
+                if key == "chi" and math.isfinite(volume["chi_peak"]):
+                    c, e = volume["chi_peak"], volume["chi_peak_error"]
+                    ax.axvspan(c - e, c + e, color=color, alpha=0.2)
+            if key == "binder" and math.isfinite(part["crossing"]["beta"]):
+                c, e = part["crossing"]["beta"], part["crossing"]["error"]
+                ax.axvspan(c - e, c + e, color="grey", alpha=0.3, label="crossing")
+            if beta_c is not None:
+                ax.axvline(beta_c, color="k", ls=":", label=f"published β_c = {beta_c}")
+            ax.set_xlabel("β")
+            ax.set_title(f"N_t = {nt}: {label}", fontsize=10)
+            ax.grid(True, alpha=0.3)
+        axes[0].legend(fontsize=8)
+        axes[2].legend(fontsize=8)
+    fig.suptitle("4-D SU(2): heat bath + over-relaxation; error bars from blocking / jackknife "
+                 "over blocks (τ_int included)", fontsize=10)  # fmt: skip
     fig.tight_layout()
     fig.savefig(path, dpi=common.DPI)
     plt.close(fig)
 
 
 def _pm(x, e, digits=4) -> str:
-    return f"{x:.{digits}f} ± {e:.{digits}f}" if math.isfinite(x) else "—"
+    """``x ± e``; ``—`` for no estimate, ``n/a`` for an error a jackknife could not give."""
+    if not math.isfinite(x):
+        return "—"
+    return f"{x:.{digits}f} ± " + (f"{e:.{digits}f}" if math.isfinite(e) else "n/a")
 
 
-def _scan_table(data) -> list[str]:
+def _scan_table(part) -> list[str]:
     lines = [
         "| lattice | β | ⟨\\|P\\|⟩ | τ_int(\\|P\\|) | χ_P | U | plaquette | block | blocks |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
-    for volume in data["volumes"]:
+    for volume in part["volumes"]:
         for r in volume["rows"]:
             blocks = volume["chains"] * (volume["draws"] // r["block_size"])
             lines.append(
@@ -412,30 +473,68 @@ def _scan_table(data) -> list[str]:
     return lines
 
 
-def _transition_lines(data) -> list[str]:
-    nt = data["config"]["nt"]
-    beta_c = data["published"]["beta_c"][str(nt)]
-    lines = ["| estimate | β | − published β_c | sweeps per β | seconds (compile) |",
-             "|---|---|---|---|---|"]  # fmt: skip
-    for v in data["volumes"]:
-        diff = v["chi_peak"] - beta_c
+def _difference(x, e, beta_c) -> tuple[str, str]:
+    """``x − β_c`` and that in standard errors of ``x`` (the published value's own error is
+    not used: :data:`PUBLISHED` gives none)."""
+    if not math.isfinite(x):
+        return "—", "—"
+    z = f"{(x - beta_c) / e:+.1f}".replace("-", "−") if math.isfinite(e) else "n/a"
+    return f"{x - beta_c:+.4f}".replace("-", "−"), z
+
+
+def _transition_lines(part) -> list[str]:
+    beta_c = PUBLISHED["beta_c"][part["config"]["nt"]]
+    lines = ["| estimate | β | − published β_c | in standard errors | sweeps per β | seconds "
+             "(compile) |", "|---|---|---|---|---|---|"]  # fmt: skip
+    for v in part["volumes"]:
+        diff, z = _difference(v["chi_peak"], v["chi_peak_error"], beta_c)
         lines.append(
             f"| χ_P peak, {v['ns']}³×{v['nt']} | {_pm(v['chi_peak'], v['chi_peak_error'])} | "
-            f"{diff:+.4f} | {v['chains']} × {v['steps_per_lattice']} | "
-            f"{v['seconds']:.0f} ({v['compile_seconds']:.0f}) |".replace("-", "−")
+            f"{diff} | {z} | {v['chains']} × {v['steps_per_lattice']} | "
+            f"{v['seconds']:.0f} ({v['compile_seconds']:.0f}) |"
         )
-    c = data["crossing"]
+    c = part["crossing"]
+    diff, z = _difference(c["beta"], c["error"], beta_c)
     lines.append(
         f"| Binder crossing, N_s = {c['sizes'][0]}, {c['sizes'][1]} | {_pm(c['beta'], c['error'])}"
-        f" | {c['beta'] - beta_c:+.4f} | both scans | — |".replace("-", "−")
+        f" | {diff} | {z} | both scans | — |"
     )
     return lines
 
 
+def _machine(part) -> str:
+    m = part["machine"]
+    return (f"{m['date_utc']}, backend `{m['backend']}`, {m['usable_cpus']} usable CPU cores, "
+            f"{m['cpu_model']}, load average {m['load_average_1min']}")  # fmt: skip
+
+
+def _part_lines(part) -> list[str]:
+    cfg = part["config"]
+    nt = cfg["nt"]
+    return [
+        f"### N_t = {nt}",
+        "",
+        (
+            f"Measured {_machine(part)}; {part['seconds']:.0f} s. N_s = "
+            f"{', '.join(str(v['ns']) for v in part['volumes'])}, β = "
+            f"{', '.join(f'{b:g}' for b in cfg['betas'])}; heat bath with "
+            f"{cfg['overrelaxation']} over-relaxation sweep(s) per step, {cfg['chains']} chains "
+            f"from hot starts, {cfg['thermalisation']} thermalisation steps."
+        ),
+        "",
+        *_scan_table(part),
+        "",
+        *_transition_lines(part),
+        "",
+    ]
+
+
 def _anisotropic_lines(data) -> list[str]:
-    a = data["anisotropic"]
+    a = data["parts"]["anisotropic"]
     s = a["settings"]
     lines = [
+        f"Measured {_machine(a)}.",
+        "",
         f"SU(2) on {'×'.join(map(str, s['shape']))} at β = {s['beta']}, ξ = {s['xi']} "
         f"(β_s = {s['beta'] / s['xi']:.4g}, β_t = {s['beta'] * s['xi']:.4g}), {s['chains']} chains "
         f"× {s['draws']} draws after {s['warmup']} warm-up steps each; HMC: "
@@ -463,49 +562,50 @@ def _anisotropic_lines(data) -> list[str]:
 
 
 def report(out_dir: Path, md_dir: Path) -> str:
-    """Section from ``deconfinement.json``, if it exists."""
+    """Section from ``deconfinement.json``, if it exists (one written before the suite had
+    parts is read as its ``N_t = 2`` and anisotropy parts)."""
     path = out_dir / "deconfinement.json"
     if not path.exists():
         return ""
     data = common.read_json(path)
-    machine = data["machine"]
+    data["parts"] = _legacy_parts(data)
+    data.setdefault("mode", "full")
     plot_link = os.path.relpath(out_dir / "deconfinement.png", md_dir)
-    nt = data["config"]["nt"]
-    published = data["published"]
+    scans = [part for name, part in data["parts"].items() if name != "anisotropic"]
+    published = ", ".join(f"β_c(N_t = {nt}) = {b}" for nt, b in PUBLISHED["beta_c"].items())
     lines = [
-        "## SU(2) deconfinement: the Polyakov loop across the N_t = 2 transition; anisotropy",
+        f"## {SUITE['title']}",
         "",
         (
-            f"From `benchmarks/deconfinement.py` ({machine['date_utc']}, "
-            f"{data['total_seconds']:.0f} s, {data['mode']} mode, backend `{machine['backend']}`, "
-            f"{machine['usable_cpus']} usable CPU cores, {machine['cpu_model']}, load average "
-            f"{machine['load_average_1min']}). 4-D SU(2) Wilson action on N_s³ × {nt}, heat bath "
-            f"with {data['config']['overrelaxation']} over-relaxation sweep(s) per step, one "
-            f"lattice per β, all β of a volume drawn together (one compiled program), "
-            f"{data['config']['chains']} chains from hot starts, "
-            f"{data['config']['thermalisation']} thermalisation steps. ⟨|P|⟩ and the plaquette: "
-            "blocking errors (τ_int shown); χ_P and the Binder cumulant U: jackknife over blocks "
-            "of the blocking level ('block', in steps; 'blocks' over both chains) — every "
-            "error includes the autocorrelation. Where τ_int is long against the run (near "
-            "β_c on the larger volume) the blocks are few and the errors themselves uncertain, "
-            "by about 1/√(2 · blocks) relative."
+            f"From `benchmarks/deconfinement.py` ({data['mode']} mode). Its parts ran at "
+            "different times, each on the machine and at the load its own line records (a "
+            "part is rerun alone with `--part` and merged into the JSON). 4-D SU(2) Wilson "
+            "action on N_s³ × N_t, heat bath with over-relaxation, one lattice per β, all β "
+            "of a volume drawn together (one compiled program), chains from hot starts. "
+            "⟨|P|⟩ and the plaquette: blocking errors (τ_int shown); χ_P and the Binder "
+            "cumulant U: jackknife over blocks of the blocking level ('block', in steps; "
+            "'blocks' over all chains) — every error includes the autocorrelation. Where "
+            "τ_int is long against the run (near β_c on the larger volume) the blocks are few "
+            "and the errors themselves uncertain, by about 1/√(2 · blocks) relative."
         ),
-        "",
-        *_scan_table(data),
         "",
         (
             "The transition: the vertex of the parabola through the largest χ_P and its two "
             "grid neighbours, per volume; the crossing of U between the two volumes (linear "
             "interpolation in the bracket where U_large − U_small changes sign). Their errors: "
             "the jackknife of the location over the blocks of each run it uses (the runs are "
-            f"independent: the variances add). Published β_c(N_t = {nt}) = "
-            f"{published['beta_c'][str(nt)]}: {published['source']}. On these small volumes "
-            "the χ_P peak is a pseudo-critical coupling, shifted from β_c by finite-size "
-            "corrections of order N_s^(−1/ν), ν ≈ 0.63 (3-D Ising universality)."
+            "independent: the variances add); 'n/a' where a leave-one-block-out sample has no "
+            "maximum (its parabola opens upwards): that location is not resolved. "
+            f"Published: {published}; "
+            f"{PUBLISHED['source']}. 'In standard errors': (β − β_c) over the error of β. "
+            "On these small volumes the χ_P peak is a pseudo-critical coupling, shifted from "
+            "β_c by finite-size corrections of order N_s^(−1/ν), ν ≈ 0.63 (3-D Ising "
+            "universality), and the crossing of two small volumes by corrections to scaling: "
+            "a difference of several standard errors is that shift, not a sampler error; it "
+            "shrinks only with larger N_s (and, at N_t = 4, larger N_s/N_t)."
         ),
         "",
-        *_transition_lines(data),
-        "",
+        *[line for part in scans for line in _part_lines(part)],
         (
             "What accuracy costs: the statistical error of a location falls as "
             "1/√(sweeps); at the rates above, halving it costs four times the seconds of its "
@@ -515,7 +615,7 @@ def report(out_dir: Path, md_dir: Path) -> str:
         "",
         f"![SU(2) deconfinement]({plot_link})",
         "",
-        "The anisotropic Wilson action, heat bath against HMC:",
+        "### The anisotropic Wilson action, heat bath against HMC",
         "",
         *_anisotropic_lines(data),
         "",
@@ -523,5 +623,29 @@ def report(out_dir: Path, md_dir: Path) -> str:
     return "\n".join(lines)
 
 
+def main(argv=None) -> int:
+    """``python benchmarks/deconfinement.py [--quick] [--part NAME ...]``; without ``--part``
+    the whole suite (``benchmarks/suites.py``'s ``standalone``), with it only those parts,
+    merged into the existing ``deconfinement.json``."""
+    import argparse
+
+    parser = argparse.ArgumentParser(description="benchmark suite deconfinement")
+    parser.add_argument("--quick", action="store_true", help="short smoke run")
+    parser.add_argument(
+        "--part",
+        action="append",
+        choices=PARTS,
+        help="measure only this part (repeatable); the others are kept",
+    )
+    args = parser.parse_args(argv)
+    if not args.part:
+        return suites.standalone(__file__, ["--quick"] if args.quick else [])
+    out_dir = common.BENCH_DIR / "results" / ("quick" if args.quick else "")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    run(out_dir, args.quick, lambda message: print(message, flush=True), parts=args.part)
+    print(report(out_dir, out_dir))
+    return 0
+
+
 if __name__ == "__main__":
-    raise SystemExit(suites.standalone(__file__))
+    raise SystemExit(main())
