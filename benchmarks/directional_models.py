@@ -257,6 +257,7 @@ def circular_data():
 
 def circular_log_density(alpha, beta, eta, data):
     """The posterior's log density in ``(alpha, beta, eta = log kappa)`` (w.r.t. dα dβ dη)."""
+    alpha, beta, eta = jnp.asarray(alpha), jnp.asarray(beta), jnp.asarray(eta)
     kappa = jnp.exp(eta)
     mean = alpha[..., None] + 2.0 * jnp.arctan(beta[..., None] * data["x"])
     loglik = jnp.sum(kappa[..., None] * jnp.cos(data["y"] - mean), -1) - len(data["x"]) * (
