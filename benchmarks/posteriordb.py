@@ -499,6 +499,7 @@ def group_ratios(rows):
                 ours["ess_per_second_with_compile"], best_c["ess_per_second_with_compile"]
             ),
             "per_gradient": ratio(ours["ess_per_gradient"], best_g["ess_per_gradient"]),
+            "time_per_gradient": ratio(seconds_per_gradient(ours), seconds_per_gradient(best)),
             "better_nuts": best["sampler"],
         }
         out.append((name, method, seed, ratios, ours))
@@ -519,7 +520,7 @@ def posterior_summary(data):
     for name, s in summary.items():
         s["directional"] = name in dm.NAMES
         s["goal"] = data["directional_goal"] if s["directional"] else data["goal"]
-        for key in ("per_second", "per_second_with_compile", "per_gradient"):
+        for key in ("per_second", "per_second_with_compile", "per_gradient", "time_per_gradient"):
             values = [r[key] for r in s["ratios"]]
             s[key] = float(np.median(values)) if values else float("nan")
             s[key + "_range"] = (min(values), max(values)) if values else None
@@ -666,7 +667,16 @@ def settings(mode):
 
 
 def short_name(posterior):
-    return posterior.split("-", 1)[1] if "-" in posterior else posterior
+    """posteriordb's model name (after the data set's); a directional posterior's full name."""
+    if posterior in dm.NAMES or "-" not in posterior:
+        return posterior
+    return posterior.split("-", 1)[1]
+
+
+def seconds_per_gradient(row):
+    """Seconds of warm-up and sampling (compile excluded) per gradient evaluation."""
+    total = row["warmup_gradients"] + row["gradients"]
+    return (row["warmup_seconds"] + row["seconds"]) / max(total, 1)
 
 
 def plot(data, path):
@@ -740,8 +750,9 @@ def summary_lines(data):
     lines = [
         "| posterior | d | groups with a healthy NUTS | GeometricHMC / better NUTS, ESS/s "
         "(warm-up incl., compile excl.): median (range) | same, compile incl. | ESS/grad "
+        "| seconds per gradient (ours / that NUTS's) "
         "| our runs: right / wrong warned / wrong silent | goal | misses |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name, s in summary.items():
         counts = " / ".join(
@@ -751,7 +762,8 @@ def summary_lines(data):
             f"| {short_name(name)} | {data['posteriors'][name]['dimension']} | "
             f"{s['nuts_healthy']} of {s['groups']} | {fmt_range(s, 'per_second')} | "
             f"{fmt_range(s, 'per_second_with_compile')} | {fmt_range(s, 'per_gradient')} | "
-            f"{counts} | {s['goal']:g}× | {'; '.join(s['misses']) or 'met'} |"
+            f"{fmt_range(s, 'time_per_gradient')} | {counts} | {s['goal']:g}× | "
+            f"{'; '.join(s['misses']) or 'met'} |"
         )
     lines.append("")
     for directional in (False, True):
@@ -787,6 +799,7 @@ def table_row(r):
         f"{r['ess_bulk_min']:.0f} / {r['ess_tail_min']:.0f} | {r['ess_per_gradient']:.2e} | "
         f"{common.format_g(r['ess_per_second'])} | "
         f"{common.format_g(r['ess_per_second_with_compile'])} | "
+        f"{common.format_g(1e6 * seconds_per_gradient(r))} | "
         f"{r['worst_sd_error']:.3f} ({r['worst_sd_parameter']}) | "
         f"{r['max_abs_z_mean']:.1f} ({r['worst_parameter']}) | {r['rhat_max']:.3f} | "
         f"{r['divergences']} | {'yes' if r['warned'] else 'no'} | {r['verdict']} |"
@@ -831,7 +844,8 @@ def intro(data, out_dir):
     machine = data["machine"]
     return (
         f"From `benchmarks/posteriordb.py` ({machine['date_utc']}, {data['mode']} mode, "
-        f"{data['total_seconds']:.0f} s on {machine['usable_cpus']} shared CPU cores "
+        f"{data['total_seconds']:.0f} s summed over the posteriors (several posteriors may "
+        f"run side by side) on {machine['usable_cpus']} shared CPU cores "
         f"({machine.get('cpu_model', '')}), JAX {machine.get('jax', '')}, liesample "
         f"{machine.get('git_commit', '')}: wall times are rough and other jobs shared the "
         "cores, so only ratios within a group, whose runs are interleaved, mean much). "
@@ -852,8 +866,11 @@ def intro(data, out_dir):
         f"{describe_lengths(data)}. ESS: the minimum over the reference's (constrained) "
         "parameters of ArviZ's bulk / tail ESS; ESS/grad: the smaller of the two per gradient "
         "of the sampling phase; ESS/s: per second of warm-up and sampling, compilation "
-        "(JAX's compile events) excluded, and included (`+c`); sd err: the largest |sd / "
-        "reference sd − 1|; |z|: the largest |error of a mean| / √(MCSE² + reference MCSE²); "
+        "(JAX's compile events) excluded, and included (`+c`; liesample's default persistent "
+        "compilation cache was on, so a program compiled before, by an earlier seed or run, "
+        "is loaded from it); µs/grad: seconds of warm-up and sampling per gradient; sd err: "
+        "the largest |sd / reference sd − 1|; |z|: the largest |error of a mean| / "
+        "√(MCSE² + reference MCSE²); "
         "div.: divergences while sampling; warned: a warning during `MCMC.warmup`/`run`, or "
         "from the post-run checks (`liesample.interop.numpyro_checks.check_mcmc(mcmc)` for "
         "GeometricHMC, the same `check_draws` on NUTS's latent sites and fields, with the "
@@ -879,8 +896,8 @@ def report(out_dir: Path, md_dir: Path) -> str:
     lines = [title, "", intro(data, out_dir), "", *summary_lines(data)]
     lines += [
         "| posterior | chains | seed | sampler | ESS bulk / tail | ESS/grad | ESS/s | ESS/s +c "
-        "| sd err | max abs z | R-hat | div. | warned | verdict |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| µs/grad | sd err | max abs z | R-hat | div. | warned | verdict |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
         *(table_row(r) for r in data["results"]),
         "",
     ]
