@@ -462,7 +462,9 @@ def verdict_of(row):
     """``right``, ``wrong, warned`` or ``wrong, silent``."""
     if row["right"]:
         return "right"
-    return "wrong, warned" if row.get("warned") else "wrong, silent"
+    if row.get("warned") is None:  # an --extra row: no post-run checks
+        return "wrong, unchecked"
+    return "wrong, warned" if row["warned"] else "wrong, silent"
 
 
 def healthy(row):
@@ -579,7 +581,7 @@ def run_posterior(name, index, quick, extra, num_warmup, num_draws, log):
             for j, (label, fn) in enumerate(extra_samplers().items()):
                 try:
                     out = fn(setup, jax.random.fold_in(pkey, 1000 * seed + 20 + j), *length)
-                    out.update(sampler_warnings=[], check_warnings=[], warned=False)
+                    out.update(sampler_warnings=[], check_warnings=[], warned=None)
                 except Exception as error:
                     out = error
                 outs[(label, "vmap")] = out
@@ -793,6 +795,9 @@ def summary_lines(data):
     return lines
 
 
+WARNED = {True: "yes", False: "no", None: "–"}  # None: an --extra row, not checked
+
+
 def table_row(r):
     return (
         f"| {short_name(r['posterior'])} | {r['chain_method']} | {r['seed']} | {r['sampler']} | "
@@ -802,7 +807,7 @@ def table_row(r):
         f"{common.format_g(1e6 * seconds_per_gradient(r))} | "
         f"{r['worst_sd_error']:.3f} ({r['worst_sd_parameter']}) | "
         f"{r['max_abs_z_mean']:.1f} ({r['worst_parameter']}) | {r['rhat_max']:.3f} | "
-        f"{r['divergences']} | {'yes' if r['warned'] else 'no'} | {r['verdict']} |"
+        f"{r['divergences']} | {WARNED[r['warned']]} | {r['verdict']} |"
     )
 
 
