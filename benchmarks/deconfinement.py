@@ -524,7 +524,26 @@ def _part_lines(part) -> list[str]:
         "",
         *_scan_table(part),
         "",
+        *_few_blocks(part),
         *_transition_lines(part),
+        "",
+    ]
+
+
+def _few_blocks(part, minimum: int = 10) -> list[str]:
+    """A line naming the rows whose jackknife has fewer than ``minimum`` blocks, if any."""
+    few = [
+        f"{v['ns']}³×{v['nt']} at β = {r['beta']:g} ({n})"
+        for v in part["volumes"]
+        for r in v["rows"]
+        if (n := v["chains"] * (v["draws"] // r["block_size"])) < minimum
+    ]
+    if not few:
+        return []
+    return [
+        f"Fewer than {minimum} blocks (τ_int long against the run): {', '.join(few)}; the "
+        "errors of those rows, and of a location that uses them, are themselves uncertain by "
+        "about 1/√(2 · blocks) relative.",
         "",
     ]
 
