@@ -335,3 +335,35 @@ def test_wolff_samples_the_exact_open_chain(n):
     algorithm = liesample.heisenberg_wolff(system, beta=BETA)
     series = chain_series(algorithm, random_spins(n, 40 + n), 500, 8000, 50 + n)
     assert_exact_chain_law(series, n)
+
+
+# The chain without field turns as a whole slowly (a zero mode), so single spin components
+# mix slowly and the run's convergence checks say so; the law tested is of rotation-invariant
+# observables, which mix fast.
+@pytest.mark.filterwarnings("ignore:convergence checks:UserWarning")
+@pytest.mark.parametrize("n", [2, 4])
+def test_geometric_hmc_on_the_product_of_spheres_samples_the_exact_open_chain(n):
+    """The T*G path: ``geometric_hmc(system.logdensity(β), system.space)`` through
+    ``liesample.sample`` (its window warm-up tunes the step), on the O(n) open chain."""
+    system = n_vector((LENGTH,), n)
+    sampler = liesample.geometric_hmc(system.logdensity(BETA), system.space)
+    tree = liesample.sample(
+        sampler, jax.random.key(60 + n), random_spins(n, 60 + n), 1000, progress_bar=False
+    )
+    spins = jnp.asarray(tree.posterior["mu"].values)  # (chains, draws, sites, n)
+    correlations = jax.vmap(jax.vmap(chain_observables))(spins)
+    energy = jax.vmap(jax.vmap(system.hamiltonian))(spins) / (LENGTH - 1)
+    series = np.concatenate([np.asarray(correlations), np.asarray(energy)[..., None]], -1)
+    assert_exact_chain_law(series, n)
+
+
+def test_spin_lattices_offer_the_product_of_spheres():
+    """``space`` and ``logdensity`` of an O(n) and an O(3) lattice: one sphere per site, −βh."""
+    for system in (n_vector((3, 4), 2, periodic=True), liesample.systems.heisenberg((3, 4))):
+        n = system.default_position.shape[-1]
+        assert system.space == liesample.spaces.Sphere(n - 1, shape=(3, 4))
+        spins = random_spins(n, 1)[0, :12].reshape(3, 4, n)
+        value = system.logdensity(0.7)(jnp.asarray(spins))
+        np.testing.assert_allclose(value, -0.7 * system.hamiltonian(jnp.asarray(spins)))
+    with pytest.raises(ValueError, match="beta"):
+        n_vector((4,), 2).logdensity(float("nan"))

@@ -36,7 +36,8 @@ from __future__ import annotations
 
 import math
 import operator
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -48,9 +49,11 @@ from liesample.foundation.identity import by_value
 from liesample.foundation.precision import check_dtype, float64_hint, roundoff_tolerance
 from liesample.foundation.validation import concrete_array, finite_float
 from liesample.geometry.algebras import so3
+from liesample.geometry.flat_and_round import Sphere
 from liesample.targets.spins import HeisenbergChainReference, HeisenbergRingReference
 
 __all__ = [
+    "SphereLattice",
     "SpinLatticeSystem",
     "bond_sum",
     "check_unit_spins",
@@ -71,12 +74,38 @@ UNIT_NORM_TOLERANCE = 1e-9
 start's dtype: :func:`liesample.foundation.precision.roundoff_tolerance`)."""
 
 
-class SpinLatticeSystem(LiePoissonSystem):
+class SphereLattice:
+    """What a lattice of unit spins offers the ``T*G`` samplers (``geometric_hmc``,
+    ``geometric_langevin``): the product of spheres its states live on and ``log π = −βh``.
+
+    A mixin of :class:`SpinLatticeSystem` and :class:`liesample.systems.n_vector.NVectorSystem`;
+    it reads ``hamiltonian`` and ``default_position`` (``(*shape, n)``) of the system.
+    """
+
+    hamiltonian: Any
+    default_position: Any
+
+    @property
+    def space(self) -> Sphere:
+        """``(S^{n−1})^N``: one sphere per site, the lattice's shape as the space's batch shape."""
+        *shape, n = np.shape(self.default_position)
+        return Sphere(n - 1, shape=tuple(shape))
+
+    def logdensity(self, beta: float) -> Callable[[jax.Array], jax.Array]:
+        """``s ↦ −β h(s)``: the ``log π`` (uniform measure on the spheres) of a ``T*G`` sampler
+        on :attr:`space`; ``β`` any finite real (the spheres are compact)."""
+        beta = finite_float("beta", beta)
+        hamiltonian = self.hamiltonian
+        return lambda spins: -beta * hamiltonian(spins)
+
+
+class SpinLatticeSystem(SphereLattice, LiePoissonSystem):
     """A :class:`LiePoissonSystem` whose states are stacks of *unit* spins.
 
-    Only ``check_position`` differs from the base class: after its checks (shape, finite,
+    ``check_position`` differs from the base class: after its checks (shape, finite,
     non-degenerate orbit) every spin must satisfy ``| |s_k| − 1 | ≤ 1e-9`` (in float32, 1000 units
-    of float32 round-off); a ``ValueError`` names the first offending site.
+    of float32 round-off); a ``ValueError`` names the first offending site. ``space`` and
+    ``logdensity(beta)`` give the ``T*G`` samplers the product of spheres (:class:`SphereLattice`).
     """
 
     def check_position(self, position: ArrayLike, name: str = "position") -> None:

@@ -31,6 +31,7 @@ from jax.typing import ArrayLike
 from liesample.foundation.identity import ValueIdentity, by_value
 from liesample.foundation.validation import concrete_array
 from liesample.systems.heisenberg import (
+    SphereLattice,
     SpinLatticeSystem,
     check_unit_spins,
     exchange_energy,
@@ -76,7 +77,7 @@ class UnitVectorLattice(ValueIdentity):
 
 
 @dataclass(frozen=True, eq=False, repr=False)  # the base class's short repr
-class NVectorSystem(UnitVectorLattice):
+class NVectorSystem(SphereLattice, UnitVectorLattice):
     """An O(n) spin lattice for ``n ≠ 3`` (:func:`n_vector`): what the spin samplers read.
 
     Attributes
@@ -101,6 +102,9 @@ class NVectorSystem(UnitVectorLattice):
         ``(*shape, n)``.
     check_beta : None
         Every finite ``β`` gives a normalisable law (the state space is compact).
+
+    ``space`` (the product of spheres ``(S^{n−1})^N``) and ``logdensity(beta)`` (``−βh``) let
+    the ``T*G`` samplers move the spins (:class:`~liesample.systems.heisenberg.SphereLattice`).
 
     Examples
     --------
