@@ -9,8 +9,9 @@ A suite of ``benchmarks/run.py`` (``benchmarks/suites.py``); alone::
     .venv/bin/python -m benchmarks.posteriordb --names arK-arK  # some posteriors, merged in
     .venv/bin/python -m benchmarks.posteriordb --extra          # + BlackJAX NUTS, magnetic_hmc
 
-Writes ``posteriordb.json`` (after each posterior, merged with the rows of the posteriors it
-did not run, so that a partial run is kept) and ``posteriordb.png``. The posteriordb
+Each posterior runs in a process of its own (one long process runs out of memory mappings for
+compiled code), which merges its rows into ``posteriordb.json`` (the rows of the posteriors it
+did not run are kept, so that a partial run is not lost); then ``posteriordb.png``. The posteriordb
 posteriors, their NumPyro models and reference summaries (posteriordb's Stan reference draws;
 exact moments for the toy) are in ``benchmarks/posteriordb_models.py`` and
 ``benchmarks/data/posteriordb/``; the directional ones (a sphere, an axis, a circle, a
@@ -48,6 +49,8 @@ from __future__ import annotations
 
 import argparse
 import fcntl
+import os
+import subprocess
 import sys
 import time
 import warnings
@@ -567,7 +570,7 @@ def lengths(name, quick, num_warmup, num_draws):
     return (num_warmup, num_draws)
 
 
-def run_posterior(name, index, quick, extra, num_warmup, num_draws, log):
+def run_posterior(name, quick, extra, num_warmup, num_draws, log):
     """Every group of one posterior: ``(info, rows, failures)``."""
     start = time.perf_counter()
     posterior = load(name)
@@ -581,7 +584,8 @@ def run_posterior(name, index, quick, extra, num_warmup, num_draws, log):
         outs = {}
         for m, method in enumerate(CHAIN_METHODS):
             key = jax.random.fold_in(pkey, 1000 * seed + 10 + m)
-            group = run_group(setup, key, length, method, index + 2 * s + m, log)
+            rotation = NAMES.index(name) + 2 * s + m
+            group = run_group(setup, key, length, method, rotation, log)
             outs.update({(label, method): out for label, out in group.items()})
         if extra:
             for j, (label, fn) in enumerate(extra_samplers().items()):
@@ -622,8 +626,9 @@ def merge(path, names, mode, update):
     """Read ``path`` (if it holds this schema and mode), drop the rows of ``names``, apply
     ``update(data)`` and write it back, under a lock (two runs may merge into one file)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path.with_suffix(".lock"), "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
+    folder = os.open(path.parent, os.O_RDONLY)  # the lock: the folder (no lock file left)
+    try:
+        fcntl.flock(folder, fcntl.LOCK_EX)
         data = common.read_json(path) if path.exists() else {}
         if data.get("schema") != SCHEMA or data.get("mode") != mode:
             data = {"posteriors": {}, "results": [], "failures": []}
@@ -633,28 +638,54 @@ def merge(path, names, mode, update):
         update(data)
         common.write_json(path, data)
         return data
+    finally:
+        os.close(folder)
 
 
 def run(out_dir: Path, quick: bool, log=print, names=None, extra=False,
         num_warmup=1000, num_draws=1000) -> None:  # fmt: skip
+    """Every posterior of ``names`` (by default all, or ``QUICK_POSTERIORS``), each in a
+    process of its own (:func:`run_in_process`): one process that builds a few hundred
+    ``MCMC`` programs runs out of memory mappings for compiled code (LLVM's "Cannot allocate
+    memory", then a crash)."""
     start = time.perf_counter()
     if names is None:
         names = QUICK_POSTERIORS if quick else NAMES
-    mode = "quick" if quick else "full"
+    options = ["--num-warmup", str(num_warmup), "--num-draws", str(num_draws)]
+    options += ["--quick"] * quick + ["--extra"] * extra
+    for name in names:
+        command = [sys.executable, "-m", "benchmarks.posteriordb", "--one", name, *options]
+        child = subprocess.Popen(
+            [*command, "--out-dir", str(out_dir)],
+            cwd=common.BENCH_DIR.parent,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
+        for line in child.stdout:
+            if "LLVM compilation error" not in line:
+                log(line.rstrip())
+        if child.wait() != 0:
+            log(f"  {name}: the process failed (exit status {child.returncode})")
     path = out_dir / "posteriordb.json"
-    for index, name in enumerate(names):
-        info, rows, failures = run_posterior(name, index, quick, extra, num_warmup, num_draws, log)
-
-        def update(data, name=name, info=info, rows=rows, failures=failures):
-            data.update(settings(mode))
-            data["posteriors"][name] = info
-            data["results"] += rows
-            data["failures"] += failures
-            data["total_seconds"] = sum(p["seconds"] for p in data["posteriors"].values())
-
-        data = merge(path, [name], mode, update)
-    plot(data, out_dir / "posteriordb.png")
+    if path.exists():
+        plot(common.read_json(path), out_dir / "posteriordb.png")
     log(f"wrote {path} in {time.perf_counter() - start:.0f} s")
+
+
+def run_in_process(out_dir: Path, quick: bool, log, name, extra, num_warmup, num_draws):
+    """One posterior's groups, merged into ``out_dir/posteriordb.json``."""
+    mode = "quick" if quick else "full"
+    info, rows, failures = run_posterior(name, quick, extra, num_warmup, num_draws, log)
+
+    def update(data):
+        data.update(settings(mode))
+        data["posteriors"][name] = info
+        data["results"] += rows
+        data["failures"] += failures
+        data["total_seconds"] = sum(p["seconds"] for p in data["posteriors"].values())
+
+    merge(out_dir / "posteriordb.json", [name], mode, update)
 
 
 def settings(mode):
@@ -935,10 +966,16 @@ def main(argv=None) -> int:
     parser.add_argument("--extra", action="store_true", help="add BlackJAX NUTS, magnetic_hmc")
     parser.add_argument("--num-warmup", type=int, default=1000)
     parser.add_argument("--num-draws", type=int, default=1000)
+    parser.add_argument("--one", choices=NAMES, help=argparse.SUPPRESS)  # in this process
+    parser.add_argument("--out-dir", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
-    out_dir = common.BENCH_DIR / "results" / ("quick" if args.quick else "")
-    run(out_dir, args.quick, lambda m: print(m, flush=True), args.names, args.extra,
-        args.num_warmup, args.num_draws)  # fmt: skip
+    out_dir = args.out_dir or common.BENCH_DIR / "results" / ("quick" if args.quick else "")
+    log = lambda m: print(m, flush=True)
+    lengths = (args.num_warmup, args.num_draws)
+    if args.one:
+        run_in_process(out_dir, args.quick, log, args.one, args.extra, *lengths)
+        return 0
+    run(out_dir, args.quick, log, args.names, args.extra, *lengths)
     print(report(out_dir, out_dir))
     return 0
 
