@@ -11,9 +11,11 @@ lattices (J = 1, no field; :func:`liesample.systems.n_vector` for O(n),
 :func:`liesample.systems.cp_model` for CP(N−1)) at the β of :data:`CASES`, two samplers run side
 by side in one process, from the same random starts and key:
 
-- ``recommended``: ``liesample.recommended_sampler(system, beta=β)`` (on these lattices the
-  heat bath with one over-relaxation sweep per step, ``heisenberg_heat_bath`` or
-  ``cp_heat_bath``; the run records which, from the tree's ``sampler`` attribute);
+- ``recommended``: ``liesample.recommended_sampler(system, beta=β)`` (on these lattices
+  Swendsen–Wang, ``heisenberg_cluster``, where the table measured by ``cluster_choice.py``
+  picks it, else the heat bath with one over-relaxation sweep per step,
+  ``heisenberg_heat_bath`` or ``cp_heat_bath``; the run records which, from the tree's
+  ``sampler`` attribute);
 - ``plain heat bath``: ``heisenberg_heat_bath(system, beta=β, overrelaxation=0)`` or
   ``cp_heat_bath(system, beta=β, overrelaxation=0)``, one heat-bath sweep per step.
 
@@ -383,7 +385,8 @@ def _shortest_block_in_tau(rows) -> float:
 def report_section(results) -> str:
     """The ``RESULTS.md`` section for the contents of ``spins_beyond_o3.json``."""
     rows, machine = results["ess"], results["machine"]
-    names = sorted({f"`{r['sampler_name']}` ({r['overrelaxation']} over-relaxation)"
+    names = sorted({f"`{r['sampler_name']}`" + (f" ({r['overrelaxation']} over-relaxation)"
+                                                 if r["overrelaxation"] >= 0 else "")
                     for r in rows if r["sampler"] == "recommended"})  # fmt: skip
     lines = [
         "## Spin lattices beyond O(3): XY, O(4), CP(2) and the topological charge",
