@@ -12,8 +12,9 @@ Writes ``critical_points.json`` and ``critical_points.png``. Every run is one
 with :data:`NUM_CHAINS` chains from random spins, one draw per step after a warm-up of
 :data:`WARMUP` steps, recording the mean spin ``m`` per draw (and, in 2-D, the helicity sums
 of :func:`liesample.analysis.helicity.xy_helicity_sums`). The samplers: ``recommended``
-(``liesample.recommended_sampler(system, beta=β)``: on these lattices the heat bath with one
-over-relaxation sweep per step) and, for the 3-D XY model, ``plain heat bath``
+(``liesample.recommended_sampler(system, beta=β)``: the heat bath with one over-relaxation
+sweep per step, or Swendsen–Wang where its measured table picks it; the rows record which) and,
+for the 3-D XY model, ``plain heat bath``
 (``heisenberg_heat_bath(system, beta=β, overrelaxation=0)``) beside it.
 
 - **3-D XY and O(4).** At three couplings around the published ``β_c`` on two lattice sizes,
