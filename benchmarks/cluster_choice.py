@@ -305,8 +305,8 @@ def _findings(points) -> str:
     return (
         "Summary (computed from the rows above; the winner is the sampler whose slower "
         "quantity has the larger ESS/s): " + "; ".join(parts) + ". A Swendsen–Wang step costs "
-        f"{min(costs):.2g}–{max(costs):.2g}× a heat-bath + over-relaxation step here, so it wins "
-        "even where its τ_int of the energy is the longer. `liesample.recommended_sampler` "
+        f"{min(costs):.2g}–{max(costs):.2g}× a heat-bath + over-relaxation step here, which "
+        "can outweigh a longer τ_int per step. `liesample.recommended_sampler` "
         "follows this table for O(n), n ≠ 3 (`liesample/samplers/recommended.py`, "
         "`N_VECTOR_CLUSTER_WINDOWS`)."
     )
