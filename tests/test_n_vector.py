@@ -224,7 +224,7 @@ def test_recommended_sampler_by_n():
     assert liesample.recommended_sampler(n_vector((8,), 2), beta=1.0).settings["sampler"] == (
         "heisenberg_heat_bath"
     )
-    big = n_vector((32, 32, 32), 4, periodic=True)  # O(4): no measured cluster window
+    big = n_vector((32, 32, 32), 4, periodic=True)  # O(4): β below its cluster window
     assert liesample.recommended_sampler(big, beta=0.7).settings["sampler"] == (
         "heisenberg_heat_bath"
     )
