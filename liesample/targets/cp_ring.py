@@ -45,9 +45,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from liesample.foundation.validation import finite_float, int_at_least
 from liesample.targets.cp_model import check_cp_components
 from liesample.targets.n_vector_ring import RING_TOLERANCE
+from liesample.targets.open_chain import ChainLaw
 
 __all__ = ["CPRingReference"]
 
@@ -61,7 +61,7 @@ half its digits: refused."""
 
 
 @dataclass(frozen=True)
-class CPRingReference:
+class CPRingReference(ChainLaw):
     """Exact energy of a periodic ring of ``length`` CP(N−1) sites without field at ``β`` and
     coupling ``J`` (``K = βJ``), from the spectrum of its transfer matrix (module docstring):
     the reference of ``systems.cp_model((length,), N, coupling, periodic=True)`` for its
@@ -80,17 +80,21 @@ class CPRingReference:
     True
     """
 
-    length: int
-    n: int
-    beta: float
-    coupling: float = 1.0
+    MIN_LENGTH = 2
+    SITES = "sites of the ring"
+
+    @staticmethod
+    def check_components(n) -> int:
+        """``n`` checked by :func:`check_cp_components`."""
+        return check_cp_components(n)
+
+    @property
+    def num_bonds(self) -> int:
+        """Bonds of the ring: ``length`` (``s_length = s_0``)."""
+        return self.length
 
     def __post_init__(self):
-        length = int_at_least("length", self.length, "sites of the ring", minimum=2)
-        object.__setattr__(self, "length", length)
-        object.__setattr__(self, "n", check_cp_components(self.n))
-        object.__setattr__(self, "beta", finite_float("beta", self.beta))
-        object.__setattr__(self, "coupling", finite_float("coupling", self.coupling))
+        super().__post_init__()
         self._spectrum()  # a ring that cannot be summed is refused at once
 
     def _spectrum(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -127,14 +131,6 @@ class CPRingReference:
         """``E[|z_x^† z_{x+1}|²] = ∂_K log Z / length``."""
         p, a, _ = self._spectrum()
         return float(np.sum(p * a))
-
-    def bond_energy_mean(self) -> float:
-        """``E[−J |z_x^† z_{x+1}|²]``: the energy per bond (and per site)."""
-        return -self.coupling * self.bond_mean()
-
-    def energy_mean(self) -> float:
-        """``E[h] = −J length E[|z_x^† z_{x+1}|²]``."""
-        return self.length * self.bond_energy_mean()
 
     def energy_variance(self) -> float:
         """``Var(h) = J² ∂_K² log Z``."""

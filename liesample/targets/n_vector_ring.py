@@ -63,12 +63,12 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from liesample.foundation.validation import finite_float, int_at_least
 from liesample.targets.n_vector import (
     check_spin_components,
     n_vector_bond_mean,
     n_vector_bond_variance,
 )
+from liesample.targets.open_chain import ChainLaw
 
 __all__ = ["RING_TOLERANCE", "NVectorRingReference"]
 
@@ -91,7 +91,7 @@ def _degree_logs(n: int, degrees: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 @dataclass(frozen=True)
-class NVectorRingReference:
+class NVectorRingReference(ChainLaw):
     """Exact Gibbs law of a periodic ring of ``length`` O(n) spins without field at ``β`` and
     coupling ``J`` (``K = βJ``), from the spectrum of its transfer matrix (module docstring).
 
@@ -113,17 +113,21 @@ class NVectorRingReference:
     True
     """
 
-    length: int
-    n: int
-    beta: float
-    coupling: float = 1.0
+    MIN_LENGTH = 2
+    SITES = "sites of the ring"
+
+    @staticmethod
+    def check_components(n) -> int:
+        """``n`` checked by :func:`check_spin_components`."""
+        return check_spin_components(n)
+
+    @property
+    def num_bonds(self) -> int:
+        """Bonds of the ring: ``length`` (``s_length = s_0``)."""
+        return self.length
 
     def __post_init__(self):
-        length = int_at_least("length", self.length, "sites of the ring", minimum=2)
-        object.__setattr__(self, "length", length)
-        object.__setattr__(self, "n", check_spin_components(self.n))
-        object.__setattr__(self, "beta", finite_float("beta", self.beta))
-        object.__setattr__(self, "coupling", finite_float("coupling", self.coupling))
+        super().__post_init__()
         if self._k != 0.0:
             self._spectrum()  # a ring that cannot be summed is refused at once
 
@@ -207,14 +211,6 @@ class NVectorRingReference:
         if self._k == 0.0:
             return 0.0
         return float(np.sum(self._weights() * self._bond_derivatives()[0]))
-
-    def bond_energy_mean(self) -> float:
-        """``E[−J s_x·s_{x+1}]``: the energy per bond (and per site)."""
-        return -self.coupling * self.bond_mean()
-
-    def energy_mean(self) -> float:
-        """``E[h] = −J length E[s_x·s_{x+1}]``."""
-        return self.length * self.bond_energy_mean()
 
     def energy_variance(self) -> float:
         """``Var(h) = J² ∂_K² log Z`` (``J² length / n`` at ``K = 0``)."""
