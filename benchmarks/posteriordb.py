@@ -88,6 +88,7 @@ CHAIN_METHODS = ("sequential", "vectorized")
 SEEDS = (0, 1)
 ANGLES = (0.0, 0.25)  # magnetic_hmc's field angle (--extra): 0 (the default) and 0.25
 Z_LIMIT = 4.0  # a mean further than this many MCSEs from the reference is flagged
+SD_ERROR_AXIS_MAX = 10.0  # the figure's sd-error axis ends here (larger errors marked ▲)
 SD_TOLERANCE = 0.10  # a posterior sd off the reference by more than this fraction is flagged
 RHAT_LIMIT = 1.01  # NUTS is healthy only with R-hat at most this
 GOAL = 1.0  # ESS/s (warm-up included) against the better NUTS, where NUTS is healthy
@@ -751,10 +752,17 @@ def plot(data, path):
             )
             for n in names
         ]
-        axes[1].bar(x + j * width - 0.4, values, width, label=label)
+        # an sd off by orders of magnitude (a stuck chain) would flatten every other bar
+        clipped = [min(v, SD_ERROR_AXIS_MAX) for v in values]
+        axes[1].bar(x + j * width - 0.4, clipped, width, label=label)
+        for k, v in enumerate(values):
+            if v > SD_ERROR_AXIS_MAX:
+                axes[1].text(x[k] + j * width - 0.4, SD_ERROR_AXIS_MAX, "▲", ha="center",
+                             va="bottom", fontsize=6)  # fmt: skip
     axes[1].axhline(data["sd_tolerance"], color="k", lw=0.8, ls="--")
     axes[1].set_yscale("log")
-    axes[1].set_title("max |sd / reference sd − 1| over runs")
+    axes[1].set_ylim(top=SD_ERROR_AXIS_MAX * 3)
+    axes[1].set_title(f"max |sd / reference sd − 1| over runs (▲: above {SD_ERROR_AXIS_MAX:g})")
     for ax in axes:
         ax.set_xticks(x)
         ax.set_xticklabels([short_name(n) for n in names], rotation=35, ha="right", fontsize=7)
