@@ -42,11 +42,11 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import jax.numpy as jnp
 import numpy as np
 
 import liesample
 from benchmarks import common, suites
+from benchmarks.spins_beyond_o3 import _fmt, observables
 from liesample.analysis.diagnostics import expectation_table
 from liesample.systems import n_vector
 
@@ -100,15 +100,6 @@ def random_starts(system, seed):
     return x / np.linalg.norm(x, axis=-1, keepdims=True)
 
 
-def observables(system):
-    n = system.event_shape[-1]
-    volume = int(np.prod(system.event_shape[:-1]))
-    return {
-        "abs_m": lambda s: jnp.linalg.norm(jnp.mean(s.reshape(-1, n), axis=0)),
-        "energy_per_site": lambda s: system.hamiltonian(s) / volume,
-    }
-
-
 def measure(case, label, log):
     """The rows of one run: one per quantity."""
     model, n, dimension, side, beta, num_draws = case
@@ -122,7 +113,7 @@ def measure(case, label, log):
             random_starts(system, SEED),
             num_draws,
             num_warmup=num_warmup,
-            observables=observables(system),
+            observables=observables(model, system),  # |m| and the energy per site
             keep_positions=False,
             progress_bar=False,
         )
@@ -248,10 +239,6 @@ def run(out_dir: Path, quick: bool, log=print) -> None:
         },
     )
     log(f"wrote {path} in {time.perf_counter() - start:.0f} s")
-
-
-def _fmt(value, digits=3):
-    return "—" if value is None or not np.isfinite(value) else f"{value:.{digits}g}"
 
 
 def _point_lines(points):
