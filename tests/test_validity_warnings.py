@@ -78,14 +78,17 @@ def test_unadjusted_langevin_on_a_bounded_support_names_the_adjusted_sampler():
 def test_the_langevin_sampler_on_a_collapsing_vortex_pair_warns_once():
     """lie_poisson_langevin at the β where vortex_metropolis warns: its steps are local too
     (measured at β = −12 it was further off than the sweeps), so it says so, at the caller's
-    line, once: not again when liesample.sample's warm-up rebuilds it with the chosen step."""
-    from liesample.samplers.contract import ValidityWarning, rebuilt
+    line, once: not again when liesample.sample's warm-up remakes it with the chosen step."""
+    from liesample.samplers.contract import ValidityWarning
 
     pair = point_vortices([1.0, 1.0])
     with pytest.warns(ValidityWarning, match="lie_poisson_langevin at beta = -12") as record:
         liesample.lie_poisson_langevin(pair, beta=-12.0, step_size=0.05)
     assert record[0].filename == __file__ and "mix for beta >= -6.28319" in str(record[0].message)
     with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ValidityWarning)
+        built = liesample.lie_poisson_langevin(pair, beta=-12.0, step_size=0.05)
+    with warnings.catch_warnings():
         warnings.simplefilter("error")
-        rebuilt(liesample.lie_poisson_langevin, "test", pair, beta=-12.0, step_size=0.05)
+        assert built.recipe("test", step_size=0.1).settings["step_size_source"] == "test"
         liesample.lie_poisson_langevin(pair, beta=-4.0, step_size=0.05)  # mixes: quiet

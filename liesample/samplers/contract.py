@@ -30,11 +30,14 @@ drift, the last step otherwise) and ArviZ's ``sample_stats`` names in
 attributes with defaults, what the runner and the step loop read: ``settings`` (recorded in
 the ``DataTree`` attributes), ``check_positions`` (checks every start in one vectorised call),
 ``adaptation`` (a :class:`Tunable`: what the warm-up tunes and how, an instance of the
-adaptation protocol of :mod:`liesample.tuning.protocol`) and ``noise_blocks``
-(:class:`liesample.integrators.chain_loop.NoiseBlocks`).
+adaptation protocol of :mod:`liesample.tuning.protocol`), ``noise_blocks``
+(:class:`liesample.integrators.chain_loop.NoiseBlocks`), ``structure`` (:class:`Structure`:
+what decides its compiled program, and the numbers it traces) and ``recipe``
+(:class:`Recipe`: the factory call that made it).
 :func:`as_sampler` reads a plain BlackJAX ``SamplingAlgorithm`` as a :class:`Sampler` with the
-defaults. ``step`` is pure: a sampler's parameters are fixed when it is built (a tuned value
-gives a new sampler, built by its declared ``adaptation.rebuild``).
+defaults. ``step`` is pure: a sampler's numbers are fixed when it is built; tuning returns numbers,
+and the tuned sampler is its ``recipe`` called with them, stepped by the same compiled
+program (its ``structure``, with the numbers traced).
 
 **help().** :func:`sampling_api` builds the module-level ``liesample.<sampler>`` object, a
 ``blackjax.GenerateSamplingAPI`` whose ``help()`` is the top-level docstring.
@@ -70,6 +73,7 @@ __all__ = [
     "BasicInfo",
     "DrawNames",
     "Rebuild",
+    "Recipe",
     "Sampler",
     "SamplerInfo",
     "Structure",
@@ -78,7 +82,6 @@ __all__ = [
     "check_info",
     "energy_name",
     "first_bad_chain",
-    "rebuild_structure",
     "sampling_api",
     "setting",
     "step_key",
@@ -156,53 +159,41 @@ def check_info(info) -> None:
 class Tunable(NamedTuple):
     """What a sampler's warm-up tunes, and how: the one declaration the tuning layer reads.
 
-    A declaration only: :mod:`liesample.tuning` (a higher layer) makes of it an instance of the
-    one adaptation protocol (:mod:`liesample.tuning.protocol`). An orbit sampler declares it as
-    ``Sampler.adaptation`` (:mod:`liesample.tuning.warmup` reads it, for
+    A declaration of numbers only: :mod:`liesample.tuning` (a higher layer) makes of it an
+    instance of the one adaptation protocol (:mod:`liesample.tuning.protocol`), whose result is
+    numbers, and the tuned sampler is the sampler's :class:`Recipe` called with them. An orbit
+    sampler declares it as ``Sampler.adaptation`` (:mod:`liesample.tuning.warmup` reads it, for
     :func:`liesample.sample`'s warm-up); a T*G sampler's API object as
     ``sampling_api(adaptation=…)`` (:func:`liesample.window_adaptation` and the NumPyro kernel
-    read it; the fields ``given`` to ``max_step_size`` are then unused), and the sampler it
-    builds as ``Sampler.adaptation`` with ``given`` and ``rebuild`` set (read by
-    :func:`liesample.sample`'s warm-up).
+    read it; ``given`` and ``choose`` are then unused), and the sampler it builds as
+    ``Sampler.adaptation`` with ``given`` set (read by :func:`liesample.sample`'s warm-up).
 
     method : str
         ``"dual_averaging"`` (the shared step of all chains tuned to a target of their pooled
-        acceptance rate, :func:`liesample.tuning.protocol.step_size_adaptation`), ``"rule"``
-        (the step computed from the run's starts by ``choose``, nothing learnt from the
-        transitions, :func:`liesample.tuning.protocol.fixed`), ``"window"`` (Stan's windows:
-        step size, mass and, for HMC, the integration time,
-        :func:`liesample.tuning.windows.windows_adaptation`) or ``"chees"`` (the same on
-        several chains with the field of magnetic HMC,
-        :func:`liesample.magnetic_window_adaptation`).
+        acceptance rate, :func:`liesample.tuning.protocol.step_size_adaptation`, stepping the
+        sampler's :class:`Structure` with the step traced), ``"rule"`` (the step computed from
+        the run's starts by ``choose``, nothing learnt from the transitions,
+        :func:`liesample.tuning.protocol.fixed`), ``"window"`` (Stan's windows: step size, mass
+        and, for HMC, the integration time, :func:`liesample.tuning.windows.windows_adaptation`)
+        or ``"chees"`` (the same on several chains with the field of magnetic HMC,
+        :func:`liesample.magnetic_window_adaptation`, then its jittered sampler).
     given : bool
         The user gave the step size: without ``adapt=True`` the warm-up keeps it.
     choose : callable
         ``(positions, rng_key) -> (step_size, source)``: the sampler's automatic step for the
         starts ``positions`` (chains first) and a description of how it was chosen.
         ``rng_key=None`` is the choice without warm-up; a key, the warm-up's choice.
-    rebuild : callable
-        Orbit samplers: ``(step_size, source) -> Sampler``, the same sampler with this step (a
-        float), ``source`` recorded as its ``settings["step_size_source"]``. T*G samplers
-        (``"window"``): ``(**parameters) -> Sampler``, a ``functools.partial`` of the sampler's
-        API object with ``logdensity_fn``, ``space`` and every other argument it was built
-        with (its ``keywords`` are what the warm-up keeps: a given mass, a fixed
-        ``num_integration_steps``, the options), called with the tuned parameters
-        (:func:`liesample.tuning.warmup.window_warm_up`).
-    at : callable or None
-        ``(step_size, **parameters) -> Sampler`` whose step uses ``step_size`` and the values
-        of ``parameters``, all of which may be traced (the warm-up of ``"dual_averaging"``);
-        ``None`` for ``"rule"``.
-    parameters : dict
-        The sampler's other numeric parameters (name -> float), which the warm-up passes to
-        ``at`` as arrays of the positions' dtype: one compiled warm-up serves every value.
     target_acceptance_rate : float or None
         What ``"dual_averaging"`` aims at.
     max_step_size : float or None
         The largest step ``"dual_averaging"`` may use (where every proposal is accepted, at
         ``β = 0`` say, it would grow the step without bound); ``None``: no bound.
     adapted : tuple of str
-        The parameters the warm-up tunes (``("step_size",)`` for the orbit samplers;
-        ``step_size``, ``inverse_mass_matrix``, ``num_integration_steps``, ``magnetic_field``).
+        The numbers the warm-up tunes, by their keyword in the sampler's :class:`Recipe` and
+        :class:`Structure` (``("step_size",)`` for the orbit samplers, ``("proposal_scale",)``
+        for the vortices' Metropolis; ``step_size``, ``inverse_mass_matrix``,
+        ``num_integration_steps``, ``magnetic_field``); ``"rule"`` and ``"dual_averaging"``
+        tune the first.
     accepts : tuple of str
         The kernel's parameters a caller of the window adaptation may give.
     options : tuple of str
@@ -214,9 +205,6 @@ class Tunable(NamedTuple):
     method: str
     given: bool = False
     choose: Callable | None = None
-    rebuild: Callable | None = None
-    at: Callable | None = None
-    parameters: dict | None = None
     target_acceptance_rate: float | None = None
     max_step_size: float | None = None
     adapted: tuple = ("step_size",)
@@ -267,16 +255,43 @@ class Rebuild(Program):
             return self.make(*args, **options, **values)
 
 
-def rebuild_structure(factory: Callable, args: tuple, options: Mapping, values: Mapping):
-    """The :class:`Structure` of the sampler ``factory(*args, **options, **values)``, or ``None``
-    where ``args`` or ``options`` have no canonical form (the sampler is then compiled for its
-    own object). ``values`` left ``None`` are options (a program's shape), not numbers."""
-    numbers = {k: v for k, v in values.items() if v is not None}
-    options = {**options, **{k: v for k, v in values.items() if v is None}}
-    build = Rebuild(factory, args, options)
-    if not build.by_value:
-        return None
-    return Structure(build, numbers)
+class Recipe(NamedTuple):
+    """The call that made a sampler, ``factory(*args, **options, **numbers)``: what a warm-up
+    remakes it with, its tuned numbers in place of the old (:meth:`__call__`).
+
+    ``numbers`` are the keywords a warm-up may tune or a sweep vary (the step size, ``β``, a
+    mass, a model's arguments), ``options`` the others (the scheme, a threshold); a number left
+    ``None`` is unset (a step the warm-up is to choose).
+    """
+
+    factory: Callable
+    args: tuple
+    options: Mapping
+    numbers: Mapping
+
+    def __call__(self, source: str | None = None, **numbers) -> Sampler:
+        """The sampler with ``numbers`` in place of the recipe's, ``source`` (how they were
+        chosen) recorded as its ``step_size_source`` setting; without the
+        :class:`ValidityWarning` the user's build gave."""
+        unknown = sorted(set(numbers) - set(self.numbers))
+        if unknown:
+            raise TypeError(f"{unknown} are not numbers of this sampler: {sorted(self.numbers)}")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ValidityWarning)
+            sampler = self.factory(*self.args, **self.options, **{**self.numbers, **numbers})
+        if source is not None:
+            sampler.settings["step_size_source"] = source
+        return sampler
+
+    def structure(self) -> Structure | None:
+        """The :class:`Structure` of a factory whose numbers can be traced (the ``T*G`` and
+        magnetic samplers): ``build`` a :class:`Rebuild` of the factory, ``values`` the numbers
+        that are set; ``None`` where ``args`` or ``options`` have no canonical form (the sampler
+        is then compiled for its own object)."""
+        numbers = {k: v for k, v in self.numbers.items() if v is not None}
+        unset = {k: v for k, v in self.numbers.items() if v is None}
+        build = Rebuild(self.factory, self.args, {**self.options, **unset})
+        return Structure(build, numbers) if build.by_value else None
 
 
 class Sampler(blackjax.base.SamplingAlgorithm, DeclaresNoiseBlocks):
@@ -325,6 +340,10 @@ class Sampler(blackjax.base.SamplingAlgorithm, DeclaresNoiseBlocks):
         The sampler as a structure and numeric values (:class:`Structure`), so that the runner
         compiles one program for every sampler of the same structure (a sweep over ``β``, a
         step size chosen per run). ``None`` (default): the runner compiles for this object.
+    recipe : Recipe or None
+        The factory call that made the sampler (:class:`Recipe`): a warm-up's tuned numbers
+        give the tuned sampler ``recipe(source, **numbers)``. ``None`` (default): nothing
+        remakes it (a sampler without an ``adaptation``).
     """
 
     if TYPE_CHECKING:  # a sampler's own dict (the hooks give each one); read-only placeholder
@@ -339,6 +358,7 @@ class Sampler(blackjax.base.SamplingAlgorithm, DeclaresNoiseBlocks):
     divergence_advice: str | None = None
     energy_name: str | None = None
     structure: Structure | None = None
+    recipe: Recipe | None = None
 
     def __new__(cls, init, step, **hooks):
         unknown = sorted(set(hooks) - set(HOOKS))
@@ -362,6 +382,7 @@ HOOKS = {
     "divergence_advice": None,
     "energy_name": None,
     "structure": None,
+    "recipe": None,
 }
 """The hooks a :class:`Sampler` declares, each with the factory of its default (``None``:
 the default is ``None``); keyword arguments of ``Sampler(init, step, **hooks)``."""
@@ -370,18 +391,7 @@ the default is ``None``); keyword arguments of ``Sampler(init, step, **hooks)``.
 class ValidityWarning(UserWarning):
     """A sampler built where it is known not to sample its target reliably (the message says
     why and what to do instead); given once, when the user builds it, not again when the
-    warm-up rebuilds it with a tuned step (:func:`rebuilt`)."""
-
-
-def rebuilt(build: Callable, source: str, *args, **kwargs) -> Sampler:
-    """``build(*args, **kwargs)`` recording ``source`` as its ``step_size_source`` setting (what a
-    :class:`Tunable`'s ``rebuild`` returns); a :class:`ValidityWarning` was given when the user
-    built the sampler, so the rebuild gives none."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ValidityWarning)
-        sampler = build(*args, **kwargs)
-    sampler.settings["step_size_source"] = source
-    return sampler
+    warm-up remakes it with a tuned step (:class:`Recipe`)."""
 
 
 def as_sampler(algorithm) -> Sampler:

@@ -22,7 +22,8 @@ A sampler declares what its warm-up tunes (``Sampler.adaptation``, a
 :func:`choose_from_starts` is the same declaration without a warm-up (the step size left unset):
 the sampler's own automatic step for the run's starts (``choose(positions, None)``).
 
-Either returns a new sampler built by ``rebuild`` (the chosen step and how it was chosen in its
+Each ends in numbers; the tuned sampler is the sampler's recipe called with them
+(:class:`liesample.samplers.contract.Recipe`: the chosen step, and how it was chosen, in its
 ``settings``); the sampler given is not changed.
 """
 
@@ -37,7 +38,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from liesample.foundation.compile import jit
-from liesample.samplers.contract import Sampler, SamplingAPI, Tunable
+from liesample.samplers.contract import Recipe, Sampler, SamplingAPI, Tunable
+from liesample.samplers.cotangent.magnetic_hmc import jittered_magnetic_hmc
 from liesample.tuning.adaptation import magnetic_window_adaptation, window_adaptation
 from liesample.tuning.protocol import fixed, run_adaptation, step_size_adaptation
 
@@ -73,7 +75,14 @@ def choose_from_starts(sampler: Sampler, initial_positions) -> Sampler:
             "sets its step. Pass num_warmup > 0 (the warm-up tunes it, with the mass) or "
             "build it with step_size"
         )
-    return tunable.rebuild(*tunable.choose(_host(initial_positions), None))
+    step_size, source = tunable.choose(_host(initial_positions), None)
+    return _recipe(sampler)(source, **{tunable.adapted[0]: step_size})
+
+
+def _recipe(sampler: Sampler) -> Recipe:
+    if sampler.recipe is None:
+        raise ValueError("this sampler declares no recipe (Sampler.recipe): nothing remakes it")
+    return sampler.recipe
 
 
 def adaptation_of(sampler: Sampler, initial_positions, rng_key):
@@ -98,13 +107,14 @@ def _step_cap(tunable) -> float:
     return np.inf if tunable.max_step_size is None else float(tunable.max_step_size)
 
 
-@functools.partial(jit, static_argnames=("at", "target", "num_warmup"))
-def _dual_averaging(chain_keys, states, initial, others, cap, *, at, target, num_warmup):
-    """The warm-up of ``"dual_averaging"``: one program for every value of the step, of the
-    sampler's ``others`` and of the ``cap`` (traced), for a structure's ``at`` (hashable)."""
+@functools.partial(jit, static_argnames=("build", "name", "target", "num_warmup"))
+def _dual_averaging(chain_keys, states, initial, others, cap, *, build, name, target, num_warmup):
+    """The warm-up of ``"dual_averaging"``: one program for every value of the step (the
+    structure's value ``name``), of its ``others`` and of the ``cap`` (traced), for a
+    structure's ``build`` (hashable)."""
     adaptation = step_size_adaptation(target, "acceptance_rate", cap)
     return run_adaptation(
-        adaptation, lambda step_size: at(step_size, **others), chain_keys, states,
+        adaptation, lambda step_size: build(**{name: step_size}, **others), chain_keys, states,
         {"step_size": initial}, num_warmup, _acceptance,
     )  # fmt: skip
 
@@ -127,14 +137,18 @@ def warm_up(sampler: Sampler, rng_key, chain_keys, states, initial_positions, nu
     if tunable.method in ("window", "chees"):
         return window_warm_up(sampler, rng_key, initial_positions, num_warmup)
     adaptation, initial, source = adaptation_of(sampler, initial_positions, rng_key)
+    name = tunable.adapted[0]
     if adaptation.update is None:
         step_size = adaptation.final(adaptation.init(states, {}))["step_size"]
-        return tunable.rebuild(float(step_size), source), None
+        return _recipe(sampler)(source, **{name: float(step_size)}), None
+    if sampler.structure is None:
+        raise ValueError("dual averaging steps the sampler's Structure: it declares none")
     dtype = jax.tree.leaves(states.position)[0].dtype
-    others = {name: jnp.asarray(v, dtype) for name, v in (tunable.parameters or {}).items()}
+    values = sampler.structure.values
+    others = {k: jnp.asarray(v, dtype) for k, v in values.items() if k != name}
     moved, parameters, rates = _dual_averaging(
         chain_keys, states, jnp.asarray(initial, dtype), others,
-        jnp.asarray(_step_cap(tunable), dtype), at=tunable.at,
+        jnp.asarray(_step_cap(tunable), dtype), build=sampler.structure.build, name=name,
         target=tunable.target_acceptance_rate, num_warmup=num_warmup,
     )  # fmt: skip
     step_size = float(parameters["step_size"])
@@ -147,7 +161,7 @@ def warm_up(sampler: Sampler, rng_key, chain_keys, states, initial_positions, nu
         f"{initial:.4g}; mean acceptance in the second half of the warm-up "
         f"{float(mean):.3f}"
     )
-    return tunable.rebuild(step_size, source), moved
+    return _recipe(sampler)(source, **{name: step_size}), moved
 
 
 MODEL = ("model_args", "model_kwargs")
@@ -163,12 +177,14 @@ def window_warm_up(sampler: Sampler, rng_key, initial_positions, num_warmup: int
     """The warm-up of a T*G sampler (``Tunable.method == "window"``): ``(tuned, states)``.
 
     :func:`liesample.window_adaptation` of the sampler's API object with the arguments it was
-    built with (``Tunable.rebuild``'s keywords), on every chain together (chain ``c`` with key
-    ``split(rng_key, chains)[c]``, as the sampling that follows). It tunes the step size (from
-    a given one with ``adapt=True``, else from :data:`INITIAL_STEP_SIZE`), the inverse mass
-    unless one was given, and for HMC the integration time unless ``num_integration_steps``
-    was given. ``tuned`` is ``rebuild(**tuned parameters)``; its settings record what was
-    adapted (``adapted_parameters``, ``inverse_mass_matrix`` as JSON, ``step_size_source``).
+    built with (its :class:`~liesample.samplers.contract.Recipe`), on every chain together
+    (chain ``c`` with key ``split(rng_key, chains)[c]``, as the sampling that follows). It
+    tunes the step size (from a given one with ``adapt=True``, else from
+    :data:`INITIAL_STEP_SIZE`), the inverse mass unless one was given, and for HMC the
+    integration time unless ``num_integration_steps`` was given. ``tuned`` is the recipe called
+    with the tuned numbers (``"chees"``: :func:`liesample.jittered_magnetic_hmc`'s, with the
+    recipe's arguments); its settings record what was adapted (``adapted_parameters``,
+    ``inverse_mass_matrix`` as JSON, ``step_size_source``).
     """
     if isinstance(num_warmup, bool) or int(num_warmup) != num_warmup or num_warmup < 20:
         raise ValueError(
@@ -177,34 +193,45 @@ def window_warm_up(sampler: Sampler, rng_key, initial_positions, num_warmup: int
             "hundred is typical), or give step_size and adapt=False"
         )
     tunable = cast(Tunable, sampler.adaptation)  # a T*G sampler built by its API object has one
-    factory = cast(functools.partial, tunable.rebuild)  # its API object, partially applied
-    kept = {k: v for k, v in factory.keywords.items() if v is not None and k != "jitter"}
+    recipe = _recipe(sampler)
+    given = {**recipe.options, **recipe.numbers}
+    kept = {k: v for k, v in given.items() if v is not None and k not in ("jitter", "step_size")}
     initial = sampler.settings["step_size"] if tunable.given else INITIAL_STEP_SIZE
     adapt_mass = "inverse_mass_matrix" not in kept
     if tunable.method == "chees":  # magnetic HMC: every parameter, then the jittered sampler
         options = {k: kept[k] for k in (*tunable.options, *MODEL) if k in kept}
-        warm = magnetic_window_adaptation(*factory.args, initial_step_size=initial, **options)
+        warm = magnetic_window_adaptation(*recipe.args, initial_step_size=initial, **options)
         adapted = list(tunable.adapted)
+        recipe = recipe._replace(factory=jittered_magnetic_hmc)
     else:
-        api = cast(SamplingAPI[...], factory.func)  # the sampler's API object (Tunable.rebuild)
+        api = cast(SamplingAPI[...], recipe.factory)  # the sampler's API object
         warm = window_adaptation(
-            api, *factory.args, initial_step_size=initial, adapt_mass=adapt_mass, **kept
+            api, *recipe.args, initial_step_size=initial, adapt_mass=adapt_mass, **kept
         )
         adapted = ["step_size"] + ["inverse_mass_matrix"] * adapt_mass
     (states, parameters), _ = warm.run(rng_key, initial_positions, int(num_warmup))
-    tuned = factory(**parameters)
+    target = tunable.target_acceptance_rate
+    source = (
+        f"warm-up {tunable.method} adaptation (all chains together) to target rate "
+        f"{target:g}, from {initial:.4g}"
+    )
+    tuned = _remade(recipe, source, parameters)
     if parameters.get("jitter"):
         adapted.append("num_integration_steps")
-    target = tunable.target_acceptance_rate
     tuned.settings.update(
-        step_size_source=(
-            f"warm-up {tunable.method} adaptation (all chains together) to target rate "
-            f"{target:g}, from {initial:.4g}"
-        ),
         adapted_parameters=", ".join(adapted),
         inverse_mass_matrix=_as_json(parameters["inverse_mass_matrix"]),
     )
     return tuned, states
+
+
+def _remade(recipe: Recipe, source: str, parameters: dict) -> Sampler:
+    """The recipe's sampler at the tuned ``parameters``: those it has as numbers replace its
+    own, the others (a tuned integration time where the sampler was built without one, the
+    jitter that goes with it) are given as keywords beside its options."""
+    numbers = {k: v for k, v in parameters.items() if k in recipe.numbers}
+    options = {**recipe.options, **{k: v for k, v in parameters.items() if k not in numbers}}
+    return recipe._replace(options=options)(source, **numbers)
 
 
 def _as_json(tree) -> str:

@@ -406,12 +406,13 @@ def unset_step(sampler: str, arguments: str = "logdensity_fn, space") -> Callabl
 
 
 def space_sampler(logdensity_fn, space, step_fn: Callable, settings: dict,
-                  adaptation=None, divergence_advice=None, structure=None) -> Sampler:  # fmt: skip
+                  adaptation=None, divergence_advice=None, recipe=None) -> Sampler:  # fmt: skip
     """The :class:`~liesample.samplers.contract.Sampler` of ``step_fn`` on ``space``: keyless
     :func:`init` and :func:`check_starts`; ``adaptation`` its
     :class:`~liesample.samplers.contract.Tunable`; ``divergence_advice`` its
     ``Sampler.divergence_advice`` (:func:`unadjusted_advice` for an unadjusted step);
-    ``structure`` its :class:`~liesample.samplers.contract.Structure`."""
+    ``recipe`` its :class:`~liesample.samplers.contract.Recipe`, and the
+    :class:`~liesample.samplers.contract.Structure` that gives."""
     check_logdensity_fn(logdensity_fn)
 
     def init_fn(position, rng_key=None):
@@ -430,7 +431,8 @@ def space_sampler(logdensity_fn, space, step_fn: Callable, settings: dict,
         adaptation=adaptation,
         stuck_advice=window_advice(settings["sampler"], "logdensity_fn, space"),
         divergence_advice=divergence_advice,
-        structure=structure,
+        structure=None if recipe is None else recipe.structure(),
+        recipe=recipe,
     )
 
 

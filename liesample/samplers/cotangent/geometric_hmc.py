@@ -39,9 +39,9 @@ from liesample.foundation.types import LogDensityFn, PyTree
 from liesample.foundation.validation import concrete_array
 from liesample.geometry.spaces import SpaceTree
 from liesample.samplers.contract import (
+    Recipe,
     Sampler,
     Tunable,
-    rebuild_structure,
     sampling_api,
     setting,
     step_key,
@@ -283,15 +283,7 @@ def as_top_level_api(
         space, step_size, num_integration_steps, divergence_threshold, magnetic_field,
         momentum_persistence, persistent, integrator, jitter,
     )  # fmt: skip
-    # what the warm-up rebuilds the sampler with: every argument but the tuned step size
-    rebuild = functools.partial(
-        geometric_hmc, logdensity_fn, space, num_integration_steps=num_integration_steps,
-        inverse_mass_matrix=inverse_mass_matrix, magnetic_field=magnetic_field,
-        divergence_threshold=divergence_threshold, momentum_persistence=momentum_persistence,
-        persistent=persistent, integrator=integrator, jitter=jitter, model_args=model_args,
-        model_kwargs=model_kwargs,
-    )  # fmt: skip
-    tunable = ADAPTATION._replace(given=step_size is not None, rebuild=rebuild)
+    tunable = ADAPTATION._replace(given=step_size is not None)
     fixed: dict[str, Any] = {"divergence_threshold": divergence_threshold, "integrator": integrator,
              "momentum_persistence": momentum_persistence, "persistent": persistent,
              "jitter": jitter}  # fmt: skip
@@ -302,14 +294,14 @@ def as_top_level_api(
         numbers["num_integration_steps"] = jnp.asarray(num_integration_steps)
     else:
         fixed["num_integration_steps"] = num_integration_steps
-    structure = rebuild_structure(geometric_hmc, (logdensity_fn, space), fixed, numbers)
+    recipe = Recipe(geometric_hmc, (logdensity_fn, space), fixed, numbers)
     if step_size is None:
         unset = unset_step("geometric_hmc")
-        return space_sampler(density, space, unset, settings, tunable, structure=structure)
+        return space_sampler(density, space, unset, settings, tunable, recipe=recipe)
     check_positive_step_size(step_size)
     move = make_move(density, space, step_size, inverse_mass_matrix, magnetic_field, scheme)
     step_fn = functools.partial(_step, move, num_integration_steps, jitter, options)
-    return space_sampler(density, space, step_fn, settings, tunable, structure=structure)
+    return space_sampler(density, space, step_fn, settings, tunable, recipe=recipe)
 
 
 def _settings(space, step_size, num_integration_steps, divergence_threshold, magnetic_field,

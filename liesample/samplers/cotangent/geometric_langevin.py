@@ -27,7 +27,6 @@ A non-finite step is rejected (state kept) and flagged ``is_divergent`` in both 
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Callable, Sequence
 
 import jax
@@ -39,9 +38,9 @@ from liesample.foundation.validation import concrete_array, finite_float
 from liesample.geometry.cotangent import check_scheme
 from liesample.geometry.spaces import SpaceTree
 from liesample.samplers.contract import (
+    Recipe,
     Sampler,
     Tunable,
-    rebuild_structure,
     sampling_api,
     setting,
     step_key,
@@ -273,23 +272,16 @@ def as_top_level_api(
     if magnetic_field is not None:
         settings["magnetic"] = True
     settings.update(scheme_setting(integrator, "obab"))
-    # what the warm-up rebuilds the sampler with: every argument but the tuned step size
-    rebuild = functools.partial(
-        geometric_langevin, logdensity_fn, space, friction=friction,
-        inverse_mass_matrix=inverse_mass_matrix, magnetic_field=magnetic_field,
-        adjusted=adjusted, divergence_threshold=divergence_threshold, integrator=integrator,
-        model_args=model_args, model_kwargs=model_kwargs,
-    )  # fmt: skip
-    tunable = ADAPTATION._replace(given=step_size is not None, rebuild=rebuild)
+    tunable = ADAPTATION._replace(given=step_size is not None)
     fixed = {"adjusted": adjusted, "divergence_threshold": divergence_threshold,
              "integrator": integrator}  # fmt: skip
     numbers = {"step_size": step_size, "friction": friction, "magnetic_field": magnetic_field,
                "inverse_mass_matrix": inverse_mass_matrix}  # fmt: skip
     numbers.update(model_values(model_args, model_kwargs))
-    structure = rebuild_structure(geometric_langevin, (logdensity_fn, space), fixed, numbers)
+    recipe = Recipe(geometric_langevin, (logdensity_fn, space), fixed, numbers)
     if step_size is None:
         unset = unset_step("geometric_langevin")
-        return space_sampler(density, space, unset, settings, tunable, structure=structure)
+        return space_sampler(density, space, unset, settings, tunable, recipe=recipe)
     check_positive_step_size(step_size)
     move = make_move(density, space, step_size, inverse_mass_matrix, magnetic_field, scheme)
 
@@ -305,7 +297,7 @@ def as_top_level_api(
             "liesample.geometric_hmc(logdensity_fn, space)"
         )
     )
-    return space_sampler(density, space, step_fn, settings, tunable, advice, structure)
+    return space_sampler(density, space, step_fn, settings, tunable, advice, recipe)
 
 
 geometric_langevin = sampling_api(

@@ -29,7 +29,6 @@ Non-finite energies are rejected and flagged ``is_divergent``; the state is then
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple
 
@@ -41,9 +40,9 @@ from jax.typing import ArrayLike
 from liesample.foundation.types import LogDensityFn
 from liesample.geometry.cotangent import LEAPFROG, PhasePoint, compose, drift, kick
 from liesample.samplers.contract import (
+    Recipe,
     Sampler,
     Tunable,
-    rebuild_structure,
     sampling_api,
     setting,
     step_key,
@@ -364,7 +363,7 @@ def as_top_level_api(
         settings=settings,
         check_positions=check_positions,
         stuck_advice=STUCK_ADVICE,
-        structure=rebuild_structure(magnetic_hmc, (logdensity_fn,), fixed, numbers),
+        structure=Recipe(magnetic_hmc, (logdensity_fn,), fixed, numbers).structure(),
     )
 
 
@@ -373,7 +372,7 @@ def _unset(logdensity_fn, fixed: dict, model: dict) -> Sampler:
     :func:`liesample.sample`'s warm-up tunes it (``"chees"``) and rebuilds it
     (:func:`jittered_magnetic_hmc` with the other arguments, ``fixed``, and the model's
     arguments ``model``)."""
-    rebuild = functools.partial(jittered_magnetic_hmc, logdensity_fn, **fixed, **model)
+    recipe = Recipe(magnetic_hmc, (logdensity_fn,), fixed, model)
     settings = {"sampler": "magnetic_hmc", "step_size": None, "step_size_source": UNSET}
     density = with_model_arguments(logdensity_fn, *_model_arguments(model))
     return Sampler(
@@ -381,9 +380,10 @@ def _unset(logdensity_fn, fixed: dict, model: dict) -> Sampler:
         unset_step("magnetic_hmc", "logdensity_fn"),
         settings=settings,
         check_positions=check_starts(logdensity_fn, None, _model_arguments(model)),
-        adaptation=ADAPTATION._replace(rebuild=rebuild),
+        adaptation=ADAPTATION,
         stuck_advice=STUCK_ADVICE,
-        structure=rebuild_structure(magnetic_hmc, (logdensity_fn,), fixed, model),
+        structure=recipe.structure(),
+        recipe=recipe,
     )
 
 
@@ -473,5 +473,5 @@ def jittered_magnetic_hmc(
         settings=settings,
         check_positions=base.check_positions,
         stuck_advice=STUCK_ADVICE,
-        structure=rebuild_structure(jittered_magnetic_hmc, (logdensity_fn,), options, numbers),
+        structure=Recipe(jittered_magnetic_hmc, (logdensity_fn,), options, numbers).structure(),
     )

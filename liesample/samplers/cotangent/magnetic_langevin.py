@@ -38,8 +38,8 @@ from jax.typing import ArrayLike
 
 from liesample.foundation.types import LogDensityFn
 from liesample.samplers.contract import (
+    Recipe,
     Sampler,
-    rebuild_structure,
     sampling_api,
     setting,
     step_key,
@@ -261,7 +261,7 @@ def as_top_level_api(
             "(info.metropolis_rate is the rate the step would have as a Metropolis proposal)."
         ),
         divergence_advice=unadjusted_advice("liesample.magnetic_hmc(logdensity_fn, ...)"),
-        structure=rebuild_structure(magnetic_langevin, (logdensity_fn,), fixed, numbers),
+        structure=Recipe(magnetic_langevin, (logdensity_fn,), fixed, numbers).structure(),
     )
 
 

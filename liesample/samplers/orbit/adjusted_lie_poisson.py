@@ -72,10 +72,10 @@ from liesample.foundation.validation import concrete_array, finite_float
 from liesample.integrators.chain_loop import DEFAULT_NOISE_BLOCK_SIZE, NoiseBlocks, check_block_size
 from liesample.integrators.stability import check_precision, stiffness
 from liesample.samplers.contract import (
+    Recipe,
     Sampler,
     Structure,
     Tunable,
-    rebuilt,
     sampling_api,
     step_key,
 )
@@ -424,23 +424,23 @@ def _check_positions(system, check_orbits, positions, *, step_size_checks=True):
 
 @dataclass(frozen=True)
 class _Stepper:
-    """What decides the compiled step (the :class:`Structure`'s ``build``, and the warm-up's
-    ``at``): called with the step ``value``, ``sigma`` and ``beta`` (floats, or traced), the
+    """What decides the compiled step (the :class:`Structure`'s ``build``, which the warm-up
+    steps too): called with the ``step_size``, ``sigma`` and ``beta`` (floats, or traced), the
     sampler with ``hooks``."""
 
     system: LiePoissonSystem
     noise_block_size: int
 
-    def __call__(self, value, sigma, beta, init_fn=None, **hooks) -> Sampler:
+    def __call__(self, step_size, sigma, beta, init_fn=None, **hooks) -> Sampler:
         system, size = self.system, self.noise_block_size
         noise_kernel = _noise_kernel(system)
         kernel = _keyed(system, noise_kernel)
 
         def step_fn(rng_key, state):
-            return kernel(step_key(rng_key), state, value, sigma, beta)
+            return kernel(step_key(rng_key), state, step_size, sigma, beta)
 
         def block_step(noise, state):
-            return noise_kernel(noise, state, value, sigma, beta)
+            return noise_kernel(noise, state, step_size, sigma, beta)
 
         def draw_block(rng_key, state):
             return _draw_noise(system, rng_key, (size,), state.position.dtype)
@@ -469,20 +469,14 @@ def _sampler(system, beta, sigma, step_size, target, noise_block_size) -> Sample
         step_size = _default_step_size(system, beta, sigma, system.default_position)
         settings.update(step_size=step_size, step_size_source=_DEFAULT_SOURCE + _ON_DEFAULT)
 
-    def rebuild(value, source):
-        options = {"target_acceptance_rate": target, "noise_block_size": noise_block_size}
-        return rebuilt(as_top_level_api, source, system, beta=beta, sigma=sigma, step_size=value,
-                       **options)  # fmt: skip
-
+    options = {"beta": beta, "sigma": sigma, "target_acceptance_rate": target,
+               "noise_block_size": noise_block_size}  # fmt: skip
     check_orbits = functools.partial(_check_orbits, system, beta, sigma)
     at = _Stepper(system, noise_block_size)
     tunable = Tunable(
         "dual_averaging",
         given,
         functools.partial(_choose, system, beta, sigma),
-        rebuild,
-        at=at,
-        parameters={"sigma": sigma, "beta": beta},
         target_acceptance_rate=target,
         # beyond this the noise alone crosses the orbit many times per step; at β = 0 every
         # proposal is accepted and dual averaging would grow the step without bound
@@ -496,7 +490,8 @@ def _sampler(system, beta, sigma, step_size, target, noise_block_size) -> Sample
         settings=settings,
         check_positions=functools.partial(_check_positions, system, check_orbits),
         adaptation=tunable,
-        structure=Structure(at, {"value": step_size, "sigma": sigma, "beta": beta}),
+        structure=Structure(at, {"step_size": step_size, "sigma": sigma, "beta": beta}),
+        recipe=Recipe(as_top_level_api, (system,), options, {"step_size": step_size}),
     )
 
 

@@ -43,10 +43,10 @@ from liesample.integrators.stability import (
     stiffness_on_orbits,
 )
 from liesample.samplers.contract import (
+    Recipe,
     Sampler,
     Structure,
     Tunable,
-    rebuilt,
     sampling_api,
     step_key,
 )
@@ -279,8 +279,8 @@ def as_top_level_api(
 
 
 class _Plan(NamedTuple):
-    """The checked arguments of :func:`as_top_level_api` (``options``: what ``rebuild`` passes
-    back to it)."""
+    """The checked arguments of :func:`as_top_level_api` (``options``: what its
+    :class:`Recipe` passes back to it, with the step)."""
 
     system: LiePoissonSystem
     integrator: Integrator
@@ -450,10 +450,6 @@ def _sampler(plan: _Plan, current_step) -> Sampler:
         step_size_source="given" if given else _UNCHOSEN, noise_block_size=plan.noise_block_size,
     )  # fmt: skip
     check_orbits = functools.partial(_check_orbits, plan, current_step, settings)
-
-    def rebuild(value, source):
-        return rebuilt(as_top_level_api, source, system, **plan.options, step_size=value)
-
     stepper = _Stepper(system, plan.integrator, plan.scene, plan.noise_block_size)
     values = {"step_size": plan.step_size, "sigma": sigma, "theta": theta}
     return stepper(
@@ -463,7 +459,8 @@ def _sampler(plan: _Plan, current_step) -> Sampler:
         init_fn=_starts.orbit_init_fn(init, system, check_orbits),
         settings=settings,
         check_positions=functools.partial(_check_positions, plan, check_orbits),
-        adaptation=Tunable("rule", given, functools.partial(_choose, plan), rebuild),
+        adaptation=Tunable("rule", given, functools.partial(_choose, plan)),
+        recipe=Recipe(as_top_level_api, (system,), plan.options, {"step_size": plan.step_size}),
         law_groups=_starts.orbit_groups(system),
         stuck_advice="Give a smaller step_size, or leave it unset: liesample.sample then "
         "chooses it from the starts by the bias model.",

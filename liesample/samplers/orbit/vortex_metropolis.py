@@ -56,11 +56,11 @@ from liesample.dynamics.system import checked_beta
 from liesample.foundation.validation import finite_float
 from liesample.samplers.contract import (
     BasicInfo,
+    Recipe,
     Sampler,
     Structure,
     Tunable,
     ValidityWarning,
-    rebuilt,
     sampling_api,
     step_key,
 )
@@ -285,8 +285,8 @@ def as_top_level_api(
 
 
 def _build(system, beta, proposal, proposal_scale, target_acceptance_rate) -> Sampler:
-    """:func:`as_top_level_api` after its checks of ``system`` and ``beta`` (what the warm-up's
-    rebuild calls, so the mixing warning is given once)."""
+    """:func:`as_top_level_api` after its checks of ``system`` and ``beta`` (the factory of its
+    :class:`Recipe`, so the mixing warning is given once)."""
     if proposal not in PROPOSALS:
         raise ValueError(f"proposal must be one of {PROPOSALS}, got {proposal!r}")
     given = proposal_scale is not None
@@ -302,20 +302,21 @@ def _build(system, beta, proposal, proposal_scale, target_acceptance_rate) -> Sa
         step_size_source="given" if given else _SOURCE_DEFAULT,
         target_acceptance_rate=target,
     )
-    options = {"proposal": proposal, "target_acceptance_rate": target}
+    options = {"beta": beta, "proposal": proposal, "target_acceptance_rate": target}
     at = _Stepper(system, proposal)
     # dual averaging of the proposal scale at ``target``, up to MAX_PROPOSAL_SCALE
     tunable = Tunable(
-        "dual_averaging", given, _choose, functools.partial(_rebuild, system, beta, options), at,
-        {"beta": beta}, target, MAX_PROPOSAL_SCALE,
-    )  # fmt: skip
+        "dual_averaging", given, _choose, target, MAX_PROPOSAL_SCALE, adapted=("proposal_scale",)
+    )
+    scale = settings["step_size"]
     return at(
-        settings["step_size"],
+        scale,
         beta,
         settings=settings,
         check_positions=functools.partial(_check_positions, system),
         adaptation=tunable,
-        structure=Structure(at, {"value": settings["step_size"], "beta": beta}),
+        structure=Structure(at, {"proposal_scale": scale, "beta": beta}),
+        recipe=Recipe(_build, (system,), options, {"proposal_scale": proposal_scale}),
     )
 
 
@@ -336,27 +337,20 @@ def _choose(positions, rng_key=None):
     return DEFAULT_PROPOSAL_SCALE, _SOURCE_DEFAULT
 
 
-def _rebuild(system, beta, options, value, source):
-    value = min(float(value), MAX_PROPOSAL_SCALE)
-    return rebuilt(
-        _build, source, system, beta, options["proposal"], value, options["target_acceptance_rate"]
-    )
-
-
 @dataclass(frozen=True)
 class _Stepper:
-    """What decides the compiled step (the :class:`Structure`'s ``build`` and the warm-up's
-    ``at``): called with the proposal scale ``value`` and ``beta`` (floats, or traced), the
+    """What decides the compiled step (the :class:`Structure`'s ``build``, which the warm-up
+    steps too): called with the ``proposal_scale`` and ``beta`` (floats, or traced), the
     sampler with ``hooks``."""
 
     system: PointVortexSystem
     proposal: str
 
-    def __call__(self, value, beta, **hooks) -> Sampler:
+    def __call__(self, proposal_scale, beta, **hooks) -> Sampler:
         kernel = build_kernel(self.system, self.proposal)
 
         def step_fn(rng_key, state):
-            return kernel(step_key(rng_key), state, beta, value)
+            return kernel(step_key(rng_key), state, beta, proposal_scale)
 
         return Sampler(plain_init_fn(init, self.system), step_fn, **hooks)
 
