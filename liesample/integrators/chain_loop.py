@@ -128,8 +128,9 @@ def run_steps(algorithm, key, state, first_step, num_steps, update=None, extra=N
 
 
 def run_draws(
-    algorithm, key, state, first_step, num_draws: int, thinning: int, reduce, record=None
-):
+    algorithm, key, state, first_step, num_draws: int, thinning: int, reduce, record=None,
+    num_steps=None,
+):  # fmt: skip
     """``num_draws`` draws ``thinning`` steps apart, from step ``first_step``; returns
     ``(state, (positions, info))``.
 
@@ -142,6 +143,11 @@ def run_draws(
     ``record``, if given, is a function of the position: ``positions`` then stacks
     ``record(state.position)`` (a pytree), evaluated once per draw, at the last step of its
     window, instead of the position (the runner's ``observables``). The steps do not change.
+
+    ``num_steps`` (may be traced; default ``num_draws · thinning``) is how many steps are run:
+    fewer keep the first ``num_steps // thinning`` draws (the rest of the arrays is
+    meaningless), more run on past the last draw, keeping nothing of those steps. So one
+    compiled program runs a shorter last chunk and a warm-up as well as a chunk.
     """
     _, example = jax.eval_shape(algorithm.step, jax.random.key(0), state)
     fields = example._asdict()
@@ -159,13 +165,15 @@ def run_draws(
         if record is None:
             # Written at every step of the window; the last step's write is the one kept.
             positions = jax.tree.map(
-                lambda out, leaf: out.at[draw].set(leaf), positions, state.position
+                lambda out, leaf: out.at[draw].set(leaf, mode="drop"), positions, state.position
             )
-        else:  # evaluated at the window's last step only (a cond on the unbatched step index)
+        else:  # evaluated at the window's last step of a kept draw only (an unbatched cond)
             positions = jax.lax.cond(
-                slot == thinning - 1,
+                (slot == thinning - 1) & (draw < num_draws),
                 lambda: jax.tree.map(
-                    lambda out, leaf: out.at[draw].set(leaf), positions, record(state.position)
+                    lambda out, leaf: out.at[draw].set(leaf, mode="drop"),
+                    positions,
+                    record(state.position),
                 ),
                 lambda: positions,
             )
@@ -177,10 +185,11 @@ def run_draws(
                 lambda: {n: reduce(n)(window[n]) for n in window},
                 lambda: {n: infos[n][draw] for n in infos},
             )
-        infos = {n: infos[n].at[draw].set(values[n]) for n in infos}
+        infos = {n: infos[n].at[draw].set(values[n], mode="drop") for n in infos}
         return window, positions, infos
 
+    steps = num_draws * thinning if num_steps is None else num_steps
     state, (_, positions, infos) = run_steps(
-        algorithm, key, state, first_step, num_draws * thinning, update, (window, positions, infos)
+        algorithm, key, state, first_step, steps, update, (window, positions, infos)
     )
     return state, (positions, infos)

@@ -1,6 +1,6 @@
-"""The chunked loop of a run: the sampler's starts checked, its step chosen or tuned, the
-warm-up and the chunks compiled once (``jax.jit``'s own cache, keyed by the sampler, the chunk
-length and the chains' shapes), then run chunk by chunk with a progress bar, each chunk saved to
+"""The chunked loop of a run: the sampler's starts checked, its step chosen or tuned, one
+program compiled for the warm-up's steps and every chunk (``jax.jit``'s own cache, keyed by the
+sampler's structure, the chunk length and the chains' shapes), then run chunk by chunk with a progress bar, each chunk saved to
 the run file (:mod:`liesample.run.store`) as soon as it is done.
 
 :func:`run_chains` is :func:`liesample.run.runner.sample_chains` with its keywords gathered as a
@@ -27,7 +27,7 @@ from tqdm.auto import tqdm
 from liesample.foundation.compile import jit
 from liesample.foundation.types import PyTree
 from liesample.foundation.validation import is_single_array, single_key
-from liesample.integrators.chain_loop import run_draws, run_steps
+from liesample.integrators.chain_loop import run_draws
 from liesample.run import arguments
 from liesample.run.agreement import agreement
 from liesample.run.checks import DEFAULT_MIN_ACCEPTANCE_RATE, check_run, record_casimir_drift
@@ -281,13 +281,6 @@ def _init_states(positions, values, *, sampler):
     return jax.vmap(_stepper(sampler, values).init)(positions)
 
 
-@functools.partial(jit, static_argnames=("sampler", "num_steps"))
-def _run_warmup(states, keys, first_step, values, *, sampler, num_steps):
-    """``num_steps`` steps of every chain from ``first_step``, discarded (the warm-up)."""
-    stepper = _stepper(sampler, values)
-    return jax.vmap(lambda s, k: run_steps(stepper, k, s, first_step, num_steps)[0])(states, keys)
-
-
 DRAWS = ("positions", "observables", "log_likelihood")
 """What a chunk records besides ``info``."""
 
@@ -318,16 +311,18 @@ def _recorder(observables, log_likelihood, keep_positions):
     ),
 )  # fmt: skip
 def _run_chunk(
-    states, keys, first_step, values, *, sampler, count, thinning, observables, log_likelihood,
-    keep_positions,
+    states, keys, first_step, num_steps, values, *, sampler, count, thinning, observables,
+    log_likelihood, keep_positions,
 ):  # fmt: skip
-    """``count`` draws of every chain, ``thinning`` steps apart, from ``first_step``: what
-    :func:`_recorder` records, and the per-draw info."""
+    """``num_steps`` steps of every chain from ``first_step``, keeping the first of ``count``
+    draws ``thinning`` steps apart that they span: what :func:`_recorder` records, and the
+    per-draw info. ``num_steps`` is traced, so one program runs every chunk, a shorter last one
+    (``num_steps < count · thinning``) and the warm-up (more steps, nothing kept)."""
     record = _recorder(observables, log_likelihood, keep_positions)
     stepper = _stepper(sampler, values)
     return jax.vmap(
         lambda s, k: run_draws(
-            stepper, k, s, first_step, count, thinning, reduce_over_thinning, record
+            stepper, k, s, first_step, count, thinning, reduce_over_thinning, record, num_steps
         )
     )(states, keys)
 
@@ -520,28 +515,24 @@ class _Run:
         return done, previous
 
     def compile(self, done):
-        """The executables of this run (the warm-up, one chunk length and the last partial
-        one), compiled before the timed loop; ``jax.jit``'s cache keeps them for a next run."""
+        """The one executable of this run, compiled before the timed loop: a chunk of
+        ``self.chunk`` draws, which runs the warm-up's steps and a shorter last chunk too
+        (:func:`_run_chunk`); ``jax.jit``'s cache keeps it for a next run."""
         o = self.options
         self.phase("compiling")
         self.chunk = arguments.chunk_length(self.num_draws, o.chunk_draws)
         static, values = self.program
-        args = (self.states, self.chain_keys, 0, values)
-        if self.run_warmup:
-            self.warmup = _run_warmup.lower(*args, sampler=static, num_steps=o.num_warmup).compile()
-        remaining = self.num_draws - done
-        self.executables = {}
-        if remaining:
-            for count in {min(self.chunk, remaining), remaining % self.chunk or self.chunk}:
-                self.executables[count] = _run_chunk.lower(
-                    *args,
-                    sampler=static,
-                    count=count,
-                    thinning=o.thinning,
-                    observables=self.observables_key,
-                    log_likelihood=self.log_likelihood_key,
-                    keep_positions=o.keep_positions,
-                ).compile()
+        self.executable = None
+        if self.run_warmup or done < self.num_draws:
+            self.executable = _run_chunk.lower(
+                self.states, self.chain_keys, 0, 0, values,
+                sampler=static,
+                count=min(self.chunk, self.num_draws),
+                thinning=o.thinning,
+                observables=self.observables_key,
+                log_likelihood=self.log_likelihood_key,
+                keep_positions=o.keep_positions,
+            ).compile()  # fmt: skip
 
     def _split(self, recorded, info):
         """One chunk's draws: ``positions``, ``info``, ``observables``, ``log_likelihood``."""
@@ -559,9 +550,10 @@ class _Run:
         start = time.perf_counter()
         states, bar = self.states, self.bar
         values = self.program[1]
+        run = self.executable
         if self.run_warmup:
             self.phase("warm-up")
-            states = jax.block_until_ready(self.warmup(states, self.chain_keys, 0, values))
+            states = jax.block_until_ready(run(states, self.chain_keys, 0, o.num_warmup, values)[0])
         self.phase("sampling")
         if done:
             bar.update(done)  # the draws already saved
@@ -569,8 +561,11 @@ class _Run:
         while done < self.num_draws:
             count = min(self.chunk, self.num_draws - done)
             first_step = o.num_warmup + done * o.thinning
-            states, recorded = self.executables[count](states, self.chain_keys, first_step, values)
-            chunks.append(self._split(*cast(tuple, to_host(recorded))))
+            states, recorded = run(states, self.chain_keys, first_step, count * o.thinning, values)
+            recorded = to_host(recorded)
+            if count < self.chunk:  # the last chunk, shorter: its first draws
+                recorded = jax.tree.map(lambda leaf, n=count: leaf[:, :n], recorded)
+            chunks.append(self._split(*cast(tuple, recorded)))
             record_casimir_drift(self.settings, chunks[-1]["info"])  # the file records it
             wall_time = time.perf_counter() - start
             done += count
