@@ -1,7 +1,8 @@
 """The chunked loop of a run: the sampler's starts checked, its step chosen or tuned, one
 program compiled for the warm-up's steps and every chunk (``jax.jit``'s own cache, keyed by the
-sampler's structure, the chunk length and the chains' shapes), then run chunk by chunk with a progress bar, each chunk saved to
-the run file (:mod:`liesample.run.store`) as soon as it is done.
+sampler's structure, the chunk length and the chains' shapes), then run chunk by chunk with a
+progress bar, each chunk saved to the run file (:mod:`liesample.run.store`) as soon as it is
+done.
 
 :func:`run_chains` is :func:`liesample.run.runner.sample_chains` with its keywords gathered as a
 :class:`RunOptions` and the names of the draws in their ``DataTree`` as a :class:`TreeSpec`.
