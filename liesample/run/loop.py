@@ -551,7 +551,7 @@ class _Run:
         start = time.perf_counter()
         states, bar = self.states, self.bar
         values = self.program[1]
-        run = self.executable
+        run = cast(Callable, self.executable)  # compiled wherever a step is to run
         if self.run_warmup:
             self.phase("warm-up")
             states = jax.block_until_ready(run(states, self.chain_keys, 0, o.num_warmup, values)[0])
