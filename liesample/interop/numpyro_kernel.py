@@ -432,6 +432,11 @@ class GeometricHMC(MCMCKernel):
         self._layout: Layout = None  # type: ignore[assignment]
         self._core: Core = None  # type: ignore[assignment]
         self._batched = False
+        # Set by init: NumPyro's MCMC calls init again before a run from a warm-up's state
+        # (MCMC.warmup then MCMC.run, or post_warmup_state) unless the kernel has it, as
+        # numpyro.infer.HMC does; that second init would rebuild and recompile what the
+        # warm-up's init settled, for every chain.
+        self._sample_fn: Callable | None = None
         # (step size, flat inverse mass) of each chain adapted alone
         self._chain_adaptations: list[tuple[float, np.ndarray]] = []
         self._reported: set[int] = set()
@@ -519,6 +524,7 @@ class GeometricHMC(MCMCKernel):
         # The draws' shapes, deterministic sites included, settled now rather than after the run.
         first = jax.tree.map(lambda x: x[0], state.z) if batched else state.z
         jax.eval_shape(self.postprocess_fn(model_args, model_kwargs), first)
+        self._sample_fn = self.sample
         return state
 
     def _on_draw(self, model_args, model_kwargs):
