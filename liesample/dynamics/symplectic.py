@@ -40,6 +40,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from liesample.dynamics.sde import heun_step
+from liesample.foundation.schemes import Schemes
 
 _DEFAULT_TOLERANCE = 1e-14
 _DEFAULT_MAX_ITERATIONS = 100
@@ -134,7 +135,16 @@ def stochastic_heun_step(system: SymplecticDiffusion, z, increments):
     return heun_step(lambda x: system.vector_field(x, increments), z)
 
 
-SCHEMES = ("midpoint", "heun")
+SCHEMES = Schemes(
+    "a symplectic diffusion's phase space",
+    {"midpoint": "midpoint", "heun": "heun"},
+    {
+        "midpoint": "implicit stochastic midpoint: symplectic, solved by fixed-point iteration",
+        "heun": "explicit Stratonovich Heun: not symplectic",
+    },
+    parameter="scheme",
+)
+"""The schemes of :func:`symplectic_path` (:class:`liesample.foundation.schemes.Schemes`)."""
 
 
 class SymplecticPath(NamedTuple):
@@ -151,8 +161,7 @@ def symplectic_path(system: SymplecticDiffusion, initial_state, increments, *, s
     Pure and jittable; the increments are explicit so that one Brownian path can be replayed at
     several resolutions (:func:`coarsen_increments`).
     """
-    if scheme not in SCHEMES:
-        raise ValueError(f"scheme must be one of {SCHEMES}, got {scheme!r}")
+    scheme = SCHEMES.lookup(scheme)
     if jnp.shape(initial_state) != (2 * system.dimension,):
         raise ValueError(
             f"initial_state must have shape ({2 * system.dimension},), "

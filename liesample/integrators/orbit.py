@@ -20,6 +20,7 @@ import jax
 import jax.numpy as jnp
 
 from liesample.dynamics.poisson_langevin import PoissonLangevin, Scene
+from liesample.foundation.schemes import Schemes
 
 FORMS = ("stratonovich", "ito")
 
@@ -184,7 +185,7 @@ def _euler_heun(dynamics, mu, dt, dW):
 # Euler and Heun applied to y' = −λy are stable iff λ dt ≤ 2 (liesample.integrators.stability).
 _EULER_HEUN_STABILITY = 2.0
 
-INTEGRATORS: dict[str, Integrator] = {
+_ORBIT_INTEGRATORS = {
     integrator.name: integrator
     for integrator in (
         Integrator(
@@ -225,6 +226,12 @@ INTEGRATORS: dict[str, Integrator] = {
         ),
     )
 }
+INTEGRATORS = Schemes(
+    "a coadjoint orbit",
+    _ORBIT_INTEGRATORS,
+    {name: integrator.description for name, integrator in _ORBIT_INTEGRATORS.items()},
+)
+"""The orbit samplers' integrators by name (:class:`liesample.foundation.schemes.Schemes`)."""
 
 DEFAULT_INTEGRATOR = "splitting"
 
@@ -233,6 +240,4 @@ def get_integrator(integrator: str | Integrator) -> Integrator:
     """Look up an integrator by name (or pass an :class:`Integrator` through)."""
     if isinstance(integrator, Integrator):
         return integrator
-    if integrator not in INTEGRATORS:
-        raise ValueError(f"integrator must be one of {sorted(INTEGRATORS)}, got {integrator!r}")
-    return INTEGRATORS[integrator]
+    return INTEGRATORS.lookup(integrator)

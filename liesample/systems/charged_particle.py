@@ -42,6 +42,7 @@ from liesample.dynamics.poisson_langevin import Scene, make_dynamics
 from liesample.dynamics.sde import PoissonLangevinSDE, stratonovich_heun_step
 from liesample.foundation.compile import evaluate, jit
 from liesample.foundation.identity import ValueIdentity, by_value
+from liesample.foundation.schemes import Schemes
 from liesample.foundation.validation import concrete_array, finite_float, float_array
 from liesample.geometry.cotangent import (
     BAOAB,
@@ -56,7 +57,16 @@ from liesample.geometry.cotangent import (
 from liesample.geometry.poisson import CanonicalStructure, canonical_structure, magnetic_structure
 from liesample.geometry.spaces import Euclidean
 
-INTEGRATORS = ("baoab", "heun")
+INTEGRATORS = Schemes(
+    "the charged particle's T*Rⁿ",
+    {"baoab": "baoab", "heun": "heun"},
+    {
+        "baoab": "splitting: kick, exact magnetic drift, Ornstein–Uhlenbeck, drift, kick",
+        "heun": "the generic SDE's Stratonovich Heun step",
+    },
+)
+"""The schemes of :func:`charged_particle_dynamics`
+(:class:`liesample.foundation.schemes.Schemes`)."""
 
 # Implicit midpoint for a position-dependent field: iterate until the update is below this
 # (relative to 1 + |z|), i.e. a few ulp in float64; the map contracts by ~ε|G|/2m per sweep.
@@ -446,8 +456,7 @@ def charged_particle_dynamics(
     """
     if not isinstance(system, ChargedParticleSystem):
         raise TypeError(f"system must come from charged_particle(...), got {type(system).__name__}")
-    if integrator not in INTEGRATORS:
-        raise ValueError(f"integrator must be one of {INTEGRATORS}, got {integrator!r}")
+    integrator = INTEGRATORS.lookup(integrator)
     if not isinstance(magnetic, bool):
         raise TypeError(f"magnetic must be a bool, got {magnetic!r}")
     sigma, theta, scene = make_dynamics(

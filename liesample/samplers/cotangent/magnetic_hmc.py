@@ -37,6 +37,7 @@ import jax
 import jax.numpy as jnp
 from jax.typing import ArrayLike
 
+from liesample.foundation.schemes import Schemes
 from liesample.foundation.types import LogDensityFn
 from liesample.geometry.cotangent import LEAPFROG, PhasePoint, compose, drift, kick
 from liesample.samplers.contract import (
@@ -88,12 +89,15 @@ ADAPTATION = Tunable(
 """How window adaptation tunes magnetic HMC: several chains together, the trajectory length by ChEES
 (:func:`liesample.tuning.adaptation.magnetic_window_adaptation`)."""
 
-BLACKJAX_SCHEMES = {
-    blackjax.mcmc.integrators.velocity_verlet: "leapfrog",
-    blackjax.mcmc.integrators.mclachlan: "minimal_norm",
-}
+BLACKJAX_SCHEMES = Schemes(
+    "T*Rⁿ with a magnetic field, as BlackJAX's integrators",
+    {
+        blackjax.mcmc.integrators.velocity_verlet: "leapfrog",
+        blackjax.mcmc.integrators.mclachlan: "minimal_norm",
+    },
+)
 """BlackJAX integrators and the schemes with the same coefficients (the drift here is the
-exact kinetic+magnetic flow)."""
+exact kinetic+magnetic flow; :class:`liesample.foundation.schemes.Schemes`)."""
 
 
 class MagneticHMCState(NamedTuple):
