@@ -43,6 +43,7 @@ import jax.scipy.linalg
 import numpy as np
 from jax.typing import ArrayLike, DTypeLike
 
+from liesample.foundation.schemes import Schemes
 from liesample.foundation.types import PRNGKey, PyTree, TreeDef
 from liesample.foundation.validation import concrete_array
 from liesample.geometry import spaces
@@ -95,14 +96,25 @@ MINIMAL_NORM = (
 )
 """McLachlan's two-stage minimal-norm palindrome ``B A B A B``: two gradients per step, a
 smaller energy error than two leapfrog steps of half the size on most targets."""
-SCHEMES = {
-    "leapfrog": LEAPFROG,
-    "minimal_norm": MINIMAL_NORM,
-    "baoab": BAOAB,
-    "obabo": OBABO,
-    "obab": OBAB,
-}
-"""The named schemes: name -> coefficient list ``((effect, fraction), …)``."""
+SCHEMES = Schemes(
+    "T*G",
+    {
+        "leapfrog": LEAPFROG,
+        "minimal_norm": MINIMAL_NORM,
+        "baoab": BAOAB,
+        "obabo": OBABO,
+        "obab": OBAB,
+    },
+    {
+        "leapfrog": "velocity Verlet: one gradient per step",
+        "minimal_norm": "McLachlan's two-stage minimal-norm palindrome: two gradients per step",
+        "baoab": "Leimkuhler–Matthews' kinetic Langevin splitting",
+        "obabo": "half OU refresh, a leapfrog step, half OU refresh",
+        "obab": "OU refresh, then a leapfrog step",
+    },
+)
+"""The named schemes: name -> coefficient list ``((effect, fraction), …)``
+(:class:`liesample.foundation.schemes.Schemes`)."""
 
 ANTISYMMETRY_TOLERANCE = 1e-10  # relative to max|G|: round-off of a user-built field
 
