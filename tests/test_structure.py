@@ -17,14 +17,15 @@ STARTS = np.tile(np.array([0.9, 1.2, 0.0]), (4, 1))
 
 
 class _Compiles:
-    """Counts XLA backend compilations while active."""
+    """Counts XLA backend compilations while active, and the names of the programs."""
 
     def __init__(self):
-        self.count = 0
+        self.count, self.names = 0, []
 
     def __call__(self, event, duration, **kwargs):
         if event == "/jax/core/compile/backend_compile_duration":
             self.count += 1
+            self.names.append(kwargs.get("fun_name", ""))
 
 
 @contextlib.contextmanager
@@ -55,6 +56,27 @@ def test_a_beta_sweep_compiles_at_its_first_point_only():
     assert np.mean(second.posterior["mu"].values[..., 2] ** 2) > np.mean(
         first.posterior["mu"].values[..., 2] ** 2
     )
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")  # 7 draws: the convergence checks speak
+def test_a_first_call_compiles_the_step_once_for_its_warm_up_and_every_chunk():
+    """The warm-up's steps, the chunks and a shorter last chunk run in one program: a lattice
+    new to the process compiles the heat bath's step into one program only."""
+    system = liesample.systems.wilson_gauge("U1", (6, 4))  # a shape no other test here uses
+    sampler = liesample.wilson_heat_bath(system, beta=1.0)
+    starts = np.stack([system.cold_start()] * 2)
+    with counted_compiles() as compiles:
+        tree = liesample.sample(
+            sampler, jax.random.key(0), starts, 7, num_warmup=5, chunk_draws=3,
+            progress_bar=False,
+        )  # fmt: skip
+    stepping = [name for name in compiles.names if "_run" in name]
+    assert stepping == ["jit(_run_chunk)"], compiles.names
+    # the same steps as one chunk of every draw: the shorter last chunk keeps its own draws
+    whole = liesample.sample(
+        sampler, jax.random.key(0), starts, 7, num_warmup=5, chunk_draws=7, progress_bar=False
+    )
+    np.testing.assert_array_equal(tree.posterior["theta"].values, whole.posterior["theta"].values)
 
 
 def test_the_structure_rebuilds_the_sampler_it_declares():
