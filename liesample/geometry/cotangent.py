@@ -424,10 +424,16 @@ def cotangent_bundle(
     inverse_mass_matrix: PyTree = None,
     magnetic_field: ArrayLike | None = None,
     dtype: DTypeLike | None = None,
+    metric: Metric | None = None,
 ) -> CotangentBundle:
     """:class:`CotangentBundle` of ``space`` with ``M⁻¹`` (see
     :func:`liesample.geometry.spaces.check_inverse_mass`: dense ``(n, n)`` allowed on ``Euclidean``
-    blocks) and an optional constant antisymmetric field on the ``Euclidean`` coordinates."""
+    blocks) and an optional constant antisymmetric field on the ``Euclidean`` coordinates.
+
+    ``metric``: the ``metric`` of a bundle built before from the same ``space``,
+    ``inverse_mass_matrix`` and ``dtype``, used as it is, so that a dense ``M⁻¹`` that many
+    transitions share is decomposed (``eigh``) once rather than in each; ``None`` (default)
+    computes it."""
     inverse_mass = spaces.check_inverse_mass(space, inverse_mass_matrix, dtype)
     blocks = jax.tree.leaves(space, is_leaf=spaces.is_space)
     structure: TreeDef = jax.tree.structure(space, is_leaf=spaces.is_space)
@@ -443,8 +449,9 @@ def cotangent_bundle(
         concrete = concrete_array(magnetic_field)
         if concrete is not None and not np.any(concrete):
             magnetic_field = None  # a zero field: the free drift, no matrix exponential
-    metric = None
-    if euclidean:
+    if not euclidean:
+        metric = None
+    elif metric is None:
         if all(not spaces.is_dense_inverse_mass(s, m) for s, m in euclidean):
             imm = jnp.concatenate([jnp.ravel(m) for _, m in euclidean])
         else:  # block-diagonal over the Euclidean blocks

@@ -102,6 +102,9 @@ class GeometricHMCState(NamedTuple):
     inner: object  # the liesample.geometric_hmc state
     adaptation: WindowState
     rng_key: jax.Array
+    # the decomposition of a dense inverse mass (liesample.geometry.cotangent.Metric), kept
+    # while the mass is unchanged: None without a dense block
+    metric: object = None
 
 
 class Settings(NamedTuple):
@@ -298,6 +301,25 @@ def adapt(c: Core, adaptation, i, parameters, before, inner, info, logdensity, k
     return jax.lax.cond(i < settings.num_warmup, updated, lambda state: state, adaptation)
 
 
+def _metric(layout: Layout, mass, dtype):
+    """The :class:`liesample.geometry.cotangent.Metric` a transition at inverse mass ``mass``
+    decomposes, for the state to keep; ``None`` when the mass has no dense block (nothing to
+    decompose)."""
+    metric = cotangent_bundle(layout.inner_space, mass, None, dtype).metric
+    return None if metric is None or metric.eigenvectors is None else metric
+
+
+def _next_metric(layout: Layout, metric, mass, next_mass, dtype):
+    """The metric of the next transition's ``next_mass``: ``metric`` (that of ``mass``) again
+    while the mass is unchanged (after the warm-up, and between its mass windows), so that the
+    ``eigh`` of a dense mass runs only when it changes."""
+    if metric is None:
+        return None
+    leaves = zip(jax.tree.leaves(next_mass), jax.tree.leaves(mass), strict=True)
+    changed = jnp.any(jnp.array([jnp.any(a != b) for a, b in leaves]))
+    return jax.lax.cond(changed, lambda: _metric(layout, next_mass, dtype), lambda: metric)
+
+
 def init_state(c: Core, key, params, logdensity, inner_logdensity, draw, starting_mass):
     """One chain's first state: from ``params`` (site values), or from ``draw`` (a key ↦ site
     values) until ``logdensity`` (of site values) and its gradient are finite; the step size
@@ -334,6 +356,7 @@ def init_state(c: Core, key, params, logdensity, inner_logdensity, draw, startin
         inner,
         adaptation,
         key,
+        _metric(layout, first["inverse_mass_matrix"], dtype),
     )
 
 
@@ -368,13 +391,15 @@ def sample_batch(c: Core, state, logdensity, on_draw=None):
     current = parameters(c, shared, i)
     options = {name: current[name] for name in ("step_size", "num_integration_steps")}
     mass = current["inverse_mass_matrix"]
+    metric = None if state.metric is None else jax.tree.map(lambda x: x[0], state.metric)
 
     def transition(key, inner):
-        return settings.kernel(key, inner, logdensity, space, **options, inverse_mass_matrix=mass)
+        return settings.kernel(key, inner, logdensity, space, **options, inverse_mass_matrix=mass,
+                               metric=metric)  # fmt: skip
 
     inner, info = jax.vmap(transition)(key, state.inner)
     dtype = inner.logdensity.dtype
-    kinetic = cotangent_bundle(space, mass, None, dtype).kinetic_energy
+    kinetic = cotangent_bundle(space, mass, None, dtype, metric).kinetic_energy
     energy = -inner.logdensity + jax.vmap(kinetic)(inner.momentum)
     new = shared
     if settings.num_warmup > 0:
@@ -387,6 +412,8 @@ def sample_batch(c: Core, state, logdensity, on_draw=None):
     smoothed = new.step.smoothed
     adaptation = share(new._replace(step=new.step._replace(smoothed=smoothed[:1])))
     adaptation = adaptation._replace(step=adaptation.step._replace(smoothed=smoothed[:, None]))
+    following = parameters(c, new, i + 1)
+    new_metric = _next_metric(layout, metric, mass, following["inverse_mass_matrix"], dtype)
     new_state = GeometricHMCState(
         state.i + 1,
         jax.vmap(lambda p: layout.to_user(layout.unpack(p)))(inner.position),
@@ -398,10 +425,11 @@ def sample_batch(c: Core, state, logdensity, on_draw=None):
         jnp.asarray(info.num_gradient_evaluations),
         share(current["step_size"]),
         share(current["step_size"] * current["num_integration_steps"]),
-        share(adapt_state(layout, parameters(c, new, i + 1))),
+        share(adapt_state(layout, following)),
         inner,
         adaptation,
         rng_key,
+        share(new_metric),
     )
     if settings.num_warmup > 0 and settings.adapt_step_size and num_chains >= 3:
         jax.lax.cond(

@@ -348,19 +348,22 @@ class Move(NamedTuple):
 
 
 def make_move(logdensity_fn, space, step_size, inverse_mass_matrix, magnetic_field, scheme,
-              dtype=None, precompute=True):  # fmt: skip
+              dtype=None, precompute=True, metric=None):  # fmt: skip
     """:class:`Move` of a sampler on ``space`` (``scheme`` already checked);
-    ``precompute=False`` in kernels (traced parameters)."""
-    bundle = cotangent_bundle(space, inverse_mass_matrix, magnetic_field, dtype)
+    ``precompute=False`` in kernels (traced parameters); ``metric`` the
+    :class:`~liesample.geometry.cotangent.Metric` of ``inverse_mass_matrix`` when already
+    computed (:func:`~liesample.geometry.cotangent.cotangent_bundle`)."""
+    bundle = cotangent_bundle(space, inverse_mass_matrix, magnetic_field, dtype, metric)
     flows = drift_flows(bundle, step_size, scheme, precompute)
     value_and_grad = spaces.trivialised_value_and_grad(logdensity_fn, space)
     return Move(value_and_grad, bundle, flows, step_size, tuple(scheme))
 
 
 def kernel_move(state: GeometricState, logdensity_fn, space, step_size, inverse_mass_matrix,
-                magnetic_field, scheme) -> Move:  # fmt: skip
+                magnetic_field, scheme, metric=None) -> Move:  # fmt: skip
     """:class:`Move` of one kernel call, in the dtype of ``state``: the parameters may be traced
-    (adaptation), so the kinetic–magnetic exponential is computed per transition."""
+    (adaptation), so the kinetic–magnetic exponential is computed per transition, and the
+    decomposition of a dense ``M⁻¹`` too unless ``metric`` gives it (:func:`make_move`)."""
     dtype = jnp.asarray(state.logdensity).dtype
     return make_move(
         logdensity_fn,
@@ -371,6 +374,7 @@ def kernel_move(state: GeometricState, logdensity_fn, space, step_size, inverse_
         scheme,
         dtype,
         precompute=False,
+        metric=metric,
     )
 
 

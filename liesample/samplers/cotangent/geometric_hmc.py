@@ -149,8 +149,12 @@ def build_kernel(
     integrator="leapfrog",
 ):
     """``kernel(rng_key, state, logdensity_fn, space, step_size, num_integration_steps,
-    inverse_mass_matrix=None, magnetic_field=None) -> (state, info)``; parameters may be
-    traced (adaptation): the kinetic–magnetic exponential is then computed per transition."""
+    inverse_mass_matrix=None, magnetic_field=None, metric=None) -> (state, info)``; parameters
+    may be traced (adaptation): the kinetic–magnetic exponential is then computed per
+    transition. ``metric``: ``cotangent_bundle(space, inverse_mass_matrix, dtype=…).metric``
+    (:mod:`liesample.geometry.cotangent`, in the dtype of ``state.logdensity``) when the caller
+    keeps it from one transition to the next, so that a dense ``M⁻¹`` is not decomposed in
+    each; the draws are the same."""
     if callable(divergence_threshold):  # BlackJAX's warm-ups pass their integrator first
         raise TypeError(
             "geometric_hmc.build_kernel got a function for divergence_threshold: "
@@ -171,12 +175,14 @@ def build_kernel(
         num_integration_steps,
         inverse_mass_matrix=None,
         magnetic_field=None,
+        metric=None,
     ):
         check_positive_step_size(step_size)
         check_integer("num_integration_steps", num_integration_steps)
         move = kernel_move(
-            state, logdensity_fn, space, step_size, inverse_mass_matrix, magnetic_field, scheme
-        )
+            state, logdensity_fn, space, step_size, inverse_mass_matrix, magnetic_field, scheme,
+            metric,
+        )  # fmt: skip
         return transition(rng_key, state, move, num_integration_steps, *options)
 
     return kernel
