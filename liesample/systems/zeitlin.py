@@ -28,7 +28,9 @@ so the vorticity ``ω = Σ ω_ℓm Y_ℓm`` (``ℓ < N``, ``Y_ℓm`` orthonormal
 
 **Hamiltonian.** ``P = Δ_N⁻¹ W`` (trace-free) and ``h(W) = ½ tr(PW) = −½⟨W, Δ_N⁻¹W⟩
 = ½ Σ_ℓm ω_ℓm² / (ℓ(ℓ+1)) ≥ 0``, the kinetic energy ``½∫|∇ψ|²`` of the band-limited flow.
-``Δ_N⁻¹`` is applied by one batched tridiagonal solve over the ``2N − 1`` diagonals (O(N²));
+``Δ_N⁻¹`` is applied by one batched product with the pseudo-inverse of each diagonal's
+tridiagonal operator (``V diag(1/(ℓ(ℓ+1))) Vᵀ``, N³ numbers like the eigenvectors; O(N³)
+flops, no LAPACK call);
 the coadjoint move costs O(N³): the exponential of a skew-Hermitian matrix by matrix products
 alone (:class:`SkewHermitianUnitary`) and two products.
 
@@ -132,26 +134,33 @@ class QuantisedHarmonics:
         index = np.arange(n)
         valid = index[None, :] < n - index[:, None]  # [m, k]: k < N − m
         self._valid = valid
-        k, m = index[None, :], index[:, None]
-        # Gather of the diagonals, both at once: [0, m, k] = x[k, k+m] (upper), [1, m, k] =
-        # x[k+m, k] (lower), zero-padded (one gather and one mask, however often it is traced).
-        self._pack_index = np.stack(
-            [np.where(valid, k * n + k + m, 0), np.where(valid, (k + m) * n + k, 0)]
-        )
+        # The diagonals are read and written by pads and reshapes (:meth:`_pack`): no gather,
+        # and their transposes (in every gradient) are slices, not scatters. Masks [half, m, k]:
+        # the valid entries, and for writing back the main diagonal from the upper half only.
         self._pack_mask = np.stack([valid, valid]).astype(float)
-        # The m = 0 rows of both halves (the main diagonal, twice), for jnp.where.
-        self._main_rows = np.zeros((2, n, n), bool)
-        self._main_rows[:, 0, :] = True
-        # Scatter back as a gather from concat(upper, lower) (flattened).
+        self._unpack_mask = self._pack_mask.copy()
+        self._unpack_mask[1, 0, :] = 0.0
+        # Scatter back as a gather from concat(upper, lower) (flattened; NumPy, in basis()).
         i, j = index[:, None], index[None, :]
         self._unpack_index = np.where(j >= i, (j - i) * n + i, n * n + (i - j) * n + j)
-        # The tridiagonal solves of Δ_N⁻¹: padded rows are identities; on m = 0 (kernel: I) the
-        # last unknown is pinned to 0, the others solved, and the mean removed afterwards.
+        # The tridiagonal bands of Δ_N⁻¹ (padded rows are identities; on m = 0, kernel I, the
+        # last unknown pinned to 0), kept for peers that solve them (benchmarks/zeitlin.py).
         d, lo, up = diagonal.copy(), np.zeros((n, n)), np.zeros((n, n))
         up[:, :-1] = off[:, :-1]
         lo[:, 1:] = off[:, :-1]
         d[0, n - 1], lo[0, n - 1], up[0, n - 2] = 1.0, 0.0, 0.0
         self._solve_bands = (lo, d, up)
+        # Δ_N⁻¹ on each diagonal as a dense matrix, V diag(1/(ℓ(ℓ+1))) Vᵀ with ℓ = 0 (the trace,
+        # on m = 0) sent to 0: the pseudo-inverse, N³ floats like the eigenvectors. Applied
+        # by one batched product (no LAPACK call, and its derivative is the same product).
+        weights = np.zeros((n, n))
+        for m in range(n):
+            ell = np.arange(m, n)
+            weights[m, : n - m] = np.where(ell > 0, 1.0 / np.maximum(ell * (ell + 1.0), 1.0), 0.0)
+        inverse = np.einsum("mik,mk,mjk->mij", vectors, weights, vectors)
+        centre = np.eye(n) - 1.0 / n  # m = 0: exactly trace-free in and out, to round-off
+        inverse[0] = centre @ inverse[0] @ centre
+        self._inverse = 0.5 * (inverse + np.swapaxes(inverse, -1, -2))
         ell = index[:, None] + index[None, :]  # [m, k] -> ℓ = m + k
         self._ell = np.where(valid, ell, 0)
         # Coefficient vector order: ℓ = 0 … N−1, m = −ℓ … ℓ
@@ -164,17 +173,34 @@ class QuantisedHarmonics:
         self._coef_upper = np.where(m_c == 0, 1.0, sign * root)
         self._coef_lower = np.where(m_c == 0, 0.0, np.where(m_c > 0, 1.0, -1.0) * sign * root)
         self.degrees, self.orders = ell_c, m_c
+        # from_coefficients' rows: [term (+m, −m), half, row] -> coefficient index and weight.
+        rows = n * n
+        index = np.zeros((2, 2, rows), int)
+        weights = np.zeros((2, 2, rows))
+        for term, chosen in enumerate((m_c >= 0, m_c < 0)):
+            where = np.flatnonzero(chosen)
+            for half, coefficient in enumerate((self._coef_upper, self._coef_lower)):
+                index[term, half, self._coef_rows[where]] = where
+                weights[term, half, self._coef_rows[where]] = coefficient[where]
+        present = np.zeros((2, 2, rows), bool)
+        present[0, :, self._coef_rows[m_c >= 0]] = True
+        present[1, :, self._coef_rows[m_c < 0]] = True
+        self._row_terms = (index, weights, present)
 
     # -- diagonals ------------------------------------------------------------------------
 
     def _pack(self, x):
-        """``(..., 2, N, N)``: the upper and lower diagonals ``[m, k]``, zero-padded."""
-        flat = jnp.reshape(x, jnp.shape(x)[:-2] + (self.size * self.size,))
-        return flat[..., self._pack_index] * jnp.asarray(self._pack_mask, dtype=flat.dtype)
+        """``(..., 2, N, N)``: the upper and lower diagonals ``[m, k]`` (``x[k, k+m]`` and
+        ``x[k+m, k]``), zero-padded."""
+        x = jnp.asarray(x)
+        both = jnp.stack([x, jnp.swapaxes(x, -1, -2)], axis=-3)
+        return _skew(both, self.size) * jnp.asarray(self._pack_mask, dtype=both.dtype)
 
     def _unpack(self, packed):
-        flat = jnp.reshape(packed, jnp.shape(packed)[:-3] + (2 * self.size * self.size,))
-        return flat[..., self._unpack_index]
+        """The inverse of :meth:`_pack` (the main diagonal read from the upper half)."""
+        packed = jnp.asarray(packed)
+        halves = _unskew(packed * jnp.asarray(self._unpack_mask, dtype=packed.dtype), self.size)
+        return halves[..., 0, :, :] + jnp.swapaxes(halves[..., 1, :, :], -1, -2)
 
     # -- operators ------------------------------------------------------------------------
 
@@ -202,28 +228,18 @@ class QuantisedHarmonics:
 
     def inverse_laplacian(self, x: ArrayLike) -> jax.Array:
         """``P = Δ_N⁻¹ W`` on trace-free ``W`` (the trace part is sent to 0): one batched
-        tridiagonal solve over the diagonals, O(N²)."""
-        n = self.size
+        product with the pseudo-inverse of each diagonal's tridiagonal operator, O(N³) flops on
+        O(N²) numbers."""
         p = self._pack(x)
-        diagonal = p[..., 0, 0, :]
-        mean = jnp.mean(diagonal, axis=-1, keepdims=True)
-        # m = 0 appears as both upper[0] and lower[0]: make it trace-free, pin its last entry.
-        # Selections, not indexed updates: each .at[].set would be a scatter of its own (and
-        # its own kernel to compile) in every program that evaluates h.
-        main = jnp.where(np.arange(n) == n - 1, 0.0, diagonal - mean)
-        p = jnp.where(self._main_rows, main[..., None, None, :], p)
-        lo, d, up = (jnp.broadcast_to(jnp.asarray(b, p.dtype), p.shape) for b in self._solve_bands)
-        y = jax.lax.linalg.tridiagonal_solve(lo, d, up, p[..., None])[..., 0]
-        y0 = y[..., 0, 0, :] - jnp.mean(y[..., 0, 0, :], axis=-1, keepdims=True)
-        y = jnp.where(self._main_rows, y0[..., None, None, :], y)
-        return -self._unpack(y * jnp.asarray(self._valid, p.dtype))
+        inverse = jnp.asarray(self._inverse, dtype=p.dtype)
+        return -self._unpack(jnp.einsum("mij,...hmj->...hmi", inverse, p))
 
     def energy(self, x: ArrayLike) -> jax.Array:
         """``h = −½⟨W, Δ_N⁻¹W⟩ = ½ Σ ω_ℓm²/(ℓ(ℓ+1))`` (shape ``x.shape[:-2]``).
 
         Its derivative is declared (``jax.custom_jvp``): ``Δ_N⁻¹`` is self-adjoint, so
-        ``dh = −⟨Δ_N⁻¹W, dW⟩`` reuses the one solve of the value, and a gradient transposes a
-        product instead of the solve and the diagonal gathers."""
+        ``dh = −⟨Δ_N⁻¹W, dW⟩`` reuses the one product of the value, and a gradient transposes a
+        product instead of the pseudo-inverse and the diagonal reads."""
         return _energy(self, jnp.asarray(x))
 
     # -- spherical-harmonic coefficients --------------------------------------------------
@@ -247,11 +263,11 @@ class QuantisedHarmonics:
                 f"coefficients must have shape (..., {n * n}), got {coefficients.shape}"
             )
         batch = coefficients.shape[:-1]
-        upper = jnp.zeros(batch + (n * n,), coefficients.dtype)
-        lower = jnp.zeros(batch + (n * n,), coefficients.dtype)
-        upper = upper.at[..., self._coef_rows].add(self._coef_upper * coefficients)
-        lower = lower.at[..., self._coef_rows].add(self._coef_lower * coefficients)
-        c = jnp.stack([upper, lower], axis=-2).reshape(batch + (2, n, n))
+        # Each row [|m|, ℓ − |m|] holds the terms of ±m: two gathers, not a scatter.
+        index, weights, present = self._row_terms
+        terms = coefficients[..., index] * jnp.asarray(weights, coefficients.dtype)
+        terms = jnp.where(present, terms, 0.0)
+        c = (terms[..., 0, :, :] + terms[..., 1, :, :]).reshape(batch + (2, n, n))
         v = jnp.asarray(self.eigenvectors, dtype=coefficients.dtype)
         p = jnp.einsum("mik,...mk->...mi", v, c)
         return self._unpack(p)
@@ -271,7 +287,7 @@ class QuantisedHarmonics:
         packed = np.zeros((count, 2, n * n))
         packed[np.arange(count), 0, rows] = self._coef_upper[first:last]
         packed[np.arange(count), 1, rows] = self._coef_lower[first:last]
-        p = np.einsum("mik,...mk->...mi", self.eigenvectors, packed.reshape(count, 2, n, n))
+        p = np.matmul(self.eigenvectors, packed.reshape(count, 2, n, n, 1))[..., 0]
         return p.reshape(count, 2 * n * n)[:, self._unpack_index]
 
     def energy_spectrum(self, x: ArrayLike) -> jax.Array:
@@ -295,6 +311,34 @@ class QuantisedHarmonics:
         c = self.coefficients(jnp.asarray(x, dtype=float))
         values = _grid_values(c, jnp.asarray(theta), jnp.asarray(phi), self.size - 1)
         return theta, phi, values
+
+
+def _skew(x, n):
+    """``[..., m, k] = x[..., k, k+m]`` where ``k + m < n`` (other entries: other entries of
+    ``x`` or 0; masked by the caller), by pads and reshapes: row ``k`` of ``x`` padded to
+    ``n + 1`` columns and read with stride ``n + 2`` puts ``x[k, k+m]`` at ``(k, m)``."""
+    lead = x.shape[:-2]
+    none = [(0, 0, 0)] * len(lead)
+    rows = jax.lax.pad(x, jnp.zeros((), x.dtype), none + [(0, 0, 0), (0, 1, 0)])
+    flat = jax.lax.pad(
+        jnp.reshape(rows, lead + (n * (n + 1),)), jnp.zeros((), x.dtype), none + [(0, n, 0)]
+    )
+    strided = jnp.reshape(flat, lead + (n, n + 2))[..., :n]
+    return jnp.swapaxes(strided, -1, -2)
+
+
+def _unskew(diagonals, n):
+    """The transpose of :func:`_skew` on ``[..., m, k]`` arrays that are 0 where ``k + m ≥ n``:
+    the upper triangle ``x[k, k+m] = diagonals[m, k]``, zeros below."""
+    lead = diagonals.shape[:-2]
+    none = [(0, 0, 0)] * len(lead)
+    strided = jax.lax.pad(
+        jnp.swapaxes(diagonals, -1, -2),
+        jnp.zeros((), diagonals.dtype),
+        none + [(0, 0, 0), (0, 2, 0)],
+    )
+    flat = jnp.reshape(strided, lead + (n * (n + 2),))[..., : n * (n + 1)]
+    return jnp.reshape(flat, lead + (n, n + 1))[..., :n]
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
