@@ -195,12 +195,18 @@ def _zeroed(welford):
 
 
 def _shrunk(mean, m2, count):
-    """Stan's dense inverse mass: the Welford covariance shrunk towards ``1e-3 I``."""
+    """The dense inverse mass: the Welford covariance ``Σ`` shrunk as Stan does, by the weight
+    ``5/(n + 5)`` towards ``1e-3`` times a diagonal, but the diagonal of ``Σ`` itself (``1``
+    where a coordinate did not move), not ``I``: the shrinkage then does not depend on the
+    coordinates' units. Towards ``1e-3 I`` it would swamp the narrow direction of two
+    correlated coordinates of small scale (a slope whose sd is ``1e-2`` or less, correlated
+    with its intercept near ``−1``), and the mass would whiten nothing there."""
     n = count.astype(mean.dtype)
     covariance = m2 / jnp.maximum(n - 1.0, 1.0)
     covariance = 0.5 * (covariance + covariance.T)
-    eye = jnp.eye(mean.shape[-1], dtype=mean.dtype)
-    return (n / (n + 5.0)) * covariance + 1e-3 * (5.0 / (n + 5.0)) * eye
+    variance = jnp.diagonal(covariance)
+    target = jnp.diag(jnp.where(variance > 0, variance, 1.0))
+    return (n / (n + 5.0)) * covariance + 1e-3 * (5.0 / (n + 5.0)) * target
 
 
 def windows_adaptation(w: Windows) -> Adaptation:
