@@ -105,6 +105,8 @@ class GeometricHMCState(NamedTuple):
     # the decomposition of a dense inverse mass (liesample.geometry.cotangent.Metric), kept
     # while the mass is unchanged: None without a dense block
     metric: object = None
+    # the parameters of the next transition (parameters()), computed at the end of the last one
+    parameters: object = None
 
 
 class Settings(NamedTuple):
@@ -357,6 +359,7 @@ def init_state(c: Core, key, params, logdensity, inner_logdensity, draw, startin
         adaptation,
         key,
         _metric(layout, first["inverse_mass_matrix"], dtype),
+        first,
     )
 
 
@@ -388,7 +391,10 @@ def sample_batch(c: Core, state, logdensity, on_draw=None):
     rng_key, key = keys[:, 0], keys[:, 1]
     key_step = jax.random.fold_in(key[0], 1) if settings.find_heuristic else None
     shared = _shared_adaptation(state)
-    current = parameters(c, shared, i)
+    if state.parameters is None:
+        current = parameters(c, shared, i)
+    else:  # computed by the last transition from the same adaptation state
+        current = jax.tree.map(lambda x: x[0], state.parameters)
     options = {name: current[name] for name in ("step_size", "num_integration_steps")}
     mass = current["inverse_mass_matrix"]
     metric = None if state.metric is None else jax.tree.map(lambda x: x[0], state.metric)
@@ -430,6 +436,7 @@ def sample_batch(c: Core, state, logdensity, on_draw=None):
         adaptation,
         rng_key,
         share(new_metric),
+        share(following),
     )
     if settings.num_warmup > 0 and settings.adapt_step_size and num_chains >= 3:
         jax.lax.cond(
