@@ -12,98 +12,16 @@ its own proposals, so the draws are exact whatever the acceptance rate. The site
 one flat axis: XLA compiles random draws of a many-axis shape inside such a loop into machine
 code whose size grows with the lattice (seconds to minutes of compilation); the flat draws are
 the same numbers in the same order (JAX's partitionable Threefry counts in row-major order).
-
-The heat bath draws through :func:`unrolled_threefry` keys: the bits of JAX's Threefry-2x32,
-computed by the hash written out round by round. XLA:CPU compiles JAX's own Threefry as a loop
-of its own at every place a key is split or bits are drawn (nine such places in one heat-bath
-step, each inside the step's loops), which is most of what compiling a step costs; the written-out
-hash is plain element-wise arithmetic that fuses with the operations around it.
 """
 
 from __future__ import annotations
 
-import functools
-import math
-
 import jax
 import jax.numpy as jnp
-import numpy as np
-from jax import lax
-from jax.extend import random as jax_random
 
-__all__ = ["quaternion_part", "su2_from_a0", "su2_heat_bath_a0", "unrolled_threefry", "von_mises"]
+__all__ = ["quaternion_part", "su2_from_a0", "su2_heat_bath_a0", "von_mises"]
 
 CREUTZ_BELOW = 2.0  # α below which Creutz's sampler is used (KP's acceptance falls at small α)
-
-
-_ROTATIONS = ((13, 15, 26, 6), (17, 29, 16, 24))
-
-
-def _threefry2x32(k1, k2, x1, x2):
-    """Threefry-2x32 (Salmon et al. 2011; 20 rounds), JAX's PRNG hash, round by round."""
-    u32 = lambda value: np.uint32(value)
-    ks = (k1, k2, lax.bitwise_xor(lax.bitwise_xor(k1, k2), u32(0x1BD11BDA)))
-    x1, x2 = lax.add(x1, ks[0]), lax.add(x2, ks[1])
-    for i in range(5):
-        for r in _ROTATIONS[i % 2]:
-            x1 = lax.add(x1, x2)
-            rotated = lax.bitwise_or(
-                lax.shift_left(x2, u32(r)), lax.shift_right_logical(x2, u32(32 - r))
-            )
-            x2 = lax.bitwise_xor(x1, rotated)
-        x1 = lax.add(x1, ks[(i + 1) % 3])
-        x2 = lax.add(x2, lax.add(ks[(i + 2) % 3], u32(i + 1)))
-    return x1, x2
-
-
-@functools.partial(jax.jit, static_argnums=1)
-def _hash(key, shape):
-    """The hash of the row-major counters of ``shape`` (JAX's partitionable Threefry)."""
-    size = math.prod(shape)
-    if size >= 2**32:
-        raise ValueError(f"unrolled Threefry draws fewer than 2**32 values at once, got {shape}")
-    counter = lax.iota(np.uint32, size).reshape(shape)
-    k1, k2 = lax.broadcast(key[0], shape), lax.broadcast(key[1], shape)
-    # a barrier: XLA would otherwise copy the hash into every fusion that reads its bits
-    return lax.optimization_barrier(_threefry2x32(k1, k2, jnp.zeros_like(counter), counter))
-
-
-def _split(key, shape):
-    bits1, bits2 = _hash(key, shape)
-    return jnp.stack([bits1, bits2], axis=bits1.ndim)
-
-
-def _random_bits(key, bit_width, shape):
-    bits1, bits2 = _hash(key, shape)
-    if bit_width == 64:
-        return (bits1.astype(np.uint64) << np.uint64(32)) | bits2.astype(np.uint64)
-    if bit_width == 32:
-        return bits1 ^ bits2
-    return (bits1 ^ bits2).astype(np.dtype(f"uint{bit_width}"))
-
-
-_THREEFRY = jax_random.threefry_prng_impl
-_UNROLLED_THREEFRY = jax_random.define_prng_impl(
-    key_shape=_THREEFRY.key_shape,
-    seed=_THREEFRY.seed,
-    split=_split,
-    random_bits=_random_bits,
-    fold_in=_THREEFRY.fold_in,
-    name="threefry2x32_unrolled",
-    tag="fry_unrolled",
-)
-
-
-def unrolled_threefry(rng_key):
-    """``rng_key`` (a typed key) drawing through the written-out Threefry hash (module notes):
-    every split and draw from it gives the bits JAX's ``threefry2x32`` gives. Keys of another
-    implementation, or with ``jax_threefry_partitionable`` off (whose counters differ), are
-    returned as they are."""
-    if str(jax.random.key_impl(rng_key)) != _THREEFRY.name:
-        return rng_key
-    if not jax.config.jax_threefry_partitionable:
-        return rng_key
-    return jax.random.wrap_key_data(jax.random.key_data(rng_key), impl=_UNROLLED_THREEFRY)
 
 
 def _flat(draw):

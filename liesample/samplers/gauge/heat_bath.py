@@ -51,7 +51,6 @@ from liesample.samplers.gauge._local import (
     quaternion_part,
     su2_from_a0,
     su2_heat_bath_a0,
-    unrolled_threefry,
     von_mises,
 )
 from liesample.systems.wilson_gauge import WilsonGauge
@@ -101,7 +100,7 @@ def _left_multiply(s, idx, u):
     return u.at[..., idx, :].set(s @ u[..., idx, :])
 
 
-def _update_u1(system, key, theta, staple, beta, heat: bool):
+def _update_u1(system, key, theta, staple, beta, heat):
     centre = -jnp.angle(staple)
     if heat:
         mode = centre + jnp.where(beta < 0, jnp.pi, 0.0)  # the conditional law's maximum
@@ -110,73 +109,49 @@ def _update_u1(system, key, theta, staple, beta, heat: bool):
     return jnp.mod(2.0 * centre - theta + jnp.pi, 2.0 * jnp.pi) - jnp.pi
 
 
-def _su2_move(system, key, r, beta, heat: bool):
-    """``s ∈ SU(2)`` for the subgroup block ``r`` of ``U A``: a heat-bath draw or the
-    over-relaxation ``V†²``."""
-    k, v = quaternion_part(r)
-    v_dag = jnp.conj(jnp.swapaxes(v, -1, -2))
-    if not heat:
-        return v_dag @ v_dag
-    k1, k2 = jax.random.split(key)
-    a0 = su2_heat_bath_a0(k1, 2.0 * jnp.abs(beta) * k / system.n)
-    a0 = jnp.where(beta < 0, -a0, a0)  # W = −W′ at α < 0 (module notes)
-    return su2_from_a0(k2, a0, r.dtype) @ v_dag
-
-
-def _update_sun(system, key, u, staple, beta, heat: bool):
-    subgroups = [(i, j) for i in range(system.n) for j in range(i + 1, system.n)]
-    keys = jax.random.split(key, len(subgroups))
-    if system.n == 2:  # the one subgroup is the whole matrix: no gather, no indexed update
-        return _su2_move(system, keys[0], u @ staple, beta, heat) @ u
+def _update_sun(system, key, u, staple, beta, heat):
+    subgroups = np.array([(i, j) for i in range(system.n) for j in range(i + 1, system.n)])
 
     def one(u, inputs):
         idx, key = inputs
         r = (u @ staple)[..., idx[:, None], idx[None, :]]
-        return _left_multiply(_su2_move(system, key, r, beta, heat), idx, u), None
+        k, v = quaternion_part(r)
+        v_dag = jnp.conj(jnp.swapaxes(v, -1, -2))
+        if heat:
+            k1, k2 = jax.random.split(key)
+            a0 = su2_heat_bath_a0(k1, 2.0 * jnp.abs(beta) * k / system.n)
+            a0 = jnp.where(beta < 0, -a0, a0)  # W = −W′ at α < 0 (module notes)
+            s = su2_from_a0(k2, a0, u.dtype) @ v_dag
+        else:
+            s = v_dag @ v_dag
+        return _left_multiply(s, idx, u), None
 
-    return jax.lax.scan(one, u, (jnp.asarray(np.array(subgroups)), keys))[0]
+    keys = jax.random.split(key, len(subgroups))
+    return jax.lax.scan(one, u, (jnp.asarray(subgroups), keys))[0]
 
 
-def _sweeps(system: WilsonGauge, rng_key, links, beta, heat_bath_sweeps: int, overrelaxation: int):
-    """``heat_bath_sweeps`` heat-bath sweeps, then ``overrelaxation`` over-relaxation sweeps,
-    each over the ``2d`` classes (direction × parity).
+def sweep(system: WilsonGauge, rng_key, links, beta, heat: bool):
+    """One sweep over the ``2d`` classes (direction × parity): heat bath or over-relaxation.
 
-    Heat-bath sweep ``h`` draws ``split(rng_key, heat_bath_sweeps)[h]``, its class ``2μ + p``
-    ``split(that key, 2d)[2μ + p]``. Every class of every sweep is one iteration of a single
-    ``lax.scan``, so the staples and the masked update are compiled once whatever ``d`` and
-    whichever kind of sweep: the staples, whose shifts depend on ``μ``, are a ``lax.switch``
-    over directions, and heat bath or over-relaxation a ``lax.cond`` on the iteration's kind
-    (plain code when a step has only one kind)."""
-    classes = 2 * system.dim
+    The classes are the iterations of one ``lax.scan`` (direction-major, class ``2μ + p``
+    drawing ``split(rng_key, 2d)[2μ + p]``), so the update is compiled once whatever ``d``;
+    only the staples, whose shifts depend on ``μ``, are a ``lax.switch`` over directions."""
     parity = jnp.asarray(_parity(system))
     update = _update_u1 if system.abelian else _update_sun
+    keys = jax.random.split(rng_key, 2 * system.dim)
     staples = [functools.partial(_staples, system, mu) for mu in range(system.dim)]
-    rng_key = unrolled_threefry(rng_key)  # the same bits, compiled without loops
-    heat_keys = jax.random.split(rng_key, heat_bath_sweeps)
-    class_keys = jax.vmap(lambda key: jax.random.split(key, classes))(heat_keys).reshape(-1)
-    relax_keys = jnp.broadcast_to(rng_key, (overrelaxation * classes,))  # not drawn from
-    keys = jnp.concatenate([class_keys, relax_keys])
-    kinds = np.repeat([True] * heat_bath_sweeps + [False] * overrelaxation, classes)
-
-    def move(heat, key, old, staple):
-        if heat_bath_sweeps and overrelaxation:
-            heated = lambda: update(system, key, old, staple, beta, True)
-            relaxed = lambda: update(system, key, old, staple, beta, False)
-            return jax.lax.cond(heat, heated, relaxed)
-        return update(system, key, old, staple, beta, bool(heat_bath_sweeps))
 
     def one_class(links, inputs):
-        heat, index, key = inputs
+        index, key = inputs
         mu, p = index // 2, index % 2
         staple = jax.lax.switch(mu, staples, links)
         old = links[mu]
-        new = move(heat, key, old, staple)
+        new = update(system, key, old, staple, beta, heat)
         mask = parity == p
         mask = mask if system.abelian else mask[..., None, None]
         return links.at[mu].set(jnp.where(mask, new, old)), None
 
-    index = jnp.asarray(np.tile(np.arange(classes), heat_bath_sweeps + overrelaxation))
-    return jax.lax.scan(one_class, links, (jnp.asarray(kinds), index, keys))[0]
+    return jax.lax.scan(one_class, links, (jnp.arange(2 * system.dim), keys))[0]
 
 
 def _staples(system: WilsonGauge, mu: int, links):
@@ -190,14 +165,18 @@ def build_kernel(system: WilsonGauge, heat_bath_sweeps: int = 1, overrelaxation:
     check_checkerboard(system)
 
     def kernel(rng_key, state: GaugeState, beta):
-        links = _sweeps(system, rng_key, state.position, beta, heat_bath_sweeps, overrelaxation)
-        # the action of the new links and of the old (kept if the new are not finite), as one
-        # batched evaluation: one copy of the plaquette code in the step
-        new_and_old = jnp.stack([links, state.position])
-        energies = beta * jax.vmap(system.action)(new_and_old)
-        divergent = ~(jnp.all(jnp.isfinite(links)) & jnp.isfinite(energies[0]))
+        links = state.position
+        if heat_bath_sweeps:
+            keys = jax.random.split(rng_key, heat_bath_sweeps)
+            heat = lambda links, key: (sweep(system, key, links, beta, heat=True), None)
+            links = jax.lax.scan(heat, links, keys)[0]
+        if overrelaxation:
+            relax = lambda _, links: sweep(system, rng_key, links, beta, heat=False)
+            links = jax.lax.fori_loop(0, overrelaxation, relax, links)
+        energy = beta * system.action(links)
+        divergent = ~(jnp.all(jnp.isfinite(links)) & jnp.isfinite(energy))
         links = jnp.where(divergent, state.position, links)
-        energy = jnp.where(divergent, energies[1], energies[0])
+        energy = jnp.where(divergent, beta * system.action(state.position), energy)
         rate = jnp.where(divergent, 0.0, 1.0).astype(energy.dtype)
         return GaugeState(links), BasicInfo(divergent, rate, energy)
 
