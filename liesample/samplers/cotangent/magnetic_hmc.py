@@ -373,9 +373,9 @@ def as_top_level_api(
 
 def _unset(logdensity_fn, fixed: dict, model: dict) -> Sampler:
     """``magnetic_hmc(logdensity_fn)``: a sampler that cannot step, declaring how
-    :func:`liesample.sample`'s warm-up tunes it (``"chees"``) and rebuilds it
-    (:func:`jittered_magnetic_hmc` with the other arguments, ``fixed``, and the model's
-    arguments ``model``)."""
+    :func:`liesample.sample`'s warm-up tunes it (``"chees"``) and remakes its
+    :class:`~liesample.samplers.contract.Recipe` as :func:`jittered_magnetic_hmc` with the other
+    arguments, ``fixed``, and the model's arguments ``model``."""
     recipe = Recipe(magnetic_hmc, (logdensity_fn,), fixed, model)
     settings = {"sampler": "magnetic_hmc", "step_size": None, "step_size_source": UNSET}
     density = with_model_arguments(logdensity_fn, *_model_arguments(model))
