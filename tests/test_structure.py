@@ -10,7 +10,9 @@ import numpy as np
 import pytest
 
 import liesample
-from liesample.samplers.contract import Structure
+from liesample.integrators.chain_loop import run_draws
+from liesample.samplers.contract import Structure, reduce_over_thinning
+from liesample.tuning.warmup import warm_up
 
 SYSTEM = liesample.systems.rigid_body((1.0, 2.0, 4.0))
 STARTS = np.tile(np.array([0.9, 1.2, 0.0]), (4, 1))
@@ -77,6 +79,38 @@ def test_a_first_call_compiles_the_step_once_for_its_warm_up_and_every_chunk():
         sampler, jax.random.key(0), starts, 7, num_warmup=5, chunk_draws=7, progress_bar=False
     )
     np.testing.assert_array_equal(tree.posterior["theta"].values, whole.posterior["theta"].values)
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")  # 7 draws: the convergence checks speak
+def test_a_dual_averaging_warm_up_runs_in_the_program_of_the_chunks():
+    """Dual averaging's warm-up adapts in the chunks' program: a first call compiles the
+    step into one program, and its tuned step and draws are those of the warm-up run alone
+    (``liesample.tuning.warmup.warm_up``) followed by chunks at that step."""
+    system = liesample.systems.rigid_body((1.0, 3.0, 5.0))  # inertia no other test here uses
+    sampler = liesample.adjusted_lie_poisson(system, beta=2.0, sigma=1.0)
+    starts = np.tile(np.array([0.3, 1.1, 0.2]), (3, 1))
+    with counted_compiles() as compiles:
+        tree = liesample.sample(
+            sampler, jax.random.key(2), starts, 7, num_warmup=23, chunk_draws=3,
+            progress_bar=False,
+        )  # fmt: skip
+    stepping = [name for name in compiles.names if "_run" in name or "dual" in name]
+    assert stepping == ["jit(_run_chunk)"], compiles.names
+    chain_keys = jax.random.split(jax.random.key(2), 3)
+    states = jax.vmap(sampler.init)(starts)
+    tuned, moved = warm_up(sampler, jax.random.key(2), chain_keys, states, starts, 23)
+    assert tree.attrs["step_size"] == tuned.settings["step_size"]
+    assert tree.attrs["step_size_source"] == tuned.settings["step_size_source"]
+    assert "mean acceptance in the second half of the warm-up" in tree.attrs["step_size_source"]
+    fixed = liesample.adjusted_lie_poisson(
+        system, beta=2.0, sigma=1.0, step_size=tuned.settings["step_size"]
+    )
+    draws = [
+        run_draws(fixed, key, jax.tree.map(lambda leaf, c=c: leaf[c], moved), 23, 7, 1,
+                  reduce_over_thinning)[1][0]
+        for c, key in enumerate(chain_keys)
+    ]  # fmt: skip
+    np.testing.assert_allclose(tree.posterior["mu"].values, np.stack(draws), rtol=1e-12)
 
 
 def test_the_structure_rebuilds_the_sampler_it_declares():

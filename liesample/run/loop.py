@@ -18,7 +18,7 @@ import time
 import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import cast
+from typing import Any, cast
 
 import jax
 import jax.numpy as jnp
@@ -52,7 +52,14 @@ from liesample.samplers.contract import (
     energy_name,
     reduce_over_thinning,
 )
-from liesample.tuning.warmup import choose_from_starts, warm_up
+from liesample.tuning.protocol import CHAINS
+from liesample.tuning.warmup import (
+    choose_from_starts,
+    dual_averaging_plan,
+    dual_averaging_stepper,
+    tuned_by_dual_averaging,
+    warm_up,
+)
 
 
 @dataclass(frozen=True)
@@ -249,12 +256,19 @@ def program(sampler: Sampler, positions):
     structure = sampler.structure
     if structure is None:
         return sampler, None
-    dtype = jnp.result_type(*jax.tree.leaves(positions))
-    if jnp.issubdtype(dtype, jnp.complexfloating):  # a gauge field's links: real parameters
-        dtype = jnp.finfo(dtype).dtype
+    dtype = _dtype(positions)
     if not jnp.issubdtype(dtype, jnp.floating):
         return sampler, None
     return structure.build, {k: _traced(v, dtype) for k, v in structure.values.items()}
+
+
+def _dtype(positions):
+    """The dtype of a run's real numbers: the positions' (a gauge field's complex links: their
+    real part's)."""
+    dtype = jnp.result_type(*jax.tree.leaves(positions))
+    if jnp.issubdtype(dtype, jnp.complexfloating):
+        return jnp.finfo(dtype).dtype
+    return dtype
 
 
 def _traced(value, dtype):
@@ -308,24 +322,41 @@ def _recorder(observables, log_likelihood, keep_positions):
 @functools.partial(
     jit,
     static_argnames=(
-        "sampler", "count", "thinning", "observables", "log_likelihood", "keep_positions"
+        "sampler", "count", "thinning", "observables", "log_likelihood", "keep_positions", "tuned"
     ),
 )  # fmt: skip
 def _run_chunk(
-    states, keys, first_step, num_steps, values, *, sampler, count, thinning, observables,
-    log_likelihood, keep_positions,
+    states, keys, first_step, num_steps, values, tuning, *, sampler, count, thinning,
+    observables, log_likelihood, keep_positions, tuned,
 ):  # fmt: skip
     """``num_steps`` steps of every chain from ``first_step``, keeping the first of ``count``
-    draws ``thinning`` steps apart that they span: what :func:`_recorder` records, and the
-    per-draw info. ``num_steps`` is traced, so one program runs every chunk, a shorter last one
-    (``num_steps < count · thinning``) and the warm-up (more steps, nothing kept)."""
+    draws ``thinning`` steps apart that they span: ``(states, (recorded, info), tuning)``, what
+    :func:`_recorder` records and the per-draw info. ``num_steps`` is traced, so one program
+    runs every chunk, a shorter last one (``num_steps < count · thinning``) and the warm-up
+    (more steps, nothing kept). A sampler tuned by dual averaging (``tuned``, a
+    :class:`liesample.tuning.warmup.DualAveraging`) steps through
+    :func:`liesample.tuning.warmup.dual_averaging_stepper`: the warm-up's transitions adapt
+    (``tuning.until``) in the same program, and the third result is every chain's
+    :class:`liesample.tuning.warmup.Adapted` (``None`` without ``tuned``)."""
     record = _recorder(observables, log_likelihood, keep_positions)
-    stepper = _stepper(sampler, values)
-    return jax.vmap(
-        lambda s, k: run_draws(
-            stepper, k, s, first_step, count, thinning, reduce_over_thinning, record, num_steps
-        )
-    )(states, keys)
+
+    def run(stepper, state, key):
+        return run_draws(
+            stepper, key, state, first_step, count, thinning, reduce_over_thinning, record,
+            num_steps,
+        )  # fmt: skip
+
+    if tuned is None:
+        states, recorded = jax.vmap(functools.partial(run, _stepper(sampler, values)))(states, keys)
+        return states, recorded, None
+    stepper, start = dual_averaging_stepper(sampler, values, tuned, tuning)
+    num_chains = keys.shape[0]
+
+    def chain(state, key):
+        end, recorded = run(stepper, start(state, first_step, num_chains), key)
+        return end.chain, recorded, end.adapted
+
+    return jax.vmap(chain, axis_name=CHAINS)(states, keys)
 
 
 ONE_KEY = (
@@ -370,6 +401,9 @@ class _Run:
         self._check_memory(algorithm, int(num_draws), o)
         self.algorithm, self.num_draws, self.options = algorithm, int(num_draws), o
         self.spec, self.store = spec, None
+        # set in start() and compile()
+        self.program: Any = None
+        self.executable: Any = None
         # shown from the start: the phases before the first draw take most of a short run
         self.bar = tqdm(
             total=self.num_draws, disable=not o.progress_bar, unit="draw", dynamic_ncols=True
@@ -438,14 +472,19 @@ class _Run:
         rule = adapting and cast(Tunable, sampler.adaptation).method == "rule"
         states = None if rule else self._init_states(sampler)
         self.run_warmup = o.num_warmup > 0
+        self.tuned, self.tuning = None, None
         if adapting:
             self.phase("warm-up (adapting)")
             # From the initial states and deterministic given rng_key: a resumed run re-derives
             # the same parameters.
             starts = self.placed_positions()
-            sampler, adapted = warm_up(
-                sampler, self.rng_key, self.chain_keys, states, starts, o.num_warmup
-            )
+            plan = dual_averaging_plan(sampler, starts, _dtype(self.positions))
+            if plan is not None:  # in the program of the chunks
+                sampler, adapted = self._dual_averaging(sampler, states, plan)
+            else:
+                sampler, adapted = warm_up(
+                    sampler, self.rng_key, self.chain_keys, states, starts, o.num_warmup
+                )
             arguments.check_starts(sampler, self.positions, self.num_chains)
             if adapted is not None:
                 self.run_warmup = False
@@ -455,9 +494,31 @@ class _Run:
         # after the names are checked and the step is set: tracing the step
         self.sampler = scalar_info(sampler, arguments.take_chain(self.positions, 0))
         # the compiled programs' static sampler and traced values
-        self.program = program(self.sampler, self.positions)
+        program_now = program(self.sampler, self.positions)
+        if self.executable is not None and program_now[0] != self.program[0]:
+            self.executable = None  # not the program the warm-up compiled (never expected)
+        self.program = program_now
         self.states = states
         self.settings = dict(sampler.settings, num_warmup=o.num_warmup, adapted=adapting)
+
+    def _dual_averaging(self, sampler, states, plan):
+        """``(tuned, states)``: dual averaging's warm-up run by the program that then runs the
+        chunks (:func:`_run_chunk`), compiled here."""
+        self.tuned, start = plan
+        self.sampler = scalar_info(sampler, arguments.take_chain(self.positions, 0))
+        self.program = program(self.sampler, self.positions)
+        values = self.program[1]
+        if values is None:
+            raise ValueError("dual averaging steps the sampler's Structure: it declares none")
+        values = dict(values, **{self.tuned.name: start.initial})
+        self.states, self.tuning = states, start  # the chunks adapt nothing (until = 0)
+        self.compile(0)
+        self.phase("warm-up (adapting)")
+        run = cast(Callable, self.executable)
+        warm = start._replace(until=jnp.asarray(self.options.num_warmup))
+        moved, _, ends = run(states, self.chain_keys, 0, self.options.num_warmup, values, warm)
+        until = self.options.num_warmup
+        return tuned_by_dual_averaging(sampler, start.initial, ends, until), moved
 
     def _init_states(self, sampler):
         """Every chain's initial state, placed as the run is sharded."""
@@ -523,16 +584,16 @@ class _Run:
         self.phase("compiling")
         self.chunk = arguments.chunk_length(self.num_draws, o.chunk_draws)
         static, values = self.program
-        self.executable = None
-        if self.run_warmup or done < self.num_draws:
+        if self.executable is None and (self.run_warmup or done < self.num_draws):
             self.executable = _run_chunk.lower(
-                self.states, self.chain_keys, 0, 0, values,
+                self.states, self.chain_keys, 0, 0, values, self.tuning,
                 sampler=static,
                 count=min(self.chunk, self.num_draws),
                 thinning=o.thinning,
                 observables=self.observables_key,
                 log_likelihood=self.log_likelihood_key,
                 keep_positions=o.keep_positions,
+                tuned=self.tuned,
             ).compile()  # fmt: skip
 
     def _split(self, recorded, info):
@@ -554,7 +615,8 @@ class _Run:
         run = cast(Callable, self.executable)  # compiled wherever a step is to run
         if self.run_warmup:
             self.phase("warm-up")
-            states = jax.block_until_ready(run(states, self.chain_keys, 0, o.num_warmup, values)[0])
+            steps = run(states, self.chain_keys, 0, o.num_warmup, values, self.tuning)
+            states = jax.block_until_ready(steps[0])
         self.phase("sampling")
         if done:
             bar.update(done)  # the draws already saved
@@ -562,7 +624,9 @@ class _Run:
         while done < self.num_draws:
             count = min(self.chunk, self.num_draws - done)
             first_step = o.num_warmup + done * o.thinning
-            states, recorded = run(states, self.chain_keys, first_step, count * o.thinning, values)
+            states, recorded, _ = run(
+                states, self.chain_keys, first_step, count * o.thinning, values, self.tuning
+            )
             recorded = to_host(recorded)
             if count < self.chunk:  # the last chunk, shorter: its first draws
                 recorded = jax.tree.map(lambda leaf, n=count: leaf[:, :n], recorded)

@@ -55,6 +55,7 @@ from liesample.integrators.chain_loop import NoiseBlocks, declared_noise_blocks,
 from liesample.samplers.contract import Sampler
 
 __all__ = [
+    "CHAINS",
     "ODD_RATE_FRACTION",
     "POOLINGS",
     "RATE_SMOOTHING",
@@ -70,7 +71,8 @@ __all__ = [
     "step_size_adaptation",
 ]
 
-_CHAINS = "chains"
+CHAINS = "chains"
+"""The name of the chains' vmapped axis in an adapting program (its collectives gather over it)."""
 
 
 class Row(NamedTuple):
@@ -204,7 +206,7 @@ class StepSizeState(NamedTuple):
 
 
 def step_size_adaptation(target: float, rate_field: str = "acceptance_rate",
-                         max_step_size: float = math.inf,
+                         max_step_size: float | jax.Array = math.inf,
                          pooling: str = "harmonic") -> Adaptation:  # fmt: skip
     """Dual averaging of one step size shared by the chains towards ``target`` of their
     :func:`pooled_rate` of ``info.<rate_field>`` (Hoffman & Gelman 2014, as
@@ -283,7 +285,7 @@ def _adaptive(adaptation: Adaptation, sampler_at, rows: Row, reference: Sampler)
         row = row_at(rows, carry.index)
         parameters = adaptation.current(carry.adaptation, row)
         chain, info = advance(sampler_at(**parameters), carry.chain)
-        gather = lambda tree: jax.lax.all_gather(tree, _CHAINS)
+        gather = lambda tree: jax.lax.all_gather(tree, CHAINS)
         update = cast(Callable, adaptation.update)  # an adaptation that learns has one
         state = update(
             carry.adaptation, row, parameters, gather(carry.chain), gather(chain), gather(info)
@@ -341,6 +343,6 @@ def run_adaptation(adaptation: Adaptation, sampler_at: Callable, chain_keys, sta
         carry = _Carry(state, start, jnp.asarray(0))
         return run_steps(warmup, key, carry, 0, num_steps, keep, buffers)
 
-    end, records = jax.vmap(chain, axis_name=_CHAINS)(chain_keys, states)
+    end, records = jax.vmap(chain, axis_name=CHAINS)(chain_keys, states)
     tuned = adaptation.final(jax.tree.map(lambda leaf: leaf[0], end.adaptation))
     return end.chain, tuned, records

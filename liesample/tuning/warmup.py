@@ -31,19 +31,34 @@ from __future__ import annotations
 
 import functools
 import json
-from typing import cast
+from collections.abc import Callable
+from typing import Any, NamedTuple, cast
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from liesample.foundation.compile import jit
+from liesample.integrators.chain_loop import NoiseBlocks, declared_noise_blocks, run_steps
 from liesample.samplers.contract import Recipe, Sampler, SamplingAPI, Tunable
 from liesample.samplers.cotangent.magnetic_hmc import jittered_magnetic_hmc
 from liesample.tuning.adaptation import magnetic_window_adaptation, window_adaptation
-from liesample.tuning.protocol import fixed, run_adaptation, step_size_adaptation
+from liesample.tuning.protocol import CHAINS, StepSizeState, fixed, step_size_adaptation
 
-__all__ = ["WARM_UP_METHODS", "adaptation_of", "choose_from_starts", "warm_up", "window_warm_up"]
+__all__ = [
+    "WARM_UP_METHODS",
+    "Adapted",
+    "DualAveraging",
+    "Tuned",
+    "Tuning",
+    "adaptation_of",
+    "choose_from_starts",
+    "dual_averaging_plan",
+    "dual_averaging_stepper",
+    "tuned_by_dual_averaging",
+    "warm_up",
+    "window_warm_up",
+]
 
 WARM_UP_METHODS = ("dual_averaging", "rule", "window", "chees")
 """The values of ``Tunable.method`` that :func:`adaptation_of` builds."""
@@ -107,21 +122,145 @@ def _step_cap(tunable) -> float:
     return np.inf if tunable.max_step_size is None else float(tunable.max_step_size)
 
 
-@functools.partial(jit, static_argnames=("build", "name", "target", "num_warmup"))
-def _dual_averaging(chain_keys, states, initial, others, cap, *, build, name, target, num_warmup):
-    """The warm-up of ``"dual_averaging"``: one program for every value of the step (the
-    structure's value ``name``), of its ``others`` and of the ``cap`` (traced), for a
-    structure's ``build`` (hashable)."""
-    adaptation = step_size_adaptation(target, "acceptance_rate", cap)
-    return run_adaptation(
-        adaptation, lambda step_size: build(**{name: step_size}, **others), chain_keys, states,
-        {"step_size": initial}, num_warmup, _acceptance,
-    )  # fmt: skip
+class DualAveraging(NamedTuple):
+    """The static half of ``"dual_averaging"`` in a compiled program: the structure's value it
+    tunes (``name``: ``step_size``, ``proposal_scale``) and the target acceptance rate."""
+
+    name: str
+    target: float
 
 
-def _acceptance(parameters, state, info):
-    del parameters, state
-    return info.acceptance_rate
+class Tuning(NamedTuple):
+    """The traced half: transitions ``0 … until − 1`` adapt (none with ``until = 0``), from
+    the step ``initial``, under the ``cap``."""
+
+    until: jax.Array
+    cap: jax.Array
+    initial: jax.Array
+
+
+class Adapted(NamedTuple):
+    """What one chain carries through the adapting transitions: the chains' shared dual
+    averaging (``step``), its tuned step so far (``final``: its average, under the cap), and
+    this chain's summed acceptance over the adapting transitions' second half."""
+
+    step: StepSizeState
+    final: jax.Array
+    accepted: jax.Array
+
+
+class Tuned(NamedTuple):
+    """One chain's state in a program that may adapt: the sampler's state, the
+    :class:`Adapted` numbers, the transition's index."""
+
+    chain: Any
+    adapted: Adapted
+    index: jax.Array  # type: ignore[assignment]  # the transition's index (shadows tuple.index)
+
+    @property
+    def position(self):
+        return self.chain.position
+
+
+def dual_averaging_plan(sampler: Sampler, initial_positions, dtype):
+    """``(DualAveraging, Tuning)`` for a sampler whose warm-up is ``"dual_averaging"``, from
+    its starts (the starting step: the given one, else the sampler's choice for them), adapting
+    no transition yet; ``None`` for any other warm-up."""
+    tunable = _declared(sampler)
+    if tunable.method != "dual_averaging":
+        return None
+    _, initial, _ = adaptation_of(sampler, initial_positions, None)
+    spec = DualAveraging(tunable.adapted[0], float(tunable.target_acceptance_rate))
+    cap = jnp.asarray(_step_cap(tunable), dtype)
+    return spec, Tuning(jnp.asarray(0), cap, jnp.asarray(initial, dtype))
+
+
+def dual_averaging_stepper(build: Callable, values: dict, spec: DualAveraging, tuning: Tuning):
+    """``(sampler, start)``: the sampler ``build(**values)`` on :class:`Tuned` states for
+    chains vmapped with axis :data:`liesample.tuning.protocol.CHAINS`, and ``start(state,
+    index, num_chains)``, a chain's first :class:`Tuned` state. A transition that adapts uses
+    the shared step of dual averaging (:func:`liesample.tuning.protocol.step_size_adaptation`,
+    pooled over every chain's acceptance rate) and updates it; any other uses
+    ``values[spec.name]``. Its info is the sampler's, so one program runs the warm-up and the
+    sampling."""
+    others = {k: v for k, v in values.items() if k != spec.name}
+    reference = build(**values)
+    adaptation = step_size_adaptation(spec.target, "acceptance_rate", tuning.cap)
+
+    def start(state, index, num_chains):
+        step = adaptation.init(jnp.zeros(num_chains), {"step_size": tuning.initial})
+        zero = jnp.zeros((), tuning.initial.dtype)
+        final = adaptation.final(step)["step_size"]
+        return Tuned(state, Adapted(step, final, zero), jnp.asarray(index))
+
+    def move(advance, carry: Tuned):
+        adapted = carry.adapted
+        adapting = carry.index < tuning.until
+        now = jnp.where(adapting, adaptation.current(adapted.step)["step_size"], values[spec.name])
+        chain, info = advance(build(**{spec.name: now}, **others), carry.chain)
+        infos = jax.lax.all_gather(info, CHAINS)
+        step = cast(Callable, adaptation.update)(adapted.step, None, None, None, None, infos)
+        late = adapting & (carry.index >= tuning.until // 2)
+        new = Adapted(
+            step,
+            adaptation.final(step)["step_size"],
+            adapted.accepted + jnp.where(late, info.acceptance_rate, 0.0),
+        )
+        adapted = jax.tree.map(lambda a, b: jnp.where(adapting, a, b), new, adapted)
+        return Tuned(chain, adapted, carry.index + 1), info
+
+    blocks = declared_noise_blocks(reference)
+    noise_blocks = None
+    if blocks is not None:
+        noise_blocks = NoiseBlocks(
+            blocks.size,
+            lambda key, carry: blocks.draw(key, carry.chain),
+            lambda row, carry: move(lambda s, chain: s.noise_blocks.step(row, chain), carry),
+        )
+    sampler = Sampler(
+        lambda position, rng_key=None: reference.init(position, rng_key),
+        lambda key, carry: move(lambda s, chain: s.step(key, chain), carry),
+        noise_blocks=noise_blocks,
+    )
+    return sampler, start
+
+
+def _one(leaf):
+    """One element of an array of the chains (each chain holds the same value), on the host
+    without a compiled program, also where the chains span several processes."""
+    return np.asarray(leaf.addressable_shards[0].data).ravel()[0]
+
+
+def tuned_by_dual_averaging(sampler: Sampler, initial_step, ends: Adapted, until: int):
+    """The sampler's recipe at the step the warm-up of ``until`` transitions tuned (``ends``:
+    every chain's :class:`Adapted` after it), its source naming the chains' mean acceptance
+    over the warm-up's second half."""
+    tunable = _declared(sampler)
+    accepted = ends.accepted
+    # chains spread over several processes: their sum is computed on the devices
+    total = np.sum(np.asarray(accepted)) if accepted.is_fully_addressable else jnp.sum(accepted)
+    mean = float(total) / (accepted.shape[0] * max(until - until // 2, 1))
+    source = (
+        f"warm-up dual averaging to mean acceptance {tunable.target_acceptance_rate:g} over "
+        f"chains, from {float(initial_step):.4g}; mean acceptance in the second half of the "
+        f"warm-up {mean:.3f}"
+    )
+    return _recipe(sampler)(source, **{tunable.adapted[0]: float(_one(ends.final))})
+
+
+@functools.partial(jit, static_argnames=("build", "spec"))
+def _dual_averaging(chain_keys, states, values, tuning, *, build, spec):
+    """The warm-up of ``"dual_averaging"`` on its own (:func:`warm_up`); a run of
+    :func:`liesample.sample` runs the same stepper in the program of its chunks."""
+    stepper, start = dual_averaging_stepper(build, values, spec, tuning)
+    num_chains = chain_keys.shape[0]
+
+    def chain(key, state):
+        end, _ = run_steps(stepper, key, start(state, 0, num_chains), 0, tuning.until)
+        return end
+
+    end = jax.vmap(chain, axis_name=CHAINS)(chain_keys, states)
+    return end.chain, end.adapted
 
 
 def warm_up(sampler: Sampler, rng_key, chain_keys, states, initial_positions, num_warmup: int):
@@ -136,32 +275,21 @@ def warm_up(sampler: Sampler, rng_key, chain_keys, states, initial_positions, nu
     tunable = _declared(sampler)
     if tunable.method in ("window", "chees"):
         return window_warm_up(sampler, rng_key, initial_positions, num_warmup)
-    adaptation, initial, source = adaptation_of(sampler, initial_positions, rng_key)
-    name = tunable.adapted[0]
-    if adaptation.update is None:
+    if tunable.method == "rule":
+        adaptation, _, source = adaptation_of(sampler, initial_positions, rng_key)
         step_size = adaptation.final(adaptation.init(states, {}))["step_size"]
-        return _recipe(sampler)(source, **{name: float(step_size)}), None
+        return _recipe(sampler)(source, **{tunable.adapted[0]: float(step_size)}), None
     if sampler.structure is None:
         raise ValueError("dual averaging steps the sampler's Structure: it declares none")
     dtype = jax.tree.leaves(states.position)[0].dtype
-    values = sampler.structure.values
-    others = {k: jnp.asarray(v, dtype) for k, v in values.items() if k != name}
-    moved, parameters, rates = _dual_averaging(
-        chain_keys, states, jnp.asarray(initial, dtype), others,
-        jnp.asarray(_step_cap(tunable), dtype), build=sampler.structure.build, name=name,
-        target=tunable.target_acceptance_rate, num_warmup=num_warmup,
-    )  # fmt: skip
-    step_size = float(parameters["step_size"])
-    target = tunable.target_acceptance_rate
-    kept = rates[:, num_warmup // 2 :]
-    # chains spread over several processes: their mean is computed on the devices
-    mean = np.mean(np.asarray(kept)) if kept.is_fully_addressable else jnp.mean(kept)
-    source = (
-        f"warm-up dual averaging to mean acceptance {target:g} over chains, from "
-        f"{initial:.4g}; mean acceptance in the second half of the warm-up "
-        f"{float(mean):.3f}"
+    spec, tuning = cast(tuple, dual_averaging_plan(sampler, initial_positions, dtype))
+    values = {k: jnp.asarray(v, dtype) for k, v in sampler.structure.values.items()}
+    values[spec.name] = tuning.initial
+    tuning = tuning._replace(until=jnp.asarray(num_warmup))
+    moved, ends = _dual_averaging(
+        chain_keys, states, values, tuning, build=sampler.structure.build, spec=spec
     )
-    return _recipe(sampler)(source, **{name: step_size}), moved
+    return tuned_by_dual_averaging(sampler, tuning.initial, ends, num_warmup), moved
 
 
 MODEL = ("model_args", "model_kwargs")
