@@ -276,8 +276,9 @@ def _group_rows(variable, group):
         if len(group) > 1:  # R-hat compares chains
             others = np.setdiff1d(np.arange(len(checked)), ranked, assume_unique=True)
             flagged = others[~(screened[others] <= MAX_RHAT)]  # NaN (frozen chains) counts
-            rows = [(variable.names[checked[i]], np.nan_to_num(screened[i], nan=np.inf),
-                     np.nan, np.nan, group) for i in flagged]  # fmt: skip
+            values = np.nan_to_num(screened[flagged], nan=np.inf)
+            rows = [(n, r, np.nan, np.nan, group)
+                    for n, r in zip(variable.names[checked[flagged]], values)]  # fmt: skip
         checked = checked[ranked]
     for index in variable.batches(checked):
         r_hat, bulk, tail = rank_diagnostics(variable.elements(index, group))

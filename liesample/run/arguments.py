@@ -297,8 +297,12 @@ def check_starts(sampler: Sampler, initial_positions, num_chains, step_size_chec
         ],
         axis=1,
     )  # bytes: one row per chain, whatever the leaves' dtypes
-    _, first_chains = np.unique(flat, axis=0, return_index=True)
-    for chain in np.sort(first_chains):
+    # each distinct row's first chain (np.unique over rows of many bytes is slow: it compares
+    # them as structured records)
+    first_chains: dict[bytes, int] = {}
+    for chain, row in enumerate(flat):
+        first_chains.setdefault(row.tobytes(), chain)
+    for chain in sorted(first_chains.values()):
         try:
             sampler.init(take_chain(initial_positions, chain))
         except (ValueError, TypeError) as error:
