@@ -224,14 +224,21 @@ def scalar_info(sampler: Sampler, position) -> Sampler:
     blocks, is returned as it is."""
     if sampler.noise_blocks is not None:
         return sampler
-    state = jax.eval_shape(sampler.init, position)
-    _, info = jax.eval_shape(sampler.step, jax.random.key(0), state)
+    static, values = program(sampler, position)  # traced once per structure (jit's cache)
+    _, info = _first_step.eval_shape(position, jax.random.key(0), values, sampler=static)
     fields = info._asdict() if hasattr(info, "_asdict") else dict(vars(info))
     kept = tuple(name for name, v in fields.items() if getattr(v, "shape", None) == ())
     if hasattr(info, "_asdict") and len(kept) == len(fields):
         return sampler
     hooks = {name: getattr(sampler, name) for name in HOOKS}
     return Sampler(sampler.init, _ScalarInfoStep(sampler.step, kept), **hooks)
+
+
+@functools.partial(jit, static_argnames=("sampler",))
+def _first_step(position, rng_key, values, *, sampler):
+    """One step from ``position`` (:func:`scalar_info` reads the shapes of its info)."""
+    stepper = _stepper(sampler, values)
+    return stepper.step(rng_key, stepper.init(position))
 
 
 @dataclass(frozen=True)
