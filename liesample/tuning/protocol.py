@@ -63,6 +63,7 @@ __all__ = [
     "Adaptation",
     "Row",
     "StepSizeState",
+    "carried_sampler",
     "fixed",
     "odd_chains",
     "pooled_rate",
@@ -292,6 +293,14 @@ def _adaptive(adaptation: Adaptation, sampler_at, rows: Row, reference: Sampler)
         )
         return _Carry(chain, state, carry.index + 1), (parameters, info)
 
+    return carried_sampler(reference, move)
+
+
+def carried_sampler(reference: Sampler, move: Callable) -> Sampler:
+    """A sampler on a carry whose ``chain`` is a state of ``reference``: each transition is
+    ``move(advance, carry)``, where ``advance(sampler, chain) -> (chain, info)`` steps any
+    sampler built like ``reference`` with this transition's key or noise row (the noise blocks
+    of ``reference``, drawn for the carry's chain, when it declares them)."""
     blocks = declared_noise_blocks(reference)
     noise_blocks = None
     if blocks is not None:

@@ -39,11 +39,17 @@ import jax.numpy as jnp
 import numpy as np
 
 from liesample.foundation.compile import jit
-from liesample.integrators.chain_loop import NoiseBlocks, declared_noise_blocks, run_steps
+from liesample.integrators.chain_loop import run_steps
 from liesample.samplers.contract import Recipe, Sampler, SamplingAPI, Tunable
 from liesample.samplers.cotangent.magnetic_hmc import jittered_magnetic_hmc
 from liesample.tuning.adaptation import magnetic_window_adaptation, window_adaptation
-from liesample.tuning.protocol import CHAINS, StepSizeState, fixed, step_size_adaptation
+from liesample.tuning.protocol import (
+    CHAINS,
+    StepSizeState,
+    carried_sampler,
+    fixed,
+    step_size_adaptation,
+)
 
 __all__ = [
     "WARM_UP_METHODS",
@@ -209,20 +215,7 @@ def dual_averaging_stepper(build: Callable, values: dict, spec: DualAveraging, t
         adapted = jax.tree.map(lambda a, b: jnp.where(adapting, a, b), new, adapted)
         return Tuned(chain, adapted, carry.index + 1), info
 
-    blocks = declared_noise_blocks(reference)
-    noise_blocks = None
-    if blocks is not None:
-        noise_blocks = NoiseBlocks(
-            blocks.size,
-            lambda key, carry: blocks.draw(key, carry.chain),
-            lambda row, carry: move(lambda s, chain: s.noise_blocks.step(row, chain), carry),
-        )
-    sampler = Sampler(
-        lambda position, rng_key=None: reference.init(position, rng_key),
-        lambda key, carry: move(lambda s, chain: s.step(key, chain), carry),
-        noise_blocks=noise_blocks,
-    )
-    return sampler, start
+    return carried_sampler(reference, move), start
 
 
 def _one(leaf):
