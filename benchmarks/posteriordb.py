@@ -166,14 +166,12 @@ def compiled(fn, *args):
 
 
 class CompileClock:
-    """Seconds of compilation that JAX reports while it is active: tracing, lowering, XLA, and
-    loading a program from the persistent compilation cache instead of compiling it."""
+    """Seconds of compilation that JAX reports (tracing, lowering, XLA) while it is active."""
 
     EVENTS = (
         "/jax/core/compile/jaxpr_trace_duration",
         "/jax/core/compile/jaxpr_to_mlir_module_duration",
         "/jax/core/compile/backend_compile_duration",
-        "/jax/compilation_cache/cache_retrieval_time_sec",
     )
 
     def __init__(self):
