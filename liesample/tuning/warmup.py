@@ -204,15 +204,16 @@ def dual_averaging_stepper(build: Callable, values: dict, spec: DualAveraging, t
         adapting = carry.index < tuning.until
         now = jnp.where(adapting, adaptation.current(adapted.step)["step_size"], values[spec.name])
         chain, info = advance(build(**{spec.name: now}, **others), carry.chain)
-        infos = jax.lax.all_gather(info, CHAINS)
-        step = cast(Callable, adaptation.update)(adapted.step, None, None, None, None, infos)
-        late = adapting & (carry.index >= tuning.until // 2)
-        new = Adapted(
-            step,
-            adaptation.final(step)["step_size"],
-            adapted.accepted + jnp.where(late, info.acceptance_rate, 0.0),
-        )
-        adapted = jax.tree.map(lambda a, b: jnp.where(adapting, a, b), new, adapted)
+
+        def update(adapted):
+            infos = jax.lax.all_gather(info, CHAINS)
+            step = cast(Callable, adaptation.update)(adapted.step, None, None, None, None, infos)
+            late = carry.index >= tuning.until // 2
+            accepted = adapted.accepted + jnp.where(late, info.acceptance_rate, 0.0)
+            return Adapted(step, adaptation.final(step)["step_size"], accepted)
+
+        # the same index in every chain: a sampling transition skips the update
+        adapted = jax.lax.cond(adapting, update, lambda adapted: adapted, adapted)
         return Tuned(chain, adapted, carry.index + 1), info
 
     return carried_sampler(reference, move), start
