@@ -53,7 +53,7 @@ def _user_warnings(record):
 def vectorized():
     """One MCMC for both runs (``jit_model_args``: ``a`` is traced, the loop compiles once)."""
     return MCMC(
-        GeometricHMC(two_modes, check_convergence=True), num_warmup=300, num_samples=1000,
+        GeometricHMC(two_modes), num_warmup=300, num_samples=1000,
         num_chains=2, chain_method="vectorized", progress_bar=False, jit_model_args=True,
     )  # fmt: skip
 
@@ -81,7 +81,7 @@ def test_sequential_chains_of_20_unadapted_draws_warn():
     def model():
         numpyro.sample("theta", dist.Normal(jnp.zeros(2), jnp.array([1.0, 3.0])).to_event(1))
 
-    kernel = GeometricHMC(model, check_convergence=True)
+    kernel = GeometricHMC(model)  # the checks are on by default
     mcmc = MCMC(kernel, num_warmup=0, num_samples=20, num_chains=2, chain_method="sequential",
                 progress_bar=False)  # fmt: skip
     with warnings.catch_warnings(record=True) as record:
@@ -105,24 +105,30 @@ def test_parallel_chains_warn():  # pragma: no cover - one CPU device here
         mcmc.run(jax.random.key(1))
 
 
-def test_the_host_side_tells_chains_apart_by_their_keys_and_keeps_mcmcs_thinning(monkeypatch):
-    """Draws of two chains arriving interleaved (as parallel chains may), thinned by 2: each
-    chain is assembled by its key sequence, the check runs once, on the draws MCMC keeps."""
+def test_the_kept_draws_are_buffered_as_mcmc_keeps_them_and_sent_once_per_run(monkeypatch):
+    """Two chains, a warm-up of 2, then 5 draws thinned by 2, twice (a continued run): the
+    buffer holds the draws MCMC keeps, and the host gets one call per run, after its last
+    draw."""
     seen = []
     monkeypatch.setattr(numpyro_checks, "check_draws", lambda *run: seen.append(run))
-    checks = RunChecks(num_warmup=0, num_samples=5, num_chains=2, thinning=2)
-    keys = {chain: [np.array([[chain, k]]) for k in range(6)] for chain in (0, 1)}
-    for step in range(5):
-        for chain in (1, 0) if step % 2 else (0, 1):
-            value = {"x": np.array([10.0 * chain + step])}
-            fields = {"diverging": np.array([False])}
-            checks.receive(keys[chain][step], keys[chain][step + 1], value, fields)
-    ((variables, fields, scales),) = seen
+    checks = RunChecks(num_warmup=2, num_samples=5, num_chains=2, thinning=2)
+    latent = lambda z: {"x": z}
+    draw = lambda i: jnp.array([[10.0 * chain + i] for chain in (0, 1)])
+    fields = lambda i: {"diverging": jnp.array([i == 6, False])}
+    kept = checks.buffer(latent, draw(0), fields(0))
+    step = jax.jit(checks.trace, static_argnums=1)
+    for i in range(12):
+        kept = step(i, latent, draw(i), fields(i), kept)
+        jax.effects_barrier()
+        assert len(seen) == (i >= 6) + (i >= 11)
+    (first, _, scales), (second, _, _) = seen
     assert scales == {}  # no model: no hierarchical scale
-    # Of 5 draws thinned by 2 MCMC keeps draws 2 and 4: it skips the first num_samples % 2,
-    # then keeps the last of each pair.
-    np.testing.assert_array_equal(variables["x"], [[2.0, 4.0], [12.0, 14.0]])
-    assert fields["diverging"].shape == (2, 2)
+    # Of 5 draws thinned by 2 MCMC keeps draws 2 and 4 of each run (transitions 4 and 6 of
+    # the first, 9 and 11 of the second): it skips the first num_samples % 2, then keeps the
+    # last of each pair.
+    np.testing.assert_array_equal(first["x"], [[[4.0], [6.0]], [[14.0], [16.0]]])
+    np.testing.assert_array_equal(second["x"], [[[9.0], [11.0]], [[19.0], [21.0]]])
+    np.testing.assert_array_equal(seen[0][1]["diverging"], [[False, True], [False, False]])
 
 
 @pytest.mark.slow  # the run's own checks run by default (tests above)

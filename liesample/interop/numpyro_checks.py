@@ -9,27 +9,30 @@ R-hat of the energies, and one ``UserWarning`` with the rank-normalised split R-
 and tail ESS of every element of every latent site
 (:func:`liesample.analysis.convergence.convergence_warnings`), on the constrained values
 ``mcmc.get_samples()`` holds, thinned as MCMC keeps them. A well-mixed run is quiet.
-They run by themselves with ``GeometricHMC(model, check_convergence=True)``; by default
-(``False``) call :func:`check_mcmc` on the finished run, which costs nothing while the chains
-run, whereas the automatic checks send every kept draw to the host (below).
+They run by themselves at the end of ``MCMC.run`` (``GeometricHMC(model)``'s default,
+``check_convergence=True``); with ``check_convergence=False`` call :func:`check_mcmc` on the
+finished run.
 
 **The mechanism and its limits.** NumPyro's ``MCMCKernel`` interface tells a kernel
 ``num_warmup`` (an argument of ``init``) but not how many draws follow, and calls nothing on it
 once the loop ends. So ``init`` looks, on the call stack, for the ``numpyro.infer.MCMC`` whose
 ``sampler`` is this kernel (:func:`calling_mcmc`) and reads its public ``num_samples``,
-``num_chains``, ``thinning`` and ``chain_method``. Each transition after the warm-up sends the
-draw's latent values, ``diverging``, ``accept_prob`` and ``energy`` to the host
-(``jax.debug.callback``, with the chain's key before and after the transition, which tells the
-chains apart whatever order they run in); once ``num_chains`` chains hold ``num_samples``
-draws, the checks run and the copies are dropped. So:
+``num_chains``, ``thinning`` and ``chain_method``. The kernel's state then carries a buffer of
+the draws MCMC keeps (their latent values, ``diverging``, ``accept_prob`` and ``energy``;
+:meth:`RunChecks.buffer`): each transition after the warm-up writes its draw there when MCMC
+keeps it, and after the run's last draw the buffer goes to the host in one
+``jax.debug.callback``; once ``num_chains`` chains have arrived, the checks run and the copies
+are dropped. So:
 
 - it works for ``chain_method`` ``"sequential"``, ``"vectorized"`` and ``"parallel"``, for
   ``mcmc.warmup`` followed by ``mcmc.run`` and for a continued run from ``post_warmup_state``
-  (each run of ``num_samples`` draws is checked); with ``"parallel"`` the chains are numbered in
-  the order their first draws reach the host;
+  (each run of ``num_samples`` draws is checked); the chains are numbered in the order their
+  draws reach the host (with ``"parallel"``, not necessarily MCMC's);
 - with a callable ``chain_method``, or a driver other than ``numpyro.infer.MCMC``, nothing is
   found and nothing is checked: call :func:`check_mcmc` on the finished ``MCMC``;
-- the host holds a second copy of the kept draws until the check;
+- the device holds a second copy of the kept draws during the run (``check_convergence=False``
+  keeps none); a sequential run interrupted part way leaves the chains it finished, which the
+  next run's checks would count: build a new kernel after an interruption;
 - JAX dispatches asynchronously: on an accelerator the warnings come when the computation reaches
   the last draw, which can be after ``MCMC.run`` returns (``jax.effects_barrier()`` waits for it);
 - a warning turned into an error (``-W error``) is raised inside the host callback, so the run
@@ -68,7 +71,7 @@ STUCK_ADVICE = (
     "Give a longer num_warmup so the step size adapts, a smaller step_size with "
     "adapt_step_size=False, or init_params near the posterior."
 )
-SILENCE = "GeometricHMC(..., check_convergence=False) (the default) turns these checks off"
+SILENCE = "GeometricHMC(..., check_convergence=False) turns these checks off"
 
 
 def funnel_warnings(variables: dict[str, np.ndarray], fields: dict[str, np.ndarray],
@@ -116,21 +119,6 @@ def calling_mcmc(kernel) -> MCMC | None:
         del frame  # no reference cycle through the frames
 
 
-def _key_bytes(keys) -> np.ndarray:
-    """``(chains, …)`` raw key data, one row of bytes per chain."""
-    keys = np.asarray(keys)
-    return keys.reshape(len(keys), -1)
-
-
-class _Chain:
-    """One chain's draws on the host: latent values, and the per-draw fields."""
-
-    def __init__(self):
-        self.count = 0
-        self.values: list[dict[str, np.ndarray]] = []
-        self.fields: list[dict[str, np.ndarray]] = []
-
-
 class RunChecks:
     """The host side of the checks of one ``MCMC`` set-up (module docstring): ``trace`` is
     called in the kernel's traced transition, ``receive`` on the host with each draw after the
@@ -140,8 +128,8 @@ class RunChecks:
         self.settings = (int(num_warmup), int(num_samples), int(num_chains), int(thinning))
         # the model's hierarchical scales, for funnel_warnings (the kernel sets them)
         self.scales: dict[str, tuple[str, ...]] = {}
-        self._chains: list[_Chain] = []
-        self._by_key: dict[bytes, _Chain] = {}
+        # each chain's kept (latent values, fields), as they arrive
+        self._chains: list[tuple[dict, dict]] = []
 
     @classmethod
     def find(cls, kernel, num_warmup, batched) -> RunChecks | None:
@@ -157,59 +145,64 @@ class RunChecks:
         current = getattr(kernel, "run_checks", None)
         if not isinstance(current, RunChecks) or current.settings != settings:
             return cls(*settings)
-        if batched or current._by_key:
-            current._chains, current._by_key = [], {}
+        if batched:
+            current._chains = []
         return current
 
-    def trace(self, i, keys_before, keys_after, latent_fn, z, fields: dict[str, Any]):
+    @property
+    def num_kept(self) -> int:
+        """The draws of a run MCMC keeps per chain (``num_samples // thinning``)."""
+        _, num_samples, _, thinning = self.settings
+        return num_samples // thinning
+
+    def buffer(self, latent_fn, z, fields: dict[str, Any]):
+        """The zero buffer of one run's kept draws, chains on the leading axis of ``z`` and of
+        ``fields``' arrays: ``(latent values, fields)``, each ``(chains, num_kept, …)``."""
+        values = jax.eval_shape(latent_fn, z)
+        zeros = lambda x: jnp.zeros((x.shape[0], self.num_kept, *x.shape[1:]), x.dtype)
+        return jax.tree.map(zeros, (values, fields))
+
+    def trace(self, i, latent_fn, z, fields: dict[str, Any], kept):
         """In the transition of draw ``i`` (chains on the leading axis): after the warm-up,
-        send ``latent_fn(z)`` (the constrained latent values) and ``fields`` to
-        :meth:`receive`."""
-
-        def key_data(keys):
-            if jax.dtypes.issubdtype(keys.dtype, jax.dtypes.prng_key):
-                return jax.random.key_data(keys)
-            return keys
-
-        def send():
-            values = latent_fn(z)
-            before, after = key_data(keys_before), key_data(keys_after)
-            jax.debug.callback(self.receive, before, after, values, fields)
-
-        jax.lax.cond(i >= self.settings[0], send, lambda: None)
-
-    def receive(self, keys_before, keys_after, values, fields):
-        """One draw of every chain in the batch; runs the checks when the run is complete."""
-        before, after = _key_bytes(keys_before), _key_bytes(keys_after)
-        values = {k: np.asarray(v) for k, v in values.items()}  # indexed on the host below
-        fields = {k: np.asarray(v) for k, v in fields.items()}
-        _, num_samples, num_chains, thinning = self.settings
+        write ``latent_fn(z)`` (the constrained latent values) and ``fields`` into ``kept``
+        (:meth:`buffer`) where MCMC keeps the draw, and send the whole buffer to
+        :meth:`receive` after the run's last draw, one host round trip per run. Returns the
+        buffer."""
+        num_warmup, num_samples, _, thinning = self.settings
+        if self.num_kept == 0:
+            return kept
+        # a continued run (post_warmup_state) goes on counting: the run's own index
+        j = jnp.mod(i - num_warmup, num_samples)
         # MCMC keeps the last draw of each group of `thinning` after the first `offset` draws
         offset = num_samples % thinning
-        for c in range(len(before)):
-            chain = self._by_key.pop(before[c].tobytes(), None)
-            if chain is None:
-                chain = _Chain()
-                self._chains.append(chain)
-            if chain.count >= offset and (chain.count - offset) % thinning == thinning - 1:
-                chain.values.append({k: v[c] for k, v in values.items()})
-                chain.fields.append({k: v[c] for k, v in fields.items()})
-            chain.count += 1
-            if chain.count < num_samples:
-                self._by_key[after[c].tobytes()] = chain
-        complete = [chain for chain in self._chains if chain.count >= num_samples]
-        if len(complete) >= num_chains:
-            self._chains, self._by_key = [], {}
-            check_draws(
-                _stacked([chain.values for chain in complete[:num_chains]]),
-                _stacked([chain.fields for chain in complete[:num_chains]]),
-                self.scales,
-            )
+        keep = (i >= num_warmup) & (j >= offset) & (jnp.mod(j - offset, thinning) == thinning - 1)
+        slot = jnp.clip((j - offset) // thinning, 0, self.num_kept - 1)
 
+        def write(kept):
+            new = (latent_fn(z), fields)
+            put = lambda buf, x: jax.lax.dynamic_update_index_in_dim(buf, x.astype(buf.dtype),
+                                                                     slot, 1)  # fmt: skip
+            return jax.tree.map(put, kept, new)
 
-def _stacked(chains) -> dict[str, np.ndarray]:
-    """Per-chain lists of per-draw dicts → name → ``(chains, draws, …)``."""
-    return {name: np.stack([[d[name] for d in draws] for draws in chains]) for name in chains[0][0]}
+        kept = jax.lax.cond(keep, write, lambda kept: kept, kept)
+        last = (i >= num_warmup) & (j == num_samples - 1)
+        jax.lax.cond(last, lambda: jax.debug.callback(self.receive, *kept), lambda: None)
+        return kept
+
+    def receive(self, values, fields):
+        """The kept draws of one run of every chain in the batch (``(chains, draws, …)``);
+        runs the checks once ``num_chains`` chains have arrived."""
+        values = {k: np.asarray(v) for k, v in values.items()}
+        fields = {k: np.asarray(v) for k, v in fields.items()}
+        for c in range(len(next(iter(fields.values())))):
+            self._chains.append(({k: v[c] for k, v in values.items()},
+                                 {k: v[c] for k, v in fields.items()}))  # fmt: skip
+        num_chains = self.settings[2]
+        if len(self._chains) >= num_chains:
+            complete, self._chains = self._chains[:num_chains], []
+            stack = lambda part: {k: np.stack([chain[part][k] for chain in complete])
+                                  for k in complete[0][part]}  # fmt: skip
+            check_draws(stack(0), stack(1), self.scales)
 
 
 def check_draws(variables: dict[str, np.ndarray], fields: dict[str, np.ndarray],

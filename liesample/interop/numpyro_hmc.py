@@ -107,6 +107,8 @@ class GeometricHMCState(NamedTuple):
     metric: object = None
     # the parameters of the next transition (parameters()), computed at the end of the last one
     parameters: object = None
+    # the post-run checks' buffer of the run's kept draws (RunChecks.buffer), or None
+    kept: object = None
 
 
 class Settings(NamedTuple):
@@ -382,8 +384,9 @@ def sample_batch(c: Core, state, logdensity, on_draw=None):
     """One transition of every chain (a leading chain axis), ``logdensity`` of the sampler's
     position. The chains share the warm-up: one step size (dual averaging of their pooled
     rate), one mass (their pooled moments) and one ``T`` (ChEES centred on their mean); each
-    chain carries a copy of the adaptation state (and its own running rate). ``on_draw(i,
-    keys_before, keys_after, z, fields)``, when given, is called (traced) with each draw."""
+    chain carries a copy of the adaptation state (and its own running rate). ``on_draw(i, z,
+    fields, kept)``, when given, is called (traced) with each draw and returns the state's new
+    ``kept``."""
     settings, layout = c.settings, c.layout
     space = layout.inner_space
     i = state.i[0]
@@ -447,7 +450,7 @@ def sample_batch(c: Core, state, logdensity, on_draw=None):
     if on_draw is not None:  # the draw, to the post-run checks
         fields = {"diverging": info.is_divergent, "accept_prob": info.acceptance_rate,
                   "energy": energy}  # fmt: skip
-        on_draw(i, state.rng_key, rng_key, new_state.z, fields)
+        new_state = new_state._replace(kept=on_draw(i, new_state.z, fields, state.kept))
     return new_state
 
 

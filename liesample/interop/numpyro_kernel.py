@@ -82,10 +82,10 @@ rank-normalised split R-hat and bulk/tail ESS of every element of every latent s
 naming them, and a funnel warning naming a centred hierarchy's scale site
 (``hierarchical_scales``, found in the model at ``init``) with
 ``numpyro.infer.reparam.LocScaleReparam`` as the fix; it costs nothing while the chains run.
-``check_convergence=True`` runs the same checks at the end of ``MCMC.run`` with no extra call,
-at the price of a host round trip per kept draw (several times the sampling time of a cheap
-model): NumPyro does not tell a kernel how many draws follow its warm-up, so ``init`` finds the
-calling ``MCMC`` on the call stack; the mechanism and its limits are in
+By default (``check_convergence=True``) the same checks run at the end of ``MCMC.run`` with no
+extra call: the chains keep a copy of the draws MCMC keeps on the device, sent to the host once,
+after the run's last draw. NumPyro does not tell a kernel how many draws follow its warm-up, so
+``init`` finds the calling ``MCMC`` on the call stack; the mechanism and its limits are in
 :mod:`liesample.interop.numpyro_checks`.
 
 **Chains.** ``chain_method="vectorized"`` vmaps init and transition over chains;
@@ -346,10 +346,9 @@ class GeometricHMC(MCMCKernel):
         ``T``, whose chain then barely moves). ``False`` integrates ``T`` itself.
     check_convergence : bool
         Run :func:`liesample.sample`'s post-run checks at the end of ``MCMC.run`` with no extra
-        call (module docstring). ``False`` (default): each kept draw would otherwise go to the
-        host during the run, a round trip per transition; call
-        ``liesample.interop.numpyro_checks.check_mcmc(mcmc)`` after the run instead, which
-        costs nothing while the chains run.
+        call (default; module docstring): the chains carry a second copy of the kept draws on
+        the device, sent to the host once per run. ``False`` keeps no copy; then
+        ``liesample.interop.numpyro_checks.check_mcmc(mcmc)`` checks the finished run.
     kinetic_fn, forward_mode_differentiation, regularize_mass_matrix
         NumPyro's, accepted at their defaults only (``None``, ``False``, ``True``): the
         kinetic energy is ``½ pᵀM⁻¹p`` in algebra coordinates, gradients are taken in
@@ -385,7 +384,7 @@ class GeometricHMC(MCMCKernel):
         divergence_threshold: float = 1000.0,
         integrator="leapfrog",
         jitter: bool = True,
-        check_convergence: bool = False,
+        check_convergence: bool = True,
         kinetic_fn=None,
         forward_mode_differentiation: bool = False,
         regularize_mass_matrix: bool = True,
@@ -525,7 +524,7 @@ class GeometricHMC(MCMCKernel):
         first = jax.tree.map(lambda x: x[0], state.z) if batched else state.z
         jax.eval_shape(self.postprocess_fn(model_args, model_kwargs), first)
         self._sample_fn = self.sample
-        return state
+        return self._with_buffer(state, model_args, model_kwargs)
 
     def _on_draw(self, model_args, model_kwargs):
         """The post-run checks' ``trace`` of each draw (module docstring), or ``None``."""
@@ -533,8 +532,19 @@ class GeometricHMC(MCMCKernel):
         if checks is None:
             return None
         latent = latent_values(self.postprocess_fn(model_args, model_kwargs), self._layout.sites)
-        return lambda i, before, after, z, fields: checks.trace(i, before, after, latent, z,
-                                                                fields)  # fmt: skip
+        return lambda i, z, fields, kept: checks.trace(i, latent, z, fields, kept)
+
+    def _with_buffer(self, state, model_args, model_kwargs):
+        """``state`` with the post-run checks' buffer of kept draws (none without checks)."""
+        checks = self.run_checks
+        if checks is None:
+            return state
+        latent = latent_values(self.postprocess_fn(model_args, model_kwargs), self._layout.sites)
+        batch = state if self._batched else jax.tree.map(lambda x: jnp.asarray(x)[None], state)
+        fields = {"diverging": batch.diverging, "accept_prob": batch.accept_prob,
+                  "energy": batch.energy}  # fmt: skip
+        kept = checks.buffer(latent, batch.z, fields)
+        return state._replace(kept=kept if self._batched else jax.tree.map(lambda x: x[0], kept))
 
     @property
     def chain_adaptations(self) -> list:
