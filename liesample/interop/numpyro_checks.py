@@ -121,8 +121,8 @@ def calling_mcmc(kernel) -> MCMC | None:
 
 class RunChecks:
     """The host side of the checks of one ``MCMC`` set-up (module docstring): ``trace`` is
-    called in the kernel's traced transition, ``receive`` on the host with each draw after the
-    warm-up; the checks run when ``num_chains`` chains hold ``num_samples`` draws."""
+    called in the kernel's traced transition, ``receive`` on the host with a run's kept draws;
+    the checks run when ``num_chains`` chains have arrived."""
 
     def __init__(self, num_warmup: int, num_samples: int, num_chains: int, thinning: int):
         self.settings = (int(num_warmup), int(num_samples), int(num_chains), int(thinning))
@@ -136,8 +136,8 @@ class RunChecks:
         """The checks for the ``MCMC`` calling ``kernel.init`` (``batched``: with every chain
         at once), or ``None`` when there is none (or its ``chain_method`` is a callable).
         ``kernel.run_checks`` is kept when its settings are the same, as sequential chains
-        call ``init`` once each; what it holds is dropped when it can only be left from an
-        interrupted run (a chain part way, or any chain when all chains start at once)."""
+        call ``init`` once each; what it holds is dropped when all chains start at once (it can
+        only be left from an interrupted run)."""
         mcmc = calling_mcmc(kernel)
         if mcmc is None or mcmc.chain_method not in CHAIN_METHODS:
             return None

@@ -531,19 +531,23 @@ class GeometricHMC(MCMCKernel):
         checks = self.run_checks
         if checks is None:
             return None
-        latent = latent_values(self.postprocess_fn(model_args, model_kwargs), self._layout.sites)
+        latent = self._latent(model_args, model_kwargs)
         return lambda i, z, fields, kept: checks.trace(i, latent, z, fields, kept)
+
+    def _latent(self, model_args, model_kwargs):
+        """The constrained latent values of draws ``z`` (chains on the leading axis)."""
+        return latent_values(self.postprocess_fn(model_args, model_kwargs), self._layout.sites)
 
     def _with_buffer(self, state, model_args, model_kwargs):
         """``state`` with the post-run checks' buffer of kept draws (none without checks)."""
         checks = self.run_checks
         if checks is None:
             return state
-        latent = latent_values(self.postprocess_fn(model_args, model_kwargs), self._layout.sites)
-        batch = state if self._batched else jax.tree.map(lambda x: jnp.asarray(x)[None], state)
-        fields = {"diverging": batch.diverging, "accept_prob": batch.accept_prob,
-                  "energy": batch.energy}  # fmt: skip
-        kept = checks.buffer(latent, batch.z, fields)
+        draw = (state.z, {"diverging": state.diverging, "accept_prob": state.accept_prob,
+                          "energy": state.energy})  # fmt: skip
+        if not self._batched:  # a chain axis of one, as sample_one steps it
+            draw = jax.tree.map(lambda x: jnp.asarray(x)[None], draw)
+        kept = checks.buffer(self._latent(model_args, model_kwargs), *draw)
         return state._replace(kept=kept if self._batched else jax.tree.map(lambda x: x[0], kept))
 
     @property
